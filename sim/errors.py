@@ -1,0 +1,32 @@
+"""User-facing errors.
+
+Anything the user can fix (a wrong file, a missing channel, a bad parameter) raises a
+subclass of :class:`UserError` with a one-line message that names the problem and the
+fix. The CLI prints that line and exits with code 2, without a traceback. Anything else
+is a bug and keeps its traceback.
+"""
+
+
+class UserError(Exception):
+    """A problem with the user's input: printed as one line, exit code 2."""
+
+
+class RunFileError(UserError):
+    """A run file that is not in the shaketable-run/1 format, or lacks a needed channel."""
+
+
+class MotionError(UserError):
+    """A motion or record that cannot be turned into a table reference."""
+
+
+class ScenarioError(UserError):
+    """A scenario file with a missing, unknown or invalid key."""
+
+
+class DivergenceError(Exception):
+    """The simulation left its physical bounds; carries the time and the reason."""
+
+    def __init__(self, time_s: float, reason: str):
+        super().__init__(f"simulation diverged at t = {time_s:.4f} s: {reason}")
+        self.time_s = time_s
+        self.reason = reason
