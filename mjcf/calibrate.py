@@ -117,12 +117,17 @@ def write_calibrated(path: Path, result: dict) -> None:
     note = "# calibrated: matches Table 2 effective masses (shaketable calibrate)"
 
     def set_key(text, section, key, value_text):
-        pat = re.compile(rf"(^\[{re.escape(section)}\][^\[]*?^{re.escape(key)}\s*=\s*)([^#\n]*?)(\s*#[^\n]*)?$",
-                         re.M | re.S)
-        m = pat.search(text)
-        if not m:
-            raise DescriptionError(f"{path}: cannot find {section}.{key} to rewrite")
-        return text[:m.start(2)] + value_text + "  " + note + text[m.end():]
+        lines = text.split("\n")
+        current = None
+        for i, line in enumerate(lines):
+            h = re.match(r"^\[+([^\]]+)\]+\s*(#.*)?$", line)
+            if h:
+                current = h.group(1).strip()
+                continue
+            if current == section and re.match(rf"^{re.escape(key)}\s*=", line):
+                lines[i] = f"{key} = {value_text}  {note}"
+                return "\n".join(lines)
+        raise DescriptionError(f"{path}: cannot find {section}.{key} to rewrite")
 
     text = set_key(text, "platen", "mass_kg", f"{vals['platen.mass_kg']:.1f}")
     inertia = [vals[f"platen.inertia_kg_m2[{i}]"] for i in range(3)]
