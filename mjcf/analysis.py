@@ -151,3 +151,40 @@ def settle_loops(model: mujoco.MjModel, data: mujoco.MjData, *, tol: float = 1e-
         dq = np.linalg.solve(J[:, od], -r)
         data.qpos[qadr] += dq
     return err
+
+
+def linear_modes(model: mujoco.MjModel, dofs: np.ndarray, *, gravity: bool = True,
+                 qpos: np.ndarray | None = None, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """Natural frequencies (Hz) and mode shapes of the coordinates ``dofs``, others held.
+
+    Mass from ``mj_fullM``; stiffness by central differences of the passive force
+    (joint and tendon springs) and, with ``gravity``, of the gravity force, around
+    ``qpos`` (default: the model's qpos0). Only 1-DOF joints may be listed.
+    """
+    d = mujoco.MjData(model)
+    d.qpos[:] = model.qpos0 if qpos is None else qpos
+    mujoco.mj_forward(model, d)
+    M = full_mass_matrix(model, d)[np.ix_(dofs, dofs)]
+    qadr = np.array([model.jnt_qposadr[model.dof_jntid[k]] for k in dofs])
+
+    def force(q):
+        d.qpos[qadr] = q
+        d.qvel[:] = 0
+        mujoco.mj_forward(model, d)
+        f = d.qfrc_passive.copy()
+        if gravity:
+            f -= d.qfrc_bias
+        return f[dofs]
+
+    q0 = d.qpos[qadr].copy()
+    K = np.zeros((len(dofs), len(dofs)))
+    for k in range(len(dofs)):
+        dq = np.zeros(len(dofs))
+        dq[k] = eps
+        K[:, k] = -(force(q0 + dq) - force(q0 - dq)) / (2 * eps)
+    d.qpos[qadr] = q0
+    K = 0.5 * (K + K.T)
+    L = np.linalg.cholesky(M)
+    Li = np.linalg.inv(L)
+    w2, y = np.linalg.eigh(Li @ K @ Li.T)
+    return np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi), Li.T @ y

@@ -149,9 +149,10 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
     link_cls = {}
     for cname, cls in desc.actuator_classes.items():
         d = spec.add_default(f"linkage_{cname}", main)
-        d.joint.frictionloss = 0.0
+        d.geom.rgba = _CYL
         link_cls[cname] = d
     sup_cls = spec.add_default("static_support", main)
+    sup_cls.geom.rgba = _SUPPORT
 
     world = spec.worldbody
     world.add_light(name="sun", pos=[0, 0, 12], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
@@ -206,7 +207,7 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
         cyl.add_joint(name=f"{a.name}_swivel_u", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[1, 0, 0])
         cyl.add_joint(name=f"{a.name}_swivel_v", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
         _visual(cyl, name=f"{a.name}_cylinder", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                fromto=[0, 0, 0, 0, 0, c.cylinder_length_m], size=[c.cylinder_radius_m, 0, 0], rgba=_CYL)
+                fromto=[0, 0, 0, 0, 0, c.cylinder_length_m], size=[c.cylinder_radius_m, 0, 0])
         cyl.add_site(name=f"{a.name}_base", pos=[0, 0, 0], size=[0.05, 0, 0])
 
         rod = cyl.add_body(name=f"{a.name}_rod", pos=[0, 0, 0])
@@ -248,7 +249,7 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
             ja = pis.add_joint(name=f"{nm}_air", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
             ja.frictionloss = sp.piston_friction_n
             _visual(pis, name=f"{nm}_piston", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                    fromto=[0, 0, 0, 0, 0, sp.piston_length_m], size=[sp.piston_radius_m, 0, 0], rgba=_SUPPORT)
+                    fromto=[0, 0, 0, 0, 0, sp.piston_length_m], size=[sp.piston_radius_m, 0, 0])
             shoe = pis.add_body(name=f"{nm}_shoe", pos=[0, 0, sp.piston_length_m])
             shoe.explicitinertial = True
             shoe.mass = sp.shoe_mass_kg
@@ -337,20 +338,36 @@ def _add_payload(spec, platen, payload, info):
                 else:
                     t.damping = [float(vals[i]), 0, 0]
     elif isinstance(payload, CantileverPayload):
+        # Rigid finite elements (spring-at-centre discretisation): the beam is cut into
+        # n segments of length l; a bending spring EI/l sits at the centre of each
+        # segment, and the rigid bodies span from one spring to the next (half
+        # segments at the two ends). This converges much faster than springs at the
+        # segment ends (first mode within 0.1 % at n = 24, see tests).
         info.payload_kind = "cantilever"
         p = payload
-        seg = p.height_m / p.n_segments
-        m_seg = p.mass_per_length_kg_m * seg
+        n = p.n_segments
+        seg = p.height_m / n
+        mu = p.mass_per_length_kg_m
         k_rot = p.bending_stiffness_n_m2 / seg
-        parent = platen
-        pos = p.base_m.tolist()
-        w1 = (1.875104 ** 2) * math.sqrt(p.bending_stiffness_n_m2 / (p.mass_per_length_kg_m * p.height_m ** 4))
-        for i in range(p.n_segments):
+        w1 = (1.875104 ** 2) * math.sqrt(p.bending_stiffness_n_m2 / (mu * p.height_m ** 4))
+        foot = platen.add_body(name="segment0", pos=p.base_m.tolist())
+        foot.explicitinertial = True
+        foot.mass = mu * seg / 2
+        foot.ipos = [0, 0, seg / 4]
+        foot.inertia = _box_inertia(mu * seg / 2, [p.width_m, p.width_m, seg / 2])
+        _visual(foot, name="segment0", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, seg / 4],
+                size=[p.width_m / 2, p.width_m / 2, seg / 4 * 0.98], rgba=_PAYLOAD)
+        info.payload_bodies.append("segment0")
+        parent = foot
+        pos = [0, 0, seg / 2]
+        for i in range(n):
+            length = seg if i < n - 1 else seg / 2
+            m_seg = mu * length
             b = parent.add_body(name=f"segment{i + 1}", pos=pos)
             b.explicitinertial = True
             b.mass = m_seg
-            b.ipos = [0, 0, seg / 2]
-            b.inertia = _box_inertia(m_seg, [p.width_m, p.width_m, seg])
+            b.ipos = [0, 0, length / 2]
+            b.inertia = _box_inertia(m_seg, [p.width_m, p.width_m, length])
             for ax, vec in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
                 j = b.add_joint(name=f"segment{i + 1}_bend_{ax}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=vec)
                 j.stiffness = [k_rot, 0, 0]
@@ -358,10 +375,10 @@ def _add_payload(spec, platen, payload, info):
                 j.damping = [2 * p.damping_ratio * k_rot / w1, 0, 0]
                 info.payload_joints.append(j.name)
             _visual(b, name=f"segment{i + 1}", type=mujoco.mjtGeom.mjGEOM_BOX,
-                    pos=[0, 0, seg / 2], size=[p.width_m / 2, p.width_m / 2, seg / 2 * 0.98], rgba=_PAYLOAD)
+                    pos=[0, 0, length / 2], size=[p.width_m / 2, p.width_m / 2, length / 2 * 0.98], rgba=_PAYLOAD)
             info.payload_bodies.append(b.name)
             parent = b
-            pos = [0, 0, seg]
+            pos = [0, 0, length]
 
 
 def _generalized_eig(K, M):
@@ -407,6 +424,13 @@ def build(desc: TableDescription, payload: Payload | None = None,
             j.stiffness = [k, 0, 0]
             j.springref = f / k
         info.support_loads_n = loads
+    if desc.foundation.mode == "spring":
+        # The foundation spring carries the whole weight at home.
+        jz = spec.joint("foundation_z")
+        jz.springref = float(model.body_mass.sum()) * desc.gravity_m_s2 / jz.stiffness[0]
+    if isinstance(payload, RigidPayload) and payload.clamp_frequency_hz is not None:
+        jz = spec.joint("payload_clamp_z")
+        jz.springref = payload.mass_kg * desc.gravity_m_s2 / jz.stiffness[0]
     key = spec.add_key(name="home")
     key.qpos = model.qpos0.tolist()
     model = spec.compile()
