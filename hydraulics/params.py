@@ -229,7 +229,8 @@ class HydraulicParams:
             except (TypeError, ValueError):
                 raise HydraulicsParamError(f"{name} must be a number (got {val!r})") from None
             if not math.isfinite(v) or not cond(v):
-                raise HydraulicsParamError(f"{name} must be {expect} (got {val!r})")
+                shown = repr(v) if isinstance(val, (int, float, np.floating, np.integer)) else repr(val)
+                raise HydraulicsParamError(f"{name} must be {expect} (got {shown})")
 
         pos = (lambda v: v > 0, "> 0")
         nonneg = (lambda v: v >= 0, ">= 0")

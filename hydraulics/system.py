@@ -337,8 +337,8 @@ class HydraulicSystem:
         symmetric actuator at the set supply pressure (each land drops (ps - pt)/2)."""
         G = self._G
         o = np.maximum(np.abs(opening) - G[L.G_OV], 0.0) / (1.0 - G[L.G_OV])
-        o = o + G[L.G_OLEAK] * (1.0 - o)
         from ._kernel import land_flow
 
+        # the metering lands open by o + o_leak (1 - o); the opposite pair leaks o_leak
         half = 0.5 * (G[L.G_PSET] - G[L.G_PT])
-        return np.sign(opening) * G[L.G_K] * o * land_flow(half, G[L.G_DL], G[L.G_SQDL])[0]
+        return np.sign(opening) * G[L.G_K] * o * (1.0 - G[L.G_OLEAK]) * land_flow(half, G[L.G_DL], G[L.G_SQDL])[0]
