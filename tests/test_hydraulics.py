@@ -266,7 +266,7 @@ def test_spool_frequency_response(table, model):
     Hcorr = H * np.exp(s * DT / 2)
     mag_err = np.abs(np.abs(Hcorr) / np.abs(Hc) - 1.0)
     ph_err = np.degrees(np.abs(np.angle(Hcorr / Hc)))
-    print(f"{model}: max |mag| error {mag_err.max():.2e}, max phase error {ph_err.max():.3f} deg")
+    print(f"{model}: max |mag| error {mag_err.max():.2e}, max phase error {ph_err.max():.2e} deg")
     assert mag_err.max() < 0.01
     assert ph_err.max() < 2.0
     # and the spool is exactly the zero-order-hold discretisation of the model
