@@ -494,9 +494,10 @@ def test_seal_friction(table):
 
 
 # ---------------------------------------------------------------- stability at dt
-def test_stable_random_cgs(table):
+@pytest.mark.parametrize("dt", [DT, 1.0 / 2048])
+def test_stable_random_cgs(table, dt):
     p = HydraulicParams.from_table(table)
-    hs = HydraulicSystem(p, n_sim=2, dt=DT)
+    hs = HydraulicSystem(p, n_sim=2, dt=dt)
     # rod-only masses (highest oil-column frequency) and bare-table shares (Table 2 / 4)
     m = np.array([[450.0] * 12, [12000.0] * 8 + [13000.0] * 4])
     rng = np.random.default_rng(4)
@@ -512,8 +513,8 @@ def test_stable_random_cgs(table):
             cmd = np.zeros((2, 12))
         c = np.clip(cmd - 4.0 * x / p.half_stroke_m, -1, 1)
         F = hs.step(c, x, v)
-        v = v + (F + hs.seal_friction(v)) / m * DT
-        x = x + v * DT
+        v = v + (F + hs.seal_friction(v)) / m * dt
+        x = x + v * dt
         assert np.all(hs.state.p_a >= p.vapour_pressure_pa) and np.all(hs.state.p_a <= p.relief_pressure_pa)
         vmax.append(np.abs(v).max())
     vmax = np.array(vmax)
