@@ -272,7 +272,9 @@ class HydraulicSystem:
         pressures so that each actuator's net force (pressure + cushion at x) equals
         ``force`` (default 0) with p_a, p_b as close as possible (least squares) to the
         mid level (p_supply + p_return)/2; pressures are then clipped to
-        [vapour, relief] (a force that needs more is not reached)."""
+        [vapour, relief] (a force that needs more is not reached). Pass the static
+        actuator loads (e.g. the platen weight on the vertical actuators) as ``force``
+        to start in equilibrium."""
         p = self.params
         x2 = self._in(x, "x")
         self._X[:] = 0.0
@@ -319,7 +321,10 @@ class HydraulicSystem:
         """Seal friction force (n_sim, n_act), N, opposing v: viscous + Coulomb with an
         optional Stribeck peak, the sign regularised by tanh(v / friction_smoothing_m_s)
         so that it is smooth and usable explicitly (its slope at v = 0 is
-        F_static / friction_smoothing + viscous). Not included in ``step``'s force."""
+        c0 = F_static / friction_smoothing + viscous; explicit use on a mass m needs
+        c0 dt / m < 2, e.g. 3e6 N s/m * 0.5 ms / 1000 kg = 1.5 for the CGS seals).
+        Not included in ``step``'s force (the simulator may instead apply the Coulomb
+        part through MuJoCo's frictionloss)."""
         p = self.params
         vv = np.asarray(v, dtype=np.float64)
         fc = p.seal_friction_n
