@@ -331,7 +331,8 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         )
         # Hydraulic-only keys are validated by the hydraulics package; mark them used.
         for k in ("leakage_cross_m3_s_pa", "leakage_external_m3_s_pa", "cushion_length_m",
-                  "cushion_stiffness_n_m"):
+                  "cushion_stiffness_n_m", "seal_static_friction_n", "stribeck_velocity_m_s",
+                  "friction_smoothing_m_s"):
             if c.has(k):
                 c.num(k, nonneg=True)
         c.done()

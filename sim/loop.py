@@ -1,0 +1,284 @@
+"""The coupled simulation: MuJoCo multibody table + hydraulic step + controller.
+
+Coupling order (one physics step, time t_n -> t_n + dt):
+
+1. MuJoCo state at t_n gives every linkage's stroke x_n and stroke rate v_n (named
+   accessors of :class:`mjcf.model.TableModel`).
+2. On a controller tick (every ``steps_per_tick`` steps) the driver produces the valve
+   commands, held until the next tick: either the closed-loop controller
+   (:class:`sim.controller.TableController`) or the recorded commands of a run file
+   (open-loop replay).
+3. ``hydraulics.step(command, x_n, v_n)`` advances the servovalves, chambers and supply
+   over the step and returns the net piston forces (pressures at the end of the step;
+   see ``hydraulics/system.py`` for why).
+4. The forces go into ``data.ctrl`` of the gear-1 motors on the stroke slides (so each
+   force acts along its linkage, between cylinder and rod).
+5. ``mj_step`` advances the mechanics t_n -> t_n + dt (``data.qacc`` then holds the
+   acceleration at t_n, which the recorder reads).
+
+The recorder samples at the controller tick (1024 Hz as the CGS data recorder): states
+at t_k, the command computed at t_k, and the accelerations of the step leaving t_k. The
+default physics step is 1/2048 s (0.49 ms), so a tick is exactly two steps and a replay
+of the recorded commands reproduces the run to round-off.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from hydraulics import HydraulicParams, HydraulicSystem
+from mjcf.description import actuator_strokes
+from mjcf.model import TableModel
+from sim.controller import ControllerGains, TableController
+from sim.errors import DivergenceError, ScenarioError
+
+GAP_LIMIT_M = 1e-3  #: a swivel opening by more than 1 mm means the solve has failed
+
+
+@dataclass
+class Reference:
+    """A 6-DOF reference at the controller rate: pose (N, 6), velocity, acceleration."""
+
+    t: np.ndarray
+    d: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+
+    @property
+    def rate_hz(self) -> float:
+        return 1.0 / float(self.t[1] - self.t[0])
+
+
+@dataclass
+class RunResult:
+    """Arrays recorded at the controller rate, plus timing and status."""
+
+    t: np.ndarray
+    channels: dict
+    extras: dict
+    wall_s: float
+    sim_s: float
+    timing: dict = field(default_factory=dict)
+    incomplete_reason: str | None = None
+
+    @property
+    def realtime_factor(self) -> float:
+        return self.sim_s / self.wall_s if self.wall_s > 0 else float("inf")
+
+
+class Simulation:
+    """One table simulation (one MjData, one hydraulic system)."""
+
+    def __init__(self, tm: TableModel, *, backend: str = "numba", gains: ControllerGains | None = None):
+        self.tm = tm
+        self.m = tm.model
+        self.dt = float(self.m.opt.timestep)
+        self.hp = HydraulicParams.from_table(tm.desc.raw)
+        self.hs = HydraulicSystem(self.hp, n_sim=1, dt=self.dt, backend=backend)
+        self.gains = gains or ControllerGains()
+        ratio = 1.0 / (self.gains.rate_hz * self.dt)
+        self.steps_per_tick = int(round(ratio))
+        if abs(ratio - self.steps_per_tick) > 1e-9 or self.steps_per_tick < 1:
+            raise ScenarioError(
+                f"controller rate {self.gains.rate_hz} Hz is not a whole fraction of the physics rate "
+                f"{1 / self.dt:.1f} Hz; use a rate that divides it (e.g. 1024 Hz with a 1/2048 s step)")
+        full_flow = float(self.hs.no_load_flow(1.0))
+        self.controller = TableController(
+            tm.desc, self.gains, area_m2=self.hp.area_a_m2, full_flow_m3_s=full_flow,
+            supply_pressure_pa=self.hp.supply_pressure_pa, return_pressure_pa=self.hp.return_pressure_pa)
+        self._prepare_gap()
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self, pose=None):
+        self.d = self.tm.new_data()
+        if pose is not None:
+            self.tm.set_platen_pose(self.d, pose)
+        self.hs.reset(self.tm.actuator_strokes(self.d)[None, :])
+
+    def _prepare_gap(self):
+        m = self.m
+        ids = [i for i in range(m.neq) if m.eq_type[i] == mujoco.mjtEq.mjEQ_CONNECT]
+        self._g_b1 = np.array([m.eq_obj1id[i] for i in ids])
+        self._g_b2 = np.array([m.eq_obj2id[i] for i in ids])
+        self._g_a1 = np.array([m.eq_data[i, 0:3] for i in ids])
+        self._g_a2 = np.array([m.eq_data[i, 3:6] for i in ids])
+
+    def loop_gap(self) -> float:
+        d = self.d
+        x1 = d.xpos[self._g_b1] + np.einsum("nij,nj->ni", d.xmat[self._g_b1].reshape(-1, 3, 3), self._g_a1)
+        x2 = d.xpos[self._g_b2] + np.einsum("nij,nj->ni", d.xmat[self._g_b2].reshape(-1, 3, 3), self._g_a2)
+        return float(np.sqrt(((x1 - x2) ** 2).sum(axis=1).max()))
+
+    # ------------------------------------------------------------------ run
+    def run(self, *, reference: Reference | None = None, valve_command: np.ndarray | None = None,
+            duration_s: float | None = None, progress: bool = False, check_every: int = 1) -> RunResult:
+        """Run closed loop on ``reference`` or open loop on recorded ``valve_command``.
+
+        Both inputs are sampled at the controller rate. Returns the recorder's arrays.
+        A simulation that leaves its physical bounds stops with the arrays up to then and
+        ``incomplete_reason`` set (never raises for divergence).
+        """
+        if (reference is None) == (valve_command is None):
+            raise ValueError("give exactly one of reference and valve_command")
+        tm, m, d, hs = self.tm, self.m, self.d, self.hs
+        self.controller.reset()
+        rate = self.gains.rate_hz
+        n_in = len(reference.t) if reference is not None else len(valve_command)
+        n = n_in if duration_s is None else min(n_in, int(round(duration_s * rate)) + 1)
+        na = tm.n_act
+        acc_pos = np.array([a.position_m for a in tm.desc.accelerometers]).reshape(-1, 3)
+        acc_dir = np.array([a.direction for a in tm.desc.accelerometers]).reshape(-1, 3)
+        if reference is not None:
+            s_ref_all = actuator_strokes(tm.desc, reference.d[:n])
+        ch = {k: np.full((n, na), np.nan) for k in ("valve_command", "spool_position", "actuator_displacement",
+                                                     "actuator_force", "pressure_a", "pressure_b")}
+        for k in ("table_displacement", "table_velocity", "table_acceleration"):
+            ch[k] = np.full((n, 6), np.nan)
+        ch["accelerometers"] = np.full((n, len(acc_pos)), np.nan)
+        ex = {"supply_pressure": np.full(n, np.nan), "accumulator_gas_volume": np.full(n, np.nan),
+              "loop_gap": np.full(n, np.nan)}
+        st = hs.state
+        ids = tm.actuator_ids
+        qa, da = tm.stroke_qadr, tm.stroke_dadr
+        pq, pd, pb = tm.platen_qadr, tm.platen_dadr, tm.platen_body
+        spt = self.steps_per_tick
+        x2 = np.zeros((1, na))
+        v2 = np.zeros((1, na))
+        cmd2 = np.zeros((1, na))
+        t_ctrl = t_hyd = t_phys = t_out = 0.0
+        reason = None
+        wall0 = time.perf_counter()
+        last_print = wall0
+        k = 0
+        for k in range(n):
+            tk = k / rate
+            # ---- recorder: state at t_k
+            t0 = time.perf_counter()
+            x = d.qpos[qa]
+            v = d.qvel[da]
+            quat = d.qpos[pq + 3:pq + 7]
+            R = d.xmat[pb].reshape(3, 3).copy()
+            w_world = R @ d.qvel[pd + 3:pd + 6]
+            pose = tm.platen_pose(d)
+            vel6 = np.concatenate([d.qvel[pd:pd + 3], w_world])
+            ch["actuator_displacement"][k] = x
+            ch["spool_position"][k] = st.spool[0]
+            ch["actuator_force"][k] = hs.force[0]
+            ch["pressure_a"][k] = st.p_a[0]
+            ch["pressure_b"][k] = st.p_b[0]
+            ch["table_displacement"][k] = pose
+            ch["table_velocity"][k] = vel6
+            ex["supply_pressure"][k] = st.p_supply[0]
+            ex["accumulator_gas_volume"][k] = st.gas_volume[0]
+            if k % check_every == 0:
+                gap = self.loop_gap()
+                ex["loop_gap"][k] = gap
+            t1 = time.perf_counter()
+            t_out += t1 - t0
+            # ---- controller tick
+            if reference is not None:
+                c = self.controller.command(s_ref_all[k], reference.v[k], reference.a[k], x, vel6, hs.force[0],
+                                            st.p_supply[0])
+            else:
+                c = valve_command[k]
+            cmd2[0] = c
+            ch["valve_command"][k] = c
+            t2 = time.perf_counter()
+            t_ctrl += t2 - t1
+            # ---- physics steps of this tick
+            for j in range(spt):
+                t3 = time.perf_counter()
+                x2[0] = d.qpos[qa]
+                v2[0] = d.qvel[da]
+                f = hs.step(cmd2, x2, v2)
+                d.ctrl[ids] = f[0]
+                t4 = time.perf_counter()
+                mujoco.mj_step(m, d)
+                t5 = time.perf_counter()
+                t_hyd += t4 - t3
+                t_phys += t5 - t4
+                if j == 0:
+                    t6 = time.perf_counter()
+                    alin = d.qacc[pd:pd + 3]
+                    aang = R @ d.qacc[pd + 3:pd + 6]
+                    ch["table_acceleration"][k, :3] = alin
+                    ch["table_acceleration"][k, 3:] = aang
+                    r = acc_pos @ R.T
+                    a_site = alin + np.cross(aang, r) + np.cross(w_world, np.cross(w_world, r))
+                    ch["accelerometers"][k] = np.einsum("ij,ij->i", a_site @ R, acc_dir) if len(r) else 0.0
+                    t_out += time.perf_counter() - t6
+            # ---- divergence checks
+            if k % check_every == 0:
+                reason = self._check(tk)
+                if reason:
+                    break
+            if progress and time.perf_counter() - last_print > 0.25:
+                last_print = time.perf_counter()
+                frac = (k + 1) / n
+                bar = "#" * int(30 * frac)
+                sys.stderr.write(f"\r  [{bar:<30s}] {100 * frac:5.1f} %  t = {tk:7.2f} s")
+                sys.stderr.flush()
+        wall = time.perf_counter() - wall0
+        if progress:
+            sys.stderr.write("\r" + " " * 70 + "\r")
+            sys.stderr.flush()
+        n_done = k + 1 if reason is None else k + 1
+        t = np.arange(n) / rate
+        res = RunResult(t=t, channels=ch, extras=ex, wall_s=wall, sim_s=n_done / rate,
+                        timing={"physics_s": t_phys, "hydraulics_s": t_hyd, "controller_s": t_ctrl,
+                                "output_s": t_out, "steps": n_done * spt},
+                        incomplete_reason=reason)
+        if reason:
+            # keep what was computed up to the bad sample (inclusive)
+            for key in ch:
+                ch[key] = ch[key][:n_done]
+            for key in ex:
+                ex[key] = ex[key][:n_done]
+            res.t = t[:n_done]
+        return res
+
+    def _check(self, tk: float) -> str | None:
+        d = self.d
+        st = self.hs.state
+        if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
+            return f"simulation diverged at t = {tk:.4f} s: the mechanical state is not finite (NaN/inf)"
+        if not (np.all(np.isfinite(st.p_a)) and np.all(np.isfinite(st.p_b))):
+            return f"simulation diverged at t = {tk:.4f} s: chamber pressures are not finite"
+        gap = self.loop_gap()
+        if gap > GAP_LIMIT_M:
+            return (f"simulation diverged at t = {tk:.4f} s: a swivel opened by {gap * 1e3:.2f} mm "
+                    f"(limit {GAP_LIMIT_M * 1e3:.1f} mm); the loop closure failed")
+        hp = self.hp
+        pmax = max(float(st.p_a.max()), float(st.p_b.max()))
+        if pmax > hp.relief_pressure_pa * (1 + 1e-9):
+            return f"simulation diverged at t = {tk:.4f} s: chamber pressure {pmax / 1e6:.1f} MPa above relief"
+        return None
+
+
+def reference_from_motions(motions: dict, rate_hz: float, duration_s: float) -> Reference:
+    """Stack per-DOF motions (dict dof -> Motion sampled at rate_hz) into a 6-DOF Reference."""
+    n = int(round(duration_s * rate_hz)) + 1
+    t = np.arange(n) / rate_hz
+    D = np.zeros((n, 6))
+    V = np.zeros((n, 6))
+    A = np.zeros((n, 6))
+    dofs = ("x", "y", "z", "rx", "ry", "rz")
+    for dof, mo in motions.items():
+        i = dofs.index(dof)
+        if abs(mo.sample_rate_hz - rate_hz) > 1e-6 * rate_hz:
+            raise ScenarioError(f"motion for {dof} is sampled at {mo.sample_rate_hz:g} Hz, expected {rate_hz:g} Hz")
+        m = min(n, len(mo.d))
+        D[:m, i] = mo.d[:m]
+        V[:m, i] = mo.v[:m]
+        A[:m, i] = mo.a[:m]
+    return Reference(t=t, d=D, v=V, a=A)
+
+
+__all__ = ["Reference", "RunResult", "Simulation", "reference_from_motions", "math"]
