@@ -36,6 +36,7 @@ import numpy as np
 from sim.errors import RunFileError
 
 FORMAT = "shaketable-run/1"
+EXTRA_PREFIX = "x_"  #: project extension channels (supply pressure, loop gap, ...)
 SUFFIX = ".run.npz"
 SOURCES = ("measured", "simulated")
 REQUIRED_META = ("format", "table", "sample_rate_hz", "actuators", "dofs", "source")
@@ -104,6 +105,9 @@ class RunFile:
     table_acceleration: np.ndarray | None = None
     accelerometers: np.ndarray | None = None
     path: str | None = field(default=None, kw_only=True)
+    #: Project extension channels, stored as ``x_<name>`` arrays with one row per sample
+    #: (e.g. supply_pressure, loop_gap). Readers of the plain format may ignore them.
+    extras: dict = field(default_factory=dict, kw_only=True)
 
     # -- descriptive helpers -------------------------------------------------------
     @property
@@ -323,6 +327,11 @@ def _validate(run: RunFile, name: str, require: tuple[str, ...]) -> None:
         if ncol is not None and arr.shape[1] != ncol:
             raise _error(name, f"channel {channel!r} has {arr.shape[1]} columns but there are {ncol} {what}",
                          f"make the {what} match the channel's columns")
+    for key, arr in run.extras.items():
+        arr = np.asarray(arr)
+        if not key.replace("_", "").isalnum() or arr.ndim not in (1, 2) or arr.shape[0] != n:
+            raise _error(name, f"extension channel {key!r} has shape {arr.shape}, need ({n},) or ({n}, k)",
+                         "give extension channels one row per sample and a plain name")
     if all(getattr(run, c) is None for c in INPUT_CHANNELS):
         raise _error(name, "has neither valve_command nor reference",
                      "add the servovalve commands (open-loop replay) or the reference displacement (needs a controller)")
@@ -367,6 +376,8 @@ def write_run(path: str | os.PathLike, run: RunFile) -> Path:
         arr = getattr(run, channel)
         if arr is not None:
             arrays[channel] = np.asarray(arr, dtype=np.float64)
+    for key, arr in run.extras.items():
+        arrays[EXTRA_PREFIX + key] = np.asarray(arr, dtype=np.float64)
 
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
@@ -423,7 +434,7 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
     try:
         with np.load(path, allow_pickle=False) as npz:
             keys = list(npz.files)
-            unknown = sorted(set(keys) - known)
+            unknown = sorted(k for k in set(keys) - known if not k.startswith(EXTRA_PREFIX))
             if unknown:
                 raise _error(name, f"has unknown array(s) {', '.join(unknown)}",
                              f"rename them to format keys ({', '.join(CHANNELS)}) or drop them")
@@ -456,13 +467,14 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
 
     t = data.pop("t")
     channels: dict[str, np.ndarray] = {}
+    extras = {k[len(EXTRA_PREFIX):]: data.pop(k).astype(np.float64) for k in list(data) if k.startswith(EXTRA_PREFIX)}
     for key, arr in data.items():
         if arr.dtype.kind not in "fiu":
             raise _error(name, f"channel {key!r} has type {arr.dtype}", "store it as float64")
         channels[key] = arr.astype(np.float64, copy=False)
     if t.dtype.kind not in "fiu":
         raise _error(name, f"has t of type {t.dtype}", "store t as float64 seconds")
-    run = RunFile(t=t.astype(np.float64, copy=False), meta=meta, **channels, path=name)
+    run = RunFile(t=t.astype(np.float64, copy=False), meta=meta, **channels, path=name, extras=extras)
     _validate(run, name, tuple(require))
     return run
 

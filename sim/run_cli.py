@@ -1,0 +1,254 @@
+"""``shaketable run`` and ``shaketable replay``: simulate a scenario / replay a run file."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sim.errors import RunFileError, ScenarioError, UserError
+
+SCHEMA = "shaketable-summary/1"
+
+
+def _out_dir(path) -> Path:
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = tempfile.NamedTemporaryFile(dir=out, prefix=".probe", delete=True)
+        probe.close()
+    except OSError as e:
+        raise UserError(f"cannot write to output folder {out}: {e.strerror}; choose a writable --out folder") from None
+    return out
+
+
+def _write_json_atomic(path: Path, obj) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        tmp.write_text(json.dumps(obj, indent=2, allow_nan=True))
+        os.replace(tmp, path)
+    except OSError as e:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise UserError(f"cannot write {path}: {e.strerror}") from None
+
+
+def build_runfile(res, tm, *, source="simulated", description="", payload_name=None, reference=None, extra_meta=None):
+    """RunFile from a :class:`sim.loop.RunResult` (every channel of the format)."""
+    from sim.runfile import FORMAT, RunFile
+
+    desc = tm.desc
+    n = len(res.t)
+    meta = {
+        "format": FORMAT,
+        "table": desc.name,
+        "sample_rate_hz": 1.0 / float(res.t[1] - res.t[0]) if n > 1 else 1024.0,
+        "actuators": list(desc.actuator_names),
+        "dofs": ["x", "y", "z", "rx", "ry", "rz"],
+        "source": source,
+        "description": description,
+        "payload": payload_name,
+        "accelerometers": [{"name": a.name, "position": a.position_m.tolist(), "direction": a.direction.tolist()}
+                           for a in desc.accelerometers],
+        "accelerometer_convention": "kinematic acceleration along the sensor direction, gravity removed",
+        "angle_convention": "intrinsic x-y-z rotation of the platen from home",
+    }
+    if extra_meta:
+        meta.update(extra_meta)
+    ch = res.channels
+    run = RunFile(t=res.t, meta=meta, valve_command=ch["valve_command"], spool_position=ch["spool_position"],
+                  actuator_displacement=ch["actuator_displacement"], actuator_force=ch["actuator_force"],
+                  pressure_a=ch["pressure_a"], pressure_b=ch["pressure_b"],
+                  table_displacement=ch["table_displacement"], table_velocity=ch["table_velocity"],
+                  table_acceleration=ch["table_acceleration"], accelerometers=ch["accelerometers"],
+                  reference=None if reference is None else reference.d[:n].copy(),
+                  extras=dict(res.extras))
+    if res.incomplete_reason:
+        run.mark_incomplete(res.incomplete_reason)
+    return run
+
+
+def _diagnostics(res, tm, hp) -> dict:
+    ch = res.channels
+    cap = hp.area_a_m2 * hp.supply_pressure_pa
+    fmax = np.nanmax(np.abs(ch["actuator_force"]), axis=0)
+    smax = np.nanmax(np.abs(ch["actuator_displacement"]), axis=0)
+    half = hp.half_stroke_m
+    vc = ch["valve_command"]
+    timing = res.timing
+    steps = max(timing.get("steps", 1), 1)
+    ticks = max(len(res.t), 1)
+    return {
+        "peak_force_fraction_of_capacity": {n: float(f / c) for n, f, c in zip(tm.actuator_names, fmax, cap)},
+        "peak_stroke_fraction": {n: float(s / h) for n, s, h in zip(tm.actuator_names, smax, half)},
+        "valve_saturation_fraction": float(np.mean(np.abs(vc) >= 0.999)),
+        "min_supply_pressure_pa": float(np.nanmin(res.extras["supply_pressure"])),
+        "max_loop_gap_m": float(np.nanmax(res.extras["loop_gap"])),
+        "cost_us": {
+            "physics_per_step": 1e6 * timing.get("physics_s", 0) / steps,
+            "hydraulics_per_step": 1e6 * timing.get("hydraulics_s", 0) / steps,
+            "controller_per_tick": 1e6 * timing.get("controller_s", 0) / ticks,
+            "output_per_tick": 1e6 * timing.get("output_s", 0) / ticks,
+        },
+    }
+
+
+def cmd_run(args) -> int:
+    import mjcf
+    from sim.controller import ControllerGains
+    from sim.loop import Simulation
+    from sim.metrics import tracking
+    from sim.runfile import write_run
+    from sim.scenario import build_motions, build_reference, limit_warnings, load_scenario
+
+    sc = load_scenario(args.scenario)
+    if args.duration is not None and not args.duration > 0:
+        raise ScenarioError(f"--duration must be positive (got {args.duration})")
+    desc = mjcf.load_table(sc.table)
+    payload = mjcf.load_payload(sc.payload) if sc.payload else None
+    gains = ControllerGains.from_dict(sc.controller)
+    if abs(gains.rate_hz - sc.sample_rate_hz) > 1e-9:
+        raise ScenarioError(f"output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
+                            f"({gains.rate_hz:g}): the recorder samples at the controller ticks")
+    motions = build_motions(sc)
+    ref = build_reference(sc, motions, args.duration)
+    warns = limit_warnings(desc, motions)
+    out = _out_dir(args.out)
+    for w in warns:
+        print(f"warning: {w}", file=sys.stderr)
+    tm = mjcf.build(desc, payload)
+    sim = Simulation(tm, gains=gains)
+    rec = None
+    if getattr(args, "rrd", None):
+        from sim import recording
+
+        rec = recording.RrdTarget.open(args.rrd)  # fails early (exit 2) if unwritable
+    show = sys.stderr.isatty() and not args.json
+    res = sim.run(reference=ref, progress=show)
+    run = build_runfile(res, tm, description=sc.description or sc.name,
+                        payload_name=payload.name if payload else None, reference=ref,
+                        extra_meta={"scenario": sc.name, "controller": _gains_json(gains)})
+    run_path = out / f"{sc.name}.run.npz"
+    write_run(run_path, run)
+    summary = {
+        "schema": SCHEMA,
+        "scenario": sc.name,
+        "table": desc.name,
+        "payload": payload.name if payload else None,
+        "duration_s": float(res.sim_s),
+        "wall_s": float(res.wall_s),
+        "realtime_factor": float(res.realtime_factor),
+        "complete": res.incomplete_reason is None,
+        "incomplete_reason": res.incomplete_reason,
+        "tracking": tracking(res.t, ref.d, ref.a, res.channels["table_displacement"],
+                             res.channels["table_acceleration"]),
+        "warnings": warns,
+        "run_file": str(run_path),
+    }
+    summary.update(_diagnostics(res, tm, sim.hp))
+    if rec is not None:
+        rec.write_run(run, tm)
+        summary["recording"] = str(rec.path)
+    _write_json_atomic(out / "summary.json", summary)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        _print_summary(summary)
+    if res.incomplete_reason:
+        print(f"error: {res.incomplete_reason}; kept {res.sim_s:.3f} s in {run_path} (marked incomplete)",
+              file=sys.stderr)
+        return 3
+    return 0
+
+
+def _gains_json(g) -> dict:
+    return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in g.__dict__.items()}
+
+
+def _print_summary(s: dict) -> None:
+    print(f"{s['scenario']}: {s['table']}" + (f" + {s['payload']}" if s["payload"] else "")
+          + f", {s['duration_s']:.2f} s simulated in {s['wall_s']:.1f} s ({s['realtime_factor']:.2f}x real time)")
+    print(f"  {'dof':4s} {'NRMSE d':>8s} {'NRMSE a':>8s} {'PGA ratio':>9s} {'spectrum ratio (0.5-20 Hz)':>28s}")
+    for dof, e in s["tracking"].items():
+        sr = (f"{e['spectrum_ratio_min']:.2f} .. {e['spectrum_ratio_max']:.2f}"
+              if "spectrum_ratio_min" in e else "-")
+        print(f"  {dof:4s} {100 * e['nrmse_displacement']:7.2f}% {100 * e['nrmse_acceleration']:7.1f}% "
+              f"{e['pga_ratio']:9.3f} {sr:>28s}")
+    ff = max(s["peak_force_fraction_of_capacity"].values())
+    sf = max(s["peak_stroke_fraction"].values())
+    print(f"  peak force {100 * ff:.0f} % of capacity, peak stroke {100 * sf:.0f} % of half-stroke, "
+          f"min supply {s['min_supply_pressure_pa'] / 1e6:.1f} MPa, max swivel gap {s['max_loop_gap_m'] * 1e6:.2f} um")
+    print(f"  wrote {s['run_file']}" + (f" and {s['recording']}" if s.get("recording") else ""))
+
+
+def cmd_replay(args) -> int:
+    import mjcf
+    from sim.loop import Simulation
+    from sim.metrics import channel_residuals
+    from sim.runfile import read_run, write_run
+
+    src = read_run(args.run, require=("valve_command",))
+    table = args.table or src.meta["table"]
+    desc = mjcf.load_table(table)
+    if list(src.actuators) != list(desc.actuator_names):
+        raise RunFileError(f"{args.run}: actuators {src.actuators} do not match table '{desc.name}' "
+                           f"({list(desc.actuator_names)}); give --table")
+    pay = args.payload if args.payload is not None else src.meta.get("payload")
+    payload = mjcf.load_payload(pay) if pay else None
+    tm = mjcf.build(desc, payload)
+    from sim.controller import ControllerGains
+
+    gains = ControllerGains(rate_hz=src.sample_rate_hz)
+    sim = Simulation(tm, gains=gains)
+    out = _out_dir(args.out)
+    res = sim.run(valve_command=src.valve_command, progress=sys.stderr.isatty() and not args.json)
+    run = build_runfile(res, tm, description=f"open-loop replay of {Path(args.run).name}",
+                        payload_name=payload.name if payload else None,
+                        extra_meta={"replay_of": str(args.run)})
+    if src.reference is not None:
+        run.reference = src.reference[:len(res.t)].copy()
+    stem = Path(args.run).name[: -len(".run.npz")] if args.run.endswith(".run.npz") else Path(args.run).stem
+    path = out / f"{stem}.replay.run.npz"
+    write_run(path, run)
+    resid = channel_residuals(src, run)
+    summary = {"schema": SCHEMA, "replay_of": str(args.run), "run_file": str(path),
+               "realtime_factor": float(res.realtime_factor), "complete": res.incomplete_reason is None,
+               "residual_nrmse": resid}
+    _write_json_atomic(out / "replay_summary.json", summary)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(f"replayed {args.run} open loop ({res.sim_s:.2f} s, {res.realtime_factor:.2f}x real time) -> {path}")
+        for ch in ("table_displacement", "table_acceleration", "actuator_force"):
+            if ch in resid:
+                vals = ", ".join(f"{k} {100 * v:.2f}%" for k, v in resid[ch].items() if np.isfinite(v))
+                print(f"  {ch} NRMSE: {vals}")
+    return 0 if res.incomplete_reason is None else 3
+
+
+def add_parsers(sub) -> None:
+    r = sub.add_parser("run", help="simulate a scenario and write its run file and summary")
+    r.add_argument("scenario", help="scenario name in scenarios/ or a .toml path")
+    r.add_argument("--out", default="out", help="output folder (default: out)")
+    r.add_argument("--duration", type=float, default=None, help="simulate only the first S seconds")
+    r.add_argument("--json", action="store_true", help="print the summary as JSON")
+    r.add_argument("--rrd", metavar="FILE", help="also write a rerun recording")
+    r.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("replay", help="replay a run file's valve commands open loop through the model")
+    p.add_argument("run", help="a .run.npz file with valve_command")
+    p.add_argument("--table", help="table (default: the run's meta.table)")
+    p.add_argument("--payload", help="payload (default: the run's meta.payload)")
+    p.add_argument("--out", default="out", help="output folder")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_replay)
+
+
+__all__ = ["add_parsers", "build_runfile", "time"]
