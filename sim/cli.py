@@ -133,12 +133,15 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=cmd_calibrate)
 
-    try:
-        from sim import run_cli
+    from sim import run_cli
 
-        run_cli.add_parsers(sub)
+    run_cli.add_parsers(sub)
+    try:  # rerun recordings of run files (sim/view_cli.py)
+        from sim import view_cli
     except ImportError:
-        pass
+        view_cli = None
+    if view_cli is not None:
+        view_cli.add_parsers(sub)
     return p
 
 

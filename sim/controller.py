@@ -35,6 +35,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mjcf.description import TableDescription, actuator_strokes
+
+try:  # compiled tick (the numpy method below is the reference; tests check they agree)
+    import numba as _nb
+except ImportError:  # pragma: no cover
+    _nb = None
 from sim.errors import ScenarioError
 
 DOF6 = ("x", "y", "z", "rx", "ry", "rz")
@@ -139,6 +144,48 @@ class TableController:
         """Clear the filter states (call before a new run)."""
         self._pl_prev = None
         self._pl_hp = np.zeros(self.J.shape[0])
+        self._pl_prev_arr = np.zeros(self.J.shape[0])
+        self._state = np.zeros(1)  # [0] = 1 once the filter has its first sample
+        self._kern = _tick_kernel()
+        self._kern2 = _state_kernel()
+        g = self.g
+        n = self.J.shape[0]
+        # per-actuator constants: area, opening per velocity
+        self._consts = np.ascontiguousarray(np.stack([self.area, self.open_per_velocity]))
+        # per-DOF gains (4 x 6) and scalars [kdp, kfb, hp_a, ps, dp0, flowlin, lim]
+        self._gains_arr = np.ascontiguousarray(np.concatenate([
+            np.stack([self._kp, g.kff_velocity, g.kff_acceleration_s, g.kv_feedback]).ravel(),
+            [g.kdp, g.kfb, self._hp_a if self._hp_a is not None else -1.0, self.ps, self.dp0,
+             1.0 if g.flow_linearisation else 0.0, g.command_limit]]))
+        assert n == self._consts.shape[1]
+
+    def command_fast(self, s_ref, v_ref6, a_ref6, strokes, v6, force, supply_pressure, out) -> np.ndarray:
+        """Same as :meth:`command`, compiled (numba); writes into ``out`` (n_act,)."""
+        g = self.g
+        if self._kern is None:
+            out[:] = self.command(s_ref, v_ref6, a_ref6, strokes, v6, force, supply_pressure)
+            return out
+        self._kern(s_ref, v_ref6, a_ref6, strokes, v6, force, supply_pressure, self.J, self.Jp, self.N,
+                   self.area, self.open_per_velocity, self._kp, g.kff_velocity, g.kff_acceleration_s,
+                   g.kv_feedback, g.kdp, g.kfb, self._hp_a if self._hp_a is not None else -1.0,
+                   self._state, self._pl_hp, self._pl_prev_arr, self.ps, self.dp0,
+                   1.0 if g.flow_linearisation else 0.0, g.command_limit, out)
+        return out
+
+    def command_from_state(self, k, s_ref_all, v_ref_all, a_ref_all, qpos, qvel, xmat, qa, pd, pb, force,
+                           supply_pressure, out) -> np.ndarray:
+        """Compiled tick reading strokes and the platen velocity straight from MuJoCo's arrays."""
+        g = self.g
+        if self._kern2 is None:
+            x = qpos[qa]
+            R = xmat[pb].reshape(3, 3)
+            v6 = np.concatenate([qvel[pd:pd + 3], R @ qvel[pd + 3:pd + 6]])
+            out[:] = self.command(s_ref_all[k], v_ref_all[k], a_ref_all[k], x, v6, force, supply_pressure)
+            return out
+        self._kern2(k, s_ref_all, v_ref_all, a_ref_all, qpos, qvel, xmat, qa, pd, pb, force, supply_pressure,
+                    self._consts, self.J, self.Jp, self.N, self._gains_arr, self._state, self._pl_hp,
+                    self._pl_prev_arr, out)
+        return out
 
     def command(self, s_ref, v_ref6, a_ref6, strokes, v6, force, supply_pressure=None) -> np.ndarray:
         """Valve commands (n_act,) for one tick.
@@ -173,3 +220,87 @@ class TableController:
             c -= g.kfb * (self.N @ force) / (self.area * self.ps)
         np.clip(c, -g.command_limit, g.command_limit, out=c)
         return c
+
+
+
+if _nb is not None:
+
+    @_nb.njit(cache=True)
+    def _tick(s_ref, v_ref6, a_ref6, x, v6, force, ps_now, J, Jp, N, area, opv, kp, kffv, kffa, kv, kdp, kfb,
+              hp_a, state, pl_hp, pl_prev, ps, dp0, flowlin, lim, out):
+        n = x.shape[0]
+        e = np.empty(n)
+        for i in range(n):
+            e[i] = s_ref[i] - x[i]
+        vd = np.empty(6)
+        for k in range(6):
+            acc = 0.0
+            for i in range(n):
+                acc += Jp[k, i] * e[i]
+            vd[k] = kffv[k] * v_ref6[k] + kffa[k] * a_ref6[k] + kp[k] * acc + kv[k] * (v_ref6[k] - v6[k])
+        first = state[0] == 0.0
+        state[0] = 1.0
+        for i in range(n):
+            c = 0.0
+            for k in range(6):
+                c += J[i, k] * vd[k]
+            c *= opv[i]
+            pl = force[i] / area[i]
+            if flowlin > 0.0:
+                sg = 1.0 if c > 0.0 else (-1.0 if c < 0.0 else 0.0)
+                avail = dp0 - (ps_now - ps) - sg * pl
+                if avail < 0.1 * dp0:
+                    avail = 0.1 * dp0
+                c *= np.sqrt(dp0 / avail)
+            if hp_a >= 0.0:
+                if first:
+                    pl_prev[i] = pl
+                pl_hp[i] = hp_a * (pl_hp[i] + pl - pl_prev[i])
+                pl_prev[i] = pl
+                c -= kdp * pl_hp[i] / ps
+            else:
+                c -= kdp * pl / ps
+            out[i] = c
+        if kfb != 0.0:
+            for i in range(n):
+                fi = 0.0
+                for j in range(n):
+                    fi += N[i, j] * force[j]
+                out[i] -= kfb * fi / (area[i] * ps)
+        for i in range(n):
+            if out[i] > lim:
+                out[i] = lim
+            elif out[i] < -lim:
+                out[i] = -lim
+        return out
+
+    @_nb.njit(cache=True)
+    def _tick_state(k, s_ref_all, v_ref_all, a_ref_all, qpos, qvel, xmat, qa, pd, pb, force, ps_now, consts, J, Jp,
+                    N, gains, state, pl_hp, pl_prev, out):
+        n = qa.shape[0]
+        x = np.empty(n)
+        for i in range(n):
+            x[i] = qpos[qa[i]]
+        v6 = np.empty(6)
+        v6[0] = qvel[pd]
+        v6[1] = qvel[pd + 1]
+        v6[2] = qvel[pd + 2]
+        for r in range(3):
+            v6[3 + r] = (xmat[pb, 3 * r] * qvel[pd + 3] + xmat[pb, 3 * r + 1] * qvel[pd + 4]
+                         + xmat[pb, 3 * r + 2] * qvel[pd + 5])
+        _tick(s_ref_all[k], v_ref_all[k], a_ref_all[k], x, v6, force, ps_now, J, Jp, N, consts[0], consts[1],
+              gains[0:6], gains[6:12], gains[12:18], gains[18:24], gains[24], gains[25], gains[26], state, pl_hp,
+              pl_prev, gains[27], gains[28], gains[29], gains[30], out)
+        return out
+else:  # pragma: no cover
+    _tick = _tick_state = None
+
+
+def _tick_kernel():
+    """The controller tick compiled with numba (None when numba is missing)."""
+    return _tick
+
+
+def _state_kernel():
+    """Controller tick reading MuJoCo's arrays directly (numba; None without numba)."""
+    return _tick_state

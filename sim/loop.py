@@ -118,140 +118,206 @@ class Simulation:
 
     # ------------------------------------------------------------------ run
     def run(self, *, reference: Reference | None = None, valve_command: np.ndarray | None = None,
-            duration_s: float | None = None, progress: bool = False, check_every: int = 1) -> RunResult:
+            duration_s: float | None = None, progress: bool = False, gap_every: int = 8,
+            fast: bool = True) -> RunResult:
         """Run closed loop on ``reference`` or open loop on recorded ``valve_command``.
 
         Both inputs are sampled at the controller rate. Returns the recorder's arrays.
         A simulation that leaves its physical bounds stops with the arrays up to then and
-        ``incomplete_reason`` set (never raises for divergence).
+        ``incomplete_reason`` set (never raises for divergence). The loop-closure gap is
+        evaluated every ``gap_every`` ticks (NaN in between).
+
+        Inside the loop only raw state is copied (qpos, qvel, the platen's qacc, the
+        hydraulic state); poses, velocities and accelerometer signals are derived from
+        those copies after the run, vectorised. ``fast`` uses the compiled per-step and
+        per-tick kernels of :mod:`sim._fastloop` (``False``: the plain numpy reference).
         """
+        if fast:
+            from sim import _fastloop as FL
+            from hydraulics import _layout as HL
         if (reference is None) == (valve_command is None):
             raise ValueError("give exactly one of reference and valve_command")
         tm, m, d, hs = self.tm, self.m, self.d, self.hs
-        self.controller.reset()
+        ctrl = self.controller
+        ctrl.reset()
         rate = self.gains.rate_hz
         n_in = len(reference.t) if reference is not None else len(valve_command)
         n = n_in if duration_s is None else min(n_in, int(round(duration_s * rate)) + 1)
         na = tm.n_act
-        acc_pos = np.array([a.position_m for a in tm.desc.accelerometers]).reshape(-1, 3)
-        acc_dir = np.array([a.direction for a in tm.desc.accelerometers]).reshape(-1, 3)
         if reference is not None:
             s_ref_all = actuator_strokes(tm.desc, reference.d[:n])
-        ch = {k: np.full((n, na), np.nan) for k in ("valve_command", "spool_position", "actuator_displacement",
-                                                     "actuator_force", "pressure_a", "pressure_b")}
-        for k in ("table_displacement", "table_velocity", "table_acceleration"):
-            ch[k] = np.full((n, 6), np.nan)
-        ch["accelerometers"] = np.full((n, len(acc_pos)), np.nan)
+            v_ref_all = np.ascontiguousarray(reference.v[:n])
+            a_ref_all = np.ascontiguousarray(reference.a[:n])
+        else:
+            vc_all = np.ascontiguousarray(valve_command[:n], dtype=np.float64)
+        Q = np.full((n, m.nq), np.nan)
+        V = np.full((n, m.nv), np.nan)
+        ACC = np.full((n, 6), np.nan)
+        H = {k: np.full((n, na), np.nan) for k in ("valve_command", "spool_position", "actuator_force",
+                                                   "pressure_a", "pressure_b")}
         ex = {"supply_pressure": np.full(n, np.nan), "accumulator_gas_volume": np.full(n, np.nan),
               "loop_gap": np.full(n, np.nan)}
+        Hsp, Hf, Hpa, Hpb = H["spool_position"], H["actuator_force"], H["pressure_a"], H["pressure_b"]
+        Eps, Egas = ex["supply_pressure"], ex["accumulator_gas_volume"]
         st = hs.state
+        spool, pa, pb, force, psup, gasv = st.spool[0], st.p_a[0], st.p_b[0], hs.force[0], st.p_supply, st.gas_volume
         ids = tm.actuator_ids
         qa, da = tm.stroke_qadr, tm.stroke_dadr
-        pq, pd, pb = tm.platen_qadr, tm.platen_dadr, tm.platen_body
+        pq, pd, pb_ = tm.platen_qadr, tm.platen_dadr, tm.platen_body
         spt = self.steps_per_tick
         x2 = np.zeros((1, na))
         v2 = np.zeros((1, na))
         cmd2 = np.zeros((1, na))
+        cmd = cmd2[0]
+        vel6 = np.zeros(6)
+        xk = np.zeros(na)
+        ctrl_ids = ids
+        qpos, qvel, qacc, dctrl = d.qpos, d.qvel, d.qacc, d.ctrl
+        qa64, da64, ids64 = (np.asarray(a, dtype=np.int64) for a in (qa, da, ids))
+        xmat = d.xmat
+        step = mujoco.mj_step
         t_ctrl = t_hyd = t_phys = t_out = 0.0
         reason = None
-        wall0 = time.perf_counter()
+        clock = time.perf_counter
+        wall0 = clock()
         last_print = wall0
-        k = 0
+        k = -1
         for k in range(n):
-            tk = k / rate
-            # ---- recorder: state at t_k
-            t0 = time.perf_counter()
-            x = d.qpos[qa]
-            v = d.qvel[da]
-            quat = d.qpos[pq + 3:pq + 7]
-            R = d.xmat[pb].reshape(3, 3).copy()
-            w_world = R @ d.qvel[pd + 3:pd + 6]
-            pose = tm.platen_pose(d)
-            vel6 = np.concatenate([d.qvel[pd:pd + 3], w_world])
-            ch["actuator_displacement"][k] = x
-            ch["spool_position"][k] = st.spool[0]
-            ch["actuator_force"][k] = hs.force[0]
-            ch["pressure_a"][k] = st.p_a[0]
-            ch["pressure_b"][k] = st.p_b[0]
-            ch["table_displacement"][k] = pose
-            ch["table_velocity"][k] = vel6
-            ex["supply_pressure"][k] = st.p_supply[0]
-            ex["accumulator_gas_volume"][k] = st.gas_volume[0]
-            if k % check_every == 0:
-                gap = self.loop_gap()
-                ex["loop_gap"][k] = gap
-            t1 = time.perf_counter()
-            t_out += t1 - t0
-            # ---- controller tick
-            if reference is not None:
-                c = self.controller.command(s_ref_all[k], reference.v[k], reference.a[k], x, vel6, hs.force[0],
-                                            st.p_supply[0])
+            # ---- recorder: raw state at t_k
+            t0 = clock()
+            if fast:
+                FL.record(k, qpos, qvel, Q, V, hs._X, hs._Y, HL.SPOOL, HL.FORCE, HL.PA, HL.PB, Hsp, Hf, Hpa, Hpb,
+                          HL.PS, HL.GASV, Eps, Egas)
             else:
-                c = valve_command[k]
-            cmd2[0] = c
-            ch["valve_command"][k] = c
-            t2 = time.perf_counter()
+                Q[k] = qpos
+                V[k] = qvel
+                Hsp[k] = spool
+                Hf[k] = force
+                Hpa[k] = pa
+                Hpb[k] = pb
+                Eps[k] = psup[0]
+                Egas[k] = gasv[0]
+            t1 = clock()
+            t_out += t1 - t0
+            # ---- controller tick (valve commands held until the next tick)
+            if reference is not None:
+                if fast:
+                    ctrl.command_from_state(k, s_ref_all, v_ref_all, a_ref_all, qpos, qvel, xmat, qa64, pd, pb_,
+                                            force, psup[0], cmd)
+                else:
+                    xk[:] = qpos[qa]
+                    vel6[:3] = qvel[pd:pd + 3]
+                    vel6[3:] = xmat[pb_].reshape(3, 3) @ qvel[pd + 3:pd + 6]
+                    cmd[:] = ctrl.command(s_ref_all[k], v_ref_all[k], a_ref_all[k], xk, vel6, force, psup[0])
+            else:
+                cmd[:] = vc_all[k]
+            H["valve_command"][k] = cmd
+            t2 = clock()
             t_ctrl += t2 - t1
-            # ---- physics steps of this tick
+            # ---- physics steps of this tick: hydraulics, then mj_step
             for j in range(spt):
-                t3 = time.perf_counter()
-                x2[0] = d.qpos[qa]
-                v2[0] = d.qvel[da]
-                f = hs.step(cmd2, x2, v2)
-                d.ctrl[ids] = f[0]
-                t4 = time.perf_counter()
-                mujoco.mj_step(m, d)
-                t5 = time.perf_counter()
+                t3 = clock()
+                if fast and hs.delay_steps == 0 and hs.backend == "numba":
+                    FL.pre_step(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS,
+                                hs._buf, 0, hs._P, hs._G)
+                else:
+                    x2[0] = qpos[qa]
+                    v2[0] = qvel[da]
+                    f = hs.step(cmd2, x2, v2)
+                    dctrl[ctrl_ids] = f[0]
+                t4 = clock()
+                step(m, d)
+                t5 = clock()
                 t_hyd += t4 - t3
                 t_phys += t5 - t4
                 if j == 0:
-                    t6 = time.perf_counter()
-                    alin = d.qacc[pd:pd + 3]
-                    aang = R @ d.qacc[pd + 3:pd + 6]
-                    ch["table_acceleration"][k, :3] = alin
-                    ch["table_acceleration"][k, 3:] = aang
-                    r = acc_pos @ R.T
-                    a_site = alin + np.cross(aang, r) + np.cross(w_world, np.cross(w_world, r))
-                    ch["accelerometers"][k] = np.einsum("ij,ij->i", a_site @ R, acc_dir) if len(r) else 0.0
-                    t_out += time.perf_counter() - t6
+                    ACC[k] = qacc[pd:pd + 6]
             # ---- divergence checks
-            if k % check_every == 0:
-                reason = self._check(tk)
+            if k % gap_every == 0:
+                t6 = clock()
+                gap = self.loop_gap()
+                ex["loop_gap"][k] = gap
+                reason = self._check(k / rate, gap)
+                t_out += clock() - t6
                 if reason:
                     break
-            if progress and time.perf_counter() - last_print > 0.25:
-                last_print = time.perf_counter()
+            if progress and clock() - last_print > 0.25:
+                last_print = clock()
                 frac = (k + 1) / n
                 bar = "#" * int(30 * frac)
-                sys.stderr.write(f"\r  [{bar:<30s}] {100 * frac:5.1f} %  t = {tk:7.2f} s")
+                sys.stderr.write(f"\r  [{bar:<30s}] {100 * frac:5.1f} %  t = {k / rate:7.2f} s")
                 sys.stderr.flush()
-        wall = time.perf_counter() - wall0
+        wall = clock() - wall0
         if progress:
             sys.stderr.write("\r" + " " * 70 + "\r")
             sys.stderr.flush()
-        n_done = k + 1 if reason is None else k + 1
-        t = np.arange(n) / rate
-        res = RunResult(t=t, channels=ch, extras=ex, wall_s=wall, sim_s=n_done / rate,
-                        timing={"physics_s": t_phys, "hydraulics_s": t_hyd, "controller_s": t_ctrl,
-                                "output_s": t_out, "steps": n_done * spt},
-                        incomplete_reason=reason)
-        if reason:
-            # keep what was computed up to the bad sample (inclusive)
-            for key in ch:
-                ch[key] = ch[key][:n_done]
-            for key in ex:
-                ex[key] = ex[key][:n_done]
-            res.t = t[:n_done]
-        return res
+        n_done = k + 1
+        t7 = clock()
+        ch = self._derive(Q[:n_done], V[:n_done], ACC[:n_done])
+        for key, arr in H.items():
+            ch[key] = arr[:n_done]
+        for key in ex:
+            ex[key] = ex[key][:n_done]
+        if "_payload_qpos" in ch:
+            ex["payload_qpos"] = ch.pop("_payload_qpos")
+        t_post = clock() - t7
+        return RunResult(t=np.arange(n_done) / rate, channels=ch, extras=ex, wall_s=wall + t_post,
+                         sim_s=n_done / rate,
+                         timing={"physics_s": t_phys, "hydraulics_s": t_hyd, "controller_s": t_ctrl,
+                                 "output_s": t_out + t_post, "steps": n_done * spt},
+                         incomplete_reason=reason)
 
-    def _check(self, tk: float) -> str | None:
+    def _derive(self, Q, V, ACC) -> dict:
+        """Recorder channels from raw qpos/qvel/platen-qacc samples (vectorised)."""
+        tm = self.tm
+        pq, pd = tm.platen_qadr, tm.platen_dadr
+        quat = Q[:, pq + 3:pq + 7]
+        w, x, y, z = quat.T
+        # rotation matrices of the platen (rows of R for each sample)
+        R = np.empty((len(Q), 3, 3))
+        R[:, 0, 0] = 1 - 2 * (y * y + z * z)
+        R[:, 0, 1] = 2 * (x * y - z * w)
+        R[:, 0, 2] = 2 * (x * z + y * w)
+        R[:, 1, 0] = 2 * (x * y + z * w)
+        R[:, 1, 1] = 1 - 2 * (x * x + z * z)
+        R[:, 1, 2] = 2 * (y * z - x * w)
+        R[:, 2, 0] = 2 * (x * z - y * w)
+        R[:, 2, 1] = 2 * (y * z + x * w)
+        R[:, 2, 2] = 1 - 2 * (x * x + y * y)
+        angles = np.stack([np.arctan2(-R[:, 1, 2], R[:, 2, 2]), np.arcsin(np.clip(R[:, 0, 2], -1, 1)),
+                           np.arctan2(-R[:, 0, 1], R[:, 0, 0])], axis=1)
+        pose = np.concatenate([Q[:, pq:pq + 3], angles], axis=1)
+        w_world = np.einsum("nij,nj->ni", R, V[:, pd + 3:pd + 6])
+        vel = np.concatenate([V[:, pd:pd + 3], w_world], axis=1)
+        alin = ACC[:, :3]
+        aang = np.einsum("nij,nj->ni", R, ACC[:, 3:6])
+        acc = np.concatenate([alin, aang], axis=1)
+        out = {"table_displacement": pose, "table_velocity": vel, "table_acceleration": acc,
+               "actuator_displacement": Q[:, tm.stroke_qadr].copy()}
+        accs = tm.desc.accelerometers
+        if accs:
+            P = np.array([a.position_m for a in accs])
+            Dn = np.array([a.direction for a in accs])
+            r = np.einsum("nij,aj->nai", R, P)  # sensor offsets in world
+            a_site = (alin[:, None, :] + np.cross(aang[:, None, :], r)
+                      + np.cross(w_world[:, None, :], np.cross(w_world[:, None, :], r)))
+            dirs = np.einsum("nij,aj->nai", R, Dn)  # sensor axes in world
+            out["accelerometers"] = np.einsum("nai,nai->na", a_site, dirs)
+        else:
+            out["accelerometers"] = np.zeros((len(Q), 0))
+        # payload coordinates (for drawing a flexible payload): qpos of its joints
+        if len(tm.payload_dadr):
+            qadr = [tm.model.jnt_qposadr[tm.model.dof_jntid[k]] for k in tm.payload_dadr]
+            out["_payload_qpos"] = Q[:, qadr].copy()
+        return out
+
+    def _check(self, tk: float, gap: float) -> str | None:
         d = self.d
         st = self.hs.state
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             return f"simulation diverged at t = {tk:.4f} s: the mechanical state is not finite (NaN/inf)"
         if not (np.all(np.isfinite(st.p_a)) and np.all(np.isfinite(st.p_b))):
             return f"simulation diverged at t = {tk:.4f} s: chamber pressures are not finite"
-        gap = self.loop_gap()
         if gap > GAP_LIMIT_M:
             return (f"simulation diverged at t = {tk:.4f} s: a swivel opened by {gap * 1e3:.2f} mm "
                     f"(limit {GAP_LIMIT_M * 1e3:.1f} mm); the loop closure failed")

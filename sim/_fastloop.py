@@ -1,0 +1,63 @@
+"""Compiled pieces of the coupled loop (numba): everything between two ``mj_step`` calls.
+
+``mj_step`` itself stays a Python call into MuJoCo; what runs around it is fused into one
+compiled call per physics step (:func:`pre_step`: read strokes, hydraulic step, write
+``ctrl``) and one per controller tick (:func:`record`, :func:`controller_tick`). The
+plain-numpy versions in :mod:`sim.loop` and :mod:`sim.controller` are the reference;
+``tests/test_loop.py`` checks that both paths give the same run.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from hydraulics import _layout as L
+from hydraulics.system import _numba_kernel
+
+_hyd = _numba_kernel()
+_FORCE = L.FORCE
+
+_OPTS = dict(cache=True, nogil=True, boundscheck=False)
+
+
+@numba.njit(**_OPTS)
+def pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, head, P, G):
+    """Strokes from MuJoCo -> hydraulic step -> forces into ``ctrl`` (one physics step)."""
+    for i in range(qa.shape[0]):
+        x2[0, i] = qpos[qa[i]]
+        v2[0, i] = qvel[da[i]]
+    _hyd(cmd2, x2, v2, X, Y, IC, ICS, buf, head, P, G)
+    F = X[_FORCE]
+    for i in range(ids.shape[0]):
+        ctrl[ids[i]] = F[0, i]
+
+
+@numba.njit(**_OPTS)
+def record(k, qpos, qvel, Q, V, X, Y, i_spool, i_force, i_pa, i_pb, H_spool, H_force, H_pa, H_pb,
+           y_ps, y_gas, E_ps, E_gas):
+    """Copy the raw state at tick ``k`` into the recorder's arrays."""
+    Q[k, :] = qpos
+    V[k, :] = qvel
+    na = H_spool.shape[1]
+    for i in range(na):
+        H_spool[k, i] = X[i_spool, 0, i]
+        H_force[k, i] = X[i_force, 0, i]
+        H_pa[k, i] = X[i_pa, 0, i]
+        H_pb[k, i] = X[i_pb, 0, i]
+    E_ps[k] = Y[y_ps, 0]
+    E_gas[k] = Y[y_gas, 0]
+
+
+@numba.njit(**_OPTS)
+def platen_velocity(qvel, xmat, pd, pb, out):
+    """DOF velocity of the reference point: linear (world) and angular (world frame)."""
+    out[0] = qvel[pd]
+    out[1] = qvel[pd + 1]
+    out[2] = qvel[pd + 2]
+    for r in range(3):
+        out[3 + r] = (xmat[pb, 3 * r] * qvel[pd + 3] + xmat[pb, 3 * r + 1] * qvel[pd + 4]
+                      + xmat[pb, 3 * r + 2] * qvel[pd + 5])
+
+
+__all__ = ["pre_step", "record", "platen_velocity", "np"]
