@@ -117,12 +117,13 @@ def force_colors(fraction: np.ndarray) -> np.ndarray:
 
     Blue at 0, yellow at 0.5, red at 1 and beyond; NaN gives grey.
     """
-    f = np.clip(np.asarray(fraction, dtype=float), 0.0, 1.0)
+    raw = np.asarray(fraction, dtype=float)
+    f = np.clip(np.nan_to_num(raw, nan=0.0), 0.0, 1.0)
     out = np.empty(f.shape + (4,), dtype=np.uint8)
     for k in range(3):
         out[..., k] = np.interp(f, _FORCE_MAP[:, 0], _FORCE_MAP[:, k + 1]).round().astype(np.uint8)
     out[..., 3] = 255
-    out[~np.isfinite(np.asarray(fraction, dtype=float))] = (128, 128, 128, 255)
+    out[np.isnan(raw)] = (128, 128, 128, 255)
     return out
 
 

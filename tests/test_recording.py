@@ -1,0 +1,243 @@
+"""Rerun recordings (sim/recording.py, ``shaketable view``, ``shaketable run --rrd``).
+
+Run files are made here with the project's own simulator (2 s of harmonic_bare).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim import cli
+from sim.runfile import read_run, write_run
+
+ACTS = [f"{a}{i}" for a in "XYZ" for i in range(1, 5)]
+DOFS = ["x", "y", "z", "rx", "ry", "rz"]
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory):
+    """A 2 s simulated run, recorded by ``shaketable run --rrd``."""
+    d = tmp_path_factory.mktemp("rec")
+    rc = cli.main(["run", "harmonic_bare", "--out", str(d), "--duration", "2", "--rrd", str(d / "h.rrd")])
+    assert rc == 0
+    return d, d / "harmonic_bare.run.npz", d / "h.rrd"
+
+
+def _rerun_exe() -> str | None:
+    exe = Path(sys.executable).with_name("rerun")
+    return str(exe) if exe.exists() else shutil.which("rerun")
+
+
+def _read(path):
+    """{entity: rows on the time line}, {entity: set of components}, static entities, blueprint count."""
+    import rerun as rr
+
+    reader = rr.chunk.RrdReader(str(path))
+    rows, comps, static, data = defaultdict(int), defaultdict(set), set(), defaultdict(list)
+    for ch in reader.store().stream():
+        rb = ch.to_record_batch()
+        names = [n for n in rb.schema.names if ":" in n]
+        if ch.is_static:
+            static.add(ch.entity_path)
+            comps[ch.entity_path] |= set(names)
+            continue
+        assert "time" in rb.schema.names
+        rows[ch.entity_path] += ch.num_rows
+        comps[ch.entity_path] |= set(names)
+        data[ch.entity_path].append(rb)
+    return rows, comps, static, data, len(reader.blueprints())
+
+
+def _column(batches, name):
+    out, times = [], []
+    for rb in batches:
+        col = rb.column(rb.schema.get_field_index(name)).to_pylist()
+        t = rb.column(rb.schema.get_field_index("time")).to_pylist()
+        for v, tt in zip(col, t):
+            out.append(v[0] if isinstance(v, list) and len(v) == 1 else v)
+            times.append(tt)
+    order = np.argsort([x.total_seconds() if hasattr(x, "total_seconds") else x for x in times])
+    return np.array(out, dtype=float)[order]
+
+
+def test_recording_verifies(made):
+    _, _, rrd = made
+    exe = _rerun_exe()
+    if exe is None:
+        pytest.skip("rerun CLI not installed")
+    r = subprocess.run([exe, "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr[-2000:]
+
+
+def test_recording_contents(made):
+    _, run_path, rrd = made
+    run = read_run(run_path)
+    n = run.n_samples
+    rows, comps, static, data, n_bp = _read(rrd)
+    assert n_bp == 1  # the blueprint travels with the recording
+    step = round(run.sample_rate_hz / 50.0)
+    frames = math.ceil(n / step)
+    # the platen moves once per display frame (not per physics step), at the run's pose
+    assert rows["/table/platen"] == frames
+    assert "Transform3D:translation" in comps["/table/platen"]
+    tr = np.array([_column(data["/table/platen"], "Transform3D:translation")]).reshape(frames, 3)
+    np.testing.assert_allclose(tr, run.table_displacement[::step, :3], atol=1e-6)
+    # all 12 linkages: cylinder and rod bodies move, their geoms carry static shapes and force colours
+    for a in ACTS:
+        for part in ("cylinder", "rod"):
+            ent = f"/table/actuators/{a}/{part}"
+            assert rows[ent] == frames, ent
+            geom = f"{ent}/{a}_{part}"
+            assert geom in static and "Cylinders3D:lengths" in comps[geom]
+            assert rows[geom] == frames and "Cylinders3D:colors" in comps[geom]
+    for s in ("S1", "S2", "S3", "S4"):
+        assert rows[f"/table/supports/{s}/shoe"] == frames
+    assert "/table/platen/accelerometers" in static
+    assert any(e.startswith("/table/foundation/") for e in static)
+    # time series at the full rate
+    for d in DOFS:
+        for q in ("displacement", "acceleration"):
+            for role in ("reference", "achieved"):
+                assert rows[f"/plots/dof/{d}/{q}/{role}"] == n, (d, q, role)
+    for a in ACTS:
+        for sub in ("valve/command", "valve/spool", "pressure/a", "pressure/b", "force", "stroke"):
+            assert rows[f"/plots/actuators/{a}/{sub}"] == n, (a, sub)
+    for e in ("/plots/hydraulics/supply_pressure", "/plots/hydraulics/accumulator_gas_volume"):
+        assert rows[e] == n
+    assert rows["/plots/model/loop_gap"] == int(np.isfinite(run.extras["loop_gap"]).sum())
+    for name in run.accelerometer_names:
+        assert rows[f"/plots/accelerometers/{name}"] == n
+    x = _column(data["/plots/dof/x/displacement/achieved"], "Scalars:scalars")
+    np.testing.assert_allclose(x, run.column("table_displacement", "x"))
+
+
+def test_view_compare_residuals(made, tmp_path):
+    _, run_path, _ = made
+    run = read_run(run_path)
+    other = read_run(run_path)
+    other.table_displacement = other.table_displacement * 1.1
+    other.meta["source"] = "measured"
+    other_path = write_run(tmp_path / "measured.run.npz", other)
+    out = tmp_path / "cmp.rrd"
+    rc = cli.main(["view", str(run_path), "--rrd", str(out), "--compare", str(other_path), "--rate", "25"])
+    assert rc == 0
+    rows, comps, static, data, _ = _read(out)
+    n = run.n_samples
+    frames = math.ceil(n / round(run.sample_rate_hz / 25))
+    assert rows["/table/platen"] == frames and rows["/compare/platen"] == frames
+    assert rows["/plots/dof/x/displacement/compare"] == n
+    res = _column(data["/plots/residual/dof/x/displacement/achieved"], "Scalars:scalars")
+    np.testing.assert_allclose(res, -0.1 * run.column("table_displacement", "x"), atol=1e-12)
+    assert rows["/plots/residual/actuators/Z1/force"] == n  # identical channels: zero residual, still there
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_fast_loop_closure_matches_set_platen_pose():
+    import mjcf
+    from sim import recording
+
+    rng = np.random.default_rng(1)
+    tm = mjcf.build(mjcf.load_table("cgs"), mjcf.load_payload("frame_3storey_297"))
+    assert recording._LoopSolver.build(tm) is not None
+    poses = np.column_stack([rng.uniform(-0.15, 0.15, (5, 3)), rng.uniform(-0.02, 0.02, (5, 3))])
+    pq = rng.uniform(-0.01, 0.01, (5, len(tm.info.payload_joints)))
+    bodies = recording._scene(tm).bodies
+    p1, q1 = recording._body_poses(tm, poses, pq, bodies)
+    p2, q2 = recording._body_poses(tm, poses, pq, bodies, exact=True)
+    np.testing.assert_allclose(p1, p2, atol=1e-9)
+    np.testing.assert_allclose(np.abs(np.einsum("fbi,fbi->fb", q1, q2)), 1.0, atol=1e-9)
+    # the payload is drawn deformed: floors follow their drift coordinates
+    names = [e for _, e in bodies]
+    fl = names.index("table/payload/floor3")
+    p0, _ = recording._body_poses(tm, poses, None, bodies)
+    assert np.abs(p1[:, fl] - p0[:, fl]).max() > 1e-3
+
+
+@pytest.mark.parametrize("target, why", [
+    ("missing/x.rrd", "does not exist"),
+    ("x.txt", "does not end with '.rrd'"),
+])
+def test_bad_recording_path(made, tmp_path, capsys, target, why):
+    _, run_path, _ = made
+    rc = cli.main(["view", str(run_path), "--rrd", str(tmp_path / target)])
+    err = capsys.readouterr().err
+    assert rc == 2 and why in err and err.count("\n") == 1 and err.startswith("error: ")
+    assert list(tmp_path.rglob("*")) == []
+
+
+@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="root can write anywhere")
+def test_unwritable_folder(made, tmp_path, capsys):
+    _, run_path, _ = made
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        rc = cli.main(["view", str(run_path), "--rrd", str(ro / "x.rrd")])
+        assert rc == 2 and "cannot be written" in capsys.readouterr().err
+    finally:
+        ro.chmod(0o700)
+
+
+def test_not_a_run_file(tmp_path, capsys):
+    bad = tmp_path / "bad.run.npz"
+    bad.write_text("not a run")
+    rc = cli.main(["view", str(bad), "--rrd", str(tmp_path / "x.rrd")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "not a NumPy .npz archive" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.run.npz"]
+
+
+def test_run_rrd_fails_early(tmp_path, capsys):
+    rc = cli.main(["run", "harmonic_bare", "--out", str(tmp_path / "o"), "--duration", "0.5",
+                   "--rrd", str(tmp_path / "nope" / "x.rrd")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "does not exist" in err and err.count("\n") == 1
+    assert not (tmp_path / "o" / "harmonic_bare.run.npz").exists()  # failed before simulating
+
+
+def test_failure_leaves_no_partial_file(made, tmp_path, monkeypatch):
+    import mjcf
+    from sim import recording
+
+    _, run_path, _ = made
+    run = read_run(run_path)
+    tm = mjcf.build(mjcf.load_table("cgs"), None)
+
+    def boom(*a, **k):
+        raise RuntimeError("disk gone")
+
+    monkeypatch.setattr(recording.RrdTarget, "_log_series", boom)
+    target = recording.RrdTarget.open(tmp_path / "x.rrd")
+    with pytest.raises(RuntimeError):
+        target.write_run(run, tm)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_blueprint_is_one_function(made):
+    import rerun.blueprint as rrb
+
+    from sim import recording
+
+    run = read_run(made[1])
+    bp = recording.blueprint(run)
+    assert isinstance(bp, rrb.Blueprint)
+    assert isinstance(recording.blueprint(run, run), rrb.Blueprint)
+
+
+def test_force_colours():
+    from sim.recording import force_colors
+
+    c = force_colors(np.array([0.0, 0.5, 1.0, 3.0, np.nan]))
+    assert c.shape == (5, 4) and c.dtype == np.uint8
+    assert c[2].tolist() == c[3].tolist()  # clipped at capacity
+    assert c[0, 2] > c[0, 0] and c[2, 0] > c[2, 2]  # blue at rest, red at capacity
+    assert c[4, :3].tolist() == [128, 128, 128]
