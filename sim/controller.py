@@ -64,6 +64,8 @@ class ControllerGains:
     """Velocity feed-forward (fraction of the reference velocity)."""
     kff_acceleration_s: np.ndarray = field(default_factory=lambda: np.full(6, 0.0056))
     """Acceleration feed-forward time (s): v_dem += k a_ref; default = servovalve tau."""
+    kff_jerk_s2: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    """Jerk feed-forward (s^2): v_dem += k d(a_ref)/dt; ~1/w_oil^2 cancels the oil column."""
     kv_feedback: np.ndarray = field(default_factory=lambda: np.zeros(6))
     """Velocity feedback gain (dimensionless) on v_ref - v."""
     kdp: float = 0.3
@@ -79,10 +81,17 @@ class ControllerGains:
     rate_hz: float = 1024.0
 
     @classmethod
+    def for_table(cls, desc: TableDescription, overrides: dict | None = None) -> "ControllerGains":
+        """The table's default gains (its [controller] section) with ``overrides`` on top."""
+        base = dict(desc.raw.get("controller", {}) or {})
+        base.update(overrides or {})
+        return cls.from_dict(base)
+
+    @classmethod
     def from_dict(cls, d: dict | None) -> "ControllerGains":
         d = dict(d or {})
         kw = {}
-        for key in ("kp_per_s", "kff_velocity", "kff_acceleration_s", "kv_feedback"):
+        for key in ("kp_per_s", "kff_velocity", "kff_acceleration_s", "kff_jerk_s2", "kv_feedback"):
             if key in d:
                 kw[key] = _vec6(d.pop(key), key)
         for key in ("kdp", "dp_highpass_hz", "kfb", "command_limit", "rate_hz"):
@@ -98,7 +107,7 @@ class ControllerGains:
             kw["flow_linearisation"] = v
         if d:
             raise ScenarioError(
-                f"unknown controller key '{sorted(d)[0]}'; known: kp_per_s, kff_velocity, kff_acceleration_s, "
+                f"unknown controller key '{sorted(d)[0]}'; known: kp_per_s, kff_velocity, kff_acceleration_s, kff_jerk_s2, "
                 "kv_feedback, kdp, dp_highpass_hz, kfb, flow_linearisation, command_limit, rate_hz")
         g = cls(**kw)
         if not 0 < g.command_limit <= 1:
@@ -172,7 +181,7 @@ class TableController:
                    1.0 if g.flow_linearisation else 0.0, g.command_limit, out)
         return out
 
-    def command_from_state(self, k, s_ref_all, v_ref_all, a_ref_all, qpos, qvel, xmat, qa, pd, pb, force,
+    def command_from_state(self, k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force,
                            supply_pressure, out) -> np.ndarray:
         """Compiled tick reading strokes and the platen velocity straight from MuJoCo's arrays."""
         g = self.g
@@ -180,26 +189,39 @@ class TableController:
             x = qpos[qa]
             R = xmat[pb].reshape(3, 3)
             v6 = np.concatenate([qvel[pd:pd + 3], R @ qvel[pd + 3:pd + 6]])
-            out[:] = self.command(s_ref_all[k], v_ref_all[k], a_ref_all[k], x, v6, force, supply_pressure)
+            out[:] = self.command(s_ref_all[k], v_ref_all[k], vff_all[k], x, v6, force, supply_pressure)
             return out
-        self._kern2(k, s_ref_all, v_ref_all, a_ref_all, qpos, qvel, xmat, qa, pd, pb, force, supply_pressure,
+        self._kern2(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force, supply_pressure,
                     self._consts, self.J, self.Jp, self.N, self._gains_arr, self._state, self._pl_hp,
                     self._pl_prev_arr, out)
         return out
 
-    def command(self, s_ref, v_ref6, a_ref6, strokes, v6, force, supply_pressure=None) -> np.ndarray:
+    def feedforward(self, v_ref: np.ndarray, a_ref: np.ndarray, rate_hz: float) -> np.ndarray:
+        """(N, 6) feed-forward DOF velocity demand: kff_v v + kff_a a + kff_j jerk.
+
+        The jerk is the derivative of the reference acceleration (central differences;
+        the reference is known in advance, as in the table's own off-line compensation).
+        """
+        g = self.g
+        out = g.kff_velocity * v_ref + g.kff_acceleration_s * a_ref
+        if np.any(g.kff_jerk_s2) and len(a_ref) > 2:
+            out = out + g.kff_jerk_s2 * np.gradient(a_ref, 1.0 / rate_hz, axis=0)
+        return np.ascontiguousarray(out)
+
+    def command(self, s_ref, v_ref6, vff6, strokes, v6, force, supply_pressure=None) -> np.ndarray:
         """Valve commands (n_act,) for one tick.
 
         Args:
             s_ref: (n_act,) reference strokes (exact IK of the reference pose), m.
-            v_ref6, a_ref6: (6,) reference DOF velocity and acceleration.
+            v_ref6: (6,) reference DOF velocity; vff6: (6,) feed-forward velocity demand
+                (see :meth:`feedforward`).
             strokes: (n_act,) measured strokes (LVDT), m.
             v6: (6,) measured DOF velocity.
             force: (n_act,) measured actuator forces (pressure), N.
         """
         g = self.g
         e_dof = self.Jp @ (s_ref - strokes)
-        v_dem = g.kff_velocity * v_ref6 + g.kff_acceleration_s * a_ref6 + self._kp * e_dof
+        v_dem = vff6 + self._kp * e_dof
         if g.kv_feedback.any():
             v_dem = v_dem + g.kv_feedback * (v_ref6 - v6)
         c = (self.J @ v_dem) * self.open_per_velocity
@@ -237,7 +259,7 @@ if _nb is not None:
             acc = 0.0
             for i in range(n):
                 acc += Jp[k, i] * e[i]
-            vd[k] = kffv[k] * v_ref6[k] + kffa[k] * a_ref6[k] + kp[k] * acc + kv[k] * (v_ref6[k] - v6[k])
+            vd[k] = a_ref6[k] + kp[k] * acc + kv[k] * (v_ref6[k] - v6[k])  # a_ref6 carries the feed-forward
         first = state[0] == 0.0
         state[0] = 1.0
         for i in range(n):

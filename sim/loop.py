@@ -81,7 +81,7 @@ class Simulation:
         self.dt = float(self.m.opt.timestep)
         self.hp = HydraulicParams.from_table(tm.desc.raw)
         self.hs = HydraulicSystem(self.hp, n_sim=1, dt=self.dt, backend=backend)
-        self.gains = gains or ControllerGains()
+        self.gains = gains or ControllerGains.for_table(tm.desc)
         ratio = 1.0 / (self.gains.rate_hz * self.dt)
         self.steps_per_tick = int(round(ratio))
         if abs(ratio - self.steps_per_tick) > 1e-9 or self.steps_per_tick < 1:
@@ -147,7 +147,7 @@ class Simulation:
         if reference is not None:
             s_ref_all = actuator_strokes(tm.desc, reference.d[:n])
             v_ref_all = np.ascontiguousarray(reference.v[:n])
-            a_ref_all = np.ascontiguousarray(reference.a[:n])
+            a_ref_all = ctrl.feedforward(reference.v[:n], reference.a[:n], rate)  # feed-forward velocity
         else:
             vc_all = np.ascontiguousarray(valve_command[:n], dtype=np.float64)
         Q = np.full((n, m.nq), np.nan)

@@ -73,6 +73,7 @@ class Scenario:
     controller: dict
     sample_rate_hz: float
     path: Path | None = None
+    iteration: dict = field(default_factory=dict)
     raw: dict = field(default_factory=dict, repr=False)
 
 
@@ -102,7 +103,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         raise ScenarioError(str(e)) from None
     data = _load(path)
     src = str(path)
-    _unknown(data, {"scenario", "motion", "controller", "output"}, "top level", src)
+    _unknown(data, {"scenario", "motion", "controller", "output", "iteration"}, "top level", src)
     sc = data.get("scenario")
     if not isinstance(sc, dict):
         raise ScenarioError(f"{src}: missing the [scenario] table (name, table, ...)")
@@ -121,6 +122,13 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     rate = out.get("sample_rate_hz", 1024.0)
     if isinstance(rate, bool) or not isinstance(rate, (int, float)) or rate <= 0:
         raise ScenarioError(f"{src}: 'output.sample_rate_hz' must be positive (got {rate!r})")
+    it = data.get("iteration", {"count": 0})
+    if not isinstance(it, dict):
+        raise ScenarioError(f"{src}: [iteration] must be a table (count, gain, band_hz)")
+    _unknown(it, {"count", "gain", "band_hz", "h_min"}, "iteration", src)
+    cnt = it.get("count", 0)
+    if isinstance(cnt, bool) or not isinstance(cnt, int) or not 0 <= cnt <= 10:
+        raise ScenarioError(f"{src}: 'iteration.count' must be an integer 0..10 (got {cnt!r})")
     ctrl = data.get("controller", {})
     if not isinstance(ctrl, dict):
         raise ScenarioError(f"{src}: [controller] must be a table of gains")
@@ -138,7 +146,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         raise ScenarioError(f"{src}: 'scenario.pad_to_duration' must be true or false")
     s = Scenario(name=sc["name"], table=table, payload=payload, duration_s=float(dur) if dur else None,
                  pad_to_duration=pad, description=str(sc.get("description", "")), motion=mo,
-                 controller=ctrl, sample_rate_hz=float(rate), path=path, raw=data)
+                 controller=ctrl, sample_rate_hz=float(rate), path=path, raw=data, iteration=dict(it))
     _check_motion(s)
     return s
 
