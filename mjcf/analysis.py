@@ -104,6 +104,31 @@ def effective_mass_matrix(model: mujoco.MjModel, data: mujoco.MjData | None = No
     return T.T @ M @ T
 
 
+def static_balance(model: mujoco.MjModel, force_dofs, qpos=None) -> np.ndarray:
+    """Generalised forces on ``force_dofs`` that hold a pose against gravity (N or N m).
+
+    Solves ``qfrc_bias = J_eq^T lambda + S f`` over the platen and loop coordinates by
+    least squares (minimum norm where the supports/actuators are redundant); raises if
+    the balance cannot be met (residual above 1e-6 of the load).
+    """
+    data = mujoco.MjData(model)
+    if qpos is not None:
+        data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    _, J = connect_rows(model, data)
+    rows = np.concatenate([platen_dofs(model), loop_dofs(model)])
+    S = np.zeros((model.nv, len(force_dofs)))
+    for i, d in enumerate(force_dofs):
+        S[d, i] = 1.0
+    A = np.hstack([J.T, S])[rows]
+    b = (data.qfrc_bias - data.qfrc_passive)[rows]  # gravity less the springs (supports)
+    x, *_ = np.linalg.lstsq(A, b, rcond=None)
+    res = np.abs(A @ x - b).max()
+    if res > 1e-6 * max(np.abs(b).max(), 1.0):
+        raise ValueError(f"static balance not met (residual {res:.3g} N)")
+    return x[-len(force_dofs):]
+
+
 def support_preloads(model: mujoco.MjModel, desc) -> np.ndarray:
     """Vertical force (N, upward) each static support must give to hold the home pose.
 

@@ -96,11 +96,26 @@ class Simulation:
         self.reset()
 
     # ------------------------------------------------------------------ state
-    def reset(self, pose=None):
+    def reset(self, pose=None, forces=None):
+        """Back to the home keyframe (or ``pose``), hydraulics at rest.
+
+        ``forces`` (n_act,) presets the actuator forces (chamber pressures and ``ctrl``),
+        e.g. :meth:`static_forces` for a table whose actuators carry dead weight.
+        """
         self.d = self.tm.new_data()
         if pose is not None:
             self.tm.set_platen_pose(self.d, pose)
-        self.hs.reset(self.tm.actuator_strokes(self.d)[None, :])
+        x = self.tm.actuator_strokes(self.d)[None, :]
+        self.hs.reset(x, force=None if forces is None else np.asarray(forces, float)[None, :])
+        self.d.ctrl[self.tm.actuator_ids] = self.hs.force[0]
+        mujoco.mj_forward(self.m, self.d)
+
+    def static_forces(self) -> np.ndarray:
+        """Actuator forces (n_act,) that hold the home pose against gravity with the
+        supports at their preload (zero when the supports carry everything)."""
+        from mjcf.analysis import static_balance
+
+        return static_balance(self.m, self.tm.stroke_dadr, qpos=self.d.qpos.copy())
 
     def _prepare_gap(self):
         m = self.m

@@ -120,9 +120,9 @@ def cmd_run(args) -> int:
     motions = build_motions(sc)
     ref = build_reference(sc, motions, args.duration)
     warns = limit_warnings(desc, motions)
-    out = _out_dir(args.out)
     for w in warns:
         print(f"warning: {w}", file=sys.stderr)
+    out = _out_dir(args.out)
     tm = mjcf.build(desc, payload)
     sim = Simulation(tm, gains=gains)
     rec = None

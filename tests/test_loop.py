@@ -1,0 +1,176 @@
+"""The coupled simulation: closed valves hold, replay reproduces, tracking, bad input."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import mjcf
+from sim.cli import main
+from sim.controller import ControllerGains
+from sim.loop import Simulation
+from sim.scenario import build_motions, build_reference, load_scenario
+
+
+@pytest.fixture(scope="module")
+def loaded_no_supports():
+    """CGS + 20 t block with the static supports removed: the vertical actuators carry
+    the whole dead weight, so a force applied in the wrong place would make it sag."""
+    d = mjcf.load_table("cgs")
+    raw = json.loads(json.dumps(d.raw))
+    raw["servovalve"]["null_leakage_m3_s"] = 0.0  # creep only through the piston leakage
+    d2 = dataclasses.replace(d, supports=None, raw=raw)
+    return mjcf.build(d2, mjcf.load_payload("rigid_20t"))
+
+
+def test_closed_valves_hold_the_loaded_table(loaded_no_supports):
+    tm = loaded_no_supports
+    sim = Simulation(tm)
+    F = sim.static_forces()
+    assert np.all(F[8:] > 1.5e5)  # Z1..Z4 carry ~700 kN together
+    assert np.allclose(F[:8], 0, atol=1e-3)
+    sim.reset(forces=F)
+    secs = 4.0
+    res = sim.run(valve_command=np.zeros((int(secs * 1024), tm.n_act)))
+    assert res.incomplete_reason is None
+    pose = res.channels["table_displacement"]
+    # the table creeps down only through the cross-piston leakage: v = k_c * F / A^2
+    hp = sim.hp
+    A = hp.area_a_m2[8]
+    v_creep = hp.leakage_cross_m3_s_pa[8] * F[8] / A ** 2
+    dz = pose[-1, 2] - pose[0, 2]
+    assert dz < 0
+    assert abs(dz / (-v_creep * res.t[-1]) - 1) < 0.05, (dz, v_creep)
+    assert np.abs(pose[:, [0, 1, 3, 4, 5]]).max() < 1e-6
+    # and the sag stays far below the oil-column compliance a misplaced force would show
+    assert abs(dz) < 1e-3
+
+
+def test_closed_valves_hold_with_supports():
+    tm = mjcf.build(mjcf.load_table("cgs"), mjcf.load_payload("rigid_20t"))
+    sim = Simulation(tm)
+    res = sim.run(valve_command=np.zeros((3 * 1024, tm.n_act)))
+    pose = res.channels["table_displacement"]
+    assert np.abs(pose - pose[0]).max() < 1e-4
+
+
+@pytest.fixture(scope="module")
+def harmonic():
+    sc = load_scenario("harmonic_bare")
+    desc = mjcf.load_table(sc.table)
+    tm = mjcf.build(desc)
+    ref = build_reference(sc, build_motions(sc))
+    return tm, ref
+
+
+def test_harmonic_test_tracks_within_2_percent(harmonic):
+    tm, ref = harmonic
+    sim = Simulation(tm)
+    res = sim.run(reference=ref)
+    assert res.incomplete_reason is None
+    d = res.channels["table_displacement"]
+    for i in range(3):
+        e = d[:, i] - ref.d[: len(d), i]
+        nrmse = np.sqrt(np.mean(e ** 2)) / np.sqrt(np.mean(ref.d[:, i] ** 2))
+        assert nrmse < 0.02, (i, nrmse)
+    assert np.nanmax(res.extras["loop_gap"]) < 1e-5
+
+
+def test_replay_of_valve_commands_reproduces_the_run(harmonic):
+    tm, ref = harmonic
+    sim = Simulation(tm)
+    short = dataclasses.replace(ref)
+    res = sim.run(reference=short, duration_s=3.0)
+    sim2 = Simulation(tm)
+    rep = sim2.run(valve_command=res.channels["valve_command"])
+    for ch in ("table_displacement", "table_acceleration", "actuator_force", "pressure_a", "accelerometers"):
+        assert np.array_equal(res.channels[ch], rep.channels[ch]), ch
+
+
+def test_compiled_and_numpy_paths_agree(harmonic):
+    tm, ref = harmonic
+    a = Simulation(tm).run(reference=ref, duration_s=1.0, fast=True)
+    b = Simulation(tm, backend="numpy").run(reference=ref, duration_s=1.0, fast=False)
+    for ch in ("table_displacement", "valve_command", "actuator_force"):
+        scale = np.abs(a.channels[ch]).max() + 1e-12
+        assert np.abs(a.channels[ch] - b.channels[ch]).max() / scale < 1e-7, ch
+
+
+def test_divergence_stops_and_keeps_the_partial_run(harmonic, monkeypatch):
+    tm, ref = harmonic
+    sim = Simulation(tm)
+    calls = {"n": 0}
+    orig = sim.loop_gap
+
+    def bad_gap():
+        calls["n"] += 1
+        return 5e-3 if calls["n"] > 40 else orig()
+
+    monkeypatch.setattr(sim, "loop_gap", bad_gap)
+    res = sim.run(reference=ref, duration_s=2.0)
+    assert res.incomplete_reason and "swivel opened by 5.00 mm" in res.incomplete_reason
+    assert "t = " in res.incomplete_reason
+    assert 0 < len(res.t) < 2.0 * 1024
+    assert all(len(v) == len(res.t) for v in res.channels.values())
+
+
+def test_run_cli_writes_run_file_and_summary(tmp_path, capsys):
+    rc = main(["run", "harmonic_bare", "--out", str(tmp_path), "--duration", "2", "--json"])
+    assert rc == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["realtime_factor"] > 0
+    assert set(s["tracking"]) == {"x", "y", "z"}
+    for e in s["tracking"].values():
+        assert {"nrmse_displacement", "nrmse_acceleration", "pga_ratio"} <= set(e)
+    from sim.runfile import CHANNELS, read_run
+
+    run = read_run(tmp_path / "harmonic_bare.run.npz", require=CHANNELS)
+    assert run.sample_rate_hz == 1024.0 and run.n_samples == 2 * 1024 + 1
+    assert run.accelerometers.shape[1] == 11
+    assert json.loads((tmp_path / "summary.json").read_text())["scenario"] == "harmonic_bare"
+    # the replay command reproduces it to round-off
+    rc = main(["replay", str(tmp_path / "harmonic_bare.run.npz"), "--out", str(tmp_path), "--json"])
+    rep = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert max(rep["residual_nrmse"]["table_displacement"][k] for k in "xyz") < 1e-12
+
+
+@pytest.mark.parametrize("text,expect", [
+    ('[scenario]\nname = "s"\ntable = "cgs"\ncolour = 1\n[motion]\ntype = "el_centro_1940"\n', "unknown key 'colour'"),
+    ('[scenario]\nname = "s"\ntable = "cgs"\nduration_s = 500.0\n[motion]\ntype = "el_centro_1940"\n',
+     "longer than the motion"),
+    ('[scenario]\nname = "s"\ntable = "cgs"\n[motion.x]\ntype = "at2"\nfile = "rec.AT2"\n', "AT2"),
+    ('[scenario]\nname = "s"\ntable = "cgs"\n[motion.q]\ntype = "sine"\n', "'q' is not a DOF"),
+    ('[scenario]\nname = "s"\ntable = "cgs"\n[motion]\ntype = "el_centro_1940"\n[controller]\nkq = 1\n',
+     "unknown controller key 'kq'"),
+])
+def test_bad_scenarios_are_refused_in_one_line(tmp_path, capsys, text, expect):
+    (tmp_path / "rec.AT2").write_text("this is not a PEER record\n1 2 3\n")
+    p = tmp_path / "s.toml"
+    p.write_text(text)
+    rc = main(["run", str(p), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2, err
+    assert expect in err, err
+    assert len(err.splitlines()) == 1
+    assert not list((tmp_path / "out").glob("*.run.npz")) if (tmp_path / "out").exists() else True
+
+
+def test_limits_warn_and_unwritable_output_refused(tmp_path, capsys):
+    p = tmp_path / "big.toml"
+    p.write_text('[scenario]\nname = "big"\ntable = "cgs"\nduration_s = 5.0\n'
+                 '[motion.x]\ntype = "sine"\namplitude = 0.3\nfrequency_hz = 0.1\n')
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    rc = main(["run", str(p), "--out", str(blocker / "sub")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "cannot write to output folder" in err
+    assert "x peak displacement 0.3 m exceeds the +/-0.25 m stroke by 20 %" in err
+
+
+def test_scenario_gains_override_table_defaults():
+    d = mjcf.load_table("cgs")
+    g = ControllerGains.for_table(d, {"kp_per_s": 12.0})
+    assert np.all(g.kp_per_s == 12.0)
+    assert g.kdp == d.raw["controller"]["kdp"]
