@@ -1,0 +1,116 @@
+"""``make bench``: real-time factors and per-step costs, measured in one run.
+
+    python -m bench [--quick] [--with-recording]
+
+For each scene (bare CGS table, 20 t rigid specimen, 3-storey frame, 6 m tower):
+
+* the bare ``mj_step`` of the model (random actuator forces), microseconds;
+* the whole coupled loop on the strong-motion part of El Centro (80 %, 3 components):
+  real-time factor, cost per physics step split into physics / hydraulics / controller /
+  output, and the ratio whole loop / bare ``mj_step`` (target <= 1.3);
+* the hydraulic step alone (12 actuators and a 64 x 12 batch, numba and numpy).
+
+All figures come from this one run on this machine; they are ratios of timings taken
+side by side, not absolute promises.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import mujoco
+import numpy as np
+
+import mjcf
+from sim.loop import Simulation
+from sim.records import el_centro_motions
+from sim.scenario import DOFS
+from sim.loop import Reference
+
+SCENES = [("bare", None), ("rigid 20 t", "rigid_20t"), ("3-storey frame", "frame_3storey_297"),
+          ("6 m tower", "tower_6m")]
+
+
+def bare_step_us(model, n=4000) -> float:
+    d = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, d, 0)
+    rng = np.random.default_rng(0)
+    forces = rng.normal(0, 5e4, (64, model.nu))
+    for i in range(200):
+        mujoco.mj_step(model, d)
+    t = time.perf_counter()
+    for i in range(n):
+        d.ctrl[:] = forces[i & 63]
+        mujoco.mj_step(model, d)
+    return (time.perf_counter() - t) / n * 1e6
+
+
+def strong_motion(seconds: float) -> Reference:
+    rate = 1024.0
+    mos = el_centro_motions(sample_rate_hz=rate, amplitude_factor=0.8)
+    n = len(next(iter(mos.values())).t)
+    D = np.zeros((n, 6))
+    V = np.zeros((n, 6))
+    A = np.zeros((n, 6))
+    for dof, m in mos.items():
+        i = DOFS.index(dof)
+        D[:, i], V[:, i], A[:, i] = m.d, m.v, m.a
+    # start where the motion is quiet just before the strong part, at rest offset removed
+    i0 = int(np.argmax(np.abs(A[:, 0]) > 0.05 * np.abs(A[:, 0]).max()))
+    sl = slice(i0, min(n, i0 + int(seconds * rate) + 1))
+    D, V, A = D[sl] - D[sl][0], V[sl], A[sl]
+    return Reference(t=np.arange(len(D)) / rate, d=D, v=V, a=A)
+
+
+def loop_figures(tm, ref) -> dict:
+    sim = Simulation(tm)
+    sim.run(reference=ref, duration_s=0.5)  # warm the compiled kernels
+    sim.reset()
+    res = sim.run(reference=ref)
+    tmg = res.timing
+    steps = tmg["steps"]
+    return {
+        "rtf": res.realtime_factor,
+        "wall_per_step_us": res.wall_s / steps * 1e6,
+        "physics_us": tmg["physics_s"] / steps * 1e6,
+        "hydraulics_us": tmg["hydraulics_s"] / steps * 1e6,
+        "controller_us": tmg["controller_s"] / steps * 1e6,
+        "output_us": tmg["output_s"] / steps * 1e6,
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m bench")
+    ap.add_argument("--quick", action="store_true", help="shorter runs")
+    ap.add_argument("--with-recording", action="store_true", help="also time the rerun recording overhead")
+    args = ap.parse_args(argv)
+    secs = 5.0 if args.quick else 15.0
+    desc = mjcf.load_table("cgs")
+    ref = strong_motion(secs)
+    print(f"shaketable bench: CGS table, El Centro 80 % strong motion, {secs:.0f} s simulated per scene; "
+          f"physics step {1e3 / 2048:.3f} ms (2048 Hz), controller/recorder 1024 Hz")
+    print(f"{'scene':16s} {'mj_step':>8s} {'loop/step':>9s} {'ratio':>6s} {'RTF':>6s} | "
+          f"{'physics':>8s} {'hydr.':>7s} {'ctrl':>7s} {'output':>7s}  (us per physics step)")
+    for label, payload in SCENES:
+        tm = mjcf.build(desc, mjcf.load_payload(payload) if payload else None)
+        bare = bare_step_us(tm.model)
+        f = loop_figures(tm, ref)
+        print(f"{label:16s} {bare:8.1f} {f['wall_per_step_us']:9.1f} {f['wall_per_step_us'] / bare:6.2f} "
+              f"{f['rtf']:6.2f} | {f['physics_us']:8.1f} {f['hydraulics_us']:7.1f} {f['controller_us']:7.1f} "
+              f"{f['output_us']:7.1f}")
+        sys.stdout.flush()
+    print()
+    from bench import hydraulics_bench
+
+    hydraulics_bench.main()
+    if args.with_recording:
+        from bench import recording_bench
+
+        recording_bench.main([])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
