@@ -7,7 +7,7 @@ a second run (``compare``): its series next to the first run's and the residual
 What goes in (entity paths follow the model):
 
 ==========================================  ==========================================================
-``table/foundation``                        static world geoms (pit floor, foundation)
+``table/foundation``                        static world geoms (pit floor); ``table/ground`` if a foundation body moves
 ``table/platen``                            platen body, its transform per display frame
 ``table/platen/accelerometers``             sensor positions and directions (platen frame)
 ``table/actuators/<A>/cylinder``, ``/rod``  the linkage bodies; geoms coloured by |force| / (A_a p_supply)
@@ -75,6 +75,8 @@ _PRELOAD = None
 def preload() -> None:
     """Start importing rerun in a background thread (it takes ~1 s); :func:`_rerun` waits for it."""
     global _PRELOAD
+    if os.environ.get("SHAKETABLE_RRD_PRELOAD", "1") == "0":  # for bench/recording_bench.py
+        return
     if _PRELOAD is None and "rerun" not in __import__("sys").modules:
         import threading
 
@@ -159,10 +161,17 @@ def _quat_xyzw(q_wxyz: np.ndarray) -> np.ndarray:
     return np.concatenate([q[..., 1:4], q[..., :1]], axis=-1)
 
 
-def body_entity(name: str, actuators, world: bool = False) -> str:
-    """Entity path of a MuJoCo body (see the module table)."""
-    if world or name in ("world", "foundation"):
+def body_entity(name: str, actuators, world: bool = False, has_foundation: bool = False) -> str:
+    """Entity path of a MuJoCo body (see the module table).
+
+    The world's geoms (pit floor) are ``table/foundation``, unless the model has a
+    (spring-mounted, moving) ``foundation`` body: then that body is ``table/foundation``
+    and the world's geoms are ``table/ground``.
+    """
+    if name == "foundation":
         return "table/foundation"
+    if world or name == "world":
+        return "table/ground" if has_foundation else "table/foundation"
     if name == "platen":
         return "table/platen"
     for suffix in ("_cylinder", "_rod"):
@@ -225,9 +234,10 @@ def _scene(tm) -> _Scene:
     m = tm.model
     acts = list(tm.actuator_names)
     sc = _Scene()
+    has_fdn = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "foundation") >= 0
     for b in range(m.nbody):
         name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
-        ent = body_entity(name, acts, world=(b == 0))
+        ent = body_entity(name, acts, world=(b == 0), has_foundation=has_fdn)
         if b != 0:
             sc.bodies.append((b, ent))
         for g in range(int(m.body_geomadr[b]), int(m.body_geomadr[b]) + int(m.body_geomnum[b])):
