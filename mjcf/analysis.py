@@ -60,13 +60,21 @@ def loop_dofs(model: mujoco.MjModel) -> np.ndarray:
 
 
 def platen_dofs(model: mujoco.MjModel) -> np.ndarray:
+    """DOF indices of the platen: its free joint (6) or its bearing slides (platen_x, ...)."""
     j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "platen")
-    a = model.jnt_dofadr[j]
-    return np.arange(a, a + 6)
+    if j >= 0:
+        a = model.jnt_dofadr[j]
+        return np.arange(a, a + 6)
+    out = []
+    for dof in ("x", "y", "z"):
+        j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"platen_{dof}")
+        if j >= 0:
+            out.append(model.jnt_dofadr[j])
+    return np.array(out, dtype=int)
 
 
 def projection(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
-    """T (nv, 6): all joint velocities produced by a unit platen velocity, loops closed.
+    """T (nv, n_p): all joint velocities produced by a unit platen velocity, loops closed.
 
     Columns are the platen's free-joint velocities (linear in world, angular in the
     platen frame; identical at the home pose). Payload and foundation coordinates are
@@ -79,9 +87,10 @@ def projection(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
     Jp = J[:, pd]
     if Jo.shape[0] != Jo.shape[1]:
         raise ValueError(f"loop Jacobian is {Jo.shape}, expected square")
-    T = np.zeros((model.nv, 6))
-    T[pd, :] = np.eye(6)
-    T[od, :] = -np.linalg.solve(Jo, Jp)
+    T = np.zeros((model.nv, len(pd)))
+    T[pd, :] = np.eye(len(pd))
+    if len(od):
+        T[od, :] = -np.linalg.solve(Jo, Jp)
     return T
 
 
@@ -92,7 +101,8 @@ def full_mass_matrix(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
 
 
 def effective_mass_matrix(model: mujoco.MjModel, data: mujoco.MjData | None = None) -> np.ndarray:
-    """6x6 effective mass of the platen DOF about the reference point (kg, kg m^2)."""
+    """Effective mass of the platen DOF about the reference point (kg, kg m^2): 6x6 for a
+    free platen, n x n for a platen on bearings with n translational DOF."""
     if data is None:
         data = mujoco.MjData(model)
         key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home")

@@ -116,6 +116,7 @@ class BuildInfo:
     payload_kind: str = "none"
     payload_joints: list[str] = field(default_factory=list)
     payload_bodies: list[str] = field(default_factory=list)
+    step_effects: list = field(default_factory=list)  #: effects applied every physics step
 
 
 def build_spec(desc: TableDescription, payload: Payload | None = None,
@@ -181,8 +182,15 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
 
     # Platen.
     pl = desc.platen
-    platen = world.add_body(name="platen", pos=[0, 0, 0])
-    platen.add_freejoint(name="platen")
+    if pl.guided:
+        # Linear bearings on the foundation: one slide per translational DOF of the table.
+        platen = base_parent.add_body(name="platen", pos=[0, 0, 0])
+        for dof in desc.dofs:
+            axis = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1]}[dof]
+            platen.add_joint(name=f"platen_{dof}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
+    else:
+        platen = world.add_body(name="platen", pos=[0, 0, 0])
+        platen.add_freejoint(name="platen")
     platen.explicitinertial = True
     platen.mass = pl.mass_kg
     platen.ipos = pl.com_m.tolist()
@@ -270,6 +278,10 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
             eq.solimp = list(opt.eq_solimp)
 
     _add_payload(spec, platen, payload, info)
+    if desc.effects:
+        from sim.effects import build_effects
+
+        info.step_effects = build_effects(spec, list(desc.effects))
     return spec, info
 
 

@@ -130,6 +130,7 @@ class Limits:
 @dataclass(frozen=True, kw_only=True)
 class Platen:
     size_m: np.ndarray  #: (3,) length x, width y, depth z
+    guided: bool = False  #: True: the platen moves only along the table's DOFs (linear bearings)
     com_m: np.ndarray  #: (3,) centre of mass in the table frame
     mass_kg: float
     inertia_kg_m2: np.ndarray  #: (3,) principal moments about the centre of mass
@@ -221,6 +222,7 @@ class TableDescription:
     accelerometer_bandwidth_hz: float
     source: str
     raw: dict = field(repr=False)
+    effects: tuple = ()  #: [[effect]] entries (sim/effects.py), validated when the model is built
 
     @property
     def actuator_names(self) -> tuple[str, ...]:
@@ -291,7 +293,11 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
     li.done()
 
     pl = top.sub("platen")
+    guide = pl.text("guide", "free", choices=("free", "bearings"))
+    if guide == "bearings" and any(d in ("rx", "ry", "rz") for d in dofs):
+        raise DescriptionError(f"{src}: 'platen.guide = \"bearings\"' allows translations only; table.dofs has rotations")
     platen = Platen(
+        guided=(guide == "bearings"),
         size_m=pl.vec("size_m", 3, positive=True),
         com_m=pl.vec("com_m", 3),
         mass_kg=pl.num("mass_kg", positive=True),
@@ -411,13 +417,16 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         top.raw(k)
     if top.has("controller"):
         top.raw("controller")
+    effects = top.raw("effect", [])
+    if not isinstance(effects, list) or not all(isinstance(e, dict) for e in effects):
+        raise DescriptionError(f"{src}: '[[effect]]' entries must be tables")
     top.done()
 
     desc = TableDescription(
         name=name, title=title, dofs=tuple(dofs), gravity_m_s2=g, limits=limits, platen=platen,
         foundation=foundation, actuator_classes=classes, actuators=tuple(actuators),
         supports=supports, accelerometers=tuple(accs), recorder_rate_hz=rate,
-        accelerometer_bandwidth_hz=bw, source=src, raw=data,
+        accelerometer_bandwidth_hz=bw, source=src, raw=data, effects=tuple(effects),
     )
     check_stroke_reach(desc)
     return desc
@@ -466,9 +475,11 @@ def actuator_strokes(desc: TableDescription, pose) -> np.ndarray:
 
 
 def envelope_corners(desc: TableDescription) -> np.ndarray:
-    """All 64 corners of the rated 6-DOF motion box (m, rad)."""
+    """All corners of the rated motion box over the table's DOFs (m, rad), as 6-vectors."""
     half = np.concatenate([desc.limits.stroke_m, desc.limits.rotation_rad])
-    return np.array([np.array(s) * half for s in itertools.product((-1.0, 1.0), repeat=6)])
+    mask = np.array([d in desc.dofs for d in DOFS6], dtype=float)
+    corners = np.array([np.array(s) * half * mask for s in itertools.product((-1.0, 1.0), repeat=6)])
+    return np.unique(corners, axis=0)
 
 
 def check_stroke_reach(desc: TableDescription) -> None:

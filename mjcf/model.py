@@ -52,14 +52,28 @@ class TableModel:
         self.stroke_dadr = np.array([m.jnt_dofadr[jid(f"{n}_stroke")] for n in names])
         self.actuator_ids = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in names])
         pj = jid("platen")
-        self.platen_qadr = m.jnt_qposadr[pj]
-        self.platen_dadr = m.jnt_dofadr[pj]
+        self.platen_free = pj >= 0
+        if self.platen_free:
+            self.platen_qadr = m.jnt_qposadr[pj]
+            self.platen_dadr = m.jnt_dofadr[pj]
+            self.platen_dof_index = np.arange(6)
+            self.platen_slide_qadr = self.platen_slide_dadr = np.zeros(0, dtype=int)
+        else:  # platen on bearings: one slide per translational DOF
+            dofs = [d for d in ("x", "y", "z") if jid(f"platen_{d}") >= 0]
+            self.platen_dof_index = np.array([("x", "y", "z").index(d) for d in dofs], dtype=int)
+            self.platen_slide_qadr = np.array([m.jnt_qposadr[jid(f"platen_{d}")] for d in dofs], dtype=int)
+            self.platen_slide_dadr = np.array([m.jnt_dofadr[jid(f"platen_{d}")] for d in dofs], dtype=int)
+            self.platen_qadr = int(self.platen_slide_qadr[0])
+            self.platen_dadr = int(self.platen_slide_dadr[0])
         self.platen_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "platen")
         self.acc_sites = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"acc_{a.name}")
                                    for a in self.desc.accelerometers], dtype=int)
         self.home_key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home")
         self.support_names = [f"S{i + 1}" for i in range(len(self.desc.supports.positions_m))] if self.desc.supports else []
         self.support_qadr = np.array([m.jnt_qposadr[jid(f"{s}_air")] for s in self.support_names], dtype=int)
+        self.step_effects = list(getattr(self.info, "step_effects", []))
+        for e in self.step_effects:
+            e.bind(m)
         self.payload_dadr = np.array([m.jnt_dofadr[jid(n)] for n in getattr(self.info, "payload_joints", [])], dtype=int)
 
     # ------------------------------------------------------------------ data
@@ -83,18 +97,41 @@ class TableModel:
 
     def platen_pose(self, d: mujoco.MjData) -> np.ndarray:
         """(6,) reference-point pose: x, y, z (m) and intrinsic x-y-z angles (rad)."""
+        if not self.platen_free:
+            out = np.zeros(6)
+            out[self.platen_dof_index] = d.qpos[self.platen_slide_qadr]
+            return out
         q = d.qpos[self.platen_qadr:self.platen_qadr + 7]
         return np.concatenate([q[:3], quat_to_xyz(q[3:7])])
 
     def platen_velocity(self, d: mujoco.MjData) -> np.ndarray:
         """(6,) reference-point velocity: linear (world) and angular (world frame)."""
+        if not self.platen_free:
+            out = np.zeros(6)
+            out[self.platen_dof_index] = d.qvel[self.platen_slide_dadr]
+            return out
         v = d.qvel[self.platen_dadr:self.platen_dadr + 6]
         R = d.xmat[self.platen_body].reshape(3, 3)
         return np.concatenate([v[:3], R @ v[3:6]])
 
+    def platen_acceleration(self, d: mujoco.MjData) -> np.ndarray:
+        """(6,) reference-point acceleration of the last step (linear world, angular world)."""
+        if not self.platen_free:
+            out = np.zeros(6)
+            out[self.platen_dof_index] = d.qacc[self.platen_slide_dadr]
+            return out
+        a = d.qacc[self.platen_dadr:self.platen_dadr + 6]
+        R = d.xmat[self.platen_body].reshape(3, 3)
+        return np.concatenate([a[:3], R @ a[3:6]])
+
     def set_platen_pose(self, d: mujoco.MjData, pose) -> float:
         """Put the platen at ``pose`` (6,) and close every loop; returns the residual (m)."""
         pose = np.asarray(pose, dtype=float)
+        if not self.platen_free:
+            d.qpos[self.platen_slide_qadr] = pose[self.platen_dof_index]
+            err = analysis.settle_loops(self.model, d)
+            mujoco.mj_forward(self.model, d)
+            return err
         d.qpos[self.platen_qadr:self.platen_qadr + 3] = pose[:3]
         d.qpos[self.platen_qadr + 3:self.platen_qadr + 7] = xyz_to_quat(*pose[3:6])
         err = analysis.settle_loops(self.model, d)
@@ -109,9 +146,10 @@ class TableModel:
         return analysis.effective_mass_matrix(self.model)
 
     def effective_mass(self) -> dict[str, float]:
-        """Diagonal of the 6x6 effective mass about the reference point, by DOF name."""
+        """Diagonal of the effective mass about the reference point, by DOF name."""
         Me = self.effective_mass_matrix()
-        return {k: float(Me[i, i]) for i, k in enumerate(("x", "y", "z", "rx", "ry", "rz"))}
+        names = ("x", "y", "z", "rx", "ry", "rz")
+        return {names[j]: float(Me[i, i]) for i, j in enumerate(self.platen_dof_index)}
 
     def total_mass(self) -> float:
         return float(self.model.body_mass.sum())

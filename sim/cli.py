@@ -76,10 +76,9 @@ def cmd_model(args) -> int:
           f"loop equalities {m.neq}, step {m.opt.timestep * 1e3:.2f} ms")
     print(f"  moving mass {out['total_mass_kg'] / 1000:.2f} t (payload {out['payload_mass_kg'] / 1000:.2f} t)")
     print("  effective mass at the reference point:")
-    for k in ("x", "y", "z"):
-        print(f"    {k:2s} {eff[k] / 1000:8.2f} t")
-    for k in ("rx", "ry", "rz"):
-        print(f"    {k:2s} {eff[k] / 1000:8.1f} t m^2")
+    for k, v in eff.items():
+        unit = "t" if k in ("x", "y", "z") else "t m^2"
+        print(f"    {k:2s} {v / 1000:8.2f} {unit}")
     print("  linkages (base -> platen swivel, m; half-stroke):")
     for a in acts:
         b = ", ".join(f"{v:+.2f}" for v in a["base"])

@@ -136,6 +136,9 @@ class TableController:
         self.desc = desc
         self.g = gains
         self.J = dof_jacobian(desc)
+        # only the table's own DOFs are controlled (a uni-axial table has just x)
+        mask = np.array([d in desc.dofs for d in DOF6], dtype=float)
+        self.J = self.J * mask
         self.Jp = np.linalg.pinv(self.J)
         n = self.J.shape[0]
         self.N = np.eye(n) - self.J @ self.Jp  # projector onto wrench-free actuator forces

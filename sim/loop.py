@@ -189,6 +189,9 @@ class Simulation:
         ctrl_ids = ids
         qpos, qvel, qacc, dctrl = d.qpos, d.qvel, d.qacc, d.ctrl
         qa64, da64, ids64 = (np.asarray(a, dtype=np.int64) for a in (qa, da, ids))
+        free = tm.platen_free
+        effects = tm.step_effects
+        slide_d, pdi, n_pd = tm.platen_slide_dadr, tm.platen_dof_index, len(tm.platen_dof_index)
         xmat = d.xmat
         step = mujoco.mj_step
         t_ctrl = t_hyd = t_phys = t_out = 0.0
@@ -216,7 +219,12 @@ class Simulation:
             t_out += t1 - t0
             # ---- controller tick (valve commands held until the next tick)
             if reference is not None:
-                if fast:
+                if not free:
+                    xk[:] = qpos[qa]
+                    vel6[:] = 0.0
+                    vel6[pdi] = qvel[slide_d]
+                    ctrl.command_fast(s_ref_all[k], v_ref_all[k], a_ref_all[k], xk, vel6, force, psup[0], cmd)
+                elif fast:
                     ctrl.command_from_state(k, s_ref_all, v_ref_all, a_ref_all, qpos, qvel, xmat, qa64, pd, pb_,
                                             force, psup[0], cmd)
                 else:
@@ -240,13 +248,20 @@ class Simulation:
                     v2[0] = qvel[da]
                     f = hs.step(cmd2, x2, v2)
                     dctrl[ctrl_ids] = f[0]
+                if effects:
+                    d.qfrc_applied[:] = 0.0
+                    for e in effects:
+                        e.apply(m, d)
                 t4 = clock()
                 step(m, d)
                 t5 = clock()
                 t_hyd += t4 - t3
                 t_phys += t5 - t4
                 if j == 0:
-                    ACC[k] = qacc[pd:pd + 6]
+                    if free:
+                        ACC[k] = qacc[pd:pd + 6]
+                    else:
+                        ACC[k, :n_pd] = qacc[slide_d]
             # ---- divergence checks
             if k % gap_every == 0:
                 t6 = clock()
@@ -286,6 +301,23 @@ class Simulation:
         """Recorder channels from raw qpos/qvel/platen-qacc samples (vectorised)."""
         tm = self.tm
         pq, pd = tm.platen_qadr, tm.platen_dadr
+        if not tm.platen_free:
+            n = len(Q)
+            pose = np.zeros((n, 6))
+            vel = np.zeros((n, 6))
+            pose[:, tm.platen_dof_index] = Q[:, tm.platen_slide_qadr]
+            vel[:, tm.platen_dof_index] = V[:, tm.platen_slide_dadr]
+            acc = np.zeros((n, 6))
+            acc[:, tm.platen_dof_index] = ACC[:, :len(tm.platen_dof_index)]
+            out = {"table_displacement": pose, "table_velocity": vel, "table_acceleration": acc,
+                   "actuator_displacement": Q[:, tm.stroke_qadr].copy()}
+            accs = tm.desc.accelerometers
+            Dn = np.array([a.direction for a in accs]).reshape(-1, 3)
+            out["accelerometers"] = acc[:, :3] @ Dn.T  # no rotation: every point moves alike
+            if len(tm.payload_dadr):
+                qadr = [tm.model.jnt_qposadr[tm.model.dof_jntid[k]] for k in tm.payload_dadr]
+                out["_payload_qpos"] = Q[:, qadr].copy()
+            return out
         quat = Q[:, pq + 3:pq + 7]
         w, x, y, z = quat.T
         # rotation matrices of the platen (rows of R for each sample)
