@@ -75,6 +75,42 @@ def build_runfile(res, tm, *, source="simulated", description="", payload_name=N
     return run
 
 
+def feasibility(res, tm, hp, force_frac, stroke_frac) -> dict:
+    """Will this specimen and motion work on this table? Checks with margins and a verdict.
+
+    Each check compares a peak over the run with the table's capability: actuator stroke
+    (cushions start at half-stroke - cushion length), actuator force (A p_supply), valve
+    opening (saturation means the demanded flow was not available), supply pressure
+    (accumulators drained below 90 % of the set pressure), the overturning moment at the
+    reference point from the vertical actuators (seed 000: about 180 t.m), loop closure.
+    """
+    from sim.controller import dof_jacobian
+
+    ch = res.channels
+    desc = tm.desc
+    J = dof_jacobian(desc)
+    W = ch["actuator_force"] @ J  # wrench at the reference point (home Jacobian): Fx..Fz, Mx..Mz
+    m_ot = float(np.nanmax(np.hypot(W[:, 3], W[:, 4]))) if len(W) else 0.0
+    lim_ot = desc.limits.overturning_moment_n_m
+    sat = float(np.mean(np.abs(ch["valve_command"]) >= 0.999))
+    ps_min = float(np.nanmin(res.extras["supply_pressure"]))
+    cush = np.asarray(hp.cushion_length_m) / np.asarray(hp.half_stroke_m)
+    checks = {
+        "stroke": {"peak_fraction": float(np.max(stroke_frac)), "limit": float(np.min(1 - cush)),
+                   "ok": bool(np.all(stroke_frac < 1 - cush))},
+        "force": {"peak_fraction": float(np.max(force_frac)), "limit": 0.9, "ok": bool(np.max(force_frac) < 0.9)},
+        "valve_saturation": {"fraction_of_time": sat, "limit": 0.01, "ok": sat < 0.01},
+        "supply_pressure": {"min_fraction": ps_min / hp.supply_pressure_pa, "limit": 0.9,
+                            "ok": ps_min >= 0.9 * hp.supply_pressure_pa},
+        "overturning_moment": {"peak_n_m": m_ot, "limit_n_m": lim_ot, "ok": (lim_ot <= 0) or m_ot <= lim_ot},
+        "loop_closure": {"max_gap_m": float(np.nanmax(res.extras["loop_gap"])), "limit": 1e-4,
+                         "ok": bool(np.nanmax(res.extras["loop_gap"]) < 1e-4)},
+        "completed": {"ok": res.incomplete_reason is None},
+    }
+    failed = [k for k, v in checks.items() if not v["ok"]]
+    return {"feasible": not failed, "failed": failed, "checks": checks}
+
+
 def _diagnostics(res, tm, hp) -> dict:
     ch = res.channels
     cap = hp.area_a_m2 * hp.supply_pressure_pa
@@ -85,7 +121,9 @@ def _diagnostics(res, tm, hp) -> dict:
     timing = res.timing
     steps = max(timing.get("steps", 1), 1)
     ticks = max(len(res.t), 1)
+    feas = feasibility(res, tm, hp, fmax / cap, smax / half)
     return {
+        "feasibility": feas,
         "peak_force_fraction_of_capacity": {n: float(f / c) for n, f, c in zip(tm.actuator_names, fmax, cap)},
         "peak_stroke_fraction": {n: float(s / h) for n, s, h in zip(tm.actuator_names, smax, half)},
         "valve_saturation_fraction": float(np.mean(np.abs(vc) >= 0.999)),
@@ -219,6 +257,9 @@ def _print_summary(s: dict) -> None:
               if "spectrum_ratio_min" in e else "-")
         print(f"  {dof:4s} {100 * e['nrmse_displacement']:7.2f}% {100 * e['nrmse_acceleration']:7.1f}% "
               f"{e['pga_ratio']:9.3f} {sr:>28s}")
+    fe = s.get("feasibility")
+    if fe is not None:
+        print("  feasible on this table: " + ("yes" if fe["feasible"] else "NO (" + ", ".join(fe["failed"]) + ")"))
     ff = max(s["peak_force_fraction_of_capacity"].values())
     sf = max(s["peak_stroke_fraction"].values())
     print(f"  peak force {100 * ff:.0f} % of capacity, peak stroke {100 * sf:.0f} % of half-stroke, "

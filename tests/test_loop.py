@@ -174,3 +174,19 @@ def test_scenario_gains_override_table_defaults():
     g = ControllerGains.for_table(d, {"kp_per_s": 12.0})
     assert np.all(g.kp_per_s == 12.0)
     assert g.kdp == d.raw["controller"]["kdp"]
+
+
+def test_feasibility_verdict_flags_a_motion_beyond_the_stroke(tmp_path, capsys):
+    p = tmp_path / "far.toml"
+    p.write_text('[scenario]\nname = "far"\ntable = "cgs"\nduration_s = 5.0\n'
+                 '[motion.x]\ntype = "sine"\namplitude = 0.31\nfrequency_hz = 0.1\n')
+    rc = main(["run", str(p), "--out", str(tmp_path), "--json"])
+    out = capsys.readouterr()
+    s = json.loads(out.out)
+    assert rc == 0
+    fe = s["feasibility"]
+    assert not fe["feasible"] and "stroke" in fe["failed"]
+    assert fe["checks"]["stroke"]["peak_fraction"] > 0.95
+    assert fe["checks"]["force"]["ok"]
+    ok = json.loads((tmp_path / "summary.json").read_text())
+    assert ok["feasibility"]["failed"] == fe["failed"]
