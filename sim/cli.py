@@ -141,6 +141,12 @@ def build_parser() -> argparse.ArgumentParser:
         view_cli = None
     if view_cli is not None:
         view_cli.add_parsers(sub)
+    try:  # identification programme (sim/characterize_cli.py)
+        from sim import characterize_cli
+    except ImportError:
+        characterize_cli = None
+    if characterize_cli is not None:
+        characterize_cli.add_parsers(sub)
     return p
 
 

@@ -222,6 +222,13 @@ def hysteresis_loop(d, v, force, *, n_bins: int = 20, v_min_fraction: float = 0.
 
 
 # ------------------------------------------------------------------ servovalve fits
+def zero_order_hold(f, fs: float) -> np.ndarray:
+    """FRF of a zero-order hold at rate ``fs`` seen from its input samples:
+    ``sinc(f/fs) exp(-j pi f/fs)`` (a half-sample delay and the sinc droop)."""
+    x = np.asarray(f, float) / fs
+    return np.sinc(x) * np.exp(-1j * np.pi * x)
+
+
 def first_order(f, K: float, tau: float) -> np.ndarray:
     s = 2j * np.pi * np.asarray(f, float)
     return K / (tau * s + 1)
@@ -267,4 +274,4 @@ def fit_second_order(f, H, band: tuple[float, float] = (0.5, 50.0), *, fix_gain:
 
 
 __all__ = ["FRF", "Peak", "FrictionFit", "frf", "peak_pick", "band_average", "friction_fit", "hysteresis_loop",
-           "first_order", "second_order", "fit_first_order", "fit_second_order"]
+           "first_order", "second_order", "zero_order_hold", "fit_first_order", "fit_second_order"]

@@ -137,3 +137,20 @@ def test_friction_fit_and_loop_of_a_coulomb_system():
 def test_bad_segment_length_raises():
     with pytest.raises(ValueError):
         E.frf(np.zeros(100), np.zeros(100), FS, nperseg=1000)
+
+
+def test_zero_order_hold_matches_a_held_signal():
+    """A signal held over each 1/fs interval and sampled on a 4x finer grid: its FRF to the
+    samples is the ZOH (the fine grid then sees the staircase's half-sample delay)."""
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal(2 ** 15)
+    up = 4
+    held = np.repeat(x, up)
+    # average of the staircase over each fine interval = a 4x oversampled view; decimate by
+    # taking the mean over the hold (continuous-time ZOH followed by an ideal integrate-and-dump)
+    fine = E.frf(np.repeat(x, up), held, FS * up, nperseg=4096)
+    assert np.allclose(fine.H[fine.band(1, 100)], 1.0)
+    f = np.array([10.0, 50.0, 120.0])
+    z = E.zero_order_hold(f, FS)
+    assert np.allclose(np.abs(z), np.sinc(f / FS))
+    assert np.allclose(-np.angle(z) / (2 * np.pi * f), 0.5 / FS)
