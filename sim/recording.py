@@ -14,21 +14,28 @@ What goes in (entity paths follow the model):
 ``table/supports/S<i>/piston``, ``/shoe``   static supports (hydrostatic bearings)
 ``table/payload/<body>``                    payload bodies (deformed when ``payload_qpos`` is given)
 ``compare/platen``                          the compare run's platen (translucent)
-``plots/dof/<d>/displacement/...``          ``reference``, ``achieved``, ``compare``
-``plots/dof/<d>/acceleration/...``          ``reference`` (second difference of the reference), ``achieved``, ``compare``
-``plots/actuators/<A>/valve/...``           ``command``, ``spool``
-``plots/actuators/<A>/pressure/...``        ``a``, ``b``
-``plots/actuators/<A>/force``, ``/stroke``  net piston force, stroke
-``plots/accelerometers/<name>``             accelerometer channels
-``plots/hydraulics/...``                    ``supply_pressure``, ``accumulator_gas_volume``
+``plots/dof/<d>/displacement``              one entity, a value per series: ``reference``, ``achieved``
+``plots/dof/<d>/acceleration``              ``reference`` (second difference of the reference), ``achieved``
+``plots/actuators/<A>/valve``               ``command``, ``spool``
+``plots/actuators/<A>/pressure``            ``a``, ``b``
+``plots/actuators/force``, ``/stroke``      net piston force, stroke: one series per actuator
+``plots/accelerometers``                    one series per accelerometer channel
+``plots/hydraulics/<q>``                    ``supply_pressure``, ``accumulator_gas_volume`` (one series each)
 ``plots/model/loop_gap``                    largest swivel opening of the model (finite samples only)
-``plots/residual/<same sub-path>``          ``run - compare`` per channel (with a compare run)
+``plots/compare/<same sub-path>``           the compare run's series (not its reference), on this run's time
+``plots/residual/<same sub-path>``          ``run - compare`` per series (with a compare run)
 ==========================================  ==========================================================
 
 Time is the run's own time on the timeline ``time`` (a duration in s). Each body's geoms are
 logged once as static shapes in the body frame; per display frame (default 50 Hz, never
-every physics step) only the body transforms and linkage colours change. Time series go
-out whole, at the run's full rate, with ``send_columns``. The blueprint (3-D view beside
+every physics step) only the body transforms and linkage colours change. Each group of
+time series goes out in one ``send_columns`` call as one entity with one scalar per
+series and row (``rr.Scalars`` with several values per row, named by ``rr.SeriesLines``),
+so the time column and row ids are stored once per group, not once per channel. Time series
+keep every n-th sample, n the largest that keeps at least ``series_rate_hz`` (default
+250 Hz: every 4th sample of a 1024 Hz run); ``series_rate_hz=None`` keeps the full rate. A
+series with drop-outs (non-finite samples where the rest of its group is finite) leaves
+its group for ``<group>/<name>``, finite samples only. The blueprint (3-D view beside
 tabbed time-series panels) is built by :func:`blueprint` and travels with the recording.
 
 A recording file is written to a temporary file in the target folder and moved into
@@ -50,6 +57,7 @@ from sim.errors import RunFileError, UserError
 
 TIMELINE = "time"
 DEFAULT_RATE_HZ = 50.0
+DEFAULT_SERIES_RATE_HZ = 250.0  # time series: every n-th sample, n the largest keeping >= this rate
 APPLICATION_ID = "shaketable"
 SUFFIX = ".rrd"
 DEFAULT_URL = "rerun+http://127.0.0.1:9876/proxy"
@@ -60,6 +68,9 @@ _C_ACH = (31, 119, 180)
 _C_CMP = (255, 127, 14)
 _C_RES = (214, 39, 40)
 _C_B = (44, 160, 44)
+_ROLE_COLORS = {"reference": _C_REF, "achieved": _C_ACH, "command": _C_REF, "spool": _C_ACH, "a": _C_ACH, "b": _C_B}
+_CMP_SHADES = [_C_CMP, (140, 86, 75)]  # compare run: orange, brown
+_RES_SHADES = [_C_RES, (148, 103, 189)]  # residual: red, purple
 _FORCE_MAP = np.array([  # fraction of capacity -> colour
     [0.0, 60, 100, 170],
     [0.25, 60, 170, 200],
@@ -70,6 +81,7 @@ _FORCE_MAP = np.array([  # fraction of capacity -> colour
 
 
 _PRELOAD = None
+_TARGET = object()  # write_run: "the target's setting"
 
 
 def preload() -> None:
@@ -448,30 +460,35 @@ def blueprint(run, compare=None, *, tm=None):
     acts = run.actuators
     dofs = run.dofs
 
-    def ts(name, origin=None, contents=None):
-        if contents is not None:
-            return rrb.TimeSeriesView(name=name, origin="/", contents=contents)
-        return rrb.TimeSeriesView(name=name, origin=origin)
+    def ts(name, *subs, compare_too=True):
+        # each panel: plots/<sub> (with any channel split off below it) and, with a compare run,
+        # plots/compare/<sub>
+        contents = []
+        for sub in subs:
+            contents.append(f"plots/{sub}/**")
+            if compare is not None and compare_too:
+                contents.append(f"plots/compare/{sub}/**")
+        return rrb.TimeSeriesView(name=name, origin="/", contents=contents)
 
     tabs = [
-        rrb.Grid(*[ts(f"{d} displacement", f"plots/dof/{d}/displacement") for d in dofs], name="DOF displacement"),
-        rrb.Grid(*[ts(f"{d} acceleration", f"plots/dof/{d}/acceleration") for d in dofs], name="DOF acceleration"),
-        rrb.Grid(*[ts(f"{a} valve", f"plots/actuators/{a}/valve") for a in acts], name="valves"),
-        rrb.Grid(*[ts(f"{a} pressure", f"plots/actuators/{a}/pressure") for a in acts], name="pressures"),
-        rrb.Vertical(ts("actuator force", contents=[f"plots/actuators/{a}/force" for a in acts]),
-                     ts("actuator stroke", contents=[f"plots/actuators/{a}/stroke" for a in acts]),
+        rrb.Grid(*[ts(f"{d} displacement", f"dof/{d}/displacement") for d in dofs], name="DOF displacement"),
+        rrb.Grid(*[ts(f"{d} acceleration", f"dof/{d}/acceleration") for d in dofs], name="DOF acceleration"),
+        rrb.Grid(*[ts(f"{a} valve", f"actuators/{a}/valve") for a in acts], name="valves"),
+        rrb.Grid(*[ts(f"{a} pressure", f"actuators/{a}/pressure") for a in acts], name="pressures"),
+        rrb.Vertical(ts("actuator force", "actuators/force", compare_too=False),
+                     ts("actuator stroke", "actuators/stroke", compare_too=False),
                      name="forces"),
-        rrb.Vertical(ts("supply pressure", contents=["plots/hydraulics/supply_pressure"]),
-                     ts("accumulator gas volume", contents=["plots/hydraulics/accumulator_gas_volume"]),
-                     ts("loop-closure gap", contents=["plots/model/loop_gap"]),
+        rrb.Vertical(ts("supply pressure", "hydraulics/supply_pressure"),
+                     ts("accumulator gas volume", "hydraulics/accumulator_gas_volume"),
+                     ts("loop-closure gap", "model/loop_gap", compare_too=False),
                      name="hydraulics"),
     ]
     if run.accelerometers is not None:
-        tabs.append(rrb.Grid(ts("accelerometers", "plots/accelerometers"), name="accelerometers"))
+        tabs.append(rrb.Grid(ts("accelerometers", "accelerometers", compare_too=False), name="accelerometers"))
     if compare is not None:
         tabs.append(rrb.Grid(
-            *[ts(f"{d} residual", contents=[f"plots/residual/dof/{d}/**"]) for d in dofs],
-            ts("force residual", contents=[f"plots/residual/actuators/{a}/force" for a in acts]),
+            *[ts(f"{d} residual", f"residual/dof/{d}", compare_too=False) for d in dofs],
+            ts("force residual", "residual/actuators/force", compare_too=False),
             name="residuals"))
     view3d = rrb.Spatial3DView(
         name="table", origin="/", contents=["table/**", "compare/**"],
@@ -508,51 +525,73 @@ def _reference_acceleration(run) -> np.ndarray | None:
     return np.gradient(np.gradient(run.reference, dt, axis=0), dt, axis=0)
 
 
-def _channel_series(run) -> list[tuple[str, str, np.ndarray]]:
-    """(entity sub-path under plots/, role, (N,) values) for every channel the run has."""
+@dataclass
+class _Group:
+    """Channels drawn together: one entity ``plots/<sub>``, one scalar per channel and row."""
+
+    sub: str  # entity sub-path under plots/
+    unit: str
+    labels: list  # series names, one per column
+    roles: list  # colour role per column (None: the viewer's own colours)
+    values: np.ndarray  # (N, k)
+
+
+def _channel_groups(run) -> list[_Group]:
+    """The run's time series, grouped as they are drawn (see the module table)."""
     out = []
     dofs, acts = run.dofs, run.actuators
 
-    def add(ch_arr, names, template, role):
-        if ch_arr is None:
-            return
-        for j, n in enumerate(names):
-            out.append((template.format(n=n), role, ch_arr[:, j]))
+    def cols(*pairs):
+        have = [(role, arr) for role, arr in pairs if arr is not None]
+        return [r for r, _ in have], [a for _, a in have]
 
-    add(run.reference, dofs, "dof/{n}/displacement", "reference")
-    add(run.table_displacement, dofs, "dof/{n}/displacement", "achieved")
-    add(_reference_acceleration(run), dofs, "dof/{n}/acceleration", "reference")
-    add(run.table_acceleration, dofs, "dof/{n}/acceleration", "achieved")
-    add(run.valve_command, acts, "actuators/{n}/valve", "command")
-    add(run.spool_position, acts, "actuators/{n}/valve", "spool")
-    add(run.pressure_a, acts, "actuators/{n}/pressure", "a")
-    add(run.pressure_b, acts, "actuators/{n}/pressure", "b")
-    add(run.actuator_force, acts, "actuators/{n}", "force")
-    add(run.actuator_displacement, acts, "actuators/{n}", "stroke")
+    ref_acc = _reference_acceleration(run)
+    for j, d in enumerate(dofs):
+        for q, unit, ref, ach in (("displacement", "m or rad", run.reference, run.table_displacement),
+                                  ("acceleration", "m/s² or rad/s²", ref_acc, run.table_acceleration)):
+            roles, arrs = cols(("reference", ref), ("achieved", ach))
+            if roles:
+                out.append(_Group(f"dof/{d}/{q}", unit, roles, roles, np.column_stack([a[:, j] for a in arrs])))
+    for j, a in enumerate(acts):
+        for q, unit, pairs in (("valve", "fraction of rated opening",
+                                (("command", run.valve_command), ("spool", run.spool_position))),
+                               ("pressure", "Pa", (("a", run.pressure_a), ("b", run.pressure_b)))):
+            roles, arrs = cols(*pairs)
+            if roles:
+                out.append(_Group(f"actuators/{a}/{q}", unit, roles, roles, np.column_stack([x[:, j] for x in arrs])))
+    for q, unit, arr in (("force", "N", run.actuator_force), ("stroke", "m", run.actuator_displacement)):
+        if arr is not None:
+            out.append(_Group(f"actuators/{q}", unit, list(acts), [None] * len(acts), np.asarray(arr, dtype=float)))
     if run.accelerometers is not None:
-        for j, n in enumerate(run.column_names("accelerometers")):
-            out.append(("accelerometers", n, run.accelerometers[:, j]))
-    for key, where in (("supply_pressure", "hydraulics"), ("accumulator_gas_volume", "hydraulics"),
-                       ("loop_gap", "model")):
+        names = run.column_names("accelerometers")
+        out.append(_Group("accelerometers", "m/s²", list(names), [None] * len(names),
+                          np.asarray(run.accelerometers, dtype=float)))
+    for key, where, unit in (("supply_pressure", "hydraulics", "Pa"), ("accumulator_gas_volume", "hydraulics", "m³"),
+                             ("loop_gap", "model", "m")):
         if key in run.extras:
             arr = np.asarray(run.extras[key], dtype=float)
-            out.append((where, key, arr if arr.ndim == 1 else arr[:, 0]))
+            out.append(_Group(f"{where}/{key}", unit, [key], ["achieved"], (arr if arr.ndim == 1 else arr[:, 0])[:, None]))
     return out
 
 
-_UNITS = {"displacement": "m or rad", "acceleration": "m/s² or rad/s²", "valve": "fraction of rated opening",
-          "pressure": "Pa", "force": "N", "stroke": "m", "accelerometers": "m/s²",
-          "supply_pressure": "Pa", "accumulator_gas_volume": "m³", "loop_gap": "m"}
+def _role_colors(roles: list, kind: str) -> list | None:
+    """One colour per column: the role's colour for this run, shades of orange / red for the
+    compare run and the residual; None when the viewer should pick (one channel per actuator)."""
+    if kind == "run":
+        cols = [_ROLE_COLORS.get(r) if r is not None else None for r in roles]
+        return None if any(c is None for c in cols) else cols
+    if all(r is None for r in roles):
+        return None
+    shades = _CMP_SHADES if kind == "compare" else _RES_SHADES
+    return [shades[i % len(shades)] for i in range(len(roles))]
 
 
-def _entity(sub: str, role: str) -> str:
-    # accelerometers: plots/accelerometers/<name>; others: plots/<sub>/<role>
-    return f"plots/{sub}/{role}"
-
-
-def _role_color(role: str):
-    return {"reference": _C_REF, "achieved": _C_ACH, "command": _C_REF, "spool": _C_ACH,
-            "a": _C_ACH, "b": _C_B, "compare": _C_CMP, "residual": _C_RES}.get(role)
+def series_stride(sample_rate_hz: float, series_rate_hz: float | None) -> int:
+    """Keep every n-th sample of a time series: the largest n whose rate is at least ``series_rate_hz``
+    (1, the full rate, for None or a run sampled at or below it)."""
+    if series_rate_hz is None or not (sample_rate_hz > series_rate_hz):
+        return 1
+    return max(1, int(np.floor(sample_rate_hz / series_rate_hz + 1e-9)))
 
 
 # ---------------------------------------------------------------------- target
@@ -566,36 +605,46 @@ class RrdTarget:
     """
 
     def __init__(self, path: Path | None, *, spawn: bool = False, connect: str | None = None,
-                 rate_hz: float = DEFAULT_RATE_HZ, application_id: str = APPLICATION_ID):
+                 rate_hz: float = DEFAULT_RATE_HZ, series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ,
+                 application_id: str = APPLICATION_ID):
         self.path = path
         self.spawn = spawn
         self.connect = connect
         self.rate_hz = float(rate_hz)
+        self.series_rate_hz = None if series_rate_hz is None else float(series_rate_hz)
         self.application_id = application_id
         self.recording_id: str | None = None
 
     @classmethod
     def open(cls, path=None, *, spawn: bool = False, connect: str | None = None,
-             rate_hz: float = DEFAULT_RATE_HZ, application_id: str = APPLICATION_ID) -> "RrdTarget":
+             rate_hz: float = DEFAULT_RATE_HZ, series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ,
+             application_id: str = APPLICATION_ID) -> "RrdTarget":
         """Check the target now; nothing is written until :meth:`write_run`.
 
         Args:
             path: ``.rrd`` file to write (its folder must exist and be writable), or None.
             spawn: also stream to a viewer started here (needs a screen).
             connect: also stream to a running viewer at this gRPC URL ("" for the default URL).
-            rate_hz: display rate of the 3-D transforms (time series keep the run's rate).
+            rate_hz: display rate of the 3-D transforms.
+            series_rate_hz: time series keep every n-th sample, n the largest that keeps at
+                least this rate (default 250 Hz: every 4th sample of a 1024 Hz run); None keeps
+                the run's full rate.
         """
         if path is None and not spawn and connect is None:
             raise RecordingError("no recording target; give a .rrd file, spawn a viewer or connect to one")
         if not (np.isfinite(rate_hz) and rate_hz > 0):
             raise RecordingError(f"display rate {rate_hz!r} Hz is not a positive number; give e.g. 50")
+        if series_rate_hz is not None and not (np.isfinite(series_rate_hz) and series_rate_hz > 0):
+            raise RecordingError(f"time-series rate {series_rate_hz!r} Hz is not a positive number; "
+                                 "give e.g. 250, or None for the full rate")
         p = check_path(path) if path is not None else None
         preload()
-        return cls(p, spawn=spawn, connect=connect, rate_hz=rate_hz, application_id=application_id)
+        return cls(p, spawn=spawn, connect=connect, rate_hz=rate_hz, series_rate_hz=series_rate_hz,
+                   application_id=application_id)
 
     # ------------------------------------------------------------------ writing
     def write_run(self, run, tm, payload_qpos: np.ndarray | None = None, *, compare=None,
-                  rate_hz: float | None = None, name: str | None = None) -> Path | None:
+                  rate_hz: float | None = None, series_rate_hz=_TARGET, name: str | None = None) -> Path | None:
         """Record ``run`` (a RunFile) with the geometry of ``tm`` (a TableModel).
 
         Args:
@@ -605,6 +654,8 @@ class RrdTarget:
                 (``tm.info.payload_joints`` order) to show it deformed; run files do not carry them.
             compare: optional second RunFile laid beside ``run`` (series, residuals, ghost platen).
             rate_hz: display rate of the 3-D scene (default: the target's, 50 Hz).
+            series_rate_hz: least rate of the time series, None for the run's full rate
+                (default: the target's, 250 Hz).
             name: recording name shown in the viewer (default: the run's description or path).
 
         Returns:
@@ -624,6 +675,7 @@ class RrdTarget:
             raise RunFileError(f"run file {compare.name} has DOFs {', '.join(compare.dofs)} but "
                                f"{run.name} has {', '.join(run.dofs)}; compare runs of the same table")
         rate = float(rate_hz) if rate_hz is not None else self.rate_hz
+        series_rate = self.series_rate_hz if series_rate_hz is _TARGET else series_rate_hz
 
         self.recording_id = str(uuid.uuid4())
         rec = rr.RecordingStream(self.application_id, recording_id=self.recording_id)
@@ -641,7 +693,7 @@ class RrdTarget:
             if self.spawn or self.connect is not None:
                 sinks.append(rr.GrpcSink(self.connect or DEFAULT_URL))
             rec.set_sinks(*sinks, default_blueprint=bp)
-            self._log(rec, run, tm, payload_qpos, compare, rate, name)
+            self._log(rec, run, tm, payload_qpos, compare, rate, series_rate, name)
             rec.flush()
             rec.disconnect()
             if tmp is not None:
@@ -666,7 +718,7 @@ class RrdTarget:
         return self.path
 
     # ------------------------------------------------------------------ content
-    def _log(self, rec, run, tm, payload_qpos, compare, rate_hz, name) -> None:
+    def _log(self, rec, run, tm, payload_qpos, compare, rate_hz, series_rate_hz, name) -> None:
         import rerun as rr
 
         title = name or run.meta.get("description") or Path(run.name).name
@@ -681,7 +733,7 @@ class RrdTarget:
         rec.send_property("run", rr.AnyValues(**props))
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         self._log_scene(rec, run, tm, payload_qpos, compare, rate_hz)
-        self._log_series(rec, run, compare)
+        self._log_series(rec, run, compare, series_rate_hz)
 
     def _log_scene(self, rec, run, tm, payload_qpos, compare, rate_hz) -> None:
         import mujoco
@@ -768,49 +820,75 @@ class RrdTarget:
                 rec.send_columns("compare/platen", indexes=[rr.TimeColumn(TIMELINE, duration=run.t[idx][ok])],
                                  columns=rr.Transform3D.columns(translation=tr, quaternion=_quat_xyzw(qq)))
 
-    def _log_series(self, rec, run, compare) -> None:
+    def _log_series(self, rec, run, compare, series_rate_hz) -> None:
         import rerun as rr
 
-        mine = _channel_series(run)
+        stride = series_stride(run.sample_rate_hz, series_rate_hz)
+        idx = np.arange(0, run.n_samples, stride)
+        t = run.t[idx]
         theirs = {}
         if compare is not None:
-            for sub, role, vals in _channel_series(compare):
-                if role == "reference":
-                    continue
-                theirs[(sub, role)] = (_aligned(run, compare.t, vals[:, None])[:, 0])
-        for sub, role, vals in mine:
-            self._series(rec, run.t, _entity(sub, role), vals, role, sub)
-            other = theirs.get((sub, role))
-            if other is None:
+            for g in _channel_groups(compare):
+                for lab, role, j in zip(g.labels, g.roles, range(len(g.labels))):
+                    if role != "reference":
+                        theirs[(g.sub, lab)] = g.values[:, j]
+        for g in _channel_groups(run):
+            self._send_group(rr, rec, t, f"plots/{g.sub}", g.labels, g.unit, _role_colors(g.roles, "run"),
+                             g.values[idx])
+            pick = [j for j, lab in enumerate(g.labels) if (g.sub, lab) in theirs]
+            if not pick:
                 continue
-            # the compare run's series sits next to this run's; the residual goes to plots/residual/...
-            cmp_ent = _entity(sub, f"{role}_compare") if role != "achieved" else _entity(sub, "compare")
-            self._series(rec, run.t, cmp_ent, other, "compare", sub, label=f"{role} (compare)")
-            self._series(rec, run.t, f"plots/residual/{sub}/{role}", vals - other, "residual", sub,
-                         label=f"{role} residual (run - compare)")
+            # the compare run, resampled onto this run's time, and the residual run - compare
+            other = _aligned(run, compare.t, np.column_stack([theirs[(g.sub, g.labels[j])] for j in pick]))[idx]
+            labels = [g.labels[j] for j in pick]
+            roles = [g.roles[j] for j in pick]
+            self._send_group(rr, rec, t, f"plots/compare/{g.sub}", [f"{lab} (compare)" for lab in labels], g.unit,
+                             _role_colors(roles, "compare"), other)
+            self._send_group(rr, rec, t, f"plots/residual/{g.sub}", [f"{lab}: run - compare" for lab in labels],
+                             g.unit, _role_colors(roles, "residual"), g.values[idx][:, pick] - other)
 
     @staticmethod
-    def _series(rec, t, ent, vals, role, sub, label=None) -> None:
-        import rerun as rr
+    def _send_group(rr, rec, t, ent, labels, unit, colors, values) -> None:
+        """One entity with one scalar per column and row (``send_columns``, one call).
 
-        vals = np.asarray(vals, dtype=float)
-        ok = np.isfinite(vals)
-        if not np.any(ok):
+        Rows where no column is finite are left out. A column that is not finite exactly
+        where the others are (a sensor drop-out, a channel that starts late) goes to its own
+        entity ``<ent>/<label>`` with its finite samples only, so no row carries a NaN.
+        """
+        values = np.asarray(values, dtype=float).reshape(len(t), -1)
+        fin = np.isfinite(values)
+        rows = fin.any(axis=1)
+        if not rows.any():
             return
-        unit = _UNITS.get(sub.split("/")[-1]) or _UNITS.get(role) or _UNITS.get(sub.split("/")[0], "")
-        color = _role_color(role)
-        rec.log(ent, rr.SeriesLines(names=f"{label or role} [{unit}]" if unit else (label or role),
-                                    colors=[color] if color else None, widths=1.5), static=True)
-        rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t[ok])],
-                         columns=rr.Scalars.columns(scalars=vals[ok]))
+        together = np.all(fin == rows[:, None], axis=0)
+        names = [f"{lab} [{unit}]" if unit else str(lab) for lab in labels]
+        widths = 1.5
+
+        def send(path, cols, keep):
+            rec.log(path, rr.SeriesLines(names=[names[j] for j in cols],
+                                         colors=[colors[j] for j in cols] if colors else None,
+                                         widths=[widths] * len(cols)), static=True)
+            v = values[np.ix_(keep, cols)] if len(cols) > 1 else values[keep, cols[0]]
+            rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t[keep])],
+                             columns=rr.Scalars.columns(scalars=v))
+
+        cols = np.flatnonzero(together)
+        if len(cols):
+            send(ent, list(cols), np.flatnonzero(rows))
+        for j in np.flatnonzero(~together):
+            keep = np.flatnonzero(fin[:, j])
+            if len(keep):
+                send(f"{ent}/{rr.escape_entity_path_part(str(labels[j]))}", [j], keep)
 
 
 def record_run(path, run, tm, *, compare=None, payload_qpos=None, rate_hz: float = DEFAULT_RATE_HZ,
-               spawn: bool = False, connect: str | None = None) -> Path | None:
+               series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ, spawn: bool = False,
+               connect: str | None = None) -> Path | None:
     """Convenience: ``RrdTarget.open(path, ...).write_run(run, tm, ...)``."""
-    return RrdTarget.open(path, spawn=spawn, connect=connect, rate_hz=rate_hz).write_run(
+    return RrdTarget.open(path, spawn=spawn, connect=connect, rate_hz=rate_hz,
+                          series_rate_hz=series_rate_hz).write_run(
         run, tm, payload_qpos, compare=compare)
 
 
-__all__ = ["DEFAULT_RATE_HZ", "TIMELINE", "RecordingError", "RrdTarget", "blueprint", "body_entity",
-           "check_path", "force_colors", "record_run"]
+__all__ = ["DEFAULT_RATE_HZ", "DEFAULT_SERIES_RATE_HZ", "TIMELINE", "RecordingError", "RrdTarget", "blueprint", "body_entity",
+           "check_path", "force_colors", "record_run", "series_stride"]

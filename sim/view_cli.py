@@ -1,12 +1,14 @@
 """``shaketable view``: record any run file (measured or simulated) as a rerun recording.
 
     shaketable view RUN.run.npz --rrd FILE.rrd [--compare OTHER.run.npz] [--table T]
-                    [--payload P] [--rate HZ] [--spawn | --connect [URL]]
+                    [--payload P] [--rate HZ] [--full-rate] [--spawn | --connect [URL]]
 
 The geometry comes from the table model named in the run's meta (or ``--table``), with
 the run's payload (or ``--payload``; ``--payload none`` for a bare table). ``--compare``
 lays a second run beside the first (its series, the residual per channel and a ghost
-platen). ``--spawn`` / ``--connect`` also stream to a live viewer (needs a screen, or a
+platen). Time series keep every n-th sample, n the largest that keeps at least 250 Hz
+(every 4th of a 1024 Hz run); ``--full-rate`` keeps every sample (a file ~3x larger).
+``--spawn`` / ``--connect`` also stream to a live viewer (needs a screen, or a
 viewer already running at URL).
 
 rerun's own script helpers (``rr.script_add_args`` / ``rr.script_setup``) exist in 0.41
@@ -32,8 +34,8 @@ def cmd_view(args) -> int:
     if not args.rrd and not args.spawn and args.connect is None:
         raise UserError("view needs a target: give --rrd FILE.rrd, --spawn or --connect [URL]")
     # check the target before reading anything large
-    target = recording.RrdTarget.open(args.rrd, spawn=args.spawn, connect=args.connect,
-                                      rate_hz=args.rate)
+    target = recording.RrdTarget.open(args.rrd, spawn=args.spawn, connect=args.connect, rate_hz=args.rate,
+                                      series_rate_hz=None if args.full_rate else recording.DEFAULT_SERIES_RATE_HZ)
     run = read_run(args.run)
     compare = read_run(args.compare) if args.compare else None
     table = args.table or run.meta["table"]
@@ -46,7 +48,8 @@ def cmd_view(args) -> int:
     path = target.write_run(run, tm, compare=compare)
     out = {"run": str(args.run), "compare": args.compare, "table": desc.name,
            "payload": payload.name if payload else None, "recording": str(path) if path else None,
-           "samples": run.n_samples, "display_rate_hz": args.rate}
+           "samples": run.n_samples, "display_rate_hz": args.rate,
+           "series_rate_hz": run.sample_rate_hz / recording.series_stride(run.sample_rate_hz, target.series_rate_hz)}
     if args.json:
         print(json.dumps(out, indent=2))
     else:
@@ -74,7 +77,7 @@ def _rate(text: str) -> float:
 
 
 def add_parsers(sub) -> None:
-    from sim.recording import DEFAULT_RATE_HZ
+    from sim.recording import DEFAULT_RATE_HZ, DEFAULT_SERIES_RATE_HZ
 
     v = sub.add_parser("view", help="record a run file (measured or simulated) as a rerun recording")
     v.add_argument("run", help="a .run.npz file")
@@ -83,7 +86,10 @@ def add_parsers(sub) -> None:
     v.add_argument("--table", help="table model (default: the run's meta.table)")
     v.add_argument("--payload", help="payload (default: the run's meta.payload; 'none' for a bare table)")
     v.add_argument("--rate", type=_rate, default=DEFAULT_RATE_HZ, metavar="HZ",
-                   help=f"display rate of the 3-D scene (default {DEFAULT_RATE_HZ:g} Hz; plots keep the run's rate)")
+                   help=f"display rate of the 3-D scene (default {DEFAULT_RATE_HZ:g} Hz)")
+    v.add_argument("--full-rate", action="store_true",
+                   help=f"time series at the run's full rate (default: every n-th sample, at least "
+                        f"{DEFAULT_SERIES_RATE_HZ:g} Hz)")
     v.add_argument("--spawn", action="store_true", help="also stream to a viewer started now (needs a screen)")
     v.add_argument("--connect", nargs="?", const="", default=None, metavar="URL",
                    help="also stream to a running viewer (default rerun+http://127.0.0.1:9876/proxy)")

@@ -58,6 +58,7 @@ def _read(path):
 
 
 def _column(batches, name):
+    """Rows of component ``name`` in time order: (rows,) for one value per row, (rows, k) for k."""
     out, times = [], []
     for rb in batches:
         col = rb.column(rb.schema.get_field_index(name)).to_pylist()
@@ -65,8 +66,27 @@ def _column(batches, name):
         for v, tt in zip(col, t):
             out.append(v[0] if isinstance(v, list) and len(v) == 1 else v)
             times.append(tt)
-    order = np.argsort([x.total_seconds() if hasattr(x, "total_seconds") else x for x in times])
+    order = np.argsort([x.total_seconds() if hasattr(x, "total_seconds") else x for x in times], kind="stable")
     return np.array(out, dtype=float)[order]
+
+
+def _times(batches):
+    t = [x.total_seconds() if hasattr(x, "total_seconds") else x * 1e-9
+         for rb in batches for x in rb.column(rb.schema.get_field_index("time")).to_pylist()]
+    return np.sort(np.array(t))
+
+
+def _names(path, ent):
+    """The series names logged (static) on ``ent``."""
+    import rerun as rr
+
+    for ch in rr.chunk.RrdReader(str(path)).store().stream():
+        if ch.is_static and ch.entity_path == ent:
+            rb = ch.to_record_batch()
+            i = rb.schema.get_field_index("SeriesLines:names")
+            if i >= 0:
+                return rb.column(i).to_pylist()[0]
+    return None
 
 
 def test_recording_verifies(made):
@@ -79,6 +99,8 @@ def test_recording_verifies(made):
 
 
 def test_recording_contents(made):
+    from sim import recording
+
     _, run_path, rrd = made
     run = read_run(run_path)
     n = run.n_samples
@@ -103,21 +125,74 @@ def test_recording_contents(made):
         assert rows[f"/table/supports/{s}/shoe"] == frames
     assert "/table/platen/accelerometers" in static
     assert any(e.startswith("/table/foundation/") for e in static)
-    # time series at the full rate
+    # time series: one entity per group, one value per channel and row, every 4th sample
+    # of the 1024 Hz run by default (>= 250 Hz)
+    ss = recording.series_stride(run.sample_rate_hz, recording.DEFAULT_SERIES_RATE_HZ)
+    assert ss == 4
+    ns = math.ceil(n / ss)
     for d in DOFS:
         for q in ("displacement", "acceleration"):
-            for role in ("reference", "achieved"):
-                assert rows[f"/plots/dof/{d}/{q}/{role}"] == n, (d, q, role)
+            ent = f"/plots/dof/{d}/{q}"
+            assert rows[ent] == ns, ent
+            assert _column(data[ent], "Scalars:scalars").shape == (ns, 2)
+    assert [x.split(" [")[0] for x in _names(rrd, "/plots/dof/x/displacement")] == ["reference", "achieved"]
     for a in ACTS:
-        for sub in ("valve/command", "valve/spool", "pressure/a", "pressure/b", "force", "stroke"):
-            assert rows[f"/plots/actuators/{a}/{sub}"] == n, (a, sub)
+        for sub in ("valve", "pressure"):
+            assert rows[f"/plots/actuators/{a}/{sub}"] == ns, (a, sub)
+    for q in ("force", "stroke"):
+        assert _column(data[f"/plots/actuators/{q}"], "Scalars:scalars").shape == (ns, 12)
+        assert [x.split(" [")[0] for x in _names(rrd, f"/plots/actuators/{q}")] == ACTS
     for e in ("/plots/hydraulics/supply_pressure", "/plots/hydraulics/accumulator_gas_volume"):
-        assert rows[e] == n
-    assert rows["/plots/model/loop_gap"] == int(np.isfinite(run.extras["loop_gap"]).sum())
-    for name in run.accelerometer_names:
-        assert rows[f"/plots/accelerometers/{name}"] == n
-    x = _column(data["/plots/dof/x/displacement/achieved"], "Scalars:scalars")
-    np.testing.assert_allclose(x, run.column("table_displacement", "x"))
+        assert rows[e] == ns
+    assert rows["/plots/model/loop_gap"] == int(np.isfinite(run.extras["loop_gap"][::ss]).sum())
+    acc = _column(data["/plots/accelerometers"], "Scalars:scalars")
+    assert acc.shape == (ns, len(run.accelerometer_names))
+    np.testing.assert_allclose(acc, run.accelerometers[::ss])
+    xd = _column(data["/plots/dof/x/displacement"], "Scalars:scalars")
+    np.testing.assert_allclose(xd[:, 1], run.column("table_displacement", "x")[::ss])
+    np.testing.assert_allclose(_times(data["/plots/dof/x/displacement"]), run.t[::ss], atol=1e-9)
+    f = _column(data["/plots/actuators/force"], "Scalars:scalars")
+    np.testing.assert_allclose(f, run.actuator_force[::ss])
+    # no time series is sent one channel per entity any more
+    assert not any(e.startswith("/plots/dof/x/displacement/") for e in rows)
+
+
+def test_full_rate(made, tmp_path):
+    """``--full-rate`` keeps every sample of every series."""
+    _, run_path, _ = made
+    run = read_run(run_path)
+    out = tmp_path / "full.rrd"
+    assert cli.main(["view", str(run_path), "--rrd", str(out), "--full-rate"]) == 0
+    rows, _, _, data, _ = _read(out)
+    n = run.n_samples
+    assert rows["/plots/dof/x/acceleration"] == n and rows["/plots/actuators/Z4/pressure"] == n
+    v = _column(data["/plots/actuators/X1/valve"], "Scalars:scalars")
+    np.testing.assert_allclose(v, np.column_stack([run.column("valve_command", "X1"), run.column("spool_position", "X1")]))
+    assert rows["/table/platen"] == math.ceil(n / round(run.sample_rate_hz / 50.0))  # 3-D scene unchanged
+    assert out.stat().st_size > 2 * made[2].stat().st_size
+
+
+def test_partial_nan_channel_splits_off(tmp_path):
+    """A channel with drop-outs leaves its group for ``<group>/<name>`` (finite samples only);
+    the rest of the group keeps every row, and no row carries a NaN."""
+    import rerun as rr
+
+    from sim import recording
+
+    t = np.arange(40) / 100.0
+    v = np.column_stack([np.sin(t), np.cos(t), t])
+    v[5:9, 1] = np.nan
+    v[:, 2] = np.nan
+    out = tmp_path / "g.rrd"
+    rec = rr.RecordingStream("test", recording_id="g")
+    rec.save(str(out))
+    recording.RrdTarget._send_group(rr, rec, t, "plots/g", ["p", "q r", "s"], "m", None, v)
+    rec.flush()
+    rec.disconnect()
+    rows, _, _, data, _ = _read(out)
+    assert rows["/plots/g"] == 40 and rows["/plots/g/q\\ r"] == 36 and "/plots/g/s" not in rows
+    np.testing.assert_allclose(_column(data["/plots/g"], "Scalars:scalars"), v[:, 0])
+    np.testing.assert_allclose(_column(data["/plots/g/q\\ r"], "Scalars:scalars"), v[np.isfinite(v[:, 1]), 1])
 
 
 def test_view_compare_residuals(made, tmp_path):
@@ -134,10 +209,15 @@ def test_view_compare_residuals(made, tmp_path):
     n = run.n_samples
     frames = math.ceil(n / round(run.sample_rate_hz / 25))
     assert rows["/table/platen"] == frames and rows["/compare/platen"] == frames
-    assert rows["/plots/dof/x/displacement/compare"] == n
-    res = _column(data["/plots/residual/dof/x/displacement/achieved"], "Scalars:scalars")
-    np.testing.assert_allclose(res, -0.1 * run.column("table_displacement", "x"), atol=1e-12)
-    assert rows["/plots/residual/actuators/Z1/force"] == n  # identical channels: zero residual, still there
+    ss = 4  # 1024 Hz run, series at >= 250 Hz
+    ns = math.ceil(n / ss)
+    # the compare run's achieved displacement only (its reference is not repeated)
+    cmp_x = _column(data["/plots/compare/dof/x/displacement"], "Scalars:scalars")
+    np.testing.assert_allclose(cmp_x, 1.1 * run.column("table_displacement", "x")[::ss], atol=1e-12)
+    res = _column(data["/plots/residual/dof/x/displacement"], "Scalars:scalars")
+    np.testing.assert_allclose(res, -0.1 * run.column("table_displacement", "x")[::ss], atol=1e-12)
+    f = _column(data["/plots/residual/actuators/force"], "Scalars:scalars")
+    assert f.shape == (ns, 12) and not f.any()  # identical channels: zero residual, still there
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 
 
