@@ -366,8 +366,8 @@ class Simulation:
         if not (np.all(np.isfinite(st.p_a)) and np.all(np.isfinite(st.p_b))):
             return f"simulation diverged at t = {tk:.4f} s: chamber pressures are not finite"
         if gap > GAP_LIMIT_M:
-            return (f"simulation diverged at t = {tk:.4f} s: a swivel opened by {gap * 1e3:.2f} mm "
-                    f"(limit {GAP_LIMIT_M * 1e3:.1f} mm); the loop closure failed")
+            return (f"simulation diverged at t = {tk:.4f} s: a swivel opened by {gap * 1e3:.3g} mm "
+                    f"(limit {GAP_LIMIT_M * 1e3:.3g} mm); the loop closure failed")
         hp = self.hp
         pmax = max(float(st.p_a.max()), float(st.p_b.max()))
         if pmax > hp.relief_pressure_pa * (1 + 1e-9):

@@ -16,6 +16,10 @@ from sim.errors import RunFileError, ScenarioError, UserError
 SCHEMA = "shaketable-summary/1"
 
 
+class DivergenceAtStart(UserError):
+    """Diverged before a second sample: nothing to keep (a run file needs two samples)."""
+
+
 def _out_dir(path) -> Path:
     out = Path(path)
     try:
@@ -200,6 +204,8 @@ def cmd_run(args) -> int:
     else:
         res = sim.run(reference=ref, progress=show)
         plain, best, wall_total = res, 0, res.wall_s
+    if len(res.t) < 2:
+        raise DivergenceAtStart(res.incomplete_reason or "the simulation stopped before its second sample")
     run = build_runfile(res, tm, description=sc.description or sc.name,
                         payload_name=payload.name if payload else None, reference=ref,
                         extra_meta={"scenario": sc.name, "controller": _gains_json(gains)})

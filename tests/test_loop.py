@@ -109,7 +109,7 @@ def test_divergence_stops_and_keeps_the_partial_run(harmonic, monkeypatch):
 
     monkeypatch.setattr(sim, "loop_gap", bad_gap)
     res = sim.run(reference=ref, duration_s=2.0)
-    assert res.incomplete_reason and "swivel opened by 5.00 mm" in res.incomplete_reason
+    assert res.incomplete_reason and "swivel opened by 5 mm" in res.incomplete_reason
     assert "t = " in res.incomplete_reason
     assert 0 < len(res.t) < 2.0 * 1024
     assert all(len(v) == len(res.t) for v in res.channels.values())
@@ -190,3 +190,20 @@ def test_feasibility_verdict_flags_a_motion_beyond_the_stroke(tmp_path, capsys):
     assert fe["checks"]["force"]["ok"]
     ok = json.loads((tmp_path / "summary.json").read_text())
     assert ok["feasibility"]["failed"] == fe["failed"]
+
+
+def test_diverged_run_is_kept_and_marked_incomplete(tmp_path, capsys, monkeypatch):
+    import sim.loop
+
+    monkeypatch.setattr(sim.loop, "GAP_LIMIT_M", 1.5e-7)  # a 0.15 um gap now counts as a failed loop closure
+    rc = main(["run", "harmonic_bare", "--out", str(tmp_path), "--duration", "1"])
+    err = capsys.readouterr().err
+    assert rc == 3
+    assert "diverged at t = " in err and "swivel opened" in err and "marked incomplete" in err
+    from sim.runfile import read_run
+
+    run = read_run(tmp_path / "harmonic_bare.run.npz")
+    assert run.incomplete and "swivel" in run.incomplete_reason
+    assert 2 <= run.n_samples < 1025
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["complete"] is False
