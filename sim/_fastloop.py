@@ -61,3 +61,29 @@ def platen_velocity(qvel, xmat, pd, pb, out):
 
 
 __all__ = ["pre_step", "record", "platen_velocity", "np"]
+
+
+@numba.njit(**_OPTS)
+def loop_gap(xpos, xmat, b1, b2, a1, a2):
+    """Largest swivel opening over the connect equalities (m), from body poses."""
+    worst = 0.0
+    for i in range(b1.shape[0]):
+        s = 0.0
+        for r in range(3):
+            p1 = xpos[b1[i], r] + xmat[b1[i], 3 * r] * a1[i, 0] + xmat[b1[i], 3 * r + 1] * a1[i, 1] \
+                + xmat[b1[i], 3 * r + 2] * a1[i, 2]
+            p2 = xpos[b2[i], r] + xmat[b2[i], 3 * r] * a2[i, 0] + xmat[b2[i], 3 * r + 1] * a2[i, 1] \
+                + xmat[b2[i], 3 * r + 2] * a2[i, 2]
+            s += (p1 - p2) ** 2
+        if s > worst:
+            worst = s
+    return np.sqrt(worst)
+
+
+@numba.njit(**_OPTS)
+def all_finite(a, b, c, d):
+    for x in (a.ravel(), b.ravel(), c.ravel(), d.ravel()):
+        for v in x:
+            if not np.isfinite(v):
+                return False
+    return True

@@ -123,10 +123,21 @@ class Simulation:
         self._g_b1 = np.array([m.eq_obj1id[i] for i in ids])
         self._g_b2 = np.array([m.eq_obj2id[i] for i in ids])
         self._g_a1 = np.array([m.eq_data[i, 0:3] for i in ids])
-        self._g_a2 = np.array([m.eq_data[i, 3:6] for i in ids])
+        self._g_a2 = np.array([m.eq_data[i, 3:6] for i in ids]).reshape(-1, 3)
+        self._g_a1 = self._g_a1.reshape(-1, 3)
+        self._g_b1 = self._g_b1.astype(np.int64)
+        self._g_b2 = self._g_b2.astype(np.int64)
+        try:
+            from sim import _fastloop
+
+            self._fl = _fastloop
+        except ImportError:  # pragma: no cover
+            self._fl = None
 
     def loop_gap(self) -> float:
         d = self.d
+        if self._fl is not None:
+            return float(self._fl.loop_gap(d.xpos, d.xmat, self._g_b1, self._g_b2, self._g_a1, self._g_a2))
         x1 = d.xpos[self._g_b1] + np.einsum("nij,nj->ni", d.xmat[self._g_b1].reshape(-1, 3, 3), self._g_a1)
         x2 = d.xpos[self._g_b2] + np.einsum("nij,nj->ni", d.xmat[self._g_b2].reshape(-1, 3, 3), self._g_a2)
         return float(np.sqrt(((x1 - x2) ** 2).sum(axis=1).max()))
@@ -361,6 +372,10 @@ class Simulation:
     def _check(self, tk: float, gap: float) -> str | None:
         d = self.d
         st = self.hs.state
+        if self._fl is not None and self._fl.all_finite(d.qpos, d.qvel, st.p_a, st.p_b) and gap <= GAP_LIMIT_M:
+            pmax = max(st.p_a.max(), st.p_b.max())
+            if pmax <= self.hp.relief_pressure_pa * (1 + 1e-9):
+                return None
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             return f"simulation diverged at t = {tk:.4f} s: the mechanical state is not finite (NaN/inf)"
         if not (np.all(np.isfinite(st.p_a)) and np.all(np.isfinite(st.p_b))):
