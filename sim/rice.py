@@ -292,13 +292,21 @@ def peaks(f, mag, band, *, min_prominence=0.0) -> list[tuple[float, float]]:
             den = y0 - 2 * y1 + y2
             d = 0.5 * (y0 - y2) / den if den != 0 else 0.0
             df = f[i + 1] - f[i]
-            lo = min(mag[max(0, i - 40):i].min(initial=y1), y1)
-            hi_side = min(mag[i + 1:i + 41].min(initial=y1), y1)
-            prom = y1 - max(lo, hi_side)
-            if prom >= min_prominence:
+            if min_prominence > 0:
+                lo = min(np.nanmin(mag[max(0, i - 40):i], initial=y1), y1)
+                hi_side = min(np.nanmin(mag[i + 1:i + 41], initial=y1), y1)
+                if y1 - max(lo, hi_side) < min_prominence:
+                    continue
+            if np.isfinite(y1):
                 out.append((float(f[i] + d * df), float(y1 - 0.25 * (y0 - y2) * d)))
     out.sort(key=lambda p: -p[1])
     return out
+
+
+def notch_in(f, mag, band) -> tuple[float, float]:
+    """The lowest local minimum in ``band`` (f, |T|); (nan, nan) if none."""
+    p = peaks(f, -np.asarray(mag), band)
+    return (p[0][0], -p[0][1]) if p else (math.nan, math.nan)
 
 
 def peak_in(f, mag, band) -> tuple[float, float]:

@@ -179,3 +179,87 @@ def rice_simulation(gains: R.Gains, parameter_set: str = "d18", *, payload: str 
              estimator="H1", detrend=False)
     return RiceRun(t=np.arange(n_rec) / RICE_FS_HZ, a_cmd=a_cmd, x_cmd=x_cmd, frf=fr, wall_s=wall, gains=gains,
                    parameter_set=parameter_set, delay=delay, payload=payload, **rec)
+
+
+# ------------------------------------------------------------------ Rice: the paper's cases
+@dataclass(frozen=True)
+class RiceCase:
+    """One operating condition of the paper: gains, parameter set, payload, delay on/off."""
+
+    name: str
+    gains: R.Gains
+    parameter_set: str
+    payload: str | None = None
+    delay: bool = True
+    figure: str = ""
+
+
+def rice_cases() -> list[RiceCase]:
+    """The paper's conditions (Figs. 3-7, 9, 11-13) that the report runs on the model."""
+    G = R.Gains
+    P = R.PAYLOAD_GAINS
+    out = [RiceCase("P1 (all others 0)", G(), "d0", figure="Figs. 3-7 base")]
+    out += [RiceCase(f"P{v:g}", G(p=v), "d0", figure="Fig. 3") for v in (2.0, 3.0)]
+    out += [RiceCase(f"P{v:g} tau=0", G(p=v), "d0", delay=False, figure="Fig. 3 dashed") for v in (1.0, 2.0)]
+    out += [RiceCase(f"I{v:g} Hz", G(i_hz=v), "d0", figure="Fig. 4") for v in (20.0, 40.0)]
+    out += [RiceCase(f"D{v * 1e3:g} ms", G(d_s=v), R.D_SET[v], figure="Fig. 5") for v in (0.010, 0.020)]
+    out += [RiceCase(f"FF{v * 1e3:g} ms", G(ff_s=v), "d0", figure="Fig. 6") for v in (0.020, 0.030)]
+    out += [RiceCase(f"dP{v:g}", G(dp=v), "d0", figure="Fig. 7") for v in (-1.5, -3.0)]
+    out += [RiceCase("optimal", R.OPTIMAL, "d18", figure="Fig. 9"),
+            RiceCase("optimal tau=0", R.OPTIMAL, "d18", delay=False, figure="Fig. 9 dashed"),
+            RiceCase("bare, payload gains", P, "d18", figure="Sec. 8 reference")]
+    out += [RiceCase(f"rigid {m} kg", P, "pr", f"rice_rigid_{m}", figure="Fig. 11") for m in (68, 204, 408)]
+    out += [RiceCase(f"rigid {m} kg, 52 Hz clamp", P, "pfr", f"rice_rigid_{m}_clamp", figure="Fig. 12")
+            for m in (68, 204, 408)]
+    out += [RiceCase(f"frame {m} kg", P, "pf", f"frame_3storey_{m}", figure="Fig. 13") for m in (297, 501)]
+    return out
+
+
+def _smooth(y, n=5):
+    k = np.ones(n) / n
+    return np.convolve(np.pad(y, n // 2, mode="edge"), k, mode="valid")
+
+
+def rice_metrics(f, mag, modes=None) -> dict:
+    """Peaks of a |T| curve in the bands the paper discusses (f Hz, |T|); with payload
+    modes, the spike nearest each modal frequency (within +/-1.5 Hz)."""
+    spikes = [R.peak_in(f, mag, (m.f_hz - 1.5, m.f_hz + 1.5)) for m in (modes or []) if math.isfinite(m.f_hz)
+              and m.f_hz < 45]
+    return {
+        "spikes": spikes,
+        "foundation_notch": R.notch_in(f, mag, (25.5, 32.0)),
+        "low_peak": R.peak_in(f, mag, (2.0, 20.0)),
+        "foundation_peak": R.peak_in(f, mag, (22.0, 31.0)),
+        "central_peak": R.peak_in(f, mag, (30.0, 50.0)),
+        "oil_peak": R.peak_in(f, mag, (45.0, 90.0)),
+        "small_peak": R.peak_in(f, mag, (50.0, 65.0)),
+        "T_10Hz": float(np.interp(10.0, f, mag)),
+        "T_40Hz": float(np.interp(40.0, f, mag)),
+    }
+
+
+def run_rice_case(case: RiceCase, n_segments: int = RICE_SEGMENTS, rms_m_s2: float = 0.5, seed: int = 1) -> dict:
+    """Model FRF and analytical T(s) of one case, with their peak metrics and the error."""
+    run = rice_simulation(case.gains, case.parameter_set, payload=case.payload, delay=case.delay,
+                          n_segments=n_segments, rms_m_s2=rms_m_s2, seed=seed)
+    f = run.frf.f
+    modes = R.payload_from_file(case.payload) if case.payload else None
+    T = R.transfer(f, None, case.gains, case.parameter_set, modes, delay=case.delay).T
+    Hm = np.abs(run.frf.H)
+    band = (f > 0) & (f <= 100.0)
+    err = np.abs(Hm / np.abs(T) - 1)[band]
+    return {"case": case, "f": f, "model": run.frf.H, "analytical": T, "coherence": run.frf.coherence,
+            "model_metrics": rice_metrics(f, _smooth(Hm), modes), "analytical_metrics": rice_metrics(f, np.abs(T), modes),
+            "max_error_0_100": float(err.max()), "f_max_error": float(f[band][err.argmax()]),
+            "rms_error_0_100": float(np.sqrt((err ** 2).mean())), "wall_s": run.wall_s}
+
+
+def run_rice_programme(cases=None, workers: int = 2, **kw) -> list[dict]:
+    cases = cases or rice_cases()
+    if workers <= 1:
+        return [run_rice_case(c, **kw) for c in cases]
+    from concurrent.futures import ProcessPoolExecutor
+    from functools import partial
+
+    with ProcessPoolExecutor(workers) as ex:
+        return list(ex.map(partial(run_rice_case, **kw), cases))
