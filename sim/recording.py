@@ -594,6 +594,186 @@ def series_stride(sample_rate_hz: float, series_rate_hz: float | None) -> int:
     return max(1, int(np.floor(sample_rate_hz / series_rate_hz + 1e-9)))
 
 
+# ---------------------------------------------------------------------- writer
+class _Lazy:
+    """Stand-in for the ``rerun`` module: notes attribute chains and calls (``rr.Boxes3D(...)``,
+    ``rr.components.FillMode.Solid``) as plain data, for :func:`_resolve` to replay."""
+
+    def __init__(self, path: tuple = ()):
+        self._path = path
+
+    def __getattr__(self, name):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return _Lazy(self._path + (name,))
+
+    def __call__(self, *args, **kwargs):
+        return _Call(self._path, args, kwargs)
+
+
+@dataclass
+class _Call:
+    path: tuple
+    args: tuple
+    kwargs: dict
+
+
+class _Ops:
+    """Stand-in for a ``rr.RecordingStream``: notes ``log``, ``send_columns``, ... calls in order."""
+
+    def __init__(self):
+        self.calls = []
+
+    def __getattr__(self, name):
+        if name.startswith("_"):
+            raise AttributeError(name)
+
+        def note(*args, **kwargs):
+            self.calls.append((name, args, kwargs))
+
+        return note
+
+
+def _resolve(rr, x):
+    if isinstance(x, _Lazy):
+        obj = rr
+        for n in x._path:
+            obj = getattr(obj, n)
+        return obj
+    if isinstance(x, _Call):
+        return _resolve(rr, _Lazy(x.path))(*_resolve(rr, x.args), **_resolve(rr, x.kwargs))
+    if isinstance(x, (list, tuple)):
+        return type(x)(_resolve(rr, v) for v in x)
+    if isinstance(x, dict):
+        return {k: _resolve(rr, v) for k, v in x.items()}
+    return x
+
+
+def _escape(part: str) -> str:
+    """An entity path part for ``part`` (as ``rr.escape_entity_path_part``, without importing rerun)."""
+    out = []
+    for c in part:
+        if c.isalnum() or c in "_-.":
+            out.append(c)
+        elif c.isascii() and c.isprintable():
+            out.append("\\" + c)
+        else:
+            out.append(f"\\u{{{ord(c):X}}}")
+    return "".join(out)
+
+
+def _execute(job: dict) -> None:
+    """Replay a recording job (from :meth:`RrdTarget.write_run`) with rerun: sinks, blueprint, calls."""
+    from types import SimpleNamespace
+
+    rr = _rerun()
+    rec = rr.RecordingStream(job["application_id"], recording_id=job["recording_id"])
+    acts, dofs, has_acc, has_cmp = job["blueprint"]
+    bp = blueprint(SimpleNamespace(actuators=acts, dofs=dofs, accelerometers=() if has_acc else None),
+                   True if has_cmp else None)
+    sinks = []
+    if job.get("file"):
+        try:
+            sinks.append(rr.FileSink(job["file"]))
+        except RuntimeError as exc:  # rerun reports the OS error in its message: "(os error 2)"
+            import re
+
+            m = re.search(r"os error (\d+)", str(exc))
+            if m is None:
+                raise
+            raise OSError(int(m.group(1)), os.strerror(int(m.group(1)))) from None
+    if job["spawn"]:
+        rr.spawn(connect=False)
+    if job["spawn"] or job["connect"] is not None:
+        sinks.append(rr.GrpcSink(job["connect"] or DEFAULT_URL))
+    done = False
+    try:
+        rec.set_sinks(*sinks, default_blueprint=bp)
+        for name, args, kwargs in job["ops"]:
+            getattr(rec, name)(*_resolve(rr, args), **_resolve(rr, kwargs))
+        rec.flush()
+        rec.disconnect()
+        done = True
+    finally:
+        if not done:
+            try:
+                rec.disconnect()
+            except Exception:  # noqa: BLE001 - best effort; the caller removes the partial file
+                pass
+
+
+_WORKER_CODE = "import sys; from sim.recording import _worker_main; sys.exit(_worker_main())"
+
+
+def _start_worker():
+    import subprocess
+    import sys
+
+    root = str(Path(__file__).resolve().parents[1])
+    env = dict(os.environ)
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return subprocess.Popen([sys.executable, "-c", _WORKER_CODE], stdin=subprocess.PIPE,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=root, env=env)
+
+
+def _stop_worker(proc) -> None:
+    if proc.poll() is None:
+        proc.kill()
+    try:
+        proc.communicate(timeout=10)
+    except Exception:  # noqa: BLE001 - it was killed; nothing more to do
+        pass
+
+
+def _run_in_worker(proc, job: dict) -> None:
+    """Hand ``job`` to the writer process and wait for it; its failure is raised here
+    (OSError for a file that cannot be written, RuntimeError otherwise)."""
+    import pickle
+
+    _, err = proc.communicate(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
+    if proc.returncode == 0:
+        return
+    lines = [ln for ln in err.decode("utf-8", "replace").splitlines() if ln.startswith(("OSError\t", "Error\t"))]
+    if lines:
+        kind, errno, msg = (lines[-1].split("\t", 2) + ["", ""])[:3]
+        if kind == "OSError":
+            raise OSError(int(errno or 0), msg)
+        raise RuntimeError(f"the recording's writer process failed: {msg}")
+    tail = _one_line(err.decode("utf-8", "replace")[-500:]) or f"exit code {proc.returncode}"
+    raise RuntimeError(f"the recording's writer process failed: {tail}")
+
+
+def _worker_main() -> int:
+    """The writer process: import rerun at once, then read one pickled job on stdin and run it."""
+    import pickle
+    import sys
+
+    try:
+        import pyarrow as pa
+        import rerun  # noqa: F401
+        import rerun.blueprint  # noqa: F401
+
+        pa.array([0.0]).to_numpy()
+        try:  # pyarrow imports pandas on its first conversion of a NumPy array; do it now
+            import pandas  # noqa: F401
+        except ImportError:
+            pass
+    except Exception:  # noqa: BLE001 - _execute imports again and reports the failure
+        pass
+    data = sys.stdin.buffer.read()
+    if not data:
+        return 0  # the target was never written
+    try:
+        _execute(pickle.loads(data))
+    except OSError as exc:
+        sys.stderr.write(f"OSError\t{exc.errno or 0}\t{_one_line(exc.strerror or exc)}\n")
+        return 1
+    except Exception as exc:  # noqa: BLE001 - reported to the parent in one line
+        sys.stderr.write(f"Error\t0\t{type(exc).__name__}: {_one_line(exc)}\n")
+        return 1
+    return 0
+
+
 # ---------------------------------------------------------------------- target
 class RrdTarget:
     """Where a recording goes: an ``.rrd`` file and/or a live viewer.
@@ -614,6 +794,7 @@ class RrdTarget:
         self.series_rate_hz = None if series_rate_hz is None else float(series_rate_hz)
         self.application_id = application_id
         self.recording_id: str | None = None
+        self._worker = None  # writer process (subprocess.Popen) started by open()
 
     @classmethod
     def open(cls, path=None, *, spawn: bool = False, connect: str | None = None,
@@ -638,9 +819,18 @@ class RrdTarget:
             raise RecordingError(f"time-series rate {series_rate_hz!r} Hz is not a positive number; "
                                  "give e.g. 250, or None for the full rate")
         p = check_path(path) if path is not None else None
-        preload()
-        return cls(p, spawn=spawn, connect=connect, rate_hz=rate_hz, series_rate_hz=series_rate_hz,
-                   application_id=application_id)
+        target = cls(p, spawn=spawn, connect=connect, rate_hz=rate_hz, series_rate_hz=series_rate_hz,
+                     application_id=application_id)
+        if p is not None and not spawn and connect is None and os.environ.get("SHAKETABLE_RRD_PRELOAD", "1") != "0":
+            # a file only: rerun is imported (~1 s) and used in a writer process of its own,
+            # started now, so the import runs beside the simulation instead of after it
+            try:
+                target._worker = _start_worker()
+            except OSError:
+                target._worker = None
+        if target._worker is None:
+            preload()
+        return target
 
     # ------------------------------------------------------------------ writing
     def write_run(self, run, tm, payload_qpos: np.ndarray | None = None, *, compare=None,
@@ -661,8 +851,6 @@ class RrdTarget:
         Returns:
             The recording file written, or None for a viewer-only target.
         """
-        rr = _rerun()
-
         if list(run.actuators) != list(tm.actuator_names):
             raise RunFileError(f"run file {run.name} has actuators {', '.join(run.actuators)} but table "
                                f"'{tm.desc.name}' has {', '.join(tm.actuator_names)}; give the matching --table")
@@ -678,24 +866,29 @@ class RrdTarget:
         series_rate = self.series_rate_hz if series_rate_hz is _TARGET else series_rate_hz
 
         self.recording_id = str(uuid.uuid4())
-        rec = rr.RecordingStream(self.application_id, recording_id=self.recording_id)
-        bp = blueprint(run, compare, tm=tm)
+        worker, self._worker = self._worker, None
         tmp = None
         try:
-            sinks = []
+            # the recording as a list of rerun calls (plain data and numpy arrays), made here;
+            # rerun itself runs in the writer process started by open() (or here)
+            ops = _Ops()
+            self._log(ops, _Lazy(), run, tm, payload_qpos, compare, rate, series_rate, name)
+            job = {"application_id": self.application_id, "recording_id": self.recording_id,
+                   "spawn": self.spawn,
+                   "connect": (self.connect or DEFAULT_URL) if self.connect is not None else None,
+                   "blueprint": ([str(a) for a in run.actuators], [str(d) for d in run.dofs],
+                                 run.accelerometers is not None, compare is not None),
+                   "ops": ops.calls}
             if self.path is not None:
                 fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp",
                                            dir=self.path.parent if str(self.path.parent) else ".")
                 os.close(fd)
-                sinks.append(rr.FileSink(tmp))
-            if self.spawn:
-                rr.spawn(connect=False)
-            if self.spawn or self.connect is not None:
-                sinks.append(rr.GrpcSink(self.connect or DEFAULT_URL))
-            rec.set_sinks(*sinks, default_blueprint=bp)
-            self._log(rec, run, tm, payload_qpos, compare, rate, series_rate, name)
-            rec.flush()
-            rec.disconnect()
+            job["file"] = tmp
+            if worker is not None and worker.poll() is None:
+                _run_in_worker(worker, job)
+                worker = None
+            else:
+                _execute(job)
             if tmp is not None:
                 umask = os.umask(0)
                 os.umask(umask)
@@ -706,20 +899,31 @@ class RrdTarget:
             raise RecordingError(f"recording {self.path} cannot be written ({_one_line(exc.strerror or exc)}); "
                                  "choose a folder you can write to, with free space") from None
         finally:
+            if worker is not None:
+                _stop_worker(worker)
             if tmp is not None:
-                try:
-                    rec.disconnect()
-                except Exception:  # noqa: BLE001 - best effort before removing the partial file
-                    pass
                 try:
                     os.unlink(tmp)
                 except OSError:
                     pass
         return self.path
 
+    def close(self) -> None:
+        """Stop the background writer process, if any (a target never written)."""
+        worker, self._worker = getattr(self, "_worker", None), None
+        if worker is not None:
+            _stop_worker(worker)
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - interpreter shutdown
+            pass
+
     # ------------------------------------------------------------------ content
-    def _log(self, rec, run, tm, payload_qpos, compare, rate_hz, series_rate_hz, name) -> None:
-        import rerun as rr
+    def _log(self, rec, rr, run, tm, payload_qpos, compare, rate_hz, series_rate_hz, name) -> None:
+        """Make the recording: ``rec`` and ``rr`` are the recording stream and the rerun module,
+        or stand-ins (:class:`_Ops`, :class:`_Lazy`) that note the calls for :func:`_execute`."""
 
         title = name or run.meta.get("description") or Path(run.name).name
         rec.send_recording_name(str(title))
@@ -732,12 +936,11 @@ class RrdTarget:
             props["incomplete_reason"] = str(run.incomplete_reason)
         rec.send_property("run", rr.AnyValues(**props))
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        self._log_scene(rec, run, tm, payload_qpos, compare, rate_hz)
-        self._log_series(rec, run, compare, series_rate_hz)
+        self._log_scene(rec, rr, run, tm, payload_qpos, compare, rate_hz)
+        self._log_series(rec, rr, run, compare, series_rate_hz)
 
-    def _log_scene(self, rec, run, tm, payload_qpos, compare, rate_hz) -> None:
+    def _log_scene(self, rec, rr, run, tm, payload_qpos, compare, rate_hz) -> None:
         import mujoco
-        import rerun as rr
 
         m = tm.model
         sc = _scene(tm)
@@ -820,9 +1023,7 @@ class RrdTarget:
                 rec.send_columns("compare/platen", indexes=[rr.TimeColumn(TIMELINE, duration=run.t[idx][ok])],
                                  columns=rr.Transform3D.columns(translation=tr, quaternion=_quat_xyzw(qq)))
 
-    def _log_series(self, rec, run, compare, series_rate_hz) -> None:
-        import rerun as rr
-
+    def _log_series(self, rec, rr, run, compare, series_rate_hz) -> None:
         stride = series_stride(run.sample_rate_hz, series_rate_hz)
         idx = np.arange(0, run.n_samples, stride)
         t = run.t[idx]
@@ -878,7 +1079,7 @@ class RrdTarget:
         for j in np.flatnonzero(~together):
             keep = np.flatnonzero(fin[:, j])
             if len(keep):
-                send(f"{ent}/{rr.escape_entity_path_part(str(labels[j]))}", [j], keep)
+                send(f"{ent}/{_escape(str(labels[j]))}", [j], keep)
 
 
 def record_run(path, run, tm, *, compare=None, payload_qpos=None, rate_hz: float = DEFAULT_RATE_HZ,

@@ -321,3 +321,29 @@ def test_force_colours():
     assert c[2].tolist() == c[3].tolist()  # clipped at capacity
     assert c[0, 2] > c[0, 0] and c[2, 0] > c[2, 2]  # blue at rest, red at capacity
     assert c[4, :3].tolist() == [128, 128, 128]
+
+
+def test_writer_process(made, tmp_path):
+    """A file target imports rerun in a writer process started by ``open``; its failures come back
+    here (an unwritable file as RecordingError), and no partial file is left."""
+    import mjcf
+    from sim import recording
+
+    run = read_run(made[1])
+    tm = mjcf.build(mjcf.load_table("cgs"), None)
+    target = recording.RrdTarget.open(tmp_path / "w.rrd")
+    assert target._worker is not None and target._worker.poll() is None
+    assert target.write_run(run, tm) == tmp_path / "w.rrd" and target._worker is None
+    # the folder goes away between open and write_run
+    sub = tmp_path / "gone"
+    sub.mkdir()
+    target = recording.RrdTarget.open(sub / "x.rrd")
+    sub.rmdir()
+    with pytest.raises(recording.RecordingError, match="cannot be written"):
+        target.write_run(run, tm)
+    # a target never written stops its writer
+    target = recording.RrdTarget.open(tmp_path / "never.rrd")
+    proc = target._worker
+    target.close()
+    assert proc.poll() is not None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["w.rrd"]
