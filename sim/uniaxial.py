@@ -263,3 +263,298 @@ def run_rice_programme(cases=None, workers: int = 2, **kw) -> list[dict]:
 
     with ProcessPoolExecutor(workers) as ex:
         return list(ex.map(partial(run_rice_case, **kw), cases))
+
+
+# ------------------------------------------------------------------ UCSD (seed 002)
+UCSD_FILE = R.ROOT / "scenarios" / "tables" / "ucsd.toml"
+#: Hold-down nitrogen pressure (MPa) -> K_e (seed 002 Table 4 averages) and the vertical
+#: bearing force F_z (seed 002, Fig. 5); F_mu = 4.1 kN + 0.39 % F_z (seed 002).
+UCSD_HOLD_DOWN = {13.8: {"K_e": 1.263e6, "F_z": 5.783e6}, 6.9: {"K_e": 0.635e6, "F_z": 3.698e6},
+                  0.0: {"K_e": 0.0, "F_z": 1.613e6}}
+#: Table 1: triangular (D cm, V cm/s) and sinusoidal (D cm, f Hz) tests (11, 12 unusable).
+UCSD_TRIANGLES = {"T1": (5.00, 1.00), "T2": (7.50, 1.50), "T3": (12.50, 2.50), "T4": (50.00, 10.00),
+                  "T5": (25.00, 10.00), "T6": (62.50, 25.00), "T7": (37.50, 25.00), "T8": (75.00, 50.00),
+                  "T9": (46.88, 75.00), "T10": (62.50, 100.00)}
+UCSD_SINES = {"S1": (4, 0.04), "S2": (4, 0.06), "S3": (4, 0.10), "S4": (4, 0.40), "S5": (4, 1.00),
+              "S6": (10, 0.40), "S7": (10, 0.80), "S8": (10, 1.20), "S9": (20, 0.60), "S10": (20, 0.80)}
+#: Table 2: El Centro scaling and white-noise RMS (g).
+UCSD_EL_CENTRO = {"EC20": 0.2, "EC100": 1.0, "EC300": 3.0}
+UCSD_WHITE_NOISE = {"WN3": 0.03, "WN5": 0.05, "WN7": 0.07, "WN10": 0.10, "WN13": 0.13}
+G0 = 9.81
+
+
+def ucsd_description(pressure_mpa: float = 13.8, path=UCSD_FILE):
+    """The LHPOST description at a hold-down pressure (0, 6.9, 13.8 MPa): K_e and F_mu."""
+    raw = copy.deepcopy(R._raw(path))
+    hd = UCSD_HOLD_DOWN[float(pressure_mpa)]
+    for e in raw["effect"]:
+        if e["type"] == "platen_spring":
+            e["stiffness_n_m"] = hd["K_e"]
+        elif e["type"] == "platen_coulomb":
+            e["force_n"] = 4.1e3 + 0.0039 * hd["F_z"]
+    return parse_table(raw, f"{path} [hold-down {pressure_mpa:g} MPa]")
+
+
+def ucsd_motion(name: str, fs: float = 1024.0, *, cycles: float = 2.0, wn_duration_s: float = 30.0, seed: int = 0):
+    """The reference Motion of one test of seed 002's programme."""
+    from sim import motions as Mo
+
+    if name in UCSD_TRIANGLES:
+        D, V = UCSD_TRIANGLES[name]
+        return Mo.triangle(peak_displacement=D / 100, peak_velocity=V / 100, sample_rate_hz=fs, n_cycles=cycles,
+                           name=name)
+    if name in UCSD_SINES:
+        D, f = UCSD_SINES[name]
+        n = cycles + 1.0
+        return Mo.tapered_sine(amplitude=D / 100, frequency_hz=f, duration_s=n / f, sample_rate_hz=fs,
+                               taper_cycles=0.5, name=name)
+    if name in UCSD_EL_CENTRO:
+        from sim.records import el_centro_motions
+
+        return el_centro_motions(sample_rate_hz=fs, amplitude_factor=UCSD_EL_CENTRO[name])["x"]
+    if name in UCSD_WHITE_NOISE:
+        return Mo.white_noise(duration_s=wn_duration_s, sample_rate_hz=fs, band_hz=(0.5, 25.0),
+                              seed=(seed, list(UCSD_WHITE_NOISE).index(name)),
+                              rms_acceleration=UCSD_WHITE_NOISE[name] * G0, name=name)
+    raise KeyError(f"unknown test {name!r}")
+
+
+def ucsd_tests(kind: str = "all") -> list[str]:
+    groups = {"triangular": list(UCSD_TRIANGLES), "sinusoidal": list(UCSD_SINES), "elcentro": list(UCSD_EL_CENTRO),
+              "whitenoise": list(UCSD_WHITE_NOISE)}
+    if kind == "all":
+        return sum(groups.values(), [])
+    return groups[kind]
+
+
+@dataclass
+class SensorModel:
+    """The LHPOST's DAQ as seed 002 describes it (all numbers there or assumed here).
+
+    Displacement: Temposonics on the actuators (noise ``disp_noise_m``, assumed).
+    Acceleration: Setra 141A through a 100 Hz analog low-pass (4-pole Butterworth
+    assumed), noise ``acc_noise_m_s2`` (assumed). Force: chamber pressures x areas, the
+    pressure transducers' 689.5 Pa resolution and noise ``pressure_noise_pa`` (assumed),
+    no low-pass (seed 002: pressures were only high-pass filtered to remove the static
+    part; the model's force has no static part). Velocity: differentiated displacement
+    and integrated acceleration blended by a complementary crossover at
+    ``crossover_hz`` (assumed 2 Hz). Recorder: anti-alias filter and 1024 -> 512 Hz.
+    """
+
+    disp_noise_m: float = 20e-6
+    acc_noise_m_s2: float = 0.003 * G0
+    pressure_noise_pa: float = 5e3
+    pressure_resolution_pa: float = 689.5
+    acc_lowpass_hz: float = 100.0
+    crossover_hz: float = 2.0
+    recorder_hz: float = 512.0
+
+
+def ucsd_measure(res, desc, sensors: SensorModel | None = None, seed: int = 0) -> dict:
+    """Apply the DAQ to a simulation result (1024 Hz): returns 512 Hz channels."""
+    import scipy.signal as sig
+
+    s = sensors or SensorModel()
+    rng = np.random.default_rng(seed)
+    ch = res.channels
+    fs = 1.0 / float(res.t[1] - res.t[0])
+    n = len(res.t)
+    d = ch["table_displacement"][:, 0] + s.disp_noise_m * rng.standard_normal(n)
+    acc_true = ch["accelerometers"].mean(axis=1)
+    a = acc_true + s.acc_noise_m_s2 * rng.standard_normal(n)
+    b, aa = sig.butter(4, s.acc_lowpass_hz, fs=fs)
+    a = sig.lfilter(b, aa, a)
+    areas_a = np.array([a_.cls.area_a_m2 for a_ in desc.actuators])
+    areas_b = np.array([a_.cls.area_b_m2 for a_ in desc.actuators])
+    q = s.pressure_resolution_pa
+
+    def pres(p):
+        p = p + s.pressure_noise_pa * rng.standard_normal(p.shape)
+        return np.round(p / q) * q
+
+    F = (pres(ch["pressure_a"]) * areas_a - pres(ch["pressure_b"]) * areas_b).sum(axis=1)
+    F -= F[0]  # the static part (zero at rest here) removed, as the paper's high-pass
+    # complementary velocity: (w s d + a) / (s + w), trapezoidal integration
+    w = 2 * math.pi * s.crossover_hz
+    dt = 1.0 / fs
+    v = np.zeros(n)
+    z = 0.0
+    for k in range(n):
+        v[k] = z + w * d[k]
+        if k + 1 < n:
+            z += dt * (0.5 * (a[k] + a[k + 1]) - w * v[k])
+    step = int(round(fs / s.recorder_hz))
+    dec = lambda x: sig.decimate(x, step, ftype="fir", zero_phase=False) if step > 1 else x  # noqa: E731
+    return {"t": res.t[::step][:len(dec(d))], "force": dec(F), "disp": dec(d), "vel": dec(v), "acc": dec(a),
+            "fs": fs / step, "true_force": ch["actuator_force"].sum(axis=1)}
+
+
+def ucsd_run_test(name: str, pressure_mpa: float = 13.8, *, seed: int = 0, sensors: SensorModel | None = None,
+                  cycles: float = 2.0, out_dir=None) -> dict:
+    """Simulate one test on the LHPOST model and measure it (optionally write a run file)."""
+    from sim.loop import Reference, Simulation
+
+    desc = ucsd_description(pressure_mpa)
+    tm = build(desc)
+    simu = Simulation(tm)
+    mo = ucsd_motion(name, simu.gains.rate_hz, cycles=cycles, seed=seed)
+    n = len(mo.t)
+    D = np.zeros((n, 6))
+    V = np.zeros((n, 6))
+    A = np.zeros((n, 6))
+    D[:, 0], V[:, 0], A[:, 0] = mo.d, mo.v, mo.a
+    res = simu.run(reference=Reference(t=mo.t, d=D, v=V, a=A))
+    if res.incomplete_reason:
+        raise RuntimeError(f"{name}: {res.incomplete_reason}")
+    meas = ucsd_measure(res, desc, sensors, seed=seed + 1000 * (1 + ucsd_tests().index(name)))
+    out = {"name": name, "pressure_mpa": pressure_mpa, "measured": meas, "wall_s": res.wall_s,
+           "peak_velocity": float(np.abs(res.channels["table_velocity"][:, 0]).max()),
+           "peak_force": float(np.abs(res.channels["actuator_force"].sum(axis=1)).max())}
+    if out_dir is not None:
+        out["path"] = str(write_measured_run(meas, desc, name, out_dir))
+    return out
+
+
+def write_measured_run(meas: dict, desc, name: str, out_dir):
+    """A run file (512 Hz) of the measured channels: what the LHPOST recorder would give."""
+    from pathlib import Path
+
+    from sim.runfile import FORMAT, RunFile, write_run
+
+    n = len(meas["t"])
+    z6 = lambda col: np.column_stack([col] + [np.zeros(n)] * 5)  # noqa: E731
+    na = len(desc.actuators)
+    force = np.zeros((n, na))
+    force[:, 0] = meas["force"]  # the measured total force (pressures x areas of both actuators)
+    meta = {"format": FORMAT, "table": desc.name, "sample_rate_hz": float(meas["fs"]),
+            "actuators": list(desc.actuator_names), "dofs": ["x", "y", "z", "rx", "ry", "rz"],
+            "source": "simulation (sim.uniaxial, seed 002 programme, measured with the LHPOST DAQ model)",
+            "description": f"{name}: seed 002 test on the ucsd model; actuator_force holds the total measured "
+                           "force in column E (W zero)"}
+    run = RunFile(t=np.arange(n) / meas["fs"], meta=meta, actuator_force=force, table_displacement=z6(meas["disp"]),
+                  table_velocity=z6(meas["vel"]), table_acceleration=z6(meas["acc"]))
+    p = Path(out_dir)
+    p.mkdir(parents=True, exist_ok=True)
+    return write_run(p / f"ucsd_{name}.run.npz", run)
+
+
+def ucsd_programme(names=None, pressure_mpa: float = 13.8, *, workers: int = 2, seed: int = 0, out_dir=None,
+                   cycles: float = 2.0) -> list[dict]:
+    names = names or ucsd_tests()
+    from functools import partial
+
+    fn = partial(ucsd_run_test, pressure_mpa=pressure_mpa, seed=seed, out_dir=out_dir, cycles=cycles)
+    if workers <= 1:
+        return [fn(n) for n in names]
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(workers) as ex:
+        return list(ex.map(fn, names))
+
+
+def ucsd_records(results) -> list:
+    from sim.identify import Record
+
+    out = []
+    for r in results:
+        m = r["measured"]
+        out.append(Record(name=r["name"], dt=1.0 / m["fs"], force=m["force"], acc=m["acc"], vel=m["vel"],
+                          disp=m["disp"]))
+    return out
+
+
+# ------------------------------------------------------------------ reports (paper vs model)
+def _fmt(x, nd=2):
+    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
+
+
+def rice_report(results: list[dict]) -> list[str]:
+    """Markdown: every Rice case, analytical Eq. 1-8 vs model FRF, with the paper's statements."""
+    tb = R.load()
+    lines = ["# Rice table (seed 001): paper vs analytical T(s) vs model FRF", "",
+             "Model FRF: white-noise acceleration command, Bartlett average of 11 x 2^14 samples at 4000 Hz, "
+             "3-term Blackman-Harris (sim/uniaxial.py). Peaks as (Hz, |T|); model peaks on a 5-bin running mean.", "",
+             "## Oil column from the known parameters (Eq. 11, no fitting)", "",
+             "| set | beta MPa | Eq. 11 Hz |", "|---|---|---|"]
+    for n, s in tb.sets.items():
+        lines.append(f"| {n} | {s.beta_pa / 1e6:.1f} | {R.oil_column_hz(tb.area_m2, tb.volume_m3, tb.m_t, s.beta_pa):.2f} |")
+    lines += ["", "## Cases", "",
+              "| case | figure | set | max err 0-100 Hz | low peak (model / Eq.) | foundation peak | notch | "
+              "central peak | oil-column peak | payload spikes (model / Eq.) |", "|---|---|---|---|---|---|---|---|---|---|"]
+
+    def pk(m, a, k):
+        return f"{_fmt(m[k][0], 1)}/{_fmt(m[k][1])} ; {_fmt(a[k][0], 1)}/{_fmt(a[k][1])}"
+
+    for r in results:
+        c, mm, am = r["case"], r["model_metrics"], r["analytical_metrics"]
+        sp = " ".join(f"{_fmt(x[0], 1)}/{_fmt(y[0], 1)}" for x, y in zip(mm["spikes"], am["spikes"])) or "-"
+        lines.append(f"| {c.name} | {c.figure} | {c.parameter_set}{'' if c.delay else ', tau=0'} | "
+                     f"{100 * r['max_error_0_100']:.1f} % @ {r['f_max_error']:.1f} Hz | {pk(mm, am, 'low_peak')} | "
+                     f"{pk(mm, am, 'foundation_peak')} | {pk(mm, am, 'foundation_notch')} | {pk(mm, am, 'central_peak')} | "
+                     f"{pk(mm, am, 'oil_peak')} | {sp} |")
+    return lines
+
+
+def ucsd_identification(results, *, force_lowpass_hz: float = 100.0, weights: str = "force") -> dict:
+    """The paper's pooled sets identified from the measured records (unconstrained and C_e = 45.9)."""
+    from sim import identify as I
+
+    recs = {r.name: I.prepare(r, force_lowpass_hz=force_lowpass_hz) for r in ucsd_records(results)}
+    sets = {"triangular": ucsd_tests("triangular"), "sinusoidal": ucsd_tests("sinusoidal"),
+            "periodic": ucsd_tests("triangular") + ucsd_tests("sinusoidal"), "El Centro": ucsd_tests("elcentro"),
+            "WN 3-7 % g": ["WN3", "WN5", "WN7"], "WN 10-13 % g": ["WN10", "WN13"]}
+    out = {}
+    for k, names in sets.items():
+        names = [n for n in names if n in recs]
+        if not names:
+            continue
+        rr = [recs[n] for n in names]
+        out[k] = {"unconstrained": I.identify(rr, 0.5, weights=weights),
+                  "constrained": I.identify(rr, 0.5, weights=weights, ce_fixed=I.PAPER_PARAMS["C_e"])}
+    if "periodic" in out:
+        rr = [recs[n] for n in sets["periodic"] if n in recs]
+        out["alpha_scan"] = I.scan_alpha(rr, weights=weights)
+    return out
+
+
+def ucsd_report(results, ident: dict | None = None) -> list[str]:
+    from sim import identify as I
+
+    ident = ident or ucsd_identification(results)
+    P = I.PAPER_PARAMS
+    paper = {"triangular": (143.9, 1.261), "sinusoidal": (143.9, 1.246), "periodic": (144.0, 1.263),
+             "El Centro": (146.0, 1.238), "WN 3-7 % g": (143.6, 2.024), "WN 10-13 % g": (144.0, 1.405)}
+    paper_fmu = {"periodic": 26.5, "El Centro": 28.3, "WN 3-7 % g": 26.1, "WN 10-13 % g": 24.4}
+    lines = ["# NEES-UCSD LHPOST (seed 002): least-squares identification of simulated tests", "",
+             "Model truth (scenarios/tables/ucsd.toml, 13.8 MPa): M_e 144 t, K_e 1.263 MN/m, C_e 45.9 kN (s/m)^0.5, "
+             "F_mu 26.65 kN (4.1 kN + 0.39 % x 5.783 MN), alpha 0.5. Records: 512 Hz, accelerometers low-passed at "
+             "100 Hz, seeded sensor noise (sim/uniaxial.SensorModel); force low-passed alike before the fit; "
+             "records trimmed to the motion; weights 1/int F^2 dt.", "",
+             "| test set | M_e t (paper) | K_e MN/m (paper) | C_e kN (s/m)^0.5 unconstr. | F_mu kN unconstr. | "
+             "F_mu kN constr. (paper) | eps |", "|---|---|---|---|---|---|---|"]
+    for k, v in ident.items():
+        if k == "alpha_scan":
+            continue
+        u, c = v["unconstrained"], v["constrained"]
+        pm, pk = paper.get(k, (None, None))
+        lines.append(f"| {k} | {u.M_e_kg / 1e3:.1f} ({_fmt(pm, 1)}) | {u.K_e_N_per_m / 1e6:.3f} ({_fmt(pk, 3)}) | "
+                     f"{u.C_e / 1e3:.1f} | {u.F_mu_N / 1e3:.2f} | {c.F_mu_N / 1e3:.2f} ({_fmt(paper_fmu.get(k), 1)}) | "
+                     f"{u.error:.3f} |")
+    if "alpha_scan" in ident:
+        lines += ["", "alpha scan (periodic tests): " + ", ".join(f"{x.alpha:.1f}: {x.error:.4f}"
+                                                                    for x in ident["alpha_scan"])]
+    per = ident.get("periodic", {}).get("constrained")
+    if per is not None:
+        lines += ["", "## Table 8 from the identified parameters (periodic, C_e constrained)", "",
+                  "| v cm/s | xi_e % (paper) | f_m Hz (paper) | A_m (paper) | u_max cm (paper) | F_0 kN (paper) | "
+                  "max rel. diff | nonlinear Eq. 1 under F_0 sin: f_peak Hz, R_peak |", "|---|---|---|---|---|---|---|---|"]
+        rows = I.table8([p[0] / 100 for p in I.PAPER_TABLE8], per.M_e_kg, per.K_e_N_per_m, per.C_e, per.F_mu_N)
+        for row, p in zip(rows, I.PAPER_TABLE8):
+            vals = [row["xi_pct"], row["f_m_hz"], row["A_m"], row["u_max_cm"], row["F0_kN"]]
+            rel = max(abs(a / b - 1) for a, b in zip(vals, p[1:]))
+            h = I.harmonic_amplification(row["F0_kN"] * 1e3, per.M_e_kg, per.K_e_N_per_m, per.C_e, per.F_mu_N,
+                                         cycles=20, steps_per_cycle=1000)
+            lines.append(f"| {p[0]:.2f} | {vals[0]:.2f} ({p[1]}) | {vals[1]:.3f} ({p[2]}) | {vals[2]:.2f} ({p[3]}) | "
+                         f"{vals[3]:.2f} ({p[4]}) | {vals[4]:.1f} ({p[5]}) | {100 * rel:.2f} % | "
+                         f"{h['f_peak_hz']:.3f}, {h['R_peak']:.2f} ({100 * (h['R_peak'] / vals[2] - 1):+.0f} % vs A_m) |")
+    return lines

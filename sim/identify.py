@@ -1,0 +1,271 @@
+"""Least-squares identification of a uni-axial table's mechanical subsystem (seed 002).
+
+Ozcelik, Luco & Conte (2008) model the NEES-UCSD platen as (their Eq. 1)
+
+    M_e u'' + K_e u + C_e |u'|^alpha sign(u') + F_mu sign(u') = F_act
+
+and identify y = (M_e, K_e, C_e, F_mu) for a given alpha by minimising the normalised
+force error over N pooled tests (Eq. 2)
+
+    eps^2 = sum_i lam_i int (F_act - R^T y)^2 dt / sum_j lam_j int F_act^2 dt,
+    R = (u'', u, |u'|^alpha sign u', sign u'),
+
+whose normal equations are a y = b (Eqs. 4-10) with the normalised weights
+lam_i / sum_j lam_j int F_j^2 dt (Eq. 8). Weights (their Fig. 3): "force" (lam_i =
+1 / int F_i^2 dt, Eq. 14: every test counts alike; the paper's lambda^(4)), "unit"
+(lam_i = 1, Eq. 16: lambda^(1)), "velocity" (1 / int u'^2 dt, lambda^(2)) and
+"velocity_sqrt" (lambda^(3)). The constrained variant fixes C_e (the paper's 45.9 kN
+(s/m)^0.5) and solves for the other three. ``alpha`` is scanned by :func:`scan_alpha`
+(eps(alpha) is flat, so the paper picks alpha from the stability of C_e and F_mu across
+single tests; :func:`per_test` gives those).
+
+Equivalent linear damping and the peak-amplification locus (Eqs. 18-26, Table 8) are in
+:func:`table8`; :func:`harmonic_amplification` integrates Eq. 1 under a harmonic force to
+find the peak amplification the nonlinear model actually reaches (their Fig. 9).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sim.errors import RunFileError
+
+WEIGHTS = ("force", "unit", "velocity", "velocity_sqrt")
+
+
+@dataclass
+class Record:
+    """One test: total actuator force and table motion at a uniform step ``dt``."""
+
+    name: str
+    dt: float
+    force: np.ndarray
+    acc: np.ndarray
+    vel: np.ndarray
+    disp: np.ndarray
+
+
+@dataclass
+class Identified:
+    M_e_kg: float
+    K_e_N_per_m: float
+    C_e: float
+    F_mu_N: float
+    alpha: float
+    error: float
+    constrained: bool = False
+    weights: str = "force"
+    per_test_error: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {"M_e_kg": self.M_e_kg, "K_e_N_per_m": self.K_e_N_per_m, "C_e": self.C_e, "F_mu_N": self.F_mu_N,
+                "alpha": self.alpha, "error": self.error, "constrained": self.constrained, "weights": self.weights,
+                "per_test_error": self.per_test_error}
+
+
+def prepare(rec: Record, *, trim: float | None = 0.01, force_lowpass_hz: float | None = None,
+            order: int = 4) -> Record:
+    """Condition a record for the least squares.
+
+    ``trim``: keep the samples from the first to the last one where |u'| exceeds that
+    fraction of its peak. At rest before and after a test the Coulomb element sticks and
+    its force is anything in [-F_mu, F_mu], while Eq. 1 says F_mu sign(u') with sign
+    taken from sensor noise: those samples only add error (in an El Centro record with
+    its quiet pads they are 40 % of the samples and most of the residual).
+    ``force_lowpass_hz``: pass the force through the same low-pass as the accelerometers
+    (Butterworth of ``order``, causal, like an analog conditioner), so that inertia and
+    force are compared with the same filter delay. Seed 002's accelerometers are
+    low-passed at 100 Hz but its pressures are not: a 4-pole 100 Hz filter delays the
+    acceleration by ~4 ms, which moves identified F_mu by tens of percent in 1 Hz tests.
+    """
+    import scipy.signal as sig
+
+    F, a, v, d = rec.force, rec.acc, rec.vel, rec.disp
+    if force_lowpass_hz:
+        b, aa = sig.butter(order, force_lowpass_hz, fs=1.0 / rec.dt)
+        F = sig.lfilter(b, aa, F)
+    if trim:
+        vmax = np.max(np.abs(v))
+        on = np.flatnonzero(np.abs(v) > trim * vmax)
+        if len(on) >= 16:
+            sl = slice(int(on[0]), int(on[-1]) + 1)
+            F, a, v, d = F[sl], a[sl], v[sl], d[sl]
+    return Record(name=rec.name, dt=rec.dt, force=np.asarray(F, float), acc=np.asarray(a, float),
+                  vel=np.asarray(v, float), disp=np.asarray(d, float))
+
+
+def regressors(rec: Record, alpha: float) -> np.ndarray:
+    """R (N, 4): u'', u, |u'|^alpha sign u', sign u' (Eq. 7)."""
+    v = rec.vel
+    return np.column_stack([rec.acc, rec.disp, np.abs(v) ** alpha * np.sign(v), np.sign(v)])
+
+
+def _weight(rec: Record, kind: str) -> float:
+    if kind == "force":
+        return 1.0 / (np.sum(rec.force ** 2) * rec.dt)
+    if kind == "unit":
+        return 1.0
+    if kind == "velocity":
+        return 1.0 / (np.sum(rec.vel ** 2) * rec.dt)
+    if kind == "velocity_sqrt":
+        return 1.0 / math.sqrt(np.sum(rec.vel ** 2) * rec.dt)
+    raise ValueError(f"weights must be one of {', '.join(WEIGHTS)} (got {kind!r})")
+
+
+def identify(records: list[Record], alpha: float = 0.5, *, weights: str = "force",
+             ce_fixed: float | None = None) -> Identified:
+    """Pooled least squares (Eqs. 2-11); ``ce_fixed`` constrains C_e to that value."""
+    if not records:
+        raise ValueError("no records to identify from")
+    lam = np.array([_weight(r, weights) for r in records])
+    E = np.array([np.sum(r.force ** 2) * r.dt for r in records])
+    lbar = lam / np.sum(lam * E)
+    a = np.zeros((4, 4))
+    b = np.zeros(4)
+    Rs = []
+    for w, r in zip(lbar, records):
+        R = regressors(r, alpha)
+        Rs.append(R)
+        a += w * (R.T @ R) * r.dt
+        b += w * (R.T @ r.force) * r.dt
+    if ce_fixed is None:
+        y = np.linalg.solve(a, b)
+    else:  # move the C_e column to the right-hand side
+        keep = [0, 1, 3]
+        bb = b[keep] - a[np.ix_(keep, [2])][:, 0] * ce_fixed
+        yk = np.linalg.solve(a[np.ix_(keep, keep)], bb)
+        y = np.array([yk[0], yk[1], ce_fixed, yk[2]])
+    per, tot = {}, 0.0
+    for w, r, R, e in zip(lbar, records, Rs, E):
+        res = np.sum((r.force - R @ y) ** 2) * r.dt
+        per[r.name] = float(math.sqrt(res / e))
+        tot += w * res
+    return Identified(M_e_kg=float(y[0]), K_e_N_per_m=float(y[1]), C_e=float(y[2]), F_mu_N=float(y[3]),
+                      alpha=float(alpha), error=float(math.sqrt(max(tot, 0.0))), constrained=ce_fixed is not None,
+                      weights=weights, per_test_error=per)
+
+
+def scan_alpha(records, alphas=None, **kw) -> list[Identified]:
+    """eps and parameters for alpha in (0, 1] (the paper's Fig. 3; alpha = 0 would make the
+    viscous term a second Coulomb term, a singular system)."""
+    alphas = np.linspace(0.1, 1.0, 10) if alphas is None else alphas
+    return [identify(records, float(a), **kw) for a in alphas]
+
+
+def per_test(records, alpha: float = 0.5, **kw) -> dict:
+    """Each test identified alone (the paper's Fig. 4: stability of C_e and F_mu)."""
+    return {r.name: identify([r], alpha, **kw) for r in records}
+
+
+# ------------------------------------------------------------------ run files
+def record_from_run(path) -> Record:
+    """A :class:`Record` from a uni-axial run file: actuator force summed over the
+    actuators (the actuators are taken to extend along the table's +x, as in the
+    project's uni-axial descriptions), table displacement/velocity/acceleration x."""
+    from sim.runfile import read_run
+
+    run = read_run(path, require=("actuator_force", "table_displacement", "table_velocity", "table_acceleration"))
+    name = run.name
+    if "x" not in run.dofs:
+        raise RunFileError(f"{name}: has no 'x' DOF column; the ucsd-ls model identifies the x motion of a uni-axial table")
+    F = np.asarray(run.actuator_force, float).sum(axis=1)
+    d = np.asarray(run.column("table_displacement", "x"), float)
+    v = np.asarray(run.column("table_velocity", "x"), float)
+    a = np.asarray(run.column("table_acceleration", "x"), float)
+    for ch, arr in (("actuator_force", F), ("table_displacement", d), ("table_velocity", v),
+                    ("table_acceleration", a)):
+        if not np.all(np.isfinite(arr)):
+            k = int(np.argmin(np.isfinite(arr)))
+            raise RunFileError(f"{name}: channel {ch} has NaN/inf (first at sample {k}); the identification needs "
+                               "finite force, displacement, velocity and acceleration")
+    if len(F) < 16:
+        raise RunFileError(f"{name}: only {len(F)} samples; the identification needs a test record")
+    return Record(name=name, dt=run.dt, force=F, acc=a, vel=v, disp=d)
+
+
+# ------------------------------------------------------------------ Table 8 (Eqs. 18-26)
+def gamma_factors(alpha: float) -> tuple[float, float]:
+    """gamma_1 = 4/pi and gamma_2 (Eq. 22) for a sinusoidal velocity."""
+    g1 = 4.0 / math.pi
+    # the paper's Eq. 22 in closed form: int |sin|^(1+a) / int sin^2 over a period
+    g2 = 2.0 / math.sqrt(math.pi) * math.gamma(1 + alpha / 2) / math.gamma(1.5 + alpha / 2)
+    return g1, g2
+
+
+def xi_equivalent(v, M, K, C, F, alpha=0.5):
+    """Eq. 24: equivalent linear damping ratio at peak velocity v (m/s)."""
+    g1, g2 = gamma_factors(alpha)
+    w = math.sqrt(K / M)
+    v = np.asarray(v, float)
+    return g1 / 2 * F * w / (K * v) + g2 / 2 * C * w / (K * v ** (1 - alpha))
+
+
+def table8(v_m_s, M, K, C, F, alpha=0.5) -> list[dict]:
+    """Eqs. 24-26: xi_e, f_m, A_m, u_max, F_0 for each peak velocity."""
+    fe = math.sqrt(K / M) / (2 * math.pi)
+    out = []
+    for v in v_m_s:
+        xi = float(xi_equivalent(v, M, K, C, F, alpha))
+        fm = fe * math.sqrt(max(1 - 2 * xi * xi, 0.0))
+        Am = 1.0 / (2 * xi * math.sqrt(1 - xi * xi))
+        u = v / (2 * math.pi * fm)
+        out.append({"v_cm_s": 100 * v, "xi_pct": 100 * xi, "f_m_hz": fm, "A_m": Am, "u_max_cm": 100 * u,
+                    "F0_kN": K * u / Am / 1e3})
+    return out
+
+
+def harmonic_amplification(F0, M, K, C, F, alpha=0.5, *, f_hz=None, cycles=30, steps_per_cycle=2000) -> dict:
+    """Steady-state peak displacement of Eq. 1 under F0 sin(2 pi f t), swept over f.
+
+    Semi-implicit Euler with the Coulomb term as a stick-slip switch (the platen sticks
+    while |F_act - K u| <= F_mu at rest). Returns the frequency of the largest
+    amplification R_d = u_max / (F0 / K) and that R_d (the paper's Fig. 9 curves).
+    """
+    fe = math.sqrt(K / M) / (2 * math.pi)
+    freqs = np.linspace(0.7 * fe, 1.1 * fe, 41) if f_hz is None else np.asarray(f_hz)
+    best = (math.nan, -1.0)
+    curve = []
+    for f in freqs:
+        dt = 1.0 / (f * steps_per_cycle)
+        u = v = 0.0
+        umax = 0.0
+        w = 2 * math.pi * f
+        n = cycles * steps_per_cycle
+        for k in range(n):
+            fa = F0 * math.sin(w * k * dt)
+            fs = fa - K * u - C * abs(v) ** alpha * math.copysign(1.0, v) if v != 0 else fa - K * u
+            if v == 0.0 and abs(fs) <= F:
+                acc = 0.0
+            else:
+                s = math.copysign(1.0, v) if v != 0 else math.copysign(1.0, fs)
+                acc = (fs - F * s) / M
+            vn = v + acc * dt
+            if v != 0.0 and vn * v < 0:  # velocity reversal: stop, let the stick test decide
+                vn = 0.0
+            v = vn
+            u += v * dt
+            if k >= n - 3 * steps_per_cycle:
+                umax = max(umax, abs(u))
+        R = umax / (F0 / K)
+        curve.append((float(f), float(R)))
+        if R > best[1]:
+            best = (float(f), float(R))
+    return {"f_peak_hz": best[0], "R_peak": best[1], "curve": curve}
+
+
+#: seed 002 Table 8 (v cm/s, xi %, f_m Hz, A_m, u_max cm, F_0 kN).
+PAPER_TABLE8 = [
+    (20.00, 33.20, 0.416, 1.60, 7.65, 60.5),
+    (25.12, 27.72, 0.433, 1.88, 9.23, 62.2),
+    (50.24, 16.32, 0.458, 3.11, 17.46, 71.1),
+    (75.36, 12.15, 0.464, 4.15, 25.85, 78.9),
+    (100.5, 9.91, 0.466, 5.07, 34.32, 85.7),
+    (125.00, 8.52, 0.468, 5.89, 42.51, 91.2),
+    (150.72, 7.50, 0.468, 6.69, 51.26, 97.0),
+    (180.00, 6.67, 0.469, 7.52, 61.08, 102.8),
+]
+#: seed 002 identified parameters (13.8 MPa, periodic tests, constrained C_e).
+PAPER_PARAMS = {"M_e_kg": 144.0e3, "K_e_N_per_m": 1.263e6, "C_e": 45.9e3, "F_mu_N": 26.5e3, "alpha": 0.5}
