@@ -147,6 +147,12 @@ def build_parser() -> argparse.ArgumentParser:
         characterize_cli = None
     if characterize_cli is not None:
         characterize_cli.add_parsers(sub)
+    try:  # uni-axial identification and the Rice/UCSD programmes (sim/identify_cli.py)
+        from sim import identify_cli
+    except ImportError:
+        identify_cli = None
+    if identify_cli is not None:
+        identify_cli.add_parsers(sub)
     return p
 
 

@@ -407,6 +407,8 @@ def ucsd_run_test(name: str, pressure_mpa: float = 13.8, *, seed: int = 0, senso
     if res.incomplete_reason:
         raise RuntimeError(f"{name}: {res.incomplete_reason}")
     meas = ucsd_measure(res, desc, sensors, seed=seed + 1000 * (1 + ucsd_tests().index(name)))
+    step = int(round(len(res.t) / max(len(meas["t"]), 1)))
+    meas["reference"] = mo.d[:len(res.t):step][:len(meas["t"])]
     out = {"name": name, "pressure_mpa": pressure_mpa, "measured": meas, "wall_s": res.wall_s,
            "peak_velocity": float(np.abs(res.channels["table_velocity"][:, 0]).max()),
            "peak_force": float(np.abs(res.channels["actuator_force"].sum(axis=1)).max())}
@@ -428,11 +430,13 @@ def write_measured_run(meas: dict, desc, name: str, out_dir):
     force[:, 0] = meas["force"]  # the measured total force (pressures x areas of both actuators)
     meta = {"format": FORMAT, "table": desc.name, "sample_rate_hz": float(meas["fs"]),
             "actuators": list(desc.actuator_names), "dofs": ["x", "y", "z", "rx", "ry", "rz"],
-            "source": "simulation (sim.uniaxial, seed 002 programme, measured with the LHPOST DAQ model)",
-            "description": f"{name}: seed 002 test on the ucsd model; actuator_force holds the total measured "
+            "source": "simulated",
+            "description": f"{name}: seed 002 test on the ucsd model (sim.uniaxial), measured with the LHPOST DAQ "
+                           "model; actuator_force holds the total measured "
                            "force in column E (W zero)"}
     run = RunFile(t=np.arange(n) / meas["fs"], meta=meta, actuator_force=force, table_displacement=z6(meas["disp"]),
-                  table_velocity=z6(meas["vel"]), table_acceleration=z6(meas["acc"]))
+                  table_velocity=z6(meas["vel"]), table_acceleration=z6(meas["acc"]),
+                  reference=z6(meas.get("reference", meas["disp"])))
     p = Path(out_dir)
     p.mkdir(parents=True, exist_ok=True)
     return write_run(p / f"ucsd_{name}.run.npz", run)

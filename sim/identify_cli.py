@@ -1,0 +1,94 @@
+"""``shaketable identify`` (seed 002 least squares on run files) and ``shaketable uniaxial``
+(the Rice and UCSD papers' programmes on the model, paper-vs-model reports)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from sim.errors import UserError
+
+
+def add_parsers(sub) -> None:
+    p = sub.add_parser("identify", help="identify a uni-axial table's mechanical model from run files")
+    p.add_argument("runs", nargs="+", metavar="RUN", help="run files (.run.npz), pooled")
+    p.add_argument("--model", required=True, choices=["ucsd-ls"],
+                   help="ucsd-ls: M u'' + K u + C |u'|^alpha sign u' + F sign u' = F_act by least squares (seed 002)")
+    p.add_argument("--alpha", type=float, default=0.5, help="power-law exponent (default 0.5, seed 002)")
+    p.add_argument("--scan-alpha", action="store_true", help="also print the error for alpha = 0.1 ... 1.0")
+    p.add_argument("--ce", type=float, metavar="N(s/m)^a", help="constrain C_e to this value (seed 002: 45900)")
+    p.add_argument("--weights", default="force", choices=["force", "unit", "velocity", "velocity_sqrt"],
+                   help="per-test weights (default force: 1/int F^2 dt, every test counts alike)")
+    p.add_argument("--force-lowpass", type=float, metavar="HZ",
+                   help="low-pass the force like the accelerometers (e.g. 100 for the LHPOST)")
+    p.add_argument("--no-trim", action="store_true", help="keep the rest before and after the motion")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_identify)
+
+    u = sub.add_parser("uniaxial", help="run the Rice (seed 001) or UCSD (seed 002) programme on the model, "
+                                        "write a paper-vs-model report")
+    u.add_argument("table", choices=["rice", "ucsd"])
+    u.add_argument("--out", default=None, help="output folder (default: uniaxial_<table>)")
+    u.add_argument("--workers", type=int, default=2)
+    u.add_argument("--quick", action="store_true", help="rice: 3 segments per FRF; ucsd: periodic tests only")
+    u.set_defaults(func=cmd_uniaxial)
+
+
+def cmd_identify(args) -> int:
+    from sim import identify as I
+
+    if not (0.0 < args.alpha <= 2.0):
+        raise UserError(f"--alpha must be in (0, 2] (got {args.alpha:g})")
+    recs = []
+    for path in args.runs:
+        if not Path(path).is_file():
+            raise UserError(f"{path}: no such run file")
+        r = I.record_from_run(path)
+        recs.append(I.prepare(r, trim=None if args.no_trim else 0.01, force_lowpass_hz=args.force_lowpass))
+    try:
+        res = I.identify(recs, args.alpha, weights=args.weights, ce_fixed=args.ce)
+    except Exception as e:  # singular normal equations: no motion, or a constant velocity sign
+        raise UserError(f"the least squares has no unique solution for these runs ({e}); give tests with "
+                        "motion in both directions") from None
+    scan = I.scan_alpha(recs, weights=args.weights, ce_fixed=args.ce) if args.scan_alpha else []
+    if args.json:
+        out = {k: v for k, v in res.as_dict().items()}
+        if scan:
+            out["alpha_scan"] = [{"alpha": s.alpha, "error": s.error} for s in scan]
+        print(json.dumps(out, indent=1))
+        return 0
+    print(f"ucsd-ls on {len(recs)} run(s), alpha = {res.alpha:g}, weights {res.weights}"
+          f"{', C_e constrained' if res.constrained else ''}")
+    print(f"  M_e   = {res.M_e_kg / 1e3:10.2f} t")
+    print(f"  K_e   = {res.K_e_N_per_m / 1e6:10.4f} MN/m")
+    print(f"  C_e   = {res.C_e / 1e3:10.2f} kN (s/m)^{res.alpha:g}")
+    print(f"  F_mu  = {res.F_mu_N / 1e3:10.2f} kN")
+    print(f"  error = {res.error:10.4f} (normalised force error, Eq. 2)")
+    for name, e in res.per_test_error.items():
+        print(f"    {e:8.4f}  {name}")
+    for s in scan:
+        print(f"  alpha {s.alpha:.1f}: error {s.error:.4f}")
+    return 0
+
+
+def cmd_uniaxial(args) -> int:
+    import pickle
+
+    from sim import uniaxial as U
+
+    out = Path(args.out or f"uniaxial_{args.table}")
+    out.mkdir(parents=True, exist_ok=True)
+    if args.table == "rice":
+        res = U.run_rice_programme(workers=args.workers, n_segments=3 if args.quick else U.RICE_SEGMENTS)
+        lines = U.rice_report(res)
+        with open(out / "rice_frf.pkl", "wb") as fh:
+            pickle.dump([{k: v for k, v in r.items()} for r in res], fh)
+    else:
+        names = U.ucsd_tests("triangular") + U.ucsd_tests("sinusoidal") if args.quick else None
+        res = U.ucsd_programme(names, workers=args.workers, out_dir=out / "runs")
+        lines = U.ucsd_report(res)
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    print(f"wrote {out / 'report.md'}", file=sys.stderr)
+    return 0
