@@ -25,6 +25,17 @@ def cmd_characterize(args) -> int:
     from sim import characterize as C
 
     show = sys.stderr.isatty() and not args.json
+    if args.table in ("rice", "ucsd"):
+        # the uni-axial tables of seeds 001/002 run their papers' own programmes (sim/uniaxial.py)
+        if args.calibrate or args.payload:
+            raise C.CharacterizeError(f"characterize {args.table} runs its paper's programme; "
+                                      "--calibrate and --payload are for the CGS programme")
+        import argparse
+
+        from sim.identify_cli import cmd_uniaxial
+
+        return cmd_uniaxial(argparse.Namespace(table=args.table, out=args.out, workers=args.workers or 2,
+                                               quick=args.quick))
     if args.calibrate:
         return _calibrate(args, show)
     s = C.characterize(args.table, args.payload, args.out, quick=args.quick, workers=args.workers,

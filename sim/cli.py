@@ -132,27 +132,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=cmd_calibrate)
 
-    from sim import run_cli
+    from sim import characterize_cli, identify_cli, run_cli, view_cli
 
-    run_cli.add_parsers(sub)
-    try:  # rerun recordings of run files (sim/view_cli.py)
-        from sim import view_cli
-    except ImportError:
-        view_cli = None
-    if view_cli is not None:
-        view_cli.add_parsers(sub)
-    try:  # identification programme (sim/characterize_cli.py)
-        from sim import characterize_cli
-    except ImportError:
-        characterize_cli = None
-    if characterize_cli is not None:
-        characterize_cli.add_parsers(sub)
-    try:  # uni-axial identification and the Rice/UCSD programmes (sim/identify_cli.py)
-        from sim import identify_cli
-    except ImportError:
-        identify_cli = None
-    if identify_cli is not None:
-        identify_cli.add_parsers(sub)
+    run_cli.add_parsers(sub)  # run, replay, fit, geometry
+    view_cli.add_parsers(sub)  # rerun recordings of run files
+    characterize_cli.add_parsers(sub)  # the CGS identification programme (and rice/ucsd dispatch)
+    identify_cli.add_parsers(sub)  # uni-axial identification, Rice/UCSD programmes
     return p
 
 

@@ -77,8 +77,9 @@ def cmd_uniaxial(args) -> int:
 
     from sim import uniaxial as U
 
-    out = Path(args.out or f"uniaxial_{args.table}")
-    out.mkdir(parents=True, exist_ok=True)
+    from sim.run_cli import _out_dir
+
+    out = _out_dir(args.out or f"uniaxial_{args.table}")
     if args.table == "rice":
         res = U.run_rice_programme(workers=args.workers, n_segments=3 if args.quick else U.RICE_SEGMENTS)
         lines = U.rice_report(res)
