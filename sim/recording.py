@@ -41,6 +41,13 @@ tabbed time-series panels) is built by :func:`blueprint` and travels with the re
 A recording file is written to a temporary file in the target folder and moved into
 place with ``os.replace`` only when complete; on any error the temporary file is removed,
 so a reader sees either no file or the whole recording.
+
+rerun itself (about 1 s to import, with pyarrow and pandas) runs in a writer process that
+:meth:`RrdTarget.open` starts for a file target, so the import happens beside the
+simulation rather than after it: :meth:`RrdTarget.write_run` notes the recording's rerun
+calls as plain data (:class:`_Ops`, :class:`_Lazy`), sends them in one pickle and waits
+for the writer; its failures come back as exceptions here. Viewer targets record
+in-process (:func:`_execute` either way).
 """
 
 from __future__ import annotations
