@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mjcf.description import DescriptionError, TableDescription
+from mjcf.description import DescriptionError, TableDescription, toml_key_index
 
 DOF_NAMES = ("x", "y", "z", "rx", "ry", "rz")
 
@@ -118,16 +118,11 @@ def write_calibrated(path: Path, result: dict) -> None:
 
     def set_key(text, section, key, value_text):
         lines = text.split("\n")
-        current = None
-        for i, line in enumerate(lines):
-            h = re.match(r"^\[+([^\]]+)\]+\s*(#.*)?$", line)
-            if h:
-                current = h.group(1).strip()
-                continue
-            if current == section and re.match(rf"^{re.escape(key)}\s*=", line):
-                lines[i] = f"{key} = {value_text}  {note}"
-                return "\n".join(lines)
-        raise DescriptionError(f"{path}: cannot find {section}.{key} to rewrite")
+        i = toml_key_index(lines, section, key)
+        if i is None:
+            raise DescriptionError(f"{path}: cannot find {section}.{key} to rewrite")
+        lines[i] = f"{key} = {value_text}  {note}"
+        return "\n".join(lines)
 
     text = set_key(text, "platen", "mass_kg", f"{vals['platen.mass_kg']:.1f}")
     inertia = [vals[f"platen.inertia_kg_m2[{i}]"] for i in range(3)]

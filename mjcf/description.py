@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -436,6 +437,23 @@ def _check_inertia(I, what):
     a, b, c = sorted(I)
     if a + b < c * (1 - 1e-9):
         raise DescriptionError(f"{what} violates the triangle inequality (got {list(I)}); principal moments need A + B >= C")
+
+
+def toml_key_index(lines: list[str], section: str, key: str) -> int | None:
+    """Line index of ``key = ...`` inside ``[section]`` of a TOML text split in lines.
+
+    Used by the calibration commands to rewrite a value in place, keeping the file's
+    comments and layout (the sources next to the numbers).
+    """
+    current = None
+    for i, line in enumerate(lines):
+        h = re.match(r"^\[+([^\]]+)\]+\s*(#.*)?$", line)
+        if h:
+            current = h.group(1).strip()
+            continue
+        if current == section and re.match(rf"^{re.escape(key)}\s*=", line):
+            return i
+    return None
 
 
 # --------------------------------------------------------------------------- kinematics

@@ -49,18 +49,7 @@ def record(k, qpos, qvel, Q, V, X, Y, i_spool, i_force, i_pa, i_pb, H_spool, H_f
     E_gas[k] = Y[y_gas, 0]
 
 
-@numba.njit(**_OPTS)
-def platen_velocity(qvel, xmat, pd, pb, out):
-    """DOF velocity of the reference point: linear (world) and angular (world frame)."""
-    out[0] = qvel[pd]
-    out[1] = qvel[pd + 1]
-    out[2] = qvel[pd + 2]
-    for r in range(3):
-        out[3 + r] = (xmat[pb, 3 * r] * qvel[pd + 3] + xmat[pb, 3 * r + 1] * qvel[pd + 4]
-                      + xmat[pb, 3 * r + 2] * qvel[pd + 5])
-
-
-__all__ = ["pre_step", "record", "platen_velocity", "np"]
+__all__ = ["pre_step", "record", "loop_gap", "all_finite"]
 
 
 @numba.njit(**_OPTS)

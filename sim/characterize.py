@@ -794,23 +794,19 @@ def write_calibration(path: str | Path, cal: dict) -> None:
     tag_fr = "calibrated: matches the friction tests, 1.25 % of capability (shaketable characterize --calibrate)"
 
     def set_key(section, key, value_text, tag):
-        current = None
-        for i, line in enumerate(lines):
-            h = re.match(r"^\[+([^\]]+)\]+\s*(#.*)?$", line)
-            if h:
-                current = h.group(1).strip()
-                continue
-            if current == section and re.match(rf"^{re.escape(key)}\s*=", line):
-                m = re.match(r"^[^#]*#\s*(.*)$", line)
-                old = m.group(1).strip() if m else ""
-                old = re.sub(r"^calibrated:\s*(matches\s+)?", "", old)
-                old = re.sub(r"^(Table 1|the friction tests[^;(]*)\s*(\(shaketable characterize --calibrate\))?[;,]?\s*",
-                             "", old).strip()
-                old = re.sub(r"^friction ~1\.25 % of capability \(friction tests\)$", "", old).strip()
-                comment = tag + (f"; {old}" if old else "")
-                lines[i] = f"{key} = {value_text}".ljust(36) + f"# {comment}"
-                return
-        raise CharacterizeError(f"{path}: cannot find {section}.{key} to rewrite")
+        from mjcf.description import toml_key_index
+
+        i = toml_key_index(lines, section, key)
+        if i is None:
+            raise CharacterizeError(f"{path}: cannot find {section}.{key} to rewrite")
+        m = re.match(r"^[^#]*#\s*(.*)$", lines[i])
+        old = m.group(1).strip() if m else ""
+        old = re.sub(r"^calibrated:\s*(matches\s+)?", "", old)
+        old = re.sub(r"^(Table 1|the friction tests[^;(]*)\s*(\(shaketable characterize --calibrate\))?[;,]?\s*",
+                     "", old).strip()
+        old = re.sub(r"^friction ~1\.25 % of capability \(friction tests\)$", "", old).strip()
+        comment = tag + (f"; {old}" if old else "")
+        lines[i] = f"{key} = {value_text}".ljust(36) + f"# {comment}"
 
     for c, v in cal["dead_volume_m3"].items():
         for side in ("a", "b"):
