@@ -117,6 +117,8 @@ class BuildInfo:
     payload_joints: list[str] = field(default_factory=list)
     payload_bodies: list[str] = field(default_factory=list)
     step_effects: list = field(default_factory=list)  #: effects applied every physics step
+    friction_joints: list[str] = field(default_factory=list)  #: joints whose friction the loop applies
+    friction_force_n: list[float] = field(default_factory=list)  #: their Coulomb levels (N or N m)
 
 
 def build_spec(desc: TableDescription, payload: Payload | None = None,
@@ -443,6 +445,14 @@ def build(desc: TableDescription, payload: Payload | None = None,
     if isinstance(payload, RigidPayload) and payload.clamp_frequency_hz is not None:
         jz = spec.joint("payload_clamp_z")
         jz.springref = payload.mass_kg * desc.gravity_m_s2 / jz.stiffness[0]
+    if desc.friction_model == "presliding":
+        # Dry friction leaves MuJoCo's frictionloss (a stiff stick constraint) and is applied
+        # by the loop as a pre-sliding (Dahl/LuGre-type) force; see sim/loop.py.
+        for j in spec.joints:
+            if j.frictionloss > 0:
+                info.friction_joints.append(j.name)
+                info.friction_force_n.append(float(j.frictionloss))
+                j.frictionloss = 0.0
     key = spec.add_key(name="home")
     key.qpos = model.qpos0.tolist()
     model = spec.compile()

@@ -224,6 +224,8 @@ class TableDescription:
     source: str
     raw: dict = field(repr=False)
     effects: tuple = ()  #: [[effect]] entries (sim/effects.py), validated when the model is built
+    friction_model: str = "coulomb"  #: "coulomb" (MuJoCo frictionloss) or "presliding" (sim/loop.py)
+    friction_presliding_m: float = 1e-4  #: pre-sliding displacement of the "presliding" model
 
     @property
     def actuator_names(self) -> tuple[str, ...]:
@@ -418,6 +420,12 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         top.raw(k)
     if top.has("controller"):
         top.raw("controller")
+    fmodel, fpre = "coulomb", 1e-4
+    if top.has("friction"):
+        fr = top.sub("friction")
+        fmodel = fr.text("model", "coulomb", choices=("coulomb", "presliding"))
+        fpre = fr.num("presliding_m", 1e-4, positive=True)
+        fr.done()
     effects = top.raw("effect", [])
     if not isinstance(effects, list) or not all(isinstance(e, dict) for e in effects):
         raise DescriptionError(f"{src}: '[[effect]]' entries must be tables")
@@ -428,6 +436,7 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         foundation=foundation, actuator_classes=classes, actuators=tuple(actuators),
         supports=supports, accelerometers=tuple(accs), recorder_rate_hz=rate,
         accelerometer_bandwidth_hz=bw, source=src, raw=data, effects=tuple(effects),
+        friction_model=fmodel, friction_presliding_m=fpre,
     )
     check_stroke_reach(desc)
     return desc

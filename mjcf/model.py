@@ -71,6 +71,10 @@ class TableModel:
         self.home_key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home")
         self.support_names = [f"S{i + 1}" for i in range(len(self.desc.supports.positions_m))] if self.desc.supports else []
         self.support_qadr = np.array([m.jnt_qposadr[jid(f"{s}_air")] for s in self.support_names], dtype=int)
+        fj = list(getattr(self.info, "friction_joints", []))
+        self.friction_dofs = np.array([m.jnt_dofadr[jid(n)] for n in fj], dtype=np.int64)
+        self.friction_force = np.array(getattr(self.info, "friction_force_n", []), dtype=float)
+        self.friction_presliding_m = self.desc.friction_presliding_m
         self.step_effects = list(getattr(self.info, "step_effects", []))
         for e in self.step_effects:
             e.bind(m)

@@ -34,6 +34,15 @@ def pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, he
 
 
 @numba.njit(**_OPTS)
+def pre_step_friction(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, head, P, G,
+                      qfa, fr_dofs, fr_fc, zfr, zss, dt):
+    """:func:`pre_step` plus the pre-sliding friction into ``qfrc_applied`` (zeroed first)."""
+    pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, head, P, G)
+    qfa[:] = 0.0
+    presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt)
+
+
+@numba.njit(**_OPTS)
 def record(k, qpos, qvel, Q, V, X, Y, i_spool, i_force, i_pa, i_pb, H_spool, H_force, H_pa, H_pb,
            y_ps, y_gas, E_ps, E_gas):
     """Copy the raw state at tick ``k`` into the recorder's arrays."""
@@ -49,7 +58,24 @@ def record(k, qpos, qvel, Q, V, X, Y, i_spool, i_force, i_pa, i_pb, H_spool, H_f
     E_gas[k] = Y[y_gas, 0]
 
 
-__all__ = ["pre_step", "record", "loop_gap", "all_finite"]
+@numba.njit(**_OPTS)
+def presliding_friction(qvel, qfrc_applied, dofs, fc, z, zss, dt):
+    """Dry friction with pre-sliding (Dahl form of LuGre with sigma1 = sigma2 = 0).
+
+    Per friction coordinate with Coulomb level Fc and pre-sliding displacement zss:
+    dz/dt = v - |v| z / zss, F = -(Fc / zss) z. Over a step z is advanced exactly for the
+    velocity held (z -> sign(v) zss with rate |v| / zss), so the update is stable at any
+    speed; at rest z (and the force) stays: the coordinate sticks elastically.
+    """
+    for i in range(dofs.shape[0]):
+        v = qvel[dofs[i]]
+        target = zss if v > 0.0 else (-zss if v < 0.0 else 0.0)
+        if v != 0.0:
+            z[i] = target + (z[i] - target) * np.exp(-abs(v) * dt / zss)
+        qfrc_applied[dofs[i]] += -fc[i] / zss * z[i]
+
+
+__all__ = ["presliding_friction", "pre_step_friction", "pre_step", "record", "loop_gap", "all_finite"]
 
 
 @numba.njit(**_OPTS)

@@ -12,7 +12,10 @@ Coupling order (one physics step, time t_n -> t_n + dt):
    over the step and returns the net piston forces (pressures at the end of the step;
    see ``hydraulics/system.py`` for why).
 4. The forces go into ``data.ctrl`` of the gear-1 motors on the stroke slides (so each
-   force acts along its linkage, between cylinder and rod).
+   force acts along its linkage, between cylinder and rod). With the table's
+   ``[friction] model = "presliding"``, dry friction of the seals, support pistons and
+   shoes is computed from the same state (pre-sliding model, ``sim._fastloop``) and
+   written to ``qfrc_applied``; named per-step effects add theirs there too.
 5. ``mj_step`` advances the mechanics t_n -> t_n + dt (``data.qacc`` then holds the
    acceleration at t_n, which the recorder reads).
 
@@ -103,12 +106,21 @@ class Simulation:
         e.g. :meth:`static_forces` for a table whose actuators carry dead weight.
         """
         self.d = self.tm.new_data()
+        self._zfr = np.zeros(len(self.tm.friction_dofs))  # pre-sliding friction states
         if pose is not None:
             self.tm.set_platen_pose(self.d, pose)
         x = self.tm.actuator_strokes(self.d)[None, :]
         self.hs.reset(x, force=None if forces is None else np.asarray(forces, float)[None, :])
         self.d.ctrl[self.tm.actuator_ids] = self.hs.force[0]
         mujoco.mj_forward(self.m, self.d)
+
+    def _presliding_numpy(self, qvel, qfa, dofs, fc, z, zss):
+        """Reference (numpy) version of :func:`sim._fastloop.presliding_friction`."""
+        v = qvel[dofs]
+        target = np.sign(v) * zss
+        moving = v != 0.0
+        z[moving] = target[moving] + (z[moving] - target[moving]) * np.exp(-np.abs(v[moving]) * self.dt / zss)
+        qfa[dofs] += -fc / zss * z
 
     def static_forces(self) -> np.ndarray:
         """Actuator forces (n_act,) that hold the home pose against gravity with the
@@ -202,6 +214,10 @@ class Simulation:
         qa64, da64, ids64 = (np.asarray(a, dtype=np.int64) for a in (qa, da, ids))
         free = tm.platen_free
         effects = tm.step_effects
+        fr_dofs, fr_fc, fr_zss = tm.friction_dofs, tm.friction_force, tm.friction_presliding_m
+        nfr = len(fr_dofs)
+        zfr = self._zfr
+        qfa = d.qfrc_applied
         slide_d, pdi, n_pd = tm.platen_slide_dadr, tm.platen_dof_index, len(tm.platen_dof_index)
         xmat = d.xmat
         step = mujoco.mj_step
@@ -251,7 +267,11 @@ class Simulation:
             # ---- physics steps of this tick: hydraulics, then mj_step
             for j in range(spt):
                 t3 = clock()
-                if fast and hs.delay_steps == 0 and hs.backend == "numba":
+                fused = fast and hs.delay_steps == 0 and hs.backend == "numba"
+                if fused and nfr:
+                    FL.pre_step_friction(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC,
+                                         hs._ICS, hs._buf, 0, hs._P, hs._G, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
+                elif fused:
                     FL.pre_step(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS,
                                 hs._buf, 0, hs._P, hs._G)
                 else:
@@ -259,10 +279,15 @@ class Simulation:
                     v2[0] = qvel[da]
                     f = hs.step(cmd2, x2, v2)
                     dctrl[ctrl_ids] = f[0]
-                if effects:
-                    d.qfrc_applied[:] = 0.0
-                    for e in effects:
-                        e.apply(m, d)
+                if not (fused and nfr) and (effects or nfr):
+                    qfa[:] = 0.0
+                    if nfr:
+                        if fast:
+                            FL.presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
+                        else:
+                            self._presliding_numpy(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss)
+                for e in effects:
+                    e.apply(m, d)
                 t4 = clock()
                 step(m, d)
                 t5 = clock()
