@@ -240,16 +240,20 @@ class TableDescription:
         )
 
 
-def _load_toml(path: Path) -> dict:
+def load_toml(path: Path, error: type[UserError] = DescriptionError, what: str = "file") -> dict:
+    """Parse a TOML file; a missing, unreadable or malformed file raises ``error`` (one line)."""
     try:
         with open(path, "rb") as f:
             return tomllib.load(f)
     except FileNotFoundError:
-        raise DescriptionError(f"{path}: no such file") from None
+        raise error(f"{path}: no such {what}") from None
     except tomllib.TOMLDecodeError as e:
-        raise DescriptionError(f"{path}: not valid TOML ({e})") from None
+        raise error(f"{path}: not valid TOML ({e})") from None
     except (IsADirectoryError, PermissionError, UnicodeDecodeError) as e:
-        raise DescriptionError(f"{path}: cannot be read ({e.__class__.__name__})") from None
+        raise error(f"{path}: cannot be read ({e.__class__.__name__})") from None
+
+
+_load_toml = load_toml
 
 
 def resolve(name_or_path: str | Path, folder: Path, kind: str) -> Path:

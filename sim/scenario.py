@@ -33,13 +33,12 @@ ones.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from mjcf.description import REPO_ROOT, resolve
+from mjcf.description import REPO_ROOT, load_toml, resolve
 from sim import motions as M
 from sim import records as R
 from sim.errors import MotionError, ScenarioError
@@ -78,15 +77,7 @@ class Scenario:
 
 
 def _load(path: Path) -> dict:
-    try:
-        with open(path, "rb") as f:
-            return tomllib.load(f)
-    except FileNotFoundError:
-        raise ScenarioError(f"{path}: no such scenario file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(f"{path}: not valid TOML ({e})") from None
-    except (IsADirectoryError, PermissionError, UnicodeDecodeError) as e:
-        raise ScenarioError(f"{path}: cannot be read ({e.__class__.__name__})") from None
+    return load_toml(path, ScenarioError, "scenario file")
 
 
 def _unknown(keys, known, where, src):
