@@ -108,25 +108,26 @@ class TableModel:
         q = d.qpos[self.platen_qadr:self.platen_qadr + 7]
         return np.concatenate([q[:3], quat_to_xyz(q[3:7])])
 
-    def platen_velocity(self, d: mujoco.MjData) -> np.ndarray:
-        """(6,) reference-point velocity: linear (world) and angular (world frame)."""
+    def _platen_rate(self, d: mujoco.MjData, vec: np.ndarray) -> np.ndarray:
+        """A platen DOF rate (qvel or qacc) as (6,): linear in world, angular in world frame.
+
+        A free joint's angular part is in the platen frame; R turns it to world (for the
+        acceleration too: d/dt(R w) = R dw/dt since w x w = 0)."""
         if not self.platen_free:
             out = np.zeros(6)
-            out[self.platen_dof_index] = d.qvel[self.platen_slide_dadr]
+            out[self.platen_dof_index] = vec[self.platen_slide_dadr]
             return out
-        v = d.qvel[self.platen_dadr:self.platen_dadr + 6]
+        v = vec[self.platen_dadr:self.platen_dadr + 6]
         R = d.xmat[self.platen_body].reshape(3, 3)
         return np.concatenate([v[:3], R @ v[3:6]])
 
+    def platen_velocity(self, d: mujoco.MjData) -> np.ndarray:
+        """(6,) reference-point velocity: linear (world) and angular (world frame)."""
+        return self._platen_rate(d, d.qvel)
+
     def platen_acceleration(self, d: mujoco.MjData) -> np.ndarray:
         """(6,) reference-point acceleration of the last step (linear world, angular world)."""
-        if not self.platen_free:
-            out = np.zeros(6)
-            out[self.platen_dof_index] = d.qacc[self.platen_slide_dadr]
-            return out
-        a = d.qacc[self.platen_dadr:self.platen_dadr + 6]
-        R = d.xmat[self.platen_body].reshape(3, 3)
-        return np.concatenate([a[:3], R @ a[3:6]])
+        return self._platen_rate(d, d.qacc)
 
     def set_platen_pose(self, d: mujoco.MjData, pose) -> float:
         """Put the platen at ``pose`` (6,) and close every loop; returns the residual (m)."""

@@ -147,56 +147,45 @@ class TableController:
         self.ps = supply_pressure_pa
         self.dp0 = supply_pressure_pa - return_pressure_pa
         self._kp = gains.kp_per_s
-        self._cmd = np.zeros(n)
         dt = 1.0 / gains.rate_hz
         self._hp_a = 1.0 / (1.0 + 2 * np.pi * gains.dp_highpass_hz * dt) if gains.dp_highpass_hz > 0 else None
+        # constants of the compiled tick: per-actuator [area, opening per velocity], and
+        # [kp (6), kv (6), kdp, kfb, hp_a (-1 = no high-pass), ps, dp0, flow linearisation, limit]
+        self._consts = np.ascontiguousarray(np.stack([self.area, self.open_per_velocity]))
+        self._gains_arr = np.ascontiguousarray(np.concatenate([
+            self._kp, gains.kv_feedback,
+            [gains.kdp, gains.kfb, self._hp_a if self._hp_a is not None else -1.0, self.ps, self.dp0,
+             1.0 if gains.flow_linearisation else 0.0, gains.command_limit]]))
         self.reset()
 
     def reset(self):
-        """Clear the filter states (call before a new run)."""
-        self._pl_prev = None
-        self._pl_hp = np.zeros(self.J.shape[0])
-        self._pl_prev_arr = np.zeros(self.J.shape[0])
-        self._state = np.zeros(1)  # [0] = 1 once the filter has its first sample
-        self._kern = _tick_kernel()
-        self._kern2 = _state_kernel()
-        g = self.g
+        """Clear the dP high-pass filter (call before a new run)."""
         n = self.J.shape[0]
-        # per-actuator constants: area, opening per velocity
-        self._consts = np.ascontiguousarray(np.stack([self.area, self.open_per_velocity]))
-        # per-DOF gains (4 x 6) and scalars [kdp, kfb, hp_a, ps, dp0, flowlin, lim]
-        self._gains_arr = np.ascontiguousarray(np.concatenate([
-            np.stack([self._kp, g.kff_velocity, g.kff_acceleration_s, g.kv_feedback]).ravel(),
-            [g.kdp, g.kfb, self._hp_a if self._hp_a is not None else -1.0, self.ps, self.dp0,
-             1.0 if g.flow_linearisation else 0.0, g.command_limit]]))
-        assert n == self._consts.shape[1]
+        self._pl_hp = np.zeros(n)
+        self._pl_prev = np.zeros(n)
+        self._state = np.zeros(1)  # [0] = 1 once the filter has its first sample
 
-    def command_fast(self, s_ref, v_ref6, a_ref6, strokes, v6, force, supply_pressure, out) -> np.ndarray:
+    def command_fast(self, s_ref, v_ref6, vff6, strokes, v6, force, supply_pressure, out) -> np.ndarray:
         """Same as :meth:`command`, compiled (numba); writes into ``out`` (n_act,)."""
-        g = self.g
-        if self._kern is None:
-            out[:] = self.command(s_ref, v_ref6, a_ref6, strokes, v6, force, supply_pressure)
+        if _tick is None:
+            out[:] = self.command(s_ref, v_ref6, vff6, strokes, v6, force, supply_pressure)
             return out
-        self._kern(s_ref, v_ref6, a_ref6, strokes, v6, force, supply_pressure, self.J, self.Jp, self.N,
-                   self.area, self.open_per_velocity, self._kp, g.kff_velocity, g.kff_acceleration_s,
-                   g.kv_feedback, g.kdp, g.kfb, self._hp_a if self._hp_a is not None else -1.0,
-                   self._state, self._pl_hp, self._pl_prev_arr, self.ps, self.dp0,
-                   1.0 if g.flow_linearisation else 0.0, g.command_limit, out)
+        _tick(s_ref, v_ref6, vff6, strokes, v6, force, supply_pressure, self.J, self.Jp, self.N,
+              self._consts, self._gains_arr, self._state, self._pl_hp, self._pl_prev, out)
         return out
 
     def command_from_state(self, k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force,
                            supply_pressure, out) -> np.ndarray:
         """Compiled tick reading strokes and the platen velocity straight from MuJoCo's arrays."""
-        g = self.g
-        if self._kern2 is None:
+        if _tick_state is None:
             x = qpos[qa]
             R = xmat[pb].reshape(3, 3)
             v6 = np.concatenate([qvel[pd:pd + 3], R @ qvel[pd + 3:pd + 6]])
             out[:] = self.command(s_ref_all[k], v_ref_all[k], vff_all[k], x, v6, force, supply_pressure)
             return out
-        self._kern2(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force, supply_pressure,
+        _tick_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force, supply_pressure,
                     self._consts, self.J, self.Jp, self.N, self._gains_arr, self._state, self._pl_hp,
-                    self._pl_prev_arr, out)
+                    self._pl_prev, out)
         return out
 
     def feedforward(self, v_ref: np.ndarray, a_ref: np.ndarray, rate_hz: float) -> np.ndarray:
@@ -234,10 +223,11 @@ class TableController:
             dp_avail = np.maximum(self.dp0 - (ps - self.ps) - np.sign(c) * pl, 0.1 * self.dp0)
             c = c * np.sqrt(self.dp0 / dp_avail)
         if self._hp_a is not None:
-            if self._pl_prev is None:
-                self._pl_prev = pl.copy()
-            self._pl_hp = self._hp_a * (self._pl_hp + pl - self._pl_prev)
-            self._pl_prev = pl.copy()
+            if self._state[0] == 0.0:
+                self._pl_prev[:] = pl
+            self._state[0] = 1.0
+            self._pl_hp[:] = self._hp_a * (self._pl_hp + pl - self._pl_prev)
+            self._pl_prev[:] = pl
             c -= g.kdp * self._pl_hp / self.ps
         else:
             c -= g.kdp * pl / self.ps
@@ -251,8 +241,13 @@ class TableController:
 if _nb is not None:
 
     @_nb.njit(cache=True)
-    def _tick(s_ref, v_ref6, a_ref6, x, v6, force, ps_now, J, Jp, N, area, opv, kp, kffv, kffa, kv, kdp, kfb,
-              hp_a, state, pl_hp, pl_prev, ps, dp0, flowlin, lim, out):
+    def _tick(s_ref, v_ref6, vff6, x, v6, force, ps_now, J, Jp, N, consts, gains, state, pl_hp, pl_prev, out):
+        area = consts[0]
+        opv = consts[1]
+        kp = gains[0:6]
+        kv = gains[6:12]
+        kdp, kfb, hp_a, ps, dp0, flowlin, lim = gains[12], gains[13], gains[14], gains[15], gains[16], gains[17], \
+            gains[18]
         n = x.shape[0]
         e = np.empty(n)
         for i in range(n):
@@ -262,7 +257,7 @@ if _nb is not None:
             acc = 0.0
             for i in range(n):
                 acc += Jp[k, i] * e[i]
-            vd[k] = a_ref6[k] + kp[k] * acc + kv[k] * (v_ref6[k] - v6[k])  # a_ref6 carries the feed-forward
+            vd[k] = vff6[k] + kp[k] * acc + kv[k] * (v_ref6[k] - v6[k])
         first = state[0] == 0.0
         state[0] = 1.0
         for i in range(n):
@@ -300,7 +295,7 @@ if _nb is not None:
         return out
 
     @_nb.njit(cache=True)
-    def _tick_state(k, s_ref_all, v_ref_all, a_ref_all, qpos, qvel, xmat, qa, pd, pb, force, ps_now, consts, J, Jp,
+    def _tick_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force, ps_now, consts, J, Jp,
                     N, gains, state, pl_hp, pl_prev, out):
         n = qa.shape[0]
         x = np.empty(n)
@@ -313,19 +308,9 @@ if _nb is not None:
         for r in range(3):
             v6[3 + r] = (xmat[pb, 3 * r] * qvel[pd + 3] + xmat[pb, 3 * r + 1] * qvel[pd + 4]
                          + xmat[pb, 3 * r + 2] * qvel[pd + 5])
-        _tick(s_ref_all[k], v_ref_all[k], a_ref_all[k], x, v6, force, ps_now, J, Jp, N, consts[0], consts[1],
-              gains[0:6], gains[6:12], gains[12:18], gains[18:24], gains[24], gains[25], gains[26], state, pl_hp,
-              pl_prev, gains[27], gains[28], gains[29], gains[30], out)
+        _tick(s_ref_all[k], v_ref_all[k], vff_all[k], x, v6, force, ps_now, J, Jp, N, consts, gains, state, pl_hp,
+              pl_prev, out)
         return out
 else:  # pragma: no cover
     _tick = _tick_state = None
 
-
-def _tick_kernel():
-    """The controller tick compiled with numba (None when numba is missing)."""
-    return _tick
-
-
-def _state_kernel():
-    """Controller tick reading MuJoCo's arrays directly (numba; None without numba)."""
-    return _tick_state

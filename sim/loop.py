@@ -27,7 +27,6 @@ of the recorded commands reproduces the run to round-off.
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -185,7 +184,7 @@ class Simulation:
         if reference is not None:
             s_ref_all = actuator_strokes(tm.desc, reference.d[:n])
             v_ref_all = np.ascontiguousarray(reference.v[:n])
-            a_ref_all = ctrl.feedforward(reference.v[:n], reference.a[:n], rate)  # feed-forward velocity
+            vff_all = ctrl.feedforward(reference.v[:n], reference.a[:n], rate)  # feed-forward velocity demand
         else:
             vc_all = np.ascontiguousarray(valve_command[:n], dtype=np.float64)
         Q = np.full((n, m.nq), np.nan)
@@ -201,7 +200,7 @@ class Simulation:
         spool, pa, pb, force, psup, gasv = st.spool[0], st.p_a[0], st.p_b[0], hs.force[0], st.p_supply, st.gas_volume
         ids = tm.actuator_ids
         qa, da = tm.stroke_qadr, tm.stroke_dadr
-        pq, pd, pb_ = tm.platen_qadr, tm.platen_dadr, tm.platen_body
+        pd, pb_ = tm.platen_dadr, tm.platen_body
         spt = self.steps_per_tick
         x2 = np.zeros((1, na))
         v2 = np.zeros((1, na))
@@ -209,7 +208,6 @@ class Simulation:
         cmd = cmd2[0]
         vel6 = np.zeros(6)
         xk = np.zeros(na)
-        ctrl_ids = ids
         qpos, qvel, qacc, dctrl = d.qpos, d.qvel, d.qacc, d.ctrl
         qa64, da64, ids64 = (np.asarray(a, dtype=np.int64) for a in (qa, da, ids))
         free = tm.platen_free
@@ -218,6 +216,7 @@ class Simulation:
         nfr = len(fr_dofs)
         zfr = self._zfr
         qfa = d.qfrc_applied
+        fused = fast and hs.delay_steps == 0 and hs.backend == "numba"  # one compiled call per step
         slide_d, pdi, n_pd = tm.platen_slide_dadr, tm.platen_dof_index, len(tm.platen_dof_index)
         xmat = d.xmat
         step = mujoco.mj_step
@@ -250,15 +249,15 @@ class Simulation:
                     xk[:] = qpos[qa]
                     vel6[:] = 0.0
                     vel6[pdi] = qvel[slide_d]
-                    ctrl.command_fast(s_ref_all[k], v_ref_all[k], a_ref_all[k], xk, vel6, force, psup[0], cmd)
+                    ctrl.command_fast(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0], cmd)
                 elif fast:
-                    ctrl.command_from_state(k, s_ref_all, v_ref_all, a_ref_all, qpos, qvel, xmat, qa64, pd, pb_,
+                    ctrl.command_from_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa64, pd, pb_,
                                             force, psup[0], cmd)
                 else:
                     xk[:] = qpos[qa]
                     vel6[:3] = qvel[pd:pd + 3]
                     vel6[3:] = xmat[pb_].reshape(3, 3) @ qvel[pd + 3:pd + 6]
-                    cmd[:] = ctrl.command(s_ref_all[k], v_ref_all[k], a_ref_all[k], xk, vel6, force, psup[0])
+                    cmd[:] = ctrl.command(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0])
             else:
                 cmd[:] = vc_all[k]
             H["valve_command"][k] = cmd
@@ -267,7 +266,6 @@ class Simulation:
             # ---- physics steps of this tick: hydraulics, then mj_step
             for j in range(spt):
                 t3 = clock()
-                fused = fast and hs.delay_steps == 0 and hs.backend == "numba"
                 if fused and nfr:
                     FL.pre_step_friction(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC,
                                          hs._ICS, hs._buf, 0, hs._P, hs._G, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
@@ -278,7 +276,7 @@ class Simulation:
                     x2[0] = qpos[qa]
                     v2[0] = qvel[da]
                     f = hs.step(cmd2, x2, v2)
-                    dctrl[ctrl_ids] = f[0]
+                    dctrl[ids] = f[0]
                 if not (fused and nfr) and (effects or nfr):
                     qfa[:] = 0.0
                     if nfr:
@@ -434,4 +432,4 @@ def reference_from_motions(motions: dict, rate_hz: float, duration_s: float) -> 
     return Reference(t=t, d=D, v=V, a=A)
 
 
-__all__ = ["Reference", "RunResult", "Simulation", "reference_from_motions", "math"]
+__all__ = ["Reference", "RunResult", "Simulation", "reference_from_motions"]

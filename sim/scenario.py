@@ -32,7 +32,6 @@ ones.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,7 +41,7 @@ from mjcf.description import REPO_ROOT, load_toml, resolve
 from sim import motions as M
 from sim import records as R
 from sim.errors import MotionError, ScenarioError
-from sim.loop import Reference
+from sim.loop import Reference, reference_from_motions
 
 SCENARIOS_DIR = REPO_ROOT / "scenarios"
 DOFS = ("x", "y", "z", "rx", "ry", "rz")
@@ -218,16 +217,7 @@ def build_reference(s: Scenario, motions: dict[str, M.Motion], duration_s: float
         raise ScenarioError(
             f"duration {dur:g} s is longer than the motion ({length:.2f} s); shorten --duration or set "
             "'scenario.pad_to_duration = true' to pad with rest")
-    n = int(round(dur * rate)) + 1
-    t = np.arange(n) / rate
-    D = np.zeros((n, 6))
-    V = np.zeros((n, 6))
-    A = np.zeros((n, 6))
-    for dof, mo in motions.items():
-        i = DOFS.index(dof)
-        k = min(n, len(mo.d))
-        D[:k, i], V[:k, i], A[:k, i] = mo.d[:k], mo.v[:k], mo.a[:k]
-    return Reference(t=t, d=D, v=V, a=A)
+    return reference_from_motions(motions, rate, dur)
 
 
 def limit_warnings(desc, motions: dict[str, M.Motion]) -> list[str]:
@@ -251,5 +241,4 @@ def list_scenarios() -> list[str]:
     return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
 
 
-__all__ = ["Scenario", "build_motions", "build_reference", "limit_warnings", "list_scenarios", "load_scenario",
-           "math"]
+__all__ = ["Scenario", "build_motions", "build_reference", "limit_warnings", "list_scenarios", "load_scenario"]
