@@ -46,6 +46,34 @@ class Record:
     acc: np.ndarray
     vel: np.ndarray
     disp: np.ndarray
+    #: (b, a) of a filter already on ``acc`` and applied by :func:`regressors` to every other
+    #: regressor (the force is filtered by :func:`prepare`); set by ``prepare(accel_lowpass_hz=...)``
+    prefilter: tuple | None = None
+    #: indices of the samples that enter the least squares (None: all); the filter runs on
+    #: the whole record
+    rows: np.ndarray | None = None
+
+    def sl(self):
+        return slice(None) if self.rows is None else self.rows
+
+    @property
+    def target(self) -> np.ndarray:
+        """The force samples the least squares fits."""
+        return self.force[self.sl()]
+
+
+def analog_lowpass(cutoff_hz: float, fs: float, order: int = 4) -> tuple:
+    """A Butterworth low-pass defined in continuous time (an analog signal conditioner)
+    discretised at ``fs`` by the bilinear transform *without* pre-warping the cutoff, so
+    that its low-frequency phase (the delay, 2.613 / (2 pi f_c) = 4.16 ms for 4 poles at
+    100 Hz) is the analog filter's at any sampling rate. ``scipy.signal.butter(fs=...)``
+    pre-warps the cutoff instead and its delay depends on the rate (4.03 ms at 1024 Hz,
+    3.62 ms at 512 Hz): a 0.4 ms mismatch between a record's accelerometer filter and the
+    filter applied to the other regressors reads as a viscous force M w^2 0.4 ms."""
+    import scipy.signal as sig
+
+    b, a = sig.butter(order, 2 * math.pi * cutoff_hz, analog=True)
+    return sig.bilinear(b, a, fs)
 
 
 @dataclass
@@ -66,52 +94,101 @@ class Identified:
                 "per_test_error": self.per_test_error}
 
 
-def prepare(rec: Record, *, trim: float | None = 0.01, force_lowpass_hz: float | None = None,
-            order: int = 4) -> Record:
+def prepare(rec: Record, *, trim: float | None = 0.01, accel_lowpass_hz: float | None = None,
+            deadband_m_s: float | None = None, order: int = 4) -> Record:
     """Condition a record for the least squares.
 
-    ``trim``: keep the samples from the first to the last one where |u'| exceeds that
+    ``trim``: fit only the samples from the first to the last one where |u'| exceeds that
     fraction of its peak. At rest before and after a test the Coulomb element sticks and
     its force is anything in [-F_mu, F_mu], while Eq. 1 says F_mu sign(u') with sign
     taken from sensor noise: those samples only add error (in an El Centro record with
     its quiet pads they are 40 % of the samples and most of the residual).
-    ``force_lowpass_hz``: pass the force through the same low-pass as the accelerometers
-    (Butterworth of ``order``, causal, like an analog conditioner), so that inertia and
-    force are compared with the same filter delay. Seed 002's accelerometers are
-    low-passed at 100 Hz but its pressures are not: a 4-pole 100 Hz filter delays the
-    acceleration by ~4 ms, which moves identified F_mu by tens of percent in 1 Hz tests.
-    """
-    import scipy.signal as sig
 
-    F, a, v, d = rec.force, rec.acc, rec.vel, rec.disp
-    if force_lowpass_hz:
-        b, aa = sig.butter(order, force_lowpass_hz, fs=1.0 / rec.dt)
-        F = sig.lfilter(b, aa, F)
+    ``deadband_m_s``: the same holds *inside* a test wherever the platen stops: at every
+    reversal it sticks while the actuator force swings through 2 F_mu (in the model's
+    S1-S3 and T1-T3 that is 2-5 % of the samples), and wherever |u'| is below the
+    velocity noise the sign of u' in Eq. 1 is the noise's. Samples with |u'| below the
+    dead band are left out of the fit (with a prefilter, also the samples within the
+    filter's memory after them, :func:`filter_memory_s`, because the filtered force
+    carries their error on). The regressors are still computed on the whole record.
+
+    ``accel_lowpass_hz``: the acceleration channel went through an analog low-pass (the
+    LHPOST's conditioners: 100 Hz; ``order``-pole Butterworth, :func:`analog_lowpass`)
+    that the force, displacement and velocity did not (seed 002: pressures only
+    high-pass filtered). The filter delays the inertia term by ~4 ms against the others,
+    which in a 1 Hz test is a velocity-proportional error M w^2 4 ms u' of several kN
+    that the least squares puts into C_e and F_mu. Eq. 1 is linear in (M_e, K_e, C_e,
+    F_mu), so passing *every* term through the same filter keeps it exact:
+    H[F] = M_e H[u''] + K_e H[u] + C_e H[|u'|^a sign u'] + F_mu H[sign u'], with
+    H[u''] the recorded acceleration. The force is filtered here, the other regressors
+    in :func:`regressors` (after the nonlinear functions of u', so that H[sign u'] is the
+    filtered friction force the filtered record contains). Filtering the force alone
+    is not enough: K_e H[u] - K_e u = -K_e 4 ms u' is then the velocity-proportional
+    error.
+    """
+    F = np.asarray(rec.force, float)
+    v = np.asarray(rec.vel, float)
+    n = len(v)
+    pre = None
+    if accel_lowpass_hz:
+        import scipy.signal as sig
+
+        pre = analog_lowpass(accel_lowpass_hz, 1.0 / rec.dt, order)
+        F = sig.lfilter(*pre, F)
+    keep = np.ones(n, bool)
     if trim:
         vmax = np.max(np.abs(v))
         on = np.flatnonzero(np.abs(v) > trim * vmax)
         if len(on) >= 16:
-            sl = slice(int(on[0]), int(on[-1]) + 1)
-            F, a, v, d = F[sl], a[sl], v[sl], d[sl]
-    return Record(name=rec.name, dt=rec.dt, force=np.asarray(F, float), acc=np.asarray(a, float),
-                  vel=np.asarray(v, float), disp=np.asarray(d, float))
+            keep[:on[0]] = False
+            keep[on[-1] + 1:] = False
+    if deadband_m_s:
+        still = np.abs(v) < deadband_m_s
+        if pre is not None:  # the filtered force carries a stuck sample's error for the filter's memory
+            m = int(math.ceil(filter_memory_s(pre, rec.dt) / rec.dt))
+            still = np.convolve(still.astype(float), np.ones(m + 1))[:n] > 0
+        if np.count_nonzero(keep & ~still) >= 16:
+            keep &= ~still
+    rows = None if keep.all() else np.flatnonzero(keep)
+    return Record(name=rec.name, dt=rec.dt, force=F, acc=np.asarray(rec.acc, float), vel=v,
+                  disp=np.asarray(rec.disp, float), prefilter=pre, rows=rows)
+
+
+def filter_memory_s(ba: tuple, dt: float, tol: float = 0.01) -> float:
+    """How long a filter remembers an input sample: the time after which its impulse
+    response stays below ``tol`` of its peak (4 poles at 100 Hz: 31 ms at 512 Hz, 24 ms at 1024 Hz)."""
+    import scipy.signal as sig
+
+    n = int(round(1.0 / dt))  # one second is plenty for the low-passes used here
+    x = np.zeros(n)
+    x[0] = 1.0
+    h = np.abs(sig.lfilter(*ba, x))
+    above = np.flatnonzero(h > tol * h.max())
+    return float((above[-1] + 1) * dt) if len(above) else 0.0
 
 
 def regressors(rec: Record, alpha: float) -> np.ndarray:
-    """R (N, 4): u'', u, |u'|^alpha sign u', sign u' (Eq. 7)."""
+    """R (N, 4): u'', u, |u'|^alpha sign u', sign u' (Eq. 7), over the record's window;
+    with a ``prefilter`` every column but the (already filtered) acceleration is filtered."""
     v = rec.vel
-    return np.column_stack([rec.acc, rec.disp, np.abs(v) ** alpha * np.sign(v), np.sign(v)])
+    R = np.column_stack([rec.acc, rec.disp, np.abs(v) ** alpha * np.sign(v), np.sign(v)])
+    if rec.prefilter is not None:
+        import scipy.signal as sig
+
+        R[:, 1:] = sig.lfilter(*rec.prefilter, R[:, 1:], axis=0)
+    return R[rec.sl()]
 
 
 def _weight(rec: Record, kind: str) -> float:
+    v = rec.vel[rec.sl()]
     if kind == "force":
-        return 1.0 / (np.sum(rec.force ** 2) * rec.dt)
+        return 1.0 / (np.sum(rec.target ** 2) * rec.dt)
     if kind == "unit":
         return 1.0
     if kind == "velocity":
-        return 1.0 / (np.sum(rec.vel ** 2) * rec.dt)
+        return 1.0 / (np.sum(v ** 2) * rec.dt)
     if kind == "velocity_sqrt":
-        return 1.0 / math.sqrt(np.sum(rec.vel ** 2) * rec.dt)
+        return 1.0 / math.sqrt(np.sum(v ** 2) * rec.dt)
     raise ValueError(f"weights must be one of {', '.join(WEIGHTS)} (got {kind!r})")
 
 
@@ -121,7 +198,7 @@ def identify(records: list[Record], alpha: float = 0.5, *, weights: str = "force
     if not records:
         raise ValueError("no records to identify from")
     lam = np.array([_weight(r, weights) for r in records])
-    E = np.array([np.sum(r.force ** 2) * r.dt for r in records])
+    E = np.array([np.sum(r.target ** 2) * r.dt for r in records])
     lbar = lam / np.sum(lam * E)
     a = np.zeros((4, 4))
     b = np.zeros(4)
@@ -130,7 +207,7 @@ def identify(records: list[Record], alpha: float = 0.5, *, weights: str = "force
         R = regressors(r, alpha)
         Rs.append(R)
         a += w * (R.T @ R) * r.dt
-        b += w * (R.T @ r.force) * r.dt
+        b += w * (R.T @ r.target) * r.dt
     if ce_fixed is None:
         y = np.linalg.solve(a, b)
     else:  # move the C_e column to the right-hand side
@@ -140,7 +217,7 @@ def identify(records: list[Record], alpha: float = 0.5, *, weights: str = "force
         y = np.array([yk[0], yk[1], ce_fixed, yk[2]])
     per, tot = {}, 0.0
     for w, r, R, e in zip(lbar, records, Rs, E):
-        res = np.sum((r.force - R @ y) ** 2) * r.dt
+        res = np.sum((r.target - R @ y) ** 2) * r.dt
         per[r.name] = float(math.sqrt(res / e))
         tot += w * res
     return Identified(M_e_kg=float(y[0]), K_e_N_per_m=float(y[1]), C_e=float(y[2]), F_mu_N=float(y[3]),

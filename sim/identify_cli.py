@@ -20,8 +20,12 @@ def add_parsers(sub) -> None:
     p.add_argument("--ce", type=float, metavar="N(s/m)^a", help="constrain C_e to this value (seed 002: 45900)")
     p.add_argument("--weights", default="force", choices=["force", "unit", "velocity", "velocity_sqrt"],
                    help="per-test weights (default force: 1/int F^2 dt, every test counts alike)")
-    p.add_argument("--force-lowpass", type=float, metavar="HZ",
-                   help="low-pass the force like the accelerometers (e.g. 100 for the LHPOST)")
+    p.add_argument("--accel-lowpass", "--force-lowpass", dest="accel_lowpass", type=float, metavar="HZ",
+                   help="the accelerometers' analog low-pass (4-pole Butterworth, e.g. 100 for the LHPOST): "
+                        "the force and the other regressors are passed through the same filter")
+    p.add_argument("--deadband", type=float, default=0.0, metavar="M/S",
+                   help="leave out samples with |velocity| below this (stick at reversals, sign of the "
+                        "velocity noise); e.g. 0.001 for the LHPOST (4 x its velocity noise). Default 0")
     p.add_argument("--no-trim", action="store_true", help="keep the rest before and after the motion")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_identify)
@@ -45,7 +49,10 @@ def cmd_identify(args) -> int:
         if not Path(path).is_file():
             raise UserError(f"{path}: no such run file")
         r = I.record_from_run(path)
-        recs.append(I.prepare(r, trim=None if args.no_trim else 0.01, force_lowpass_hz=args.force_lowpass))
+        if args.deadband < 0:
+            raise UserError(f"--deadband must be >= 0 (got {args.deadband:g})")
+        recs.append(I.prepare(r, trim=None if args.no_trim else 0.01, accel_lowpass_hz=args.accel_lowpass,
+                              deadband_m_s=args.deadband))
     try:
         res = I.identify(recs, args.alpha, weights=args.weights, ce_fixed=args.ce)
     except Exception as e:  # singular normal equations: no motion, or a constant velocity sign

@@ -44,6 +44,53 @@ def test_exact_recovery_and_constrained():
     assert r.error ** 2 == pytest.approx(np.mean([e ** 2 for e in r.per_test_error.values()]), rel=1e-9)
 
 
+def test_accelerometer_lowpass_prefilter_is_exact():
+    """Only the acceleration went through the 100 Hz analog filter (the LHPOST's
+    conditioners). Filtering the force alone leaves K_e H[u] - K_e u as a velocity error;
+    filtering every regressor alike recovers the truth exactly."""
+    import scipy.signal as sig
+
+    recs = []
+    for name, amp, f in (("S4", 0.04, 0.4), ("S7", 0.10, 0.8), ("S10", 0.2, 0.8)):
+        r = synthetic(name, amp, f, cycles=4)
+        a = sig.lfilter(*I.analog_lowpass(100.0, 1 / r.dt), r.acc)
+        recs.append(I.Record(r.name, r.dt, r.force, a, r.vel, r.disp))
+    raw = I.identify([I.prepare(r) for r in recs], 0.5, ce_fixed=45.9e3)
+    pre = I.identify([I.prepare(r, accel_lowpass_hz=100.0) for r in recs], 0.5)
+    assert abs(raw.F_mu_N / TRUE["F"] - 1) > 0.015         # the 4 ms filter delay alone: -2.2 % here
+    assert pre.F_mu_N == pytest.approx(TRUE["F"], rel=1e-6)
+    assert pre.C_e == pytest.approx(TRUE["C"], rel=1e-6)
+    assert pre.M_e_kg == pytest.approx(TRUE["M"], rel=1e-6)
+    assert pre.K_e_N_per_m == pytest.approx(TRUE["K"], rel=1e-6)
+    # the analog filter's delay does not depend on the sampling rate (butter(fs=) pre-warps: it does)
+    for fs in (512.0, 1024.0):
+        w, gd = sig.group_delay(I.analog_lowpass(100.0, fs), w=[1.0], fs=fs)
+        assert gd[0] / fs == pytest.approx(2.6131 / (2 * math.pi * 100.0), rel=0.01)
+
+
+def test_deadband_leaves_out_stuck_samples():
+    """At a reversal the platen sticks: the friction force is anything in [-F, F] while
+    the velocity is (noise around) zero. Leaving out |v| < dead band removes the bias."""
+    rng = np.random.default_rng(3)
+    recs = []
+    for name, amp, f in (("S1", 0.04, 0.04), ("S4", 0.04, 0.4), ("S7", 0.10, 0.8)):
+        r = synthetic(name, amp, f, cycles=3, dt=1 / 512)
+        v, F = r.vel.copy(), r.force.copy()
+        t = np.arange(len(v)) * r.dt
+        # a stick phase of 3 % of the period at every reversal of the displacement
+        ph = (t * f) % 0.5
+        stuck = (ph > 0.25 - 0.0075) & (ph < 0.25 + 0.0075)
+        v[stuck] = 2e-4 * rng.standard_normal(stuck.sum())  # velocity noise around zero
+        fr = TRUE["F"] * np.sin(np.pi * (ph[stuck] - 0.25) / 0.015) * -np.sign(r.disp[stuck])  # swings through 0
+        F[stuck] = TRUE["K"] * r.disp[stuck] + fr
+        recs.append(I.Record(name, r.dt, F, np.where(stuck, 0.0, r.acc), v, r.disp))
+    plain = I.identify([I.prepare(r) for r in recs], 0.5, ce_fixed=45.9e3)
+    db = I.identify([I.prepare(r, deadband_m_s=1e-3) for r in recs], 0.5, ce_fixed=45.9e3)
+    assert abs(plain.F_mu_N / TRUE["F"] - 1) > 0.01
+    assert db.F_mu_N == pytest.approx(TRUE["F"], rel=1e-6)
+    assert db.M_e_kg == pytest.approx(TRUE["M"], rel=1e-6)
+
+
 def test_alpha_scan_minimum_at_truth():
     recs = [synthetic("S7", 0.10, 0.8, alpha=0.5), synthetic("S10", 0.2, 0.8, alpha=0.5), synthetic("S4", 0.04, 0.4)]
     scan = I.scan_alpha(recs)
