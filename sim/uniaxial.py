@@ -47,13 +47,17 @@ def rice_description(parameter_set: str = "d18", *, delay: bool = True, path=R.T
     beta -> fluid.bulk_modulus_pa, k_le -> cross leakage k_le * A, tau -> valve delay
     (0 with ``delay=False``). k_t is the controller's volt-to-flow scale (returned).
     """
-    raw = copy.deepcopy(R._raw(path))
+    return _apply_parameter_set(R._raw(path), parameter_set, delay, str(path))
+
+
+def _apply_parameter_set(raw: dict, parameter_set: str, delay: bool, src: str):
+    raw = copy.deepcopy(raw)
     ps = raw["controller"]["parameter_sets"][parameter_set]
     raw["fluid"]["bulk_modulus_pa"] = float(ps["beta_pa"])
     cls = raw["actuator_class"]["main"]
     cls["leakage_cross_m3_s_pa"] = float(ps["kle_m3_per_n_s"]) * float(cls["area_a_m2"])
     raw["servovalve"]["delay_s"] = float(ps["tau_s"]) if delay else 0.0
-    desc = parse_table(raw, f"{path} [{parameter_set}{'' if delay else ', tau = 0'}]")
+    desc = parse_table(raw, f"{src} [{parameter_set}{'' if delay else ', tau = 0'}]")
     return desc, float(ps["kt_m3_per_v_s"])
 
 
@@ -105,6 +109,207 @@ class RiceRun:
     payload: str | None
 
 
+@dataclass
+class RiceGains:
+    """The Rice controller's settings for a scenario run: the paper's gains (Eq. 2), the
+    parameter set (Tables 1-2) and the recorder rate (``rate_hz``: the run file's rate,
+    the paper's 4000 Hz DAQ; the analog controller itself acts at every physics step)."""
+
+    gains: R.Gains
+    parameter_set: str
+    rate_hz: float = RICE_FS_HZ
+    physics_rate_hz: float = RICE_RATE_HZ
+    delay: bool = True
+
+    @classmethod
+    def for_table(cls, desc, overrides: dict | None = None) -> "RiceGains":
+        """The table's ``[controller]`` (type = "rice") with a scenario's overrides on top."""
+        from sim.errors import ScenarioError
+
+        c = dict(desc.raw.get("controller", {}) or {})
+        c.update(overrides or {})
+        keys = {"p_gain": "p", "i_gain_hz": "i_hz", "d_gain_s": "d_s", "ff_gain_s": "ff_s", "dp_gain": "dp"}
+        known = set(keys) | {"type", "parameter_set", "rate_hz", "recorder_rate_hz", "parameter_sets",
+                             "k_x_cond_v_per_m", "k_d_cond_v_per_m", "k_dp_cond_v_per_pa"}
+        extra = sorted(set(c) - known)
+        if extra:
+            raise ScenarioError(f"unknown rice controller key '{extra[0]}'; known: {', '.join(sorted(known))}")
+        kw = {}
+        for k, g in keys.items():
+            v = c.get(k, 0.0 if k != "p_gain" else 1.0)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ScenarioError(f"controller.{k} must be a number (got {v!r})")
+            kw[g] = float(v)
+        ps = str(c.get("parameter_set", "d18"))
+        if ps not in c.get("parameter_sets", {}):
+            raise ScenarioError(f"controller.parameter_set '{ps}' is not one of the table's parameter sets "
+                                f"({', '.join(sorted(c.get('parameter_sets', {})))})")
+        phys = float(c.get("rate_hz", RICE_RATE_HZ))
+        rec = float(c.get("recorder_rate_hz", RICE_FS_HZ))
+        if not (phys > 0 and rec > 0) or abs(phys / rec - round(phys / rec)) > 1e-9:
+            raise ScenarioError(f"controller.recorder_rate_hz ({rec:g}) must divide the controller's physics rate "
+                                f"rate_hz ({phys:g})")
+        return cls(gains=R.Gains(**kw), parameter_set=ps, rate_hz=rec, physics_rate_hz=phys)
+
+
+def is_rice(desc) -> bool:
+    """Does this table use the Rice controller (``[controller] type = "rice"``)?"""
+    return (desc.raw.get("controller", {}) or {}).get("type") == "rice"
+
+
+class RiceSimulation:
+    """The Rice table (one actuator, foundation on springs) with its analog controller.
+
+    The controller (:class:`sim.rice.RiceController`, Eq. 2) acts at every physics step
+    (``physics_rate_hz``, 8000 Hz); hydraulic step before ``mj_step`` as in ``sim/loop.py``.
+    :meth:`steps` is the one stepping loop, used by the paper's FRF test
+    (:func:`rice_simulation`) and by scenario runs (:meth:`run`, the interface of
+    :class:`sim.loop.Simulation`: ``run(reference=...)`` -> :class:`sim.loop.RunResult`,
+    ``gains.rate_hz``, ``hp``, ``tm``).
+    """
+
+    def __init__(self, desc, payload=None, gains: RiceGains | None = None, *, kt: float | None = None,
+                 backend: str = "numba"):
+        self.gains = gains or RiceGains.for_table(desc)
+        if kt is None:  # the description's parameter set applied (beta, leakage, delay; k_t returned)
+            desc, kt = _apply_parameter_set(desc.raw, self.gains.parameter_set, self.gains.delay, desc.name)
+        self.desc = desc
+        self.kt = kt
+        self.tm = build(desc, payload, BuildOptions(timestep_s=1.0 / self.gains.physics_rate_hz))
+        self.m = self.tm.model
+        self.dt = float(self.m.opt.timestep)
+        self.hp = HydraulicParams.from_table(desc.raw)
+        self.hs = HydraulicSystem(self.hp, n_sim=1, dt=self.dt, backend=backend)
+        self.q_full = float(self.hs.no_load_flow(1.0))
+        self.ctl = R.RiceController(self.gains.gains, R.load().cond, kt, self.q_full, self.dt)
+        self.steps_per_tick = int(round(self.gains.physics_rate_hz / self.gains.rate_hz))
+        self.reset()
+
+    def reset(self):
+        tm = self.tm
+        self.d = tm.new_data()
+        self.hs.reset(tm.actuator_strokes(self.d)[None, :])
+        self.d.ctrl[tm.actuator_ids] = self.hs.force[0]
+        mujoco.mj_forward(self.m, self.d)
+        self.ctl.reset()
+
+    def steps(self, XD, VD, *, record_from: int = 0, every: int = 2, n_rec: int | None = None) -> tuple[dict, str | None]:
+        """Step through the per-step commands XD, VD (stroke reference m, m/s) and record
+        every ``every``-th step from ``record_from`` on: the state at the step's start
+        (stroke, stroke rate, absolute table displacement and velocity, pressures, spool,
+        opening) and the acceleration of the step (absolute table, MuJoCo's qacc).
+        Returns the records and why the run stopped early (None if it did not)."""
+        tm, m, d, hs = self.tm, self.m, self.d, self.hs
+        n_tot = len(XD)
+        if n_rec is None:
+            n_rec = max(0, (n_tot - record_from + every - 1) // every)
+        x2 = np.zeros((1, 1))
+        v2 = np.zeros((1, 1))
+        c2 = np.zeros((1, 1))
+        qs, ds = int(tm.stroke_qadr[0]), int(tm.stroke_dadr[0])
+        jf = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "foundation_x")
+        qf, df_ = int(m.jnt_qposadr[jf]), int(m.jnt_dofadr[jf])
+        qp, dp_ = int(tm.platen_slide_qadr[0]), int(tm.platen_slide_dadr[0])
+        aid = int(tm.actuator_ids[0])
+        st = hs.state
+        pa, pb, spool = st.p_a, st.p_b, st.spool
+        qpos, qvel, qacc, ctrl = d.qpos, d.qvel, d.qacc, d.ctrl
+        keys = ("a_table", "x_table", "v_table", "stroke", "stroke_rate", "dp", "opening", "p_a", "p_b", "spool",
+                "force", "p_supply", "gas_volume")
+        rec = {k: np.full(n_rec, np.nan) for k in keys}
+        step = mujoco.mj_step
+        hstep = hs.step
+        ctl = self.ctl
+        half = tm.desc.actuators[0].cls.half_stroke_m
+        reason = None
+        for k in range(n_tot):
+            x = qpos[qs]
+            v = qvel[ds]
+            dpk = pa[0, 0] - pb[0, 0]
+            j = k - record_from
+            i = j // every if (j >= 0 and j % every == 0) else -1
+            if 0 <= i < n_rec:
+                rec["x_table"][i] = qpos[qf] + qpos[qp]
+                rec["v_table"][i] = qvel[df_] + qvel[dp_]
+                rec["p_a"][i] = pa[0, 0]
+                rec["p_b"][i] = pb[0, 0]
+                rec["spool"][i] = spool[0, 0]
+                rec["p_supply"][i] = st.p_supply[0]
+                rec["gas_volume"][i] = st.gas_volume[0]
+            u = ctl.opening(XD[k], VD[k], x, v, dpk)
+            c2[0, 0] = u
+            x2[0, 0] = x
+            v2[0, 0] = v
+            f = hstep(c2, x2, v2)
+            ctrl[aid] = f[0, 0]
+            step(m, d)
+            if 0 <= i < n_rec:
+                rec["a_table"][i] = qacc[df_] + qacc[dp_]
+                rec["stroke"][i] = x
+                rec["stroke_rate"][i] = v
+                rec["dp"][i] = dpk
+                rec["opening"][i] = u
+                rec["force"][i] = f[0, 0]
+            if not math.isfinite(x) or abs(x) > half:
+                reason = (f"simulation diverged at t = {k * self.dt:.4f} s: the Rice actuator left its stroke "
+                          f"(x = {x:.4g} m); unstable loop?")
+                break
+        return rec, reason
+
+    def run(self, *, reference=None, duration_s: float | None = None, progress: bool = False, **_):
+        """Closed loop on a 6-DOF :class:`sim.loop.Reference` at the recorder rate (its x
+        column: the commanded table displacement, which the controller compares with the
+        stroke, the paper's x_t). The reference is linearly interpolated to every physics
+        step. Returns a :class:`sim.loop.RunResult` at the recorder rate."""
+        from sim.loop import RunResult
+
+        if reference is None:
+            raise ValueError("the Rice simulation runs closed loop on a reference (no open-loop replay)")
+        self.reset()
+        rate = self.gains.rate_hz
+        sub = self.steps_per_tick
+        n = len(reference.t) if duration_s is None else min(len(reference.t), int(round(duration_s * rate)) + 1)
+        tk = np.arange(n) / rate
+        ts = np.arange(n * sub) * self.dt
+        XD = np.interp(ts, tk, reference.d[:n, 0])
+        VD = np.interp(ts, tk, reference.v[:n, 0])
+        wall0 = time.perf_counter()
+        rec, reason = self.steps(XD, VD, record_from=0, every=sub, n_rec=n)
+        wall = time.perf_counter() - wall0
+        done = int(np.argmax(~np.isfinite(rec["a_table"]))) if not np.all(np.isfinite(rec["a_table"])) else n
+        done = max(done, 1)
+        z = np.zeros((done, 6))
+        D, V, A = z.copy(), z.copy(), z.copy()
+        D[:, 0] = rec["x_table"][:done]
+        V[:, 0] = rec["v_table"][:done]
+        A[:, 0] = rec["a_table"][:done]
+        accs = self.desc.accelerometers
+        Dn = np.array([a.direction for a in accs]).reshape(-1, 3)
+        col = lambda k: rec[k][:done, None].copy()  # noqa: E731
+        ch = {"table_displacement": D, "table_velocity": V, "table_acceleration": A,
+              "actuator_displacement": col("stroke"), "accelerometers": A[:, :3] @ Dn.T,
+              "valve_command": col("opening"), "spool_position": col("spool"), "actuator_force": col("force"),
+              "pressure_a": col("p_a"), "pressure_b": col("p_b")}
+        ex = {"supply_pressure": rec["p_supply"][:done].copy(), "accumulator_gas_volume": rec["gas_volume"][:done].copy(),
+              "loop_gap": np.full(done, self._loop_gap())}
+        return RunResult(t=np.arange(done) / rate, channels=ch, extras=ex, wall_s=wall, sim_s=done / rate,
+                         timing={"physics_s": wall, "hydraulics_s": 0.0, "controller_s": 0.0, "output_s": 0.0,
+                                 "steps": done * sub}, incomplete_reason=reason)
+
+    def _loop_gap(self) -> float:
+        """Largest opening of a linkage's loop-closing ``connect`` at the end of the run."""
+        m, d = self.m, self.d
+        gap = 0.0
+        for i in range(m.neq):
+            if m.eq_type[i] != mujoco.mjtEq.mjEQ_CONNECT:
+                continue
+            b1, b2 = m.eq_obj1id[i], m.eq_obj2id[i]
+            p1 = d.xpos[b1] + d.xmat[b1].reshape(3, 3) @ m.eq_data[i, 0:3]
+            p2 = d.xpos[b2] + d.xmat[b2].reshape(3, 3) @ m.eq_data[i, 3:6]
+            gap = max(gap, float(np.linalg.norm(p1 - p2)))
+        return gap
+
+
 def rice_simulation(gains: R.Gains, parameter_set: str = "d18", *, payload: str | None = None, delay: bool = True,
                     n_segments: int = RICE_SEGMENTS, nperseg: int = RICE_NPERSEG, lead_in_s: float = 2.0,
                     rms_m_s2: float = 2.0, seed: int = 1, backend: str = "numba") -> RiceRun:
@@ -113,15 +318,8 @@ def rice_simulation(gains: R.Gains, parameter_set: str = "d18", *, payload: str 
 
     desc, kt = rice_description(parameter_set, delay=delay)
     pl = load_payload(payload) if payload else None
-    tm = build(desc, pl, BuildOptions(timestep_s=1.0 / RICE_RATE_HZ))
-    m = tm.model
-    d = tm.new_data()
-    dt = float(m.opt.timestep)
-    hp = HydraulicParams.from_table(desc.raw)
-    hs = HydraulicSystem(hp, n_sim=1, dt=dt, backend=backend)
-    q_full = float(hs.no_load_flow(1.0))
-    tb = R.load()
-    ctl = R.RiceController(gains, tb.cond, kt, q_full, dt)
+    sim = RiceSimulation(desc, pl, RiceGains(gains=gains, parameter_set=parameter_set, delay=delay), kt=kt,
+                         backend=backend)
     sub = int(round(RICE_RATE_HZ / RICE_FS_HZ))
     n_rec = n_segments * nperseg
     n_lead = int(round(lead_in_s * RICE_FS_HZ))
@@ -132,53 +330,19 @@ def rice_simulation(gains: R.Gains, parameter_set: str = "d18", *, payload: str 
     # ramp the command in over the first second of the lead-in
     ramp = np.clip(np.arange(n_tot) / (RICE_RATE_HZ * 1.0), 0, 1)
     ramp = 0.5 - 0.5 * np.cos(np.pi * ramp)
-    XD, VD, AD = xd[idx] * ramp, vd[idx] * ramp, ad[idx] * ramp  # ramp-in transient is discarded
-    x2 = np.zeros((1, 1))
-    v2 = np.zeros((1, 1))
-    c2 = np.zeros((1, 1))
-    hs.reset(tm.actuator_strokes(d)[None, :])
-    d.ctrl[tm.actuator_ids] = hs.force[0]
-    mujoco.mj_forward(m, d)
-    qs, ds = int(tm.stroke_qadr[0]), int(tm.stroke_dadr[0])
-    jf = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "foundation_x")
-    qf, df_ = int(m.jnt_qposadr[jf]), int(m.jnt_dofadr[jf])
-    qp, dp_ = int(tm.platen_slide_qadr[0]), int(tm.platen_slide_dadr[0])
-    aid = int(tm.actuator_ids[0])
-    st = hs.state
-    pa, pb = st.p_a, st.p_b
-    qpos, qvel, qacc, ctrl = d.qpos, d.qvel, d.qacc, d.ctrl
-    rec = {k: np.zeros(n_rec) for k in ("a_table", "x_table", "stroke", "dp", "opening")}
-    step = mujoco.mj_step
-    hstep = hs.step
+    XD, VD = xd[idx] * ramp, vd[idx] * ramp  # ramp-in transient is discarded
     wall0 = time.perf_counter()
-    for k in range(n_tot):
-        x = qpos[qs]
-        v = qvel[ds]
-        dpk = pa[0, 0] - pb[0, 0]
-        u = ctl.opening(XD[k], VD[k], x, v, dpk)
-        c2[0, 0] = u
-        x2[0, 0] = x
-        v2[0, 0] = v
-        f = hstep(c2, x2, v2)
-        ctrl[aid] = f[0, 0]
-        step(m, d)
-        j = k - n_lead * sub
-        if j >= 0 and j % sub == 0:
-            i = j // sub
-            rec["a_table"][i] = qacc[df_] + qacc[dp_]
-            rec["x_table"][i] = qpos[qf] + qpos[qp]
-            rec["stroke"][i] = x
-            rec["dp"][i] = dpk
-            rec["opening"][i] = u
-        if not math.isfinite(x) or abs(x) > desc.actuator_classes["main"].half_stroke_m:
-            raise RuntimeError(f"Rice simulation left the stroke at t = {k * dt:.3f} s (gains {gains}); unstable loop?")
+    rec, reason = sim.steps(XD, VD, record_from=n_lead * sub, every=sub, n_rec=n_rec)
     wall = time.perf_counter() - wall0
+    if reason:
+        raise RuntimeError(f"Rice simulation: {reason} (gains {gains})")
     a_cmd = ad[::sub][:n_rec]
     x_cmd = xd[::sub][:n_rec]
     fr = frf(a_cmd, rec["a_table"], RICE_FS_HZ, nperseg=nperseg, overlap=0.0, window="blackmanharris",
              estimator="H1", detrend=False)
     return RiceRun(t=np.arange(n_rec) / RICE_FS_HZ, a_cmd=a_cmd, x_cmd=x_cmd, frf=fr, wall_s=wall, gains=gains,
-                   parameter_set=parameter_set, delay=delay, payload=payload, **rec)
+                   parameter_set=parameter_set, delay=delay, payload=payload,
+                   **{k: rec[k] for k in ("a_table", "x_table", "stroke", "dp", "opening")})
 
 
 # ------------------------------------------------------------------ Rice: the paper's cases
@@ -350,20 +514,76 @@ class SensorModel:
     recorder_hz: float = 512.0
 
 
-def ucsd_measure(res, desc, sensors: SensorModel | None = None, seed: int = 0) -> dict:
-    """Apply the DAQ to a simulation result (1024 Hz): returns 512 Hz channels."""
+def _instant_channels(res, steps_per_sample: int | None = None) -> dict:
+    """The loop's recorder channels brought to one sampling instant per tick.
+
+    ``sim.loop`` records at tick t_k the state (u, u'), the end-of-step pressures p(t_k)
+    and the acceleration of the physics step leaving t_k, which MuJoCo computed from the
+    force of the *next* pressures p(t_k + h) (h the physics step; the hydraulic step
+    runs before ``mj_step``). A DAQ samples all sensors at one instant; here that
+    instant is the middle of the first step of each tick, t_k + h/2, where everything is
+    known to O(h^2): the acceleration a_1 of that step (constant over it), the velocity
+    u'_k + a_1 h/2, the displacement, and the pressures that produced a_1, p(t_k + h),
+    interpolated between p(t_k) and p(t_k+1). Without this the force lags the
+    acceleration by one physics step (0.49 ms) and the acceleration leads the velocity
+    by half a step, which the complementary velocity filter turns into a sign error of
+    u' at every reversal (identified M_e of S1 683 t instead of 144 t).
+
+    Also returns ``acc_steps`` (n, s): the acceleration of every physics step of each
+    tick (the first recorded, the mean of the others from the velocity change, exact
+    for the semi-implicit integrator), for the accelerometer filter.
+    """
+    ch = res.channels
+    n = len(res.t)
+    T = float(res.t[1] - res.t[0])
+    s = steps_per_sample or max(1, int(round(res.timing["steps"] / n)))
+    h = T / s
+    d = ch["table_displacement"][:, 0]
+    v = ch["table_velocity"][:, 0]
+    a1 = ch["table_acceleration"][:, 0]
+    acc = np.repeat(a1[:, None], s, axis=1)
+    if s > 1:
+        rest = ((v[1:] - v[:-1]) / h - a1[:-1]) / (s - 1)
+        acc[:-1, 1:] = rest[:, None]
+    vm = v + a1 * h / 2
+    dm = d + h / 2 * (v + a1 * h)
+    f = 1.0 / s
+
+    def at_step_end(p):  # p(t_k + h) by linear interpolation between ticks
+        out = p.copy()
+        out[:-1] = (1 - f) * p[:-1] + f * p[1:]
+        return out
+
+    return {"disp": dm, "vel": vm, "acc_steps": acc, "pressure_a": at_step_end(ch["pressure_a"]),
+            "pressure_b": at_step_end(ch["pressure_b"]), "steps": s, "fs": 1.0 / T}
+
+
+def ucsd_measure(res, desc, sensors: SensorModel | None = None, seed: int = 0, *,
+                 steps_per_sample: int | None = None) -> dict:
+    """Apply the DAQ to a simulation result (1024 Hz): returns 512 Hz channels.
+
+    Sampling instants: :func:`_instant_channels`. Accelerometers: the 100 Hz
+    conditioner is an analog filter (:func:`sim.identify.analog_lowpass`, here at the
+    physics rate on the piecewise-constant acceleration of every step, then sampled at
+    the ticks). Velocity: the complementary crossover filter
+    u'_est = (w u + int a)' / (s + w) in the trapezoidal (Tustin) form, which for
+    consistent samples returns u' to O((w T)^2).
+    """
     import scipy.signal as sig
+
+    from sim.identify import analog_lowpass
 
     s = sensors or SensorModel()
     rng = np.random.default_rng(seed)
     ch = res.channels
-    fs = 1.0 / float(res.t[1] - res.t[0])
+    ic = _instant_channels(res, steps_per_sample)
+    fs = ic["fs"]
     n = len(res.t)
-    d = ch["table_displacement"][:, 0] + s.disp_noise_m * rng.standard_normal(n)
-    acc_true = ch["accelerometers"].mean(axis=1)
-    a = acc_true + s.acc_noise_m_s2 * rng.standard_normal(n)
-    b, aa = sig.butter(4, s.acc_lowpass_hz, fs=fs)
-    a = sig.lfilter(b, aa, a)
+    d = ic["disp"] + s.disp_noise_m * rng.standard_normal(n)
+    nst = ic["steps"]
+    a_fast = ic["acc_steps"].reshape(-1)  # every physics step, at its middle
+    a_fast = a_fast + s.acc_noise_m_s2 * math.sqrt(nst) * rng.standard_normal(len(a_fast))  # same noise per tick
+    a = sig.lfilter(*analog_lowpass(s.acc_lowpass_hz, fs * nst), a_fast)[::nst]
     areas_a = np.array([a_.cls.area_a_m2 for a_ in desc.actuators])
     areas_b = np.array([a_.cls.area_b_m2 for a_ in desc.actuators])
     q = s.pressure_resolution_pa
@@ -372,17 +592,19 @@ def ucsd_measure(res, desc, sensors: SensorModel | None = None, seed: int = 0) -
         p = p + s.pressure_noise_pa * rng.standard_normal(p.shape)
         return np.round(p / q) * q
 
-    F = (pres(ch["pressure_a"]) * areas_a - pres(ch["pressure_b"]) * areas_b).sum(axis=1)
-    F -= F[0]  # the static part (zero at rest here) removed, as the paper's high-pass
-    # complementary velocity: (w s d + a) / (s + w), trapezoidal integration
+    F = (pres(ic["pressure_a"]) * areas_a - pres(ic["pressure_b"]) * areas_b).sum(axis=1)
+    # the static part removed, as the paper's high-pass: the force at rest before the test
+    # (zero in the model; the sample at t_0 + h/2 has already moved)
+    F -= ((ch["pressure_a"][0] * areas_a).sum() - (ch["pressure_b"][0] * areas_b).sum())
+    # complementary velocity V = (w s D + A) / (s + w) by Tustin: with c = w T / 2,
+    # v_k+1 = ((1 - c) v_k + w (d_k+1 - d_k) + T/2 (a_k + a_k+1)) / (1 + c)
     w = 2 * math.pi * s.crossover_hz
     dt = 1.0 / fs
+    c = w * dt / 2
     v = np.zeros(n)
-    z = 0.0
-    for k in range(n):
-        v[k] = z + w * d[k]
-        if k + 1 < n:
-            z += dt * (0.5 * (a[k] + a[k + 1]) - w * v[k])
+    v[0] = ic["vel"][0]
+    for k in range(n - 1):
+        v[k + 1] = ((1 - c) * v[k] + w * (d[k + 1] - d[k]) + dt / 2 * (a[k] + a[k + 1])) / (1 + c)
     step = int(round(fs / s.recorder_hz))
     dec = lambda x: sig.decimate(x, step, ftype="fir", zero_phase=False) if step > 1 else x  # noqa: E731
     return {"t": res.t[::step][:len(dec(d))], "force": dec(F), "disp": dec(d), "vel": dec(v), "acc": dec(a),
@@ -499,11 +721,19 @@ def rice_report(results: list[dict]) -> list[str]:
     return lines
 
 
-def ucsd_identification(results, *, force_lowpass_hz: float = 100.0, weights: str = "force") -> dict:
+#: dead band of the identification (m/s): 4 x the velocity noise of the DAQ model
+#: (0.25 mm/s rms, measured: SensorModel through the complementary filter); the periodic
+#: and El Centro results move by < 0.1 % of F_mu for dead bands from 0.5 to 5 mm/s
+UCSD_DEADBAND_M_S = 1e-3
+
+
+def ucsd_identification(results, *, accel_lowpass_hz: float = 100.0, deadband_m_s: float = UCSD_DEADBAND_M_S,
+                        weights: str = "force") -> dict:
     """The paper's pooled sets identified from the measured records (unconstrained and C_e = 45.9)."""
     from sim import identify as I
 
-    recs = {r.name: I.prepare(r, force_lowpass_hz=force_lowpass_hz) for r in ucsd_records(results)}
+    recs = {r.name: I.prepare(r, accel_lowpass_hz=accel_lowpass_hz, deadband_m_s=deadband_m_s)
+            for r in ucsd_records(results)}
     sets = {"triangular": ucsd_tests("triangular"), "sinusoidal": ucsd_tests("sinusoidal"),
             "periodic": ucsd_tests("triangular") + ucsd_tests("sinusoidal"), "El Centro": ucsd_tests("elcentro"),
             "WN 3-7 % g": ["WN3", "WN5", "WN7"], "WN 10-13 % g": ["WN10", "WN13"]}
@@ -532,8 +762,9 @@ def ucsd_report(results, ident: dict | None = None) -> list[str]:
     lines = ["# NEES-UCSD LHPOST (seed 002): least-squares identification of simulated tests", "",
              "Model truth (scenarios/tables/ucsd.toml, 13.8 MPa): M_e 144 t, K_e 1.263 MN/m, C_e 45.9 kN (s/m)^0.5, "
              "F_mu 26.65 kN (4.1 kN + 0.39 % x 5.783 MN), alpha 0.5. Records: 512 Hz, accelerometers low-passed at "
-             "100 Hz, seeded sensor noise (sim/uniaxial.SensorModel); force low-passed alike before the fit; "
-             "records trimmed to the motion; weights 1/int F^2 dt.", "",
+             "100 Hz, seeded sensor noise (sim/uniaxial.SensorModel); force and the other regressors low-passed "
+             "alike before the fit; records trimmed to the motion, samples with |u'| < 1 mm/s (and the filter's "
+             "memory after them) left out; weights 1/int F^2 dt.", "",
              "| test set | M_e t (paper) | K_e MN/m (paper) | C_e kN (s/m)^0.5 unconstr. | F_mu kN unconstr. | "
              "F_mu kN constr. (paper) | eps |", "|---|---|---|---|---|---|---|"]
     for k, v in ident.items():
