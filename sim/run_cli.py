@@ -155,7 +155,16 @@ def cmd_run(args) -> int:
         raise ScenarioError(f"--duration must be positive (got {args.duration})")
     desc = mjcf.load_table(sc.table)
     payload = mjcf.load_payload(sc.payload) if sc.payload else None
-    gains = ControllerGains.for_table(desc, sc.controller)
+    rice = None
+    if (desc.raw.get("controller", {}) or {}).get("type") == "rice":  # seed 001's analog controller, 8 kHz steps
+        from sim.uniaxial import RiceGains, RiceSimulation
+
+        if args.iterations or sc.iteration.get("count", 0):
+            raise ScenarioError("drive iterations are not available with the rice controller")
+        gains = RiceGains.for_table(desc, sc.controller)
+        rice = RiceSimulation(desc, payload, gains)
+    else:
+        gains = ControllerGains.for_table(desc, sc.controller)
     if abs(gains.rate_hz - sc.sample_rate_hz) > 1e-9:
         raise ScenarioError(f"output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
                             f"({gains.rate_hz:g}): the recorder samples at the controller ticks")
@@ -165,8 +174,8 @@ def cmd_run(args) -> int:
     for w in warns:
         print(f"warning: {w}", file=sys.stderr)
     out = _out_dir(args.out)
-    tm = mjcf.build(desc, payload)
-    sim = Simulation(tm, gains=gains)
+    tm = rice.tm if rice else mjcf.build(desc, payload)
+    sim = rice or Simulation(tm, gains=gains)
     rec = None
     if getattr(args, "rrd", None):
         from sim import recording
@@ -251,7 +260,10 @@ def cmd_run(args) -> int:
 
 
 def _gains_json(g) -> dict:
-    return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in g.__dict__.items()}
+    from dataclasses import asdict, is_dataclass
+
+    return {k: (v.tolist() if isinstance(v, np.ndarray) else asdict(v) if is_dataclass(v) else v)
+            for k, v in g.__dict__.items()}
 
 
 def _print_summary(s: dict) -> None:
