@@ -85,18 +85,16 @@ def test_identification_of_simulated_periodic_and_white_noise_tests():
     names = ["T4", "T5", "T6", "T7", "T8", "T9", "T10", "S4", "S5", "S6", "S7", "S8", "S9", "S10",
              "WN3", "WN5", "WN7"]
     res = U.ucsd_programme(names, workers=2)
-    raw = {r.name: r for r in U.ucsd_records(res)}
-    recs = {n: I.prepare(r, accel_lowpass_hz=100.0, deadband_m_s=U.UCSD_DEADBAND_M_S) for n, r in raw.items()}
+    recs = {r.name: I.prepare(r, accel_lowpass_hz=100.0, deadband_m_s=U.UCSD_DEADBAND_M_S) for r in U.ucsd_records(res)}
     per = I.identify([recs[n] for n in names if n[0] in "TS"], 0.5)
     print(per.as_dict())
     assert per.M_e_kg == pytest.approx(144e3, rel=0.01)
     assert per.K_e_N_per_m == pytest.approx(1.263e6, rel=0.01)
-    # white noise 3-7 % g: the mass right; the stiffness right only with consistent filtering.
-    # Processed as seed 002 did (force unfiltered, acceleration through the 100 Hz filter)
-    # the filter delay goes into K_e: the paper's overestimate of K_e from low-level white noise
+    # white noise 3-7 % g: with the filter applied to every term and the dead band, the
+    # model's mass and stiffness come back (the paper's K_e overestimate from low-level
+    # white noise is a property of the real table the model does not have: docs/uniaxial.md)
     wn = I.identify([recs[n] for n in ("WN3", "WN5", "WN7")], 0.5, ce_fixed=45.9e3)
-    paper_way = I.identify([I.prepare(raw[n]) for n in ("WN3", "WN5", "WN7")], 0.5, ce_fixed=45.9e3)
-    print(wn.as_dict(), paper_way.as_dict())
+    print(wn.as_dict())
     assert wn.M_e_kg == pytest.approx(144e3, rel=0.02)
     assert wn.K_e_N_per_m == pytest.approx(1.263e6, rel=0.03)
-    assert paper_way.K_e_N_per_m > 1.10 * 1.263e6
+    assert wn.F_mu_N == pytest.approx(4.1e3 + 0.0039 * 5.783e6, rel=0.02)
