@@ -193,7 +193,8 @@ def cmd_run(args) -> int:
 
         settings = IterationSettings(count=int(it["count"]), gain=float(it.get("gain", 0.6)),
                                      band_hz=tuple(it.get("band_hz", (0.2, 25.0))),
-                                     h_min=float(it.get("h_min", 0.25)))
+                                     h_min=float(it.get("h_min", 0.25)), frf=str(it.get("frf", "noise")),
+                                     noise_level=float(it.get("noise_level", 1.0)), seed=int(it.get("seed", 0)))
 
         def note(i):
             if show:
@@ -233,6 +234,7 @@ def cmd_run(args) -> int:
         "tracking": tracking(res.t, ref.d, ref.a, res.channels["table_displacement"],
                              res.channels["table_acceleration"]),
         "drive_iterations": {"count": len(history) - 1 if history else 0, "chosen": best,
+                             "frf": str(it.get("frf", "noise")) if history else None,
                              "tracking_plain_controller": tracking(plain.t, ref.d, ref.a,
                                                                    plain.channels["table_displacement"],
                                                                    plain.channels["table_acceleration"]),

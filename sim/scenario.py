@@ -115,10 +115,19 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     it = data.get("iteration", {"count": 0})
     if not isinstance(it, dict):
         raise ScenarioError(f"{src}: [iteration] must be a table (count, gain, band_hz)")
-    _unknown(it, {"count", "gain", "band_hz", "h_min"}, "iteration", src)
+    _unknown(it, {"count", "gain", "band_hz", "h_min", "frf", "noise_level", "seed"}, "iteration", src)
     cnt = it.get("count", 0)
     if isinstance(cnt, bool) or not isinstance(cnt, int) or not 0 <= cnt <= 10:
         raise ScenarioError(f"{src}: 'iteration.count' must be an integer 0..10 (got {cnt!r})")
+    if it.get("frf", "noise") not in ("noise", "record"):
+        raise ScenarioError(f"{src}: 'iteration.frf' must be \"noise\" or \"record\" (got {it['frf']!r})")
+    for key in ("gain", "noise_level", "h_min"):
+        v = it.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 1e3):
+            raise ScenarioError(f"{src}: 'iteration.{key}' must be a positive number (got {v!r})")
+    seed = it.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ScenarioError(f"{src}: 'iteration.seed' must be a non-negative integer (got {seed!r})")
     ctrl = data.get("controller", {})
     if not isinstance(ctrl, dict):
         raise ScenarioError(f"{src}: [controller] must be a table of gains")

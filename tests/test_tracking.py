@@ -2,12 +2,12 @@
 
 The issue's acceptance figures for El Centro at 80 %: displacement NRMSE <= 5 %, PGA
 within 10 %, 5 %-damped response spectrum of the achieved acceleration within
-0.8-1.25 x the reference's from 0.5 to 20 Hz. With the seal friction calibrated to the
-paper's 1.25 % of capability (seed 000, friction tests), Coulomb stick-slip at velocity
-reversals puts acceleration spikes into the 13-25 Hz band (coherence with the
-reference < 0.1 there; with friction switched off the plain controller meets the
-spectrum band). The tests below assert what the model meets; the full criterion is
-kept as a strict expected failure, so it reports the day it is met.
+0.8-1.25 x the reference's from 0.5 to 20 Hz. The plain controller falls short of it
+(PGA 1.13-1.17 in x, spectrum up to 1.25-1.43 in 13-20 Hz): the dry friction (1.25 %
+of capability, seed 000) reverses at every velocity reversal and rings the oil
+columns. The scenarios therefore iterate the drive on the model (two corrections, FRF
+from a white-noise identification run), as table controllers do before a test; the
+criterion is asserted on the iterated run.
 """
 
 import json
@@ -47,24 +47,20 @@ def test_el_centro_80_percent_tracks(tmp_path_factory, scenario):
     for dof in ("x", "y", "z"):
         e = s["tracking"][dof]
         assert e["nrmse_displacement"] <= 0.05, (dof, e)
-        assert e["pga_ratio"] >= 0.9, (dof, e)
-    for dof in ("x", "y"):
-        assert s["tracking"][dof]["pga_ratio"] <= 1.10, (dof, s["tracking"][dof])
-    # spectrum band met below the oil columns, where the reference has its content
-    for dof, (f, r) in ratios.items():
-        band = f <= 12.0
-        assert r[band].min() >= 0.8 and r[band].max() <= 1.25, (dof, r[band].min(), r[band].max())
     # the iteration helps: the chosen drive beats the plain controller on acceleration
     hist = s["drive_iterations"]["history"]
     assert hist[s["drive_iterations"]["chosen"]]["mean_nrmse_acceleration"] <= hist[0]["mean_nrmse_acceleration"]
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="friction stick-slip spikes: z PGA and the 13-20 Hz spectrum band (see module doc)")
-@pytest.mark.parametrize("scenario", ["elcentro_bare"])
+@pytest.mark.parametrize("scenario", ["elcentro_bare", "elcentro_20t"])
 def test_el_centro_full_acceptance_criterion(tmp_path_factory, scenario):
     s, ratios = _summary(tmp_path_factory, scenario)
     for dof in ("x", "y", "z"):
-        assert abs(s["tracking"][dof]["pga_ratio"] - 1) <= 0.10, dof
+        assert abs(s["tracking"][dof]["pga_ratio"] - 1) <= 0.10, (dof, s["tracking"][dof])
         f, r = ratios[dof]
-        assert r.min() >= 0.8 and r.max() <= 1.25, dof
+        assert r.min() >= 0.8 and r.max() <= 1.25, (dof, r.min(), r.max(), f[r.argmax()])
+    # the iteration is doing real work: it at least halves the plain controller's
+    # acceleration error
+    hist = s["drive_iterations"]["history"]
+    assert hist[s["drive_iterations"]["chosen"]]["mean_nrmse_acceleration"] <= 0.5 * hist[0]["mean_nrmse_acceleration"]
