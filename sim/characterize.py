@@ -33,8 +33,8 @@ this module runs the same tests on the model (closed loop, the table's own contr
 
 The calibration (:func:`calibrate`) chooses the unpublished hydraulic numbers so that
 these virtual tests reproduce the paper: dead volumes per actuator class (oil columns,
-Table 1; inner loop: the linearised oil-column model, corrected by the ratio the virtual
-test shows) and the seal friction per class (friction tests, 1.25 % of capability). The
+Table 1; inner loop: the linearised oil-column model plus the parallel stiffness the
+virtual test shows, f^2 = f_lin^2 + c) and the seal friction per class (friction tests, 1.25 % of capability). The
 bulk modulus only enters as beta/V and stays as assumed.
 """
 
