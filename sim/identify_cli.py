@@ -44,13 +44,13 @@ def cmd_identify(args) -> int:
 
     if not (0.0 < args.alpha <= 2.0):
         raise UserError(f"--alpha must be in (0, 2] (got {args.alpha:g})")
+    if args.deadband < 0:
+        raise UserError(f"--deadband must be >= 0 (got {args.deadband:g})")
     recs = []
     for path in args.runs:
         if not Path(path).is_file():
             raise UserError(f"{path}: no such run file")
         r = I.record_from_run(path)
-        if args.deadband < 0:
-            raise UserError(f"--deadband must be >= 0 (got {args.deadband:g})")
         recs.append(I.prepare(r, trim=None if args.no_trim else 0.01, accel_lowpass_hz=args.accel_lowpass,
                               deadband_m_s=args.deadband))
     try:

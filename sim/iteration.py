@@ -28,9 +28,9 @@ from sim.loop import Reference
 
 @dataclass(frozen=True, kw_only=True)
 class IterationSettings:
-    count: int = 3  #: corrections after the first run
-    gain: float = 0.8  #: fraction of the estimated correction applied per iteration
-    band_hz: tuple[float, float] = (0.2, 40.0)  #: frequencies corrected
+    count: int = 2  #: corrections after the first run
+    gain: float = 0.6  #: fraction of the estimated correction applied per iteration
+    band_hz: tuple[float, float] = (0.2, 25.0)  #: frequencies corrected
     h_min: float = 0.25  #: floor on |H| (do not amplify notches without bound)
     nperseg: int = 4096  #: Welch segment for the FRF estimate
     frf: str = "noise"
@@ -45,6 +45,15 @@ class IterationSettings:
     noise_duration_s: float = 40.0
     noise_band_hz: tuple[float, float] = (0.3, 45.0)
     seed: int = 0  #: seed of the identification noise
+
+
+    @classmethod
+    def from_scenario(cls, it: dict) -> "IterationSettings":
+        """From a scenario's (validated, see :mod:`sim.scenario`) ``[iteration]`` table;
+        keys left out keep the defaults above."""
+        conv = {"count": int, "gain": float, "band_hz": tuple, "h_min": float, "frf": str,
+                "noise_level": float, "seed": int}
+        return cls(**{k: conv[k](v) for k, v in it.items() if k in conv})
 
 
 def _spectral_derivatives(d: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:

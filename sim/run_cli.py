@@ -156,8 +156,9 @@ def cmd_run(args) -> int:
     desc = mjcf.load_table(sc.table)
     payload = mjcf.load_payload(sc.payload) if sc.payload else None
     rice = None
-    if (desc.raw.get("controller", {}) or {}).get("type") == "rice":  # seed 001's analog controller, 8 kHz steps
-        from sim.uniaxial import RiceGains, RiceSimulation
+    from sim.uniaxial import RiceGains, RiceSimulation, is_rice
+
+    if is_rice(desc):  # seed 001's analog controller, 8 kHz steps
 
         if args.iterations or sc.iteration.get("count", 0):
             raise ScenarioError("drive iterations are not available with the rice controller")
@@ -191,10 +192,7 @@ def cmd_run(args) -> int:
     if it.get("count", 0) > 0:
         from sim.iteration import IterationSettings, iterate
 
-        settings = IterationSettings(count=int(it["count"]), gain=float(it.get("gain", 0.6)),
-                                     band_hz=tuple(it.get("band_hz", (0.2, 25.0))),
-                                     h_min=float(it.get("h_min", 0.25)), frf=str(it.get("frf", "noise")),
-                                     noise_level=float(it.get("noise_level", 1.0)), seed=int(it.get("seed", 0)))
+        settings = IterationSettings.from_scenario(it)
 
         def note(i):
             if show:
@@ -234,7 +232,7 @@ def cmd_run(args) -> int:
         "tracking": tracking(res.t, ref.d, ref.a, res.channels["table_displacement"],
                              res.channels["table_acceleration"]),
         "drive_iterations": {"count": len(history) - 1 if history else 0, "chosen": best,
-                             "frf": str(it.get("frf", "noise")) if history else None,
+                             "frf": settings.frf if history else None,
                              "tracking_plain_controller": tracking(plain.t, ref.d, ref.a,
                                                                    plain.channels["table_displacement"],
                                                                    plain.channels["table_acceleration"]),

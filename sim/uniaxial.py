@@ -31,6 +31,7 @@ import mujoco
 import numpy as np
 
 from hydraulics import HydraulicParams, HydraulicSystem
+from mjcf.analysis import loop_gap
 from mjcf.builder import BuildOptions, build
 from mjcf.description import load_payload, parse_table
 from sim import rice as R
@@ -291,23 +292,10 @@ class RiceSimulation:
               "valve_command": col("opening"), "spool_position": col("spool"), "actuator_force": col("force"),
               "pressure_a": col("p_a"), "pressure_b": col("p_b")}
         ex = {"supply_pressure": rec["p_supply"][:done].copy(), "accumulator_gas_volume": rec["gas_volume"][:done].copy(),
-              "loop_gap": np.full(done, self._loop_gap())}
+              "loop_gap": np.full(done, loop_gap(self.m, self.d))}
         return RunResult(t=np.arange(done) / rate, channels=ch, extras=ex, wall_s=wall, sim_s=done / rate,
                          timing={"physics_s": wall, "hydraulics_s": 0.0, "controller_s": 0.0, "output_s": 0.0,
                                  "steps": done * sub}, incomplete_reason=reason)
-
-    def _loop_gap(self) -> float:
-        """Largest opening of a linkage's loop-closing ``connect`` at the end of the run."""
-        m, d = self.m, self.d
-        gap = 0.0
-        for i in range(m.neq):
-            if m.eq_type[i] != mujoco.mjtEq.mjEQ_CONNECT:
-                continue
-            b1, b2 = m.eq_obj1id[i], m.eq_obj2id[i]
-            p1 = d.xpos[b1] + d.xmat[b1].reshape(3, 3) @ m.eq_data[i, 0:3]
-            p2 = d.xpos[b2] + d.xmat[b2].reshape(3, 3) @ m.eq_data[i, 3:6]
-            gap = max(gap, float(np.linalg.norm(p1 - p2)))
-        return gap
 
 
 def rice_simulation(gains: R.Gains, parameter_set: str = "d18", *, payload: str | None = None, delay: bool = True,
