@@ -174,6 +174,15 @@ class TableController:
               self._consts, self._gains_arr, self._state, self._pl_hp, self._pl_prev, out)
         return out
 
+    def kernel_args(self) -> tuple:
+        """The compiled tick's constant and state arrays, in its argument order (valid
+        until the next :meth:`reset`)."""
+        return (self._consts, self.J, self.Jp, self.N, self._gains_arr, self._state, self._pl_hp, self._pl_prev)
+
+    @staticmethod
+    def has_compiled_tick() -> bool:
+        return _tick_state is not None
+
     def command_from_state(self, k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force,
                            supply_pressure, out) -> np.ndarray:
         """Compiled tick reading strokes and the platen velocity straight from MuJoCo's arrays."""
@@ -184,8 +193,7 @@ class TableController:
             out[:] = self.command(s_ref_all[k], v_ref_all[k], vff_all[k], x, v6, force, supply_pressure)
             return out
         _tick_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force, supply_pressure,
-                    self._consts, self.J, self.Jp, self.N, self._gains_arr, self._state, self._pl_hp,
-                    self._pl_prev, out)
+                    *self.kernel_args(), out)
         return out
 
     def feedforward(self, v_ref: np.ndarray, a_ref: np.ndarray, rate_hz: float) -> np.ndarray:

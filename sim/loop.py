@@ -156,7 +156,7 @@ class Simulation:
     # ------------------------------------------------------------------ run
     def run(self, *, reference: Reference | None = None, valve_command: np.ndarray | None = None,
             duration_s: float | None = None, progress: bool = False, gap_every: int = 8,
-            fast: bool = True) -> RunResult:
+            fast: bool = True, fuse: bool = True) -> RunResult:
         """Run closed loop on ``reference`` or open loop on recorded ``valve_command``.
 
         Both inputs are sampled at the controller rate. Returns the recorder's arrays.
@@ -168,6 +168,10 @@ class Simulation:
         hydraulic state); poses, velocities and accelerometer signals are derived from
         those copies after the run, vectorised. ``fast`` uses the compiled per-step and
         per-tick kernels of :mod:`sim._fastloop` (``False``: the plain numpy reference).
+        ``fuse`` (with ``fast``, closed loop on a free platen, no step effects, two or more
+        physics steps per tick): recorder, controller and pre-step in one compiled call per
+        physics step (same results; ``timing`` then has the three together under
+        ``fused_s`` and no separate hydraulics/controller split).
         """
         if fast:
             from sim import _fastloop as FL
@@ -220,82 +224,112 @@ class Simulation:
         slide_d, pdi, n_pd = tm.platen_slide_dadr, tm.platen_dof_index, len(tm.platen_dof_index)
         xmat = d.xmat
         step = mujoco.mj_step
-        t_ctrl = t_hyd = t_phys = t_out = 0.0
+        fuse_tick = (fast and fuse and fused and free and reference is not None and not effects and spt >= 2
+                     and ctrl.has_compiled_tick())
+        if fuse_tick:
+            first, later = FL.tick_first_step, FL.later_step
+            g = ctrl.kernel_args()
+            hyd_args = (qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS, hs._buf, hs._P, hs._G,
+                        fr_dofs, fr_fc, zfr, fr_zss, self.dt)
+            first_args = (qpos, qvel, xmat, dctrl, qfa, Q, V, Hsp, Hf, Hpa, Hpb, H["valve_command"], Eps, Egas,
+                          s_ref_all, v_ref_all, vff_all, qa64, da64, ids64, pd, pb_) + g + hyd_args[3:]
+            later_args = (qpos, qvel, qacc, dctrl, qfa, ACC, pd) + hyd_args
+            t_fused = 0.0
+        t_ctrl = t_hyd = t_phys = t_out = t_fused = 0.0
         reason = None
         clock = time.perf_counter
         wall0 = clock()
         last_print = wall0
         k = -1
         for k in range(n):
-            # ---- recorder: raw state at t_k
-            t0 = clock()
-            if fast:
-                FL.record(k, qpos, qvel, Q, V, hs._X, hs._Y, HL.SPOOL, HL.FORCE, HL.PA, HL.PB, Hsp, Hf, Hpa, Hpb,
-                          HL.PS, HL.GASV, Eps, Egas)
-            else:
-                Q[k] = qpos
-                V[k] = qvel
-                Hsp[k] = spool
-                Hf[k] = force
-                Hpa[k] = pa
-                Hpb[k] = pb
-                Eps[k] = psup[0]
-                Egas[k] = gasv[0]
-            t1 = clock()
-            t_out += t1 - t0
-            # ---- controller tick (valve commands held until the next tick)
-            if reference is not None:
-                if not free:
-                    xk[:] = qpos[qa]
-                    vel6[:] = 0.0
-                    vel6[pdi] = qvel[slide_d]
-                    ctrl.command_fast(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0], cmd)
-                elif fast:
-                    ctrl.command_from_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa64, pd, pb_,
-                                            force, psup[0], cmd)
-                else:
-                    xk[:] = qpos[qa]
-                    vel6[:3] = qvel[pd:pd + 3]
-                    vel6[3:] = xmat[pb_].reshape(3, 3) @ qvel[pd + 3:pd + 6]
-                    cmd[:] = ctrl.command(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0])
-            else:
-                cmd[:] = vc_all[k]
-            H["valve_command"][k] = cmd
-            t2 = clock()
-            t_ctrl += t2 - t1
-            # ---- physics steps of this tick: hydraulics, then mj_step
-            for j in range(spt):
-                t3 = clock()
-                if fused and nfr:
-                    FL.pre_step_friction(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC,
-                                         hs._ICS, hs._buf, 0, hs._P, hs._G, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
-                elif fused:
-                    FL.pre_step(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS,
-                                hs._buf, 0, hs._P, hs._G)
-                else:
-                    x2[0] = qpos[qa]
-                    v2[0] = qvel[da]
-                    f = hs.step(cmd2, x2, v2)
-                    dctrl[ids] = f[0]
-                if not (fused and nfr) and (effects or nfr):
-                    qfa[:] = 0.0
-                    if nfr:
-                        if fast:
-                            FL.presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
-                        else:
-                            self._presliding_numpy(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss)
-                for e in effects:
-                    e.apply(m, d)
-                t4 = clock()
+            if fuse_tick:
+                # ---- recorder, controller tick, hydraulics: one compiled call per physics step
+                t0 = clock()
+                first(k, *first_args)
+                t1 = clock()
                 step(m, d)
-                t5 = clock()
-                t_hyd += t4 - t3
-                t_phys += t5 - t4
-                if j == 0:
-                    if free:
-                        ACC[k] = qacc[pd:pd + 6]
+                t2 = clock()
+                t_fused += t1 - t0
+                t_phys += t2 - t1
+                for j in range(1, spt):
+                    later(k if j == 1 else -1, *later_args)
+                    t3 = clock()
+                    step(m, d)
+                    t4 = clock()
+                    t_fused += t3 - t2
+                    t_phys += t4 - t3
+                    t2 = t4
+            else:
+                # ---- recorder: raw state at t_k
+                t0 = clock()
+                if fast:
+                    FL.record(k, qpos, qvel, Q, V, hs._X, hs._Y, HL.SPOOL, HL.FORCE, HL.PA, HL.PB, Hsp, Hf, Hpa, Hpb,
+                              HL.PS, HL.GASV, Eps, Egas)
+                else:
+                    Q[k] = qpos
+                    V[k] = qvel
+                    Hsp[k] = spool
+                    Hf[k] = force
+                    Hpa[k] = pa
+                    Hpb[k] = pb
+                    Eps[k] = psup[0]
+                    Egas[k] = gasv[0]
+                t1 = clock()
+                t_out += t1 - t0
+                # ---- controller tick (valve commands held until the next tick)
+                if reference is not None:
+                    if not free:
+                        xk[:] = qpos[qa]
+                        vel6[:] = 0.0
+                        vel6[pdi] = qvel[slide_d]
+                        ctrl.command_fast(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0], cmd)
+                    elif fast:
+                        ctrl.command_from_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa64, pd, pb_,
+                                                force, psup[0], cmd)
                     else:
-                        ACC[k, :n_pd] = qacc[slide_d]
+                        xk[:] = qpos[qa]
+                        vel6[:3] = qvel[pd:pd + 3]
+                        vel6[3:] = xmat[pb_].reshape(3, 3) @ qvel[pd + 3:pd + 6]
+                        cmd[:] = ctrl.command(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0])
+                else:
+                    cmd[:] = vc_all[k]
+                H["valve_command"][k] = cmd
+                t2 = clock()
+                t_ctrl += t2 - t1
+                # ---- physics steps of this tick: hydraulics, then mj_step
+                for j in range(spt):
+                    t3 = clock()
+                    if fused and nfr:
+                        FL.pre_step_friction(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y,
+                                             hs._IC, hs._ICS, hs._buf, 0, hs._P, hs._G, qfa, fr_dofs, fr_fc, zfr,
+                                             fr_zss, self.dt)
+                    elif fused:
+                        FL.pre_step(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS,
+                                    hs._buf, 0, hs._P, hs._G)
+                    else:
+                        x2[0] = qpos[qa]
+                        v2[0] = qvel[da]
+                        f = hs.step(cmd2, x2, v2)
+                        dctrl[ids] = f[0]
+                    if not (fused and nfr) and (effects or nfr):
+                        qfa[:] = 0.0
+                        if nfr:
+                            if fast:
+                                FL.presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
+                            else:
+                                self._presliding_numpy(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss)
+                    for e in effects:
+                        e.apply(m, d)
+                    t4 = clock()
+                    step(m, d)
+                    t5 = clock()
+                    t_hyd += t4 - t3
+                    t_phys += t5 - t4
+                    if j == 0:
+                        if free:
+                            ACC[k] = qacc[pd:pd + 6]
+                        else:
+                            ACC[k, :n_pd] = qacc[slide_d]
             # ---- divergence checks
             if k % gap_every == 0:
                 t6 = clock()
@@ -328,7 +362,7 @@ class Simulation:
         return RunResult(t=np.arange(n_done) / rate, channels=ch, extras=ex, wall_s=wall + t_post,
                          sim_s=n_done / rate,
                          timing={"physics_s": t_phys, "hydraulics_s": t_hyd, "controller_s": t_ctrl,
-                                 "output_s": t_out + t_post, "steps": n_done * spt},
+                                 "output_s": t_out + t_post, "fused_s": t_fused, "steps": n_done * spt},
                          incomplete_reason=reason)
 
     def _derive(self, Q, V, ACC) -> dict:
