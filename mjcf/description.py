@@ -470,15 +470,21 @@ def toml_key_index(lines: list[str], section: str, key: str) -> int | None:
 
 
 # --------------------------------------------------------------------------- kinematics
+def rotation_matrices(angles) -> np.ndarray:
+    """(n, 3, 3) platen rotations for (n, 3) intrinsic x-y-z angles, R = Rx @ Ry @ Rz."""
+    a = np.atleast_2d(np.asarray(angles, dtype=float))
+    c, s = np.cos(a), np.sin(a)
+    n = len(a)
+    one, zero = np.ones(n), np.zeros(n)
+    Rx = np.stack([one, zero, zero, zero, c[:, 0], -s[:, 0], zero, s[:, 0], c[:, 0]], axis=1).reshape(n, 3, 3)
+    Ry = np.stack([c[:, 1], zero, s[:, 1], zero, one, zero, -s[:, 1], zero, c[:, 1]], axis=1).reshape(n, 3, 3)
+    Rz = np.stack([c[:, 2], -s[:, 2], zero, s[:, 2], c[:, 2], zero, zero, zero, one], axis=1).reshape(n, 3, 3)
+    return Rx @ Ry @ Rz
+
+
 def rotation_matrix(rx: float, ry: float, rz: float) -> np.ndarray:
     """Platen rotation: intrinsic x-y-z angles, R = Rx(rx) @ Ry(ry) @ Rz(rz)."""
-    cx, sx = math.cos(rx), math.sin(rx)
-    cy, sy = math.cos(ry), math.sin(ry)
-    cz, sz = math.cos(rz), math.sin(rz)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return Rx @ Ry @ Rz
+    return rotation_matrices([[rx, ry, rz]])[0]
 
 
 def actuator_strokes(desc: TableDescription, pose) -> np.ndarray:
@@ -498,10 +504,10 @@ def actuator_strokes(desc: TableDescription, pose) -> np.ndarray:
     plat = np.array([a.platen_m for a in desc.actuators])
     L0 = np.linalg.norm(plat - base, axis=1)
     out = np.empty((len(P), len(base)))
-    for k, p in enumerate(P):
-        R = rotation_matrix(*p[3:6])
-        pts = p[:3] + plat @ R.T
-        out[k] = np.linalg.norm(pts - base, axis=1) - L0
+    for i0 in range(0, len(P), 8192):  # in blocks: (block, n_act, 3) temporaries stay small
+        blk = P[i0:i0 + 8192]
+        pts = blk[:, None, :3] + plat @ rotation_matrices(blk[:, 3:6]).transpose(0, 2, 1)
+        out[i0:i0 + len(blk)] = np.linalg.norm(pts - base, axis=2) - L0
     return out[0] if single else out
 
 
