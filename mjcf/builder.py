@@ -19,7 +19,8 @@ Bodies (all derived from one :class:`~mjcf.description.TableDescription`):
 * ``foundation``: world-fixed, or (``mode = "spring"``) a body on three slides with a
   spring-damper per axis; every base swivel and support sits on it.
 * the payload: rigid (clamped: a child body of the platen, or on a 3-axis clamping
-  spring when ``clamp_frequency_hz`` is given), a lumped shear frame (floors on slides
+  spring when ``clamp_frequency_hz`` is given, optionally only ``clamp_mass_fraction`` of
+  the mass, the rest rigid), a lumped shear frame (floors on slides
   relative to the platen, the stiffness and modal damping matrices as fixed tendons),
   or a continuum cantilever (a chain of rigid segments with bending springs).
 
@@ -296,18 +297,29 @@ def _add_payload(spec, platen, payload, info):
         if p.clamp_frequency_hz is None:
             body = platen.add_body(name="payload", pos=p.com_m.tolist())
         else:
-            # Clamping flexibility: the block on a 3-axis spring-damper to the platen.
+            # Clamping flexibility: the block (or the fraction clamp_mass_fraction of its mass,
+            # body "payload") on a 3-axis spring-damper of clamp_frequency_hz to the platen; the
+            # rest of the mass (body "payload_fixed") rigidly on the platen, same centre.
+            a = p.clamp_mass_fraction
+            if a < 1.0:
+                fixed = platen.add_body(name="payload_fixed", pos=p.com_m.tolist())
+                fixed.explicitinertial = True
+                fixed.mass = (1.0 - a) * p.mass_kg
+                fixed.ipos = [0, 0, 0]
+                fixed.inertia = ((1.0 - a) * p.inertia_kg_m2).tolist()
+                info.payload_bodies.append("payload_fixed")
             body = platen.add_body(name="payload", pos=p.com_m.tolist())
             w = 2 * math.pi * p.clamp_frequency_hz
             for ax, vec in (("x", [1, 0, 0]), ("y", [0, 1, 0]), ("z", [0, 0, 1])):
                 j = body.add_joint(name=f"payload_clamp_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=vec)
-                j.stiffness = [p.mass_kg * w * w, 0, 0]
-                j.damping = [2 * p.clamp_damping_ratio * p.mass_kg * w, 0, 0]
+                j.stiffness = [a * p.mass_kg * w * w, 0, 0]
+                j.damping = [2 * p.clamp_damping_ratio * a * p.mass_kg * w, 0, 0]
                 info.payload_joints.append(j.name)
+        a = 1.0 if p.clamp_frequency_hz is None else p.clamp_mass_fraction
         body.explicitinertial = True
-        body.mass = p.mass_kg
+        body.mass = a * p.mass_kg
         body.ipos = [0, 0, 0]
-        body.inertia = p.inertia_kg_m2.tolist()
+        body.inertia = (a * p.inertia_kg_m2).tolist()
         info.payload_bodies.append("payload")
         # The block drawn from its footprint and height, resting on the platen.
         _visual(body, name="payload_block", type=mujoco.mjtGeom.mjGEOM_BOX,
@@ -444,7 +456,7 @@ def build(desc: TableDescription, payload: Payload | None = None,
         jz.springref = float(model.body_mass.sum()) * desc.gravity_m_s2 / jz.stiffness[0]
     if isinstance(payload, RigidPayload) and payload.clamp_frequency_hz is not None:
         jz = spec.joint("payload_clamp_z")
-        jz.springref = payload.mass_kg * desc.gravity_m_s2 / jz.stiffness[0]
+        jz.springref = payload.clamp_mass_fraction * payload.mass_kg * desc.gravity_m_s2 / jz.stiffness[0]
     if desc.friction_model == "presliding":
         # Dry friction leaves MuJoCo's frictionloss (a stiff stick constraint) and is applied
         # by the loop as a pre-sliding (Dahl/LuGre-type) force; see sim/loop.py.

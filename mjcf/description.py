@@ -543,6 +543,8 @@ class RigidPayload:
     height_m: float
     clamp_frequency_hz: float | None = None  #: optional clamping flexibility (SDOF per axis)
     clamp_damping_ratio: float = 0.02
+    #: with a clamp: the fraction of the mass on the clamping spring (the rest rigidly on the platen)
+    clamp_mass_fraction: float = 1.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -592,7 +594,12 @@ def parse_payload(data: dict, src: str = "<payload>") -> Payload:
             height_m=p.num("height_m", positive=True),
             clamp_frequency_hz=(p.num("clamp_frequency_hz", positive=True) if p.has("clamp_frequency_hz") else None),
             clamp_damping_ratio=p.num("clamp_damping_ratio", 0.02, nonneg=True),
+            clamp_mass_fraction=p.num("clamp_mass_fraction", 1.0, positive=True),
         )
+        if out.clamp_mass_fraction > 1.0:
+            raise DescriptionError(f"{src}: 'payload.clamp_mass_fraction' must be in (0, 1] (got {out.clamp_mass_fraction:g})")
+        if p.has("clamp_mass_fraction") and out.clamp_frequency_hz is None:
+            raise DescriptionError(f"{src}: 'payload.clamp_mass_fraction' needs 'payload.clamp_frequency_hz'")
         _check_inertia(out.inertia_kg_m2, f"{src}: 'payload.inertia_kg_m2'")
     elif kind == "shear_frame":
         m = p.raw("mass_kg")

@@ -178,11 +178,22 @@ D_SET = {0.0: "d0", 0.010: "d10", 0.018: "d18", 0.020: "d20"}
 
 
 # ------------------------------------------------------------------ payloads
-def rigid_modes(mass_kg: float, clamp_hz: float | None = None, zeta: float = 0.02) -> list[Mode]:
-    """A rigid block: infinitely stiff (H_p = 1) or on a clamping SDOF (Sec. 8.2)."""
+def rigid_modes(mass_kg: float, clamp_hz: float | None = None, zeta: float = 0.02,
+                clamp_fraction: float = 1.0) -> list[Mode]:
+    """A rigid block: infinitely stiff (H_p = 1) or on a clamping SDOF (Sec. 8.2).
+
+    Sec. 8.2 models the clamped block as "an SDOF payload with a natural frequency of
+    52 Hz and a perfectly rigidly clamped payload" without giving the split:
+    ``clamp_fraction`` of the mass is on the clamping SDOF, the rest is rigid (H_p = 1).
+    """
     if clamp_hz is None:
         return [Mode(mass_kg, math.inf, 0.0)]
-    return [Mode(mass_kg, clamp_hz, zeta)]
+    if not 0.0 < clamp_fraction <= 1.0:
+        raise ValueError(f"clamp_fraction must be in (0, 1] (got {clamp_fraction})")
+    out = [Mode(clamp_fraction * mass_kg, clamp_hz, zeta)]
+    if clamp_fraction < 1.0:
+        out.insert(0, Mode((1.0 - clamp_fraction) * mass_kg, math.inf, 0.0))
+    return out
 
 
 def frame_modes(M, K, zeta: float) -> list[Mode]:
@@ -214,7 +225,7 @@ def payload_from_file(path) -> list[Mode]:
 
     p = load_payload(path)
     if isinstance(p, RigidPayload):
-        return rigid_modes(p.mass_kg, p.clamp_frequency_hz, p.clamp_damping_ratio)
+        return rigid_modes(p.mass_kg, p.clamp_frequency_hz, p.clamp_damping_ratio, p.clamp_mass_fraction)
     if isinstance(p, ShearFramePayload):
         return frame_modes(p.mass_kg, p.stiffness_n_m, p.damping_ratio)
     raise ValueError(f"{path}: payload type not supported by the Rice transfer function")
