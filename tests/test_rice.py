@@ -161,3 +161,151 @@ def test_shaketable_run_rice_scenario_tracks_a_low_frequency_sine(tmp_path):
     H = np.sum(x[sel] * e) / np.sum(r[sel] * e)
     T = R.transfer([1.0], gains=R.OPTIMAL, params="d18").T[0]
     assert abs(H / T - 1) < 0.005
+
+
+# ------------------------------------------------------------------ the clamped blocks' split (Sec. 8.2)
+CLAMPED = (68, 204, 408)
+
+
+def _clamp_peaks(mass, fraction, f=F):
+    """Eq. 1-8 (payload gains, set pfr) with ``fraction`` of the block on the 52 Hz clamp:
+    the upper (split oil-column) peak, the central peak, the foundation peak (f, |T|)."""
+    m = np.abs(R.transfer(f, None, R.PAYLOAD_GAINS, "pfr", R.rigid_modes(mass, R.PAPER["clamp_hz"], 0.02, fraction)).T)
+    return R.peak_in(f, m, (45, 100)), R.peak_in(f, m, (30, 45)), R.peak_in(f, m, (22, 31))
+
+
+def _fraction_for(mass, target_hz, lo=0.02, hi=1.0):
+    """The clamped fraction that puts the upper peak of ``mass`` at ``target_hz`` (bisection;
+    the peak rises monotonically with the fraction)."""
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if _clamp_peaks(mass, mid)[0][0] > target_hz else (mid, hi)
+    return 0.5 * (lo + hi)
+
+
+def test_clamp_mass_fraction_in_the_payload_and_the_model():
+    import tomllib
+
+    import mujoco
+
+    from mjcf.builder import BuildOptions, build
+    from mjcf.description import DescriptionError, load_payload, parse_payload
+    from sim.uniaxial import rice_description
+
+    p = load_payload("rice_rigid_204_clamp")
+    a = p.clamp_mass_fraction
+    assert 0.0 < a < 1.0
+    modes = R.payload_from_file("rice_rigid_204_clamp")
+    assert sum(md.mass_kg for md in modes) == pytest.approx(204.0)
+    assert [md.mass_kg for md in modes if md.f_hz == 52.0] == pytest.approx([a * 204.0])
+    # MuJoCo: the clamped part on the 52 Hz spring, the rest a rigid body of the platen
+    desc, _ = rice_description("pfr")
+    tm = build(desc, p, BuildOptions(timestep_s=1 / 8000))
+    m = tm.model
+    body = lambda n: m.body(n).id  # noqa: E731
+    assert m.body_mass[body("payload")] == pytest.approx(a * 204.0)
+    assert m.body_mass[body("payload_fixed")] == pytest.approx((1 - a) * 204.0)
+    jx = m.joint("payload_clamp_x")
+    assert math.sqrt(m.jnt_stiffness[jx.id] / (a * 204.0)) / (2 * math.pi) == pytest.approx(52.0)
+    d = tm.new_data()
+    jz = m.joint("payload_clamp_z")
+    for _ in range(800):
+        mujoco.mj_step(m, d)
+    assert not any(w.number for w in d.warning)
+    assert abs(d.qpos[m.jnt_qposadr[jz.id]] - m.qpos0[m.jnt_qposadr[jz.id]]) < 1e-6  # at rest under gravity
+    # default: the whole block on the clamp (one body); the key needs a clamp and is in (0, 1]
+    raw = tomllib.loads(_payload_text("rice_rigid_204_clamp"))
+    del raw["payload"]["clamp_mass_fraction"]
+    p1 = parse_payload(raw)
+    assert p1.clamp_mass_fraction == 1.0
+    assert R.rigid_modes(204.0, 52.0, 0.02) == [R.Mode(204.0, 52.0, 0.02)]
+    tm1 = build(desc, p1, BuildOptions(timestep_s=1 / 8000))
+    assert tm1.model.body("payload").mass[0] == pytest.approx(204.0)
+    assert mujoco.mj_name2id(tm1.model, mujoco.mjtObj.mjOBJ_BODY, "payload_fixed") == -1
+    for bad in ({"clamp_mass_fraction": 1.5}, {"clamp_mass_fraction": 0.0}):
+        r2 = tomllib.loads(_payload_text("rice_rigid_204_clamp"))
+        r2["payload"].update(bad)
+        with pytest.raises(DescriptionError, match="clamp_mass_fraction"):
+            parse_payload(r2)
+    r3 = tomllib.loads(_payload_text("rice_rigid_204"))
+    r3["payload"]["clamp_mass_fraction"] = 0.5
+    with pytest.raises(DescriptionError, match="needs 'payload.clamp_frequency_hz'"):
+        parse_payload(r3)
+
+
+def _payload_text(name):
+    from mjcf.description import PAYLOADS_DIR
+
+    return (PAYLOADS_DIR / f"{name}.toml").read_text()
+
+
+def test_clamp_split_puts_the_small_peak_near_57_hz_analytical():
+    """Sec. 8.1/8.2: a small peak at about 57 Hz for all three blocks, central peak 36-42 Hz,
+    foundation peak 1.7 / 2.0 / 3.0. One clamped fraction, the same for every block (the
+    payload files' calibrated value), Eq. 1-8 with set pfr."""
+    fr = {mp: R.payload_from_file(f"rice_rigid_{mp}_clamp") for mp in CLAMPED}
+    fracs = {mp: sum(md.mass_kg for md in m if md.f_hz == 52.0) / mp for mp, m in fr.items()}
+    assert len({round(v, 12) for v in fracs.values()}) == 1                 # the same fraction for every block
+    a = fracs[68]
+    got = {mp: _clamp_peaks(mp, a) for mp in CLAMPED}
+    whole = {mp: _clamp_peaks(mp, 1.0) for mp in CLAMPED}
+    small = [got[mp][0][0] for mp in CLAMPED]
+    # the whole block on the clamp: 62 / 75 / 85 Hz; the split: within 1.5 Hz of 57 for all three
+    assert [w[0][0] for w in whole.values()] == pytest.approx([62.1, 75.4, 84.8], abs=0.1)
+    assert all(abs(s - 57.0) <= 1.5 for s in small), small
+    # ... but still rising with the mass (the paper's peak stays at about 57 Hz): no one
+    # fraction puts all three within 1 Hz (68 kg needs more on the clamp than 408 kg allows)
+    assert small[0] < small[1] < small[2]
+    assert _fraction_for(68, 56.0) > _fraction_for(408, 58.0)
+    # central peak: 68 and 204 kg inside 36-42 Hz; 408 kg below it with set pfr at any
+    # fraction, no worse than with the whole block on the clamp
+    assert all(36.0 <= got[mp][1][0] <= 42.0 for mp in (68, 204))
+    assert whole[408][1][0] < got[408][1][0] < 36.0
+    # foundation peak 1.7 / 2.0 / 3.0: 68 and 204 kg within 0.05; 408 kg lower than with
+    # the whole block on the clamp (2.96) but above the perfectly rigid model (set pr)
+    fd = [got[mp][2][1] for mp in CLAMPED]
+    assert fd[0] < fd[1] < fd[2]
+    assert fd[:2] == pytest.approx([1.7, 2.0], abs=0.05)
+    rigid408 = R.peak_in(F, mag(R.PAYLOAD_GAINS, "pr", payload=R.rigid_modes(408)), (22, 31))[1]
+    assert rigid408 < fd[2] < whole[408][2][1]
+
+
+def test_clamp_fraction_chosen_on_one_block_predicts_the_others():
+    """The strong form: the fraction fitted to 57.0 Hz on one block, the others predicted."""
+    from mjcf.description import load_payload
+
+    fit = {mp: _fraction_for(mp, 57.0) for mp in CLAMPED}
+    assert fit[68] > fit[204] > fit[408]
+    pred = {src: {mp: _clamp_peaks(mp, fit[src])[0][0] for mp in CLAMPED} for src in CLAMPED}
+    # chosen on 204 kg: 408 kg within 1 Hz, 68 kg within 1.5 Hz
+    assert abs(pred[204][408] - 57.0) < 1.0 and abs(pred[204][68] - 57.0) < 1.5
+    # chosen on 408 kg: both others within 2 Hz (below 57)
+    assert all(55.0 <= pred[408][mp] < 57.0 for mp in (68, 204))
+    # chosen on 68 kg: fails for the heavier blocks (the 68 kg peak is insensitive to the fraction)
+    assert pred[68][408] > 60.0
+    # the payload files' fraction lies between the 204 and 68 kg fits (minimax of the three)
+    a = load_payload("rice_rigid_68_clamp").clamp_mass_fraction
+    assert fit[204] < a < fit[68]
+    # the alternative, the same clamped mass on every block: the peak falls with the mass
+    mc = fit[204] * 204.0
+    alt = [_clamp_peaks(mp, min(1.0, mc / mp))[0][0] for mp in CLAMPED]
+    assert alt[0] > alt[1] > alt[2] and max(abs(x - 57.0) for x in alt) > 1.5
+
+
+@pytest.mark.slow
+def test_model_clamp_split_small_peak():
+    """One model FRF (the paper's estimate): 408 kg, the block whose small peak is the most
+    sensitive to the split, with the payload file's fraction."""
+    from sim import uniaxial as U
+
+    r = U.run_rice_case(U.RiceCase("rigid 408 clamp", R.PAYLOAD_GAINS, "pfr", "rice_rigid_408_clamp"))
+    f = r["f"]
+    hm = U._smooth(np.abs(r["model"]))
+    fm = R.peak_in(f, hm, (45, 100))[0]
+    fe = R.peak_in(f, np.abs(r["analytical"]), (45, 100))[0]
+    print(f"408 kg clamp split: small peak model {fm:.2f} Hz, Eq. {fe:.2f} Hz")
+    assert abs(fm - 57.0) <= 1.5
+    assert abs(fm - fe) < 0.5
+    mm, am = r["model_metrics"], r["analytical_metrics"]
+    assert abs(mm["central_peak"][0] - am["central_peak"][0]) < 0.5
+    assert mm["foundation_peak"][1] == pytest.approx(am["foundation_peak"][1], rel=0.03)
