@@ -11,6 +11,7 @@ A table description may list effects::
     type = "platen_coulomb"         # bearing friction
     dof = "x"
     force_n = 26.5e3
+    presliding_m = 2e-3             # optional: pre-sliding travel (Dahl), see PreslidingFriction
 
     [[effect]]
     type = "platen_power_damping"   # C |v|^alpha sign(v) (seed 002)
@@ -22,7 +23,10 @@ A table description may list effects::
 Each effect is applied at one defined place: springs and Coulomb friction become joint
 parameters of the platen's bearing slide in the MJCF (``apply_to_spec``: implicit,
 so friction sticks properly); forces that MuJoCo has no element for are computed from
-the state before every physics step and written to ``qfrc_applied`` (``StepEffect``).
+the state before every physics step and written to ``qfrc_applied`` (``StepEffect``;
+``reset`` is called by ``sim.loop.Simulation.reset``). A ``platen_coulomb`` with
+``presliding_m`` is such a force: pre-sliding (Dahl) friction instead of the stick
+constraint.
 Users can add their own with :func:`register`.
 """
 
@@ -78,6 +82,9 @@ class StepEffect:
     def bind(self, model: mujoco.MjModel) -> None:  # resolve indices once
         pass
 
+    def reset(self) -> None:  # back to the initial state (effects with a state of their own)
+        pass
+
     def apply(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         raise NotImplementedError
 
@@ -100,11 +107,56 @@ def _spring(spec, p, where="effect platen_spring"):
     return None
 
 
+@dataclass
+class PreslidingFriction(StepEffect):
+    """Dry friction with pre-sliding on one platen slide: the Dahl law of the
+    ``[friction] model = "presliding"`` joint friction (``sim._fastloop.presliding_friction``),
+
+        dz/dt = u' - |u'| z / delta,   F = -(F_mu / delta) z,
+
+    so the force saturates at F_mu after a travel of a few delta and, for travels much
+    smaller than delta (between close velocity reversals), acts as a spring of stiffness
+    F_mu / delta about the position of the last reversal. Over a physics step z is
+    advanced exactly for the velocity held (z -> sign(u') delta at rate |u'| / delta):
+    stable at any speed; at rest z and the force stay (elastic stick).
+    """
+
+    dof: str
+    force_n: float
+    presliding_m: float
+    name: str = "platen_coulomb"
+    z: float = 0.0
+    _d: int = -1
+    _dt: float = 0.0
+
+    def bind(self, model):
+        j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"platen_{self.dof}")
+        self._d = int(model.jnt_dofadr[j])
+        self._dt = float(model.opt.timestep)
+
+    def reset(self):
+        self.z = 0.0
+
+    def advance(self, v: float, dt: float) -> float:
+        """Advance z over one step at velocity ``v``; returns the friction force."""
+        zss = self.presliding_m
+        if v != 0.0:
+            target = zss if v > 0.0 else -zss
+            self.z = target + (self.z - target) * np.exp(-abs(v) * dt / zss)
+        return -self.force_n / zss * self.z
+
+    def apply(self, model, data):
+        data.qfrc_applied[self._d] += self.advance(float(data.qvel[self._d]), self._dt)
+
+
 @register("platen_coulomb")
 def _coulomb(spec, p, where="effect platen_coulomb"):
-    _check_keys(p, {"type", "dof", "force_n", "name", "source"}, where)
+    _check_keys(p, {"type", "dof", "force_n", "presliding_m", "name", "source"}, where)
     f = _num(p, "force_n", where, nonneg=True)
-    j = _platen_joint(spec, p.get("dof", "x"), where)
+    dof = p.get("dof", "x")
+    j = _platen_joint(spec, dof, where)
+    if "presliding_m" in p:  # pre-sliding (Dahl) friction, applied every step instead of the stick constraint
+        return PreslidingFriction(dof=dof, force_n=f, presliding_m=_num(p, "presliding_m", where, positive=True))
     if j is not None:
         j.frictionloss = float(j.frictionloss) + f
     return None

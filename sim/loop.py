@@ -106,6 +106,10 @@ class Simulation:
         """
         self.d = self.tm.new_data()
         self._zfr = np.zeros(len(self.tm.friction_dofs))  # pre-sliding friction states
+        for e in self.tm.step_effects:  # effects with a state (pre-sliding platen friction)
+            reset = getattr(e, "reset", None)
+            if reset is not None:
+                reset()
         if pose is not None:
             self.tm.set_platen_pose(self.d, pose)
         x = self.tm.actuator_strokes(self.d)[None, :]

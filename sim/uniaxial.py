@@ -433,10 +433,17 @@ UCSD_SINES = {"S1": (4, 0.04), "S2": (4, 0.06), "S3": (4, 0.10), "S4": (4, 0.40)
 UCSD_EL_CENTRO = {"EC20": 0.2, "EC100": 1.0, "EC300": 3.0}
 UCSD_WHITE_NOISE = {"WN3": 0.03, "WN5": 0.05, "WN7": 0.07, "WN10": 0.10, "WN13": 0.13}
 G0 = 9.81
+#: Pre-sliding travel of the platen friction (Dahl, ``platen_coulomb`` ``presliding_m``).
+#: calibrated: the WN 3-7 % g least squares (C_e constrained, the report's processing)
+#: returns seed 002's low-amplitude white-noise K_e (2.02 MN/m). Not in ucsd.toml (off by
+#: default): it also moves the periodic identification outside its tolerances and makes
+#: El Centro read a stiffer, less frictional table than the paper found (docs/uniaxial.md).
+UCSD_PRESLIDING_M = 0.4e-3
 
 
-def ucsd_description(pressure_mpa: float = 13.8, path=UCSD_FILE):
-    """The LHPOST description at a hold-down pressure (0, 6.9, 13.8 MPa): K_e and F_mu."""
+def ucsd_description(pressure_mpa: float = 13.8, path=UCSD_FILE, *, presliding_m: float | None = None):
+    """The LHPOST description at a hold-down pressure (0, 6.9, 13.8 MPa): K_e and F_mu;
+    ``presliding_m`` gives the platen friction a pre-sliding travel (e.g. :data:`UCSD_PRESLIDING_M`)."""
     raw = copy.deepcopy(R._raw(path))
     hd = UCSD_HOLD_DOWN[float(pressure_mpa)]
     for e in raw["effect"]:
@@ -444,7 +451,10 @@ def ucsd_description(pressure_mpa: float = 13.8, path=UCSD_FILE):
             e["stiffness_n_m"] = hd["K_e"]
         elif e["type"] == "platen_coulomb":
             e["force_n"] = 4.1e3 + 0.0039 * hd["F_z"]
-    return parse_table(raw, f"{path} [hold-down {pressure_mpa:g} MPa]")
+            if presliding_m is not None:
+                e["presliding_m"] = float(presliding_m)
+    tag = "" if presliding_m is None else f", pre-sliding {presliding_m * 1e3:g} mm"
+    return parse_table(raw, f"{path} [hold-down {pressure_mpa:g} MPa{tag}]")
 
 
 def ucsd_motion(name: str, fs: float = 1024.0, *, cycles: float = 2.0, wn_duration_s: float = 30.0, seed: int = 0):
@@ -600,11 +610,11 @@ def ucsd_measure(res, desc, sensors: SensorModel | None = None, seed: int = 0, *
 
 
 def ucsd_run_test(name: str, pressure_mpa: float = 13.8, *, seed: int = 0, sensors: SensorModel | None = None,
-                  cycles: float = 2.0, out_dir=None) -> dict:
+                  cycles: float = 2.0, out_dir=None, presliding_m: float | None = None) -> dict:
     """Simulate one test on the LHPOST model and measure it (optionally write a run file)."""
     from sim.loop import Reference, Simulation
 
-    desc = ucsd_description(pressure_mpa)
+    desc = ucsd_description(pressure_mpa, presliding_m=presliding_m)
     tm = build(desc)
     simu = Simulation(tm)
     mo = ucsd_motion(name, simu.gains.rate_hz, cycles=cycles, seed=seed)
@@ -653,11 +663,12 @@ def write_measured_run(meas: dict, desc, name: str, out_dir):
 
 
 def ucsd_programme(names=None, pressure_mpa: float = 13.8, *, workers: int = 2, seed: int = 0, out_dir=None,
-                   cycles: float = 2.0) -> list[dict]:
+                   cycles: float = 2.0, presliding_m: float | None = None) -> list[dict]:
     names = names or ucsd_tests()
     from functools import partial
 
-    fn = partial(ucsd_run_test, pressure_mpa=pressure_mpa, seed=seed, out_dir=out_dir, cycles=cycles)
+    fn = partial(ucsd_run_test, pressure_mpa=pressure_mpa, seed=seed, out_dir=out_dir, cycles=cycles,
+                 presliding_m=presliding_m)
     if workers <= 1:
         return [fn(n) for n in names]
     from concurrent.futures import ProcessPoolExecutor

@@ -98,3 +98,58 @@ def test_identification_of_simulated_periodic_and_white_noise_tests():
     assert wn.M_e_kg == pytest.approx(144e3, rel=0.02)
     assert wn.K_e_N_per_m == pytest.approx(1.263e6, rel=0.03)
     assert wn.F_mu_N == pytest.approx(4.1e3 + 0.0039 * 5.783e6, rel=0.02)
+
+
+def test_presliding_platen_friction_law():
+    """The platen_coulomb effect with presliding_m (Dahl): a spring F_mu/delta for travels
+    much smaller than delta, F_mu after a travel of many delta, bounded at any v dt, and
+    the MuJoCo stick constraint replaced (no frictionloss on the slide), reset by the loop."""
+    from sim.effects import PreslidingFriction
+    from sim.loop import Simulation
+
+    fc, delta, dt = 26.65e3, 0.4e-3, 1 / 2048
+    e = PreslidingFriction(dof="x", force_n=fc, presliding_m=delta)
+    amp, w, x, err = 5e-6, 2 * math.pi * 2.0, 0.0, 0.0
+    for k in range(2048):  # 5 um at 2 Hz (travel 1/40 of delta): a spring of fc / delta
+        v = amp * w * math.cos(w * (k + 0.5) * dt)
+        f = e.advance(v, dt)
+        x += v * dt
+        err = max(err, abs(f + fc / delta * x))
+    assert err < 0.03 * fc / delta * amp
+    e.reset()
+    for _ in range(200):  # 10 cm/s for 0.1 s = 10 mm = 25 delta
+        f = e.advance(0.1, dt)
+    assert f == pytest.approx(-fc, rel=1e-9)
+    assert e.advance(-1e3, dt) == pytest.approx(fc, rel=1e-9)  # a huge step stays bounded
+    tm = build(U.ucsd_description(13.8, presliding_m=delta))
+    j = tm.model.joint("platen_x")
+    assert float(j.frictionloss[0]) == 0.0
+    (pf,) = [s for s in tm.step_effects if isinstance(s, PreslidingFriction)]
+    pf.z = 1e-4
+    Simulation(tm)  # reset() on construction
+    assert pf.z == 0.0
+
+
+def test_presliding_reproduces_the_low_amplitude_white_noise_stiffness():
+    """Seed 002: low-level white noise (3-7 % g rms) gives the right M_e (143.6 t) but
+    K_e 2.02 MN/m, +60 % on the periodic 1.263; 10-13 % g gives 1.405 (+11 %). With the
+    platen friction's pre-sliding travel (UCSD_PRESLIDING_M, calibrated on the 3-7 % g set
+    alone) the model reproduces the first and predicts the second: at 3-7 % g most
+    excursions between reversals are shorter than 2 delta, the friction stays elastic
+    and the least squares reads it as stiffness. Same processing as the periodic test."""
+    names = ["WN3", "WN5", "WN7", "WN10", "WN13"]
+    res = U.ucsd_programme(names, workers=2, presliding_m=U.UCSD_PRESLIDING_M)
+    recs = {r.name: I.prepare(r, accel_lowpass_hz=100.0, deadband_m_s=U.UCSD_DEADBAND_M_S)
+            for r in U.ucsd_records(res)}
+    low = I.identify([recs[n] for n in names[:3]], 0.5, ce_fixed=45.9e3)
+    high = I.identify([recs[n] for n in names[3:]], 0.5, ce_fixed=45.9e3)
+    low_u = I.identify([recs[n] for n in names[:3]], 0.5)
+    print(low.as_dict(), high.as_dict(), low_u.as_dict())
+    assert low.M_e_kg == pytest.approx(143.6e3, rel=0.02)
+    assert high.M_e_kg == pytest.approx(144.0e3, rel=0.02)
+    assert low.K_e_N_per_m == pytest.approx(2.024e6, rel=0.03)          # calibrated on this set
+    assert low.K_e_N_per_m > 1.5 * 1.263e6                               # well above the periodic K_e
+    assert high.K_e_N_per_m == pytest.approx(1.405e6, rel=0.05)         # predicted (not calibrated on)
+    assert 1.05 * 1.263e6 < high.K_e_N_per_m < low.K_e_N_per_m          # the smaller the level, the larger the error
+    # the paper's unconstrained white-noise friction (14.1-14.6 kN) is far below the periodic 26.5
+    assert low_u.F_mu_N < 0.7 * 26.5e3
