@@ -424,6 +424,8 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         top.raw(k)
     if top.has("controller"):
         top.raw("controller")
+    if top.has("calibration"):
+        top.raw("calibration")  # read by mjcf/calibrate.py (validated there)
     fmodel, fpre = "coulomb", 1e-4
     if top.has("friction"):
         fr = top.sub("friction")

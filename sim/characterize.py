@@ -726,10 +726,18 @@ CAL_CLASSES = ("longitudinal", "lateral", "vertical")
 CAL_CLASS_DOF = {"longitudinal": "x", "lateral": "y", "vertical": "z"}
 
 
-def _with_values(desc, dead: dict | None = None, seal: dict | None = None):
+def _with_values(desc, dead: dict | None = None, seal: dict | None = None, masses: dict | None = None,
+                 offset: dict | None = None):
     from mjcf.description import parse_table
 
     raw = copy.deepcopy(desc.raw)
+    if masses:
+        raw["platen"]["mass_kg"] = float(masses["platen.mass_kg"])
+        raw["platen"]["inertia_kg_m2"] = [float(masses[f"platen.inertia_kg_m2[{i}]"]) for i in range(3)]
+        raw["actuator_class"]["lateral"]["rod_mass_kg"] = float(masses["actuator_class.lateral.rod_mass_kg"])
+        raw["supports"]["piston_mass_kg"] = float(masses["supports.piston_mass_kg"])
+    if offset is not None:
+        raw.setdefault("calibration", {})["effective_mass_offset"] = [float(offset[d]) for d in DOFS]
     for c, v in (dead or {}).items():
         raw["actuator_class"][c]["dead_volume_a_m3"] = float(v)
         raw["actuator_class"][c]["dead_volume_b_m3"] = float(v)
@@ -760,22 +768,39 @@ def _fit_dead_volumes(desc, targets: dict) -> dict:
     return dict(zip(CAL_CLASSES, np.exp(x).tolist()))
 
 
-def calibrate(table: str, *, quick: bool = False, workers: int | None = None, progress=None) -> dict:
-    """Choose dead volumes and seal friction per class from virtual tests (one
-    correction pass); returns the values and the before/after figures."""
+def calibrate(table: str, *, quick: bool = False, workers: int | None = None, progress=None,
+              masses: bool = True) -> dict:
+    """Choose the moving masses (effective-mass tests, Table 2), dead volumes (oil
+    columns, Table 1) and seal friction per class (friction tests) from virtual tests
+    (one correction pass); returns the values and the before/after figures."""
+    import mjcf
+    from mjcf.calibrate import calibrate_masses
+
     desc, _ = load_inputs(table, None)
     dur = QUICK if quick else FULL
     cap = capability(desc)
     # 1. virtual tests at the current values
-    jobs = programme_jobs(desc, None, dur, parts=("oil", "friction"), friction_dofs=("x", "y", "z"))
+    parts = ("oil", "mass", "friction") if masses else ("oil", "friction")
+    jobs = programme_jobs(desc, None, dur, parts=parts, friction_dofs=("x", "y", "z"))
     res0 = summarize(run_jobs(jobs, workers, progress), desc, None)
-    lin0 = linear_oil_columns(desc)
+    rigid0 = mjcf.build(desc).effective_mass()
+    lin_meas = linear_oil_columns(desc)
+    mass_cal, offset = None, None
+    if masses:
+        # the virtual tests read the rigid-body effective mass minus the parallel
+        # stiffness over the band (-K/w^2, see mjcf/calibrate.py); that offset is nearly
+        # independent of the masses, so the rigid-body targets are Table 2 plus it
+        offset = {d: rigid0[d] - res0["effective_mass"][d] for d in DOFS}
+        mass_cal = calibrate_masses(desc, targets={d: PAPER_EFFECTIVE_MASS[d] + offset[d] for d in DOFS})
+        desc = _with_values(desc, masses=mass_cal["values"], offset=offset)
+    rigid1 = mjcf.build(desc).effective_mass()
     # what the measured peak has beyond the linearised oil column is taken as a stiffness
     # in parallel (the sticking friction contacts' pre-sliding stiffness, the supports):
     # f_meas^2 = f_lin^2 + c, so the linear target is sqrt(f_paper^2 - c). (A ratio
     # f_meas / f_lin held fixed overshoots: pass 2 moved the lateral dead volume back
     # by half of pass 1's step.)
-    extra = {d: res0["oil_column_hz"][d] ** 2 - lin0[d] ** 2 for d in DOFS}
+    # c = K_par / M: scaled to the new masses
+    extra = {d: (res0["oil_column_hz"][d] ** 2 - lin_meas[d] ** 2) * rigid0[d] / rigid1[d] for d in DOFS}
     targets = {d: math.sqrt(max(PAPER_OIL_COLUMN_HZ[d] ** 2 - extra[d], 0.25 * PAPER_OIL_COLUMN_HZ[d] ** 2))
                for d in DOFS}
     dead = _fit_dead_volumes(desc, targets)
@@ -793,8 +818,10 @@ def calibrate(table: str, *, quick: bool = False, workers: int | None = None, pr
         old = float(desc.raw["actuator_class"][c]["seal_friction_n"])
         seal[c] = max(0.0, old + (target - res0["friction_force"][dof]) / gain)
     new = _with_values(desc, dead, seal)
-    return {"dead_volume_m3": dead, "seal_friction_n": seal, "before": res0, "linear_before": lin0,
-            "linear_after": linear_oil_columns(new), "linear_targets": targets, "description": new}
+    return {"dead_volume_m3": dead, "seal_friction_n": seal, "before": res0, "linear_before": lin_meas,
+            "linear_after": linear_oil_columns(new), "linear_targets": targets, "description": new,
+            "masses": mass_cal, "effective_mass_offset": offset, "rigid_effective_mass_before": rigid0,
+            "rigid_effective_mass_after": rigid1}
 
 
 def write_calibration(path: str | Path, cal: dict) -> None:
@@ -827,3 +854,7 @@ def write_calibration(path: str | Path, cal: dict) -> None:
     tmp = Path(str(path) + ".tmp")
     tmp.write_text("\n".join(lines))
     tmp.replace(path)
+    if cal.get("masses"):
+        from mjcf.calibrate import NOTE_TESTS, write_calibrated
+
+        write_calibrated(Path(path), cal["masses"], note=NOTE_TESTS, offset=cal["effective_mass_offset"])

@@ -68,7 +68,10 @@ def _calibrate(args, show) -> int:
     out = {"dead_volume_m3": cal["dead_volume_m3"], "seal_friction_n": cal["seal_friction_n"],
            "oil_column_hz_before": cal["before"]["oil_column_hz"],
            "friction_fraction_before": cal["before"].get("friction_fraction"),
-           "linear_oil_column_hz_after": cal["linear_after"], "written": str(desc.source)}
+           "linear_oil_column_hz_after": cal["linear_after"], "written": str(desc.source),
+           "effective_mass_before": cal["before"].get("effective_mass"),
+           "effective_mass_offset": cal.get("effective_mass_offset"),
+           "masses": cal["masses"]["values"] if cal.get("masses") else None}
     if args.json:
         print(json.dumps(C._jsonable(out), indent=2))
         return 0
@@ -77,6 +80,13 @@ def _calibrate(args, show) -> int:
         print(f"  actuator_class.{c}.dead_volume_a/b_m3 = {v:.4e}")
     for c, v in cal["seal_friction_n"].items():
         print(f"  actuator_class.{c}.seal_friction_n = {v:.1f}")
+    if cal.get("masses"):
+        print("  effective mass (t, t m^2): Table 2 / virtual tests before / rigid-body before -> after")
+        for d in C.DOFS:
+            print(f"    {d:3s} {C.PAPER_EFFECTIVE_MASS[d] / 1e3:8.2f} / {cal['before']['effective_mass'][d] / 1e3:8.2f}"
+                  f" / {cal['rigid_effective_mass_before'][d] / 1e3:8.2f} -> {cal['rigid_effective_mass_after'][d] / 1e3:8.2f}")
+        for k, v in cal["masses"]["values"].items():
+            print(f"  {k} = {v:.2f}")
     print("  written to " + str(desc.source) + "; run `shaketable characterize " + args.table + "` to confirm")
     return 0
 

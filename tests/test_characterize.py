@@ -50,16 +50,21 @@ def test_oil_column_peaks_are_damped(quick):
     assert np.all((z > 0.01) & (z < 0.15))
 
 
-_PRESLIDING_MASS = pytest.mark.xfail(strict=True, reason=(
-    "1 mm pre-sliding friction: its stiffness reads as negative mass in the in-phase estimate; "
-    "z at R2 -2.0 % quick / -2.1 % full (see docs/characterization.md)"))
-
-
-@pytest.mark.parametrize("dof", ["x", "y", pytest.param("z", marks=_PRESLIDING_MASS)])
-@pytest.mark.parametrize("level", ["R2"])  # R1: z -3.1 %, not met (x, y -1.6 / -1.8 % in the full run)
-def test_translational_effective_mass_within_2_percent(quick, dof, level):
+@pytest.mark.parametrize("dof", list(C.DOFS))
+@pytest.mark.parametrize("level", ["R1", "R2"])
+def test_effective_mass_within_2_percent(quick, dof, level):
+    """Table 2 from the virtual tests at both levels (the masses are calibrated against the
+    tests' mean; the R1/R2 difference is the model's own)."""
     s, _ = quick
     assert s["effective_mass_levels"][level][dof] == pytest.approx(C.PAPER_EFFECTIVE_MASS[dof], rel=0.02)
+
+
+def test_effective_mass_same_at_both_levels(quick):
+    """The paper finds one mass for R1 and R2: the level dependence stays small."""
+    s, _ = quick
+    for d in C.DOFS:
+        r1, r2 = s["effective_mass_levels"]["R1"][d], s["effective_mass_levels"]["R2"][d]
+        assert abs(r2 / r1 - 1) < 0.02, (d, r1, r2)
 
 
 def test_servovalve_second_order_fit(quick):
@@ -87,6 +92,23 @@ def test_friction_loops_are_rectangular(quick, d):
     """Coulomb loops: the half-width is nearly constant along the stroke (x may grow)."""
     s, _ = quick
     assert 0.85 < s["friction_outer_over_inner"][d] < 1.2
+
+
+def test_vertical_loop_is_shaped_by_the_support_air_chambers(quick):
+    """The z friction loop is tilted by the air chambers' compression/suction: the fitted
+    loop stiffness is the supports' air-spring stiffness sum n p0 A^2 / V (closed form, at
+    the preload that carries the dead weight); the horizontal loops are not tilted."""
+    import mjcf
+
+    s, _ = quick
+    desc, _ = C.load_inputs("cgs", None)
+    sp = desc.supports
+    loads = mjcf.build(desc).info.support_loads_n
+    k_air = float(sum(sp.polytropic_exponent * (f / sp.piston_area_m2) * sp.piston_area_m2 ** 2
+                      / sp.chamber_volume_m3 for f in loads))
+    k = s["friction_loop_stiffness"]
+    assert k["z"] == pytest.approx(k_air, rel=0.10), (k["z"], k_air)
+    assert abs(k["x"]) < 0.05 * k_air and abs(k["y"]) < 0.05 * k_air
 
 
 def test_linear_estimate_is_close_to_the_virtual_test(quick):
