@@ -433,7 +433,7 @@ def summarize(results: list[dict], desc, payload) -> dict:
         s["capability"] = cap
         s["friction_force"] = {r["dof"]: r["fit"]["coulomb"] for r in fr}
         s["friction_fraction"] = {r["dof"]: r["fit"]["coulomb"] / cap[r["dof"]] for r in fr}
-        growth = {}
+        growth, mid = {}, {}
         for r in fr:
             hw = np.asarray(r["loop"]["half_width"])
             dd = np.asarray(r["loop"]["d"])
@@ -441,7 +441,12 @@ def summarize(results: list[dict], desc, payload) -> dict:
             inner = np.nanmean(hw[np.abs(dd) < 0.4 * amp])
             outer = np.nanmean(hw[np.abs(dd) > 0.8 * amp])
             growth[r["dof"]] = float(outer / inner) if inner else float("nan")
+            mid[r["dof"]] = float(inner)
         s["friction_outer_over_inner"] = growth
+        # the other reading of a rectangular loop: its half-height at mid-stroke (the
+        # least-squares Coulomb term above is the reported figure; a loop rounded at the
+        # ends gives part of its friction to the fit's viscous term)
+        s["friction_midstroke_fraction"] = {d: v / cap[d] for d, v in mid.items()}
         s["friction_loop_stiffness"] = {r["dof"]: r["fit"]["stiffness"] for r in fr}
     hr = [r for r in results if r["kind"] == "harmonic" and not r.get("incomplete")]
     if hr:
@@ -637,11 +642,15 @@ def write_report(out: Path, summary: dict, rows: list[dict], figures: list[str])
     if summary.get("friction_fraction"):
         L += ["## Friction", "",
               "Capability per DOF = supply pressure x sum_i A_i |J_ik| (every actuator at full pressure).", "",
-              "| DOF | friction | capability | fraction | outer/inner loop half-width |", "|---|---|---|---|---|"]
+              "Fraction: the least-squares Coulomb term (F = m a + k d + c v + F0 + Fc sign(v)); mid-stroke: "
+              "the loop's half-height where |d| < 0.4 of the amplitude, for comparison.", "",
+              "| DOF | friction | capability | fraction | mid-stroke half-height | outer/inner loop half-width |",
+              "|---|---|---|---|---|---|"]
         for d, v in summary["friction_fraction"].items():
             u = "kN" if d in ("x", "y", "z") else "kN m"
             L.append(f"| {d} | {summary['friction_force'][d] / 1e3:.2f} {u} | {summary['capability'][d] / 1e3:.0f} {u} "
-                     f"| {100 * v:.2f} % | {summary['friction_outer_over_inner'][d]:.3f} |")
+                     f"| {100 * v:.2f} % | {100 * summary['friction_midstroke_fraction'][d]:.2f} % "
+                     f"| {summary['friction_outer_over_inner'][d]:.3f} |")
         L.append("")
     if summary.get("servovalve"):
         sv = summary["servovalve"]
