@@ -28,6 +28,18 @@ def test_rigid_body_effective_mass_matches_its_calibration_target(cgs, cgs_desc,
     assert 0.0 <= mass_offset(cgs_desc)[dof] < 0.15 * TABLE2[dof]
 
 
+def test_formula_calibration_is_a_fixed_point(cgs_desc):
+    """`shaketable calibrate cgs` (the linear solve from Table 2 plus the recorded offset)
+    gives back the masses written by `characterize --calibrate`: the two commands agree."""
+    from mjcf.calibrate import calibrate_masses
+
+    res = calibrate_masses(cgs_desc)
+    assert res["values"]["platen.mass_kg"] == pytest.approx(cgs_desc.platen.mass_kg, rel=1e-3)
+    for i in range(3):
+        assert res["values"][f"platen.inertia_kg_m2[{i}]"] == pytest.approx(cgs_desc.platen.inertia_kg_m2[i], rel=1e-3)
+    assert res["values"]["supports.piston_mass_kg"] == pytest.approx(cgs_desc.supports.piston_mass_kg, rel=1e-2)
+
+
 def test_mass_offset_bad_input_is_one_line(cgs_desc):
     from mjcf.calibrate import mass_offset
     from mjcf.description import DescriptionError
