@@ -53,6 +53,8 @@ def cmd_characterize(args) -> int:
     if s["failed_tests"]:
         for f in s["failed_tests"]:
             print(f"  test did not complete: {f}")
+    if s["payload"]:
+        print("  (with a payload the paper's numbers are the bare table's: the differences are the payload's effect)")
     print(f"  wrote {args.out}/characterization.json and {args.out}/report.md")
     return 0
 

@@ -160,3 +160,14 @@ def test_calibrate_command_restores_perturbed_unknowns(tmp_path):
     assert text.count("calibrated: matches Table 1 (shaketable characterize --calibrate)") == 6
     assert "calibrated: matches Table 2 in the virtual R1/R2 tests" in text
     assert text.count("\n#") == src.read_text().count("\n#")  # comment lines kept
+
+
+def test_payload_comparison_is_not_graded_against_the_bare_table():
+    """With a payload the paper's numbers are the bare table's: the rows say so and carry no
+    pass/fail (the drop is the payload's effect); bare-table rows are graded."""
+    fake = {"oil_column_hz": {d: 0.8 * v for d, v in C.PAPER_OIL_COLUMN_HZ.items()},
+            "effective_mass_levels": {"R1": {d: 1.5 * v for d, v in C.PAPER_EFFECTIVE_MASS.items()}}}
+    rows = C.compare(dict(fake, payload="rigid_20t"))
+    assert rows and all(r["within"] is None and "bare table" in r["quantity"] for r in rows)
+    rows = C.compare(dict(fake, payload=None))
+    assert all(r["within"] is False for r in rows)
