@@ -265,6 +265,24 @@ def fit_first_order(f, H, band: tuple[float, float] = (0.5, 20.0), *, fix_gain: 
     return {"K": float(K), "tau_s": float(abs(tau)), "rms_rel_error": e}
 
 
+def fit_first_order_magnitude(f, H, band: tuple[float, float] = (0.5, 125.0)) -> dict:
+    """1/(tau s + 1) fitted to |H| alone over ``band`` (linear magnitude, gain 1):
+    {"tau_s", "rms_error"}. Another reading of a first-order valve fit, for comparison
+    with :func:`fit_first_order` (complex, over the band where the phase holds)."""
+    f = np.asarray(f, float)
+    H = np.asarray(H)
+    sel = (f >= band[0]) & (f <= band[1]) & np.isfinite(H)
+    if sel.sum() < 2:
+        raise ValueError(f"band {band} holds too few bins for the fit")
+    fs_, mag = f[sel], np.abs(H[sel])
+
+    def res(p):
+        return np.abs(first_order(fs_, 1.0, p[0])) - mag
+
+    sol = scipy.optimize.least_squares(res, [0.005], method="lm")
+    return {"tau_s": float(abs(sol.x[0])), "rms_error": float(np.sqrt(np.mean(sol.fun ** 2)))}
+
+
 def fit_second_order(f, H, band: tuple[float, float] = (0.5, 50.0), *, fix_gain: bool = False) -> dict:
     """K w^2/(s^2 + 2 zeta w s + w^2) fitted over ``band``: {"K", "wn_hz", "zeta", ...}."""
     x0 = [40.0, 0.7] if fix_gain else [1.0, 40.0, 0.7]
@@ -274,4 +292,5 @@ def fit_second_order(f, H, band: tuple[float, float] = (0.5, 50.0), *, fix_gain:
 
 
 __all__ = ["FRF", "Peak", "FrictionFit", "frf", "peak_pick", "band_average", "friction_fit", "hysteresis_loop",
-           "first_order", "second_order", "zero_order_hold", "fit_first_order", "fit_second_order"]
+           "first_order", "second_order", "zero_order_hold", "fit_first_order", "fit_first_order_magnitude",
+           "fit_second_order"]
