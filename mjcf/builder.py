@@ -120,6 +120,7 @@ class BuildInfo:
     step_effects: list = field(default_factory=list)  #: effects applied every physics step
     friction_joints: list[str] = field(default_factory=list)  #: joints whose friction the loop applies
     friction_force_n: list[float] = field(default_factory=list)  #: their Coulomb levels (N or N m)
+    air_joints: list[str] = field(default_factory=list)  #: support joints whose nonlinear air law the loop adds
 
 
 def build_spec(desc: TableDescription, payload: Payload | None = None,
@@ -450,6 +451,8 @@ def build(desc: TableDescription, payload: Payload | None = None,
             j.stiffness = [k, 0, 0]
             j.springref = f / k
         info.support_loads_n = loads
+        if sp.air_law == "polytropic":
+            info.air_joints = [f"S{i}_air" for i in range(1, len(loads) + 1)]
     if desc.foundation.mode == "spring":
         # The foundation spring carries the whole weight at home.
         jz = spec.joint("foundation_z")

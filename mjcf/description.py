@@ -195,6 +195,9 @@ class Supports:
     shoe_friction_n: float
     piston_radius_m: float
     piston_length_m: float
+    #: "polytropic": the chamber force p0 A (V0 / (V0 + A q))^n (MuJoCo carries its linear
+    #: part as the joint spring, the loop adds the rest); "linear": the joint spring alone
+    air_law: str = "polytropic"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -397,6 +400,7 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
             shoe_friction_n=s.num("shoe_friction_n", nonneg=True),
             piston_radius_m=s.num("piston_radius_m", positive=True),
             piston_length_m=s.num("piston_length_m", positive=True),
+            air_law=s.text("air_law", "polytropic", choices=("polytropic", "linear")),
         )
         s.done()
 

@@ -75,6 +75,16 @@ class TableModel:
         self.friction_dofs = np.array([m.jnt_dofadr[jid(n)] for n in fj], dtype=np.int64)
         self.friction_force = np.array(getattr(self.info, "friction_force_n", []), dtype=float)
         self.friction_presliding_m = self.desc.friction_presliding_m
+        # static supports' air chambers beyond their linear part (sim._fastloop.air_springs):
+        # preload F0, A / V0 and the exponent n per support
+        aj = list(getattr(self.info, "air_joints", []))
+        self.air_qadr = np.array([m.jnt_qposadr[jid(n)] for n in aj], dtype=np.int64)
+        self.air_dadr = np.array([m.jnt_dofadr[jid(n)] for n in aj], dtype=np.int64)
+        loads = np.asarray(getattr(self.info, "support_loads_n", np.zeros(0)), dtype=float)
+        self.air_preload = loads[:len(aj)].copy() if aj else np.zeros(0)
+        sp = self.desc.supports
+        self.air_area_over_volume = sp.piston_area_m2 / sp.chamber_volume_m3 if aj else 0.0
+        self.air_exponent = sp.polytropic_exponent if aj else 1.0
         self.step_effects = list(getattr(self.info, "step_effects", []))
         for e in self.step_effects:
             e.bind(m)

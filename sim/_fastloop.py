@@ -36,11 +36,26 @@ def pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, he
 
 @numba.njit(**_OPTS)
 def pre_step_friction(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, head, P, G,
-                      qfa, fr_dofs, fr_fc, zfr, zss, dt):
-    """:func:`pre_step` plus the pre-sliding friction into ``qfrc_applied`` (zeroed first)."""
+                      qfa, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an):
+    """:func:`pre_step` plus the pre-sliding friction and the air springs' nonlinear part
+    into ``qfrc_applied`` (zeroed first)."""
     pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, head, P, G)
     qfa[:] = 0.0
     presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt)
+    air_springs(qpos, qfa, aq, ad, aF0, ac, an)
+
+
+@numba.njit(**_OPTS)
+def air_springs(qpos, qfrc_applied, aq, ad, F0, c, n):
+    """The static supports' air chambers beyond their linearisation.
+
+    Chamber force at support displacement q (up = chamber expands): F0 (1 + c q)^-n with
+    c = A / V0 (polytropic gas, preload F0 at home). MuJoCo's joint spring carries
+    F0 - n F0 c q; this adds F0 ((1 + c q)^-n - 1 + n c q), second order in q (compression
+    stiffens, suction softens the support)."""
+    for i in range(aq.shape[0]):
+        x = c * qpos[aq[i]]
+        qfrc_applied[ad[i]] += F0[i] * ((1.0 + x) ** (-n) - 1.0 + n * x)
 
 
 @numba.njit(**_OPTS)
@@ -79,13 +94,14 @@ def presliding_friction(qvel, qfrc_applied, dofs, fc, z, zss, dt):
 @numba.njit(**_OPTS)
 def tick_first_step(k, qpos, qvel, xmat, ctrl, qfa, Q, V, H_spool, H_force, H_pa, H_pb, H_cmd, E_ps, E_gas,
                     s_ref_all, v_ref_all, vff_all, qa, da, ids, pd, pb, consts, J, Jp, N, gains, cstate, pl_hp,
-                    pl_prev, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, fr_dofs, fr_fc, zfr, zss, dt):
+                    pl_prev, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac,
+                    an):
     """Everything between two ``mj_step`` calls at the start of controller tick ``k``, in
     one compiled call (each call from Python costs ~1 us plus ~0.1 us per argument):
     :func:`record`, the controller tick (:func:`sim.controller._tick_state`) into
     ``cmd2`` and its row of ``H_cmd``, then :func:`pre_step` and, with friction
-    coordinates, :func:`presliding_friction`. Same operations in the same order as the
-    separate calls, so the results are identical."""
+    coordinates, :func:`presliding_friction` and, with supports, :func:`air_springs`. Same
+    operations in the same order as the separate calls, so the results are identical."""
     record(k, qpos, qvel, Q, V, X, Y, L.SPOOL, L.FORCE, L.PA, L.PB, H_spool, H_force, H_pa, H_pb, L.PS, L.GASV,
            E_ps, E_gas)
     cmd = cmd2[0]
@@ -93,26 +109,28 @@ def tick_first_step(k, qpos, qvel, xmat, ctrl, qfa, Q, V, H_spool, H_force, H_pa
                J, Jp, N, gains, cstate, pl_hp, pl_prev, cmd)
     H_cmd[k, :] = cmd
     pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, 0, P, G)
-    if fr_dofs.shape[0]:
+    if fr_dofs.shape[0] or aq.shape[0]:
         qfa[:] = 0.0
         presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt)
+        air_springs(qpos, qfa, aq, ad, aF0, ac, an)
 
 
 @numba.njit(**_OPTS)
 def later_step(k, qpos, qvel, qacc, ctrl, qfa, ACC, pd, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G,
-               fr_dofs, fr_fc, zfr, zss, dt):
+               fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an):
     """The pre-step of a tick's later physics steps; on the second one (``k >= 0``) it
     first records the platen acceleration of the tick's first step (still in ``qacc``)."""
     if k >= 0:
         for r in range(6):
             ACC[k, r] = qacc[pd + r]
     pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, 0, P, G)
-    if fr_dofs.shape[0]:
+    if fr_dofs.shape[0] or aq.shape[0]:
         qfa[:] = 0.0
         presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt)
+        air_springs(qpos, qfa, aq, ad, aF0, ac, an)
 
 
-__all__ = ["presliding_friction", "pre_step_friction", "pre_step", "record", "loop_gap", "all_finite",
+__all__ = ["presliding_friction", "air_springs", "pre_step_friction", "pre_step", "record", "loop_gap", "all_finite",
            "tick_first_step", "later_step"]
 
 

@@ -125,6 +125,12 @@ class Simulation:
         z[moving] = target[moving] + (z[moving] - target[moving]) * np.exp(-np.abs(v[moving]) * self.dt / zss)
         qfa[dofs] += -fc / zss * z
 
+    @staticmethod
+    def _air_numpy(qpos, qfa, aq, ad, F0, c, n):
+        """Reference (numpy) version of :func:`sim._fastloop.air_springs`."""
+        x = c * qpos[aq]
+        qfa[ad] += F0 * ((1.0 + x) ** (-n) - 1.0 + n * x)
+
     def static_forces(self) -> np.ndarray:
         """Actuator forces (n_act,) that hold the home pose against gravity with the
         supports at their preload (zero when the supports carry everything)."""
@@ -222,6 +228,9 @@ class Simulation:
         effects = tm.step_effects
         fr_dofs, fr_fc, fr_zss = tm.friction_dofs, tm.friction_force, tm.friction_presliding_m
         nfr = len(fr_dofs)
+        air = (tm.air_qadr, tm.air_dadr, tm.air_preload, float(tm.air_area_over_volume), float(tm.air_exponent))
+        nair = len(tm.air_qadr)
+        nq = nfr or nair  # qfrc_applied written by the loop every step
         zfr = self._zfr
         qfa = d.qfrc_applied
         fused = fast and hs.delay_steps == 0 and hs.backend == "numba"  # one compiled call per step
@@ -234,7 +243,7 @@ class Simulation:
             first, later = FL.tick_first_step, FL.later_step
             g = ctrl.kernel_args()
             hyd_args = (qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS, hs._buf, hs._P, hs._G,
-                        fr_dofs, fr_fc, zfr, fr_zss, self.dt)
+                        fr_dofs, fr_fc, zfr, fr_zss, self.dt) + air
             first_args = (qpos, qvel, xmat, dctrl, qfa, Q, V, Hsp, Hf, Hpa, Hpb, H["valve_command"], Eps, Egas,
                           s_ref_all, v_ref_all, vff_all, qa64, da64, ids64, pd, pb_) + g + hyd_args[3:]
             later_args = (qpos, qvel, qacc, dctrl, qfa, ACC, pd) + hyd_args
@@ -307,10 +316,10 @@ class Simulation:
                 # ---- physics steps of this tick: hydraulics, then mj_step
                 for j in range(spt):
                     t3 = clock()
-                    if fused and nfr:
+                    if fused and nq:
                         FL.pre_step_friction(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y,
                                              hs._IC, hs._ICS, hs._buf, 0, hs._P, hs._G, qfa, fr_dofs, fr_fc, zfr,
-                                             fr_zss, self.dt)
+                                             fr_zss, self.dt, *air)
                     elif fused:
                         FL.pre_step(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS,
                                     hs._buf, 0, hs._P, hs._G)
@@ -319,13 +328,18 @@ class Simulation:
                         v2[0] = qvel[da]
                         f = hs.step(cmd2, x2, v2)
                         dctrl[ids] = f[0]
-                    if not (fused and nfr) and (effects or nfr):
+                    if not (fused and nq) and (effects or nq):
                         qfa[:] = 0.0
                         if nfr:
                             if fast:
                                 FL.presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
                             else:
                                 self._presliding_numpy(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss)
+                        if nair:
+                            if fast:
+                                FL.air_springs(qpos, qfa, *air)
+                            else:
+                                self._air_numpy(qpos, qfa, *air)
                     for e in effects:
                         e.apply(m, d)
                     t4 = clock()

@@ -171,3 +171,32 @@ def test_payload_comparison_is_not_graded_against_the_bare_table():
     assert rows and all(r["within"] is None and "bare table" in r["quantity"] for r in rows)
     rows = C.compare(dict(fake, payload=None))
     assert all(r["within"] is False for r in rows)
+
+
+def _z_loop_curvature(raw: dict) -> float:
+    job = C.programme_jobs(C.load_inputs("cgs", None)[0], None, C.QUICK, parts=("friction",), friction_dofs=("z",))[0]
+    r = C.run_test(dict(job, raw=raw))
+    d = np.asarray(r["loop"]["d"])
+    mid = 0.5 * (np.asarray(r["loop"]["upper"]) + np.asarray(r["loop"]["lower"]))
+    ok = np.isfinite(d) & np.isfinite(mid)
+    return float(np.polyfit(d[ok], mid[ok], 2)[0])
+
+
+def test_vertical_loop_is_curved_by_the_air_law():
+    """Compression stiffens and suction softens the supports: the vertical loop's midline
+    (tilt removed) bends by -sum F0 n (n + 1) / 2 (A / V)^2 (second-order term of
+    F0 (1 + A q / V)^-n), and does not with the linearised law."""
+    import copy
+
+    import mjcf
+
+    desc, _ = C.load_inputs("cgs", None)
+    sp = desc.supports
+    assert sp.air_law == "polytropic"
+    loads = mjcf.build(desc).info.support_loads_n
+    c, n = sp.piston_area_m2 / sp.chamber_volume_m3, sp.polytropic_exponent
+    closed = -float(np.sum(loads)) * n * (n + 1) / 2 * c * c
+    assert _z_loop_curvature(desc.raw) == pytest.approx(closed, rel=0.15)
+    raw = copy.deepcopy(desc.raw)
+    raw["supports"]["air_law"] = "linear"
+    assert abs(_z_loop_curvature(raw)) < 0.25 * abs(closed)

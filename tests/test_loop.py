@@ -251,3 +251,21 @@ def test_presliding_friction_model_compiled_matches_numpy(harmonic):
     FL.presliding_friction(np.array([0.1]), q, np.array([0]), np.array([1000.0]), z, 1e-4, 0.01)
     assert abs(z[0] - 1e-4 * (1 - np.exp(-10))) < 1e-18
     assert abs(q[0] + 1000.0 * (1 - np.exp(-10))) < 1e-9
+
+
+def test_air_spring_kernel_matches_the_polytropic_law():
+    """MuJoCo's joint spring plus sim._fastloop.air_springs = F0 (V0 / (V0 + A q))^n."""
+    from sim import _fastloop as FL
+    from sim.loop import Simulation
+
+    F0, c, n = np.array([1.4e5, 1.2e5]), 0.2827 / 0.4, 1.4
+    for q in (-0.1, -0.02, 0.0, 0.03, 0.1):
+        qpos = np.array([q, -q])
+        qfa = np.zeros(2)
+        FL.air_springs(qpos, qfa, np.array([0, 1], dtype=np.int64), np.array([0, 1], dtype=np.int64), F0, c, n)
+        qfa_np = np.zeros(2)
+        Simulation._air_numpy(qpos, qfa_np, np.array([0, 1]), np.array([0, 1]), F0, c, n)
+        linear = F0 - n * F0 * c * qpos
+        exact = F0 * (1 + c * qpos) ** (-n)
+        assert np.allclose(linear + qfa, exact, rtol=1e-12, atol=1e-9)
+        assert np.array_equal(qfa, qfa_np) or np.allclose(qfa, qfa_np, rtol=1e-15, atol=1e-12)
