@@ -80,6 +80,21 @@ def _with(desc: TableDescription, values) -> TableDescription:
                                actuator_classes=classes, actuators=acts, supports=supports)
 
 
+def values_into_raw(raw: dict, values: dict) -> None:
+    """Write calibrated values (keys as in :func:`calibrate_masses`' ``values``) into a
+    table's raw TOML dict, in place."""
+    for sec, key, idx in PARAMS:
+        v = float(values[f"{sec}.{key}" + (f"[{idx}]" if idx is not None else "")])
+        node = raw
+        for part in sec.split("."):
+            node = node[part]
+        if idx is None:
+            node[key] = v
+        else:
+            node[key] = list(node[key])
+            node[key][idx] = v
+
+
 def _eff(desc):
     from mjcf.builder import build_spec
     from mjcf.analysis import effective_mass_matrix

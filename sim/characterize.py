@@ -751,10 +751,9 @@ def _with_values(desc, dead: dict | None = None, seal: dict | None = None, masse
 
     raw = copy.deepcopy(desc.raw)
     if masses:
-        raw["platen"]["mass_kg"] = float(masses["platen.mass_kg"])
-        raw["platen"]["inertia_kg_m2"] = [float(masses[f"platen.inertia_kg_m2[{i}]"]) for i in range(3)]
-        raw["actuator_class"]["lateral"]["rod_mass_kg"] = float(masses["actuator_class.lateral.rod_mass_kg"])
-        raw["supports"]["piston_mass_kg"] = float(masses["supports.piston_mass_kg"])
+        from mjcf.calibrate import values_into_raw
+
+        values_into_raw(raw, masses)
     if offset is not None:
         raw.setdefault("calibration", {})["effective_mass_offset"] = [float(offset[d]) for d in DOFS]
     for c, v in (dead or {}).items():
