@@ -40,6 +40,13 @@ def pre_step_friction(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS
     """:func:`pre_step` plus the pre-sliding friction and the air springs' nonlinear part
     into ``qfrc_applied`` (zeroed first)."""
     pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, head, P, G)
+    applied_forces(qpos, qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an)
+
+
+@numba.njit(**_OPTS)
+def applied_forces(qpos, qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an):
+    """``qfrc_applied`` of one physics step: zeroed, then :func:`presliding_friction` and
+    :func:`air_springs`."""
     qfa[:] = 0.0
     presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt)
     air_springs(qpos, qfa, aq, ad, aF0, ac, an)
@@ -110,9 +117,7 @@ def tick_first_step(k, qpos, qvel, xmat, ctrl, qfa, Q, V, H_spool, H_force, H_pa
     H_cmd[k, :] = cmd
     pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, 0, P, G)
     if fr_dofs.shape[0] or aq.shape[0]:
-        qfa[:] = 0.0
-        presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt)
-        air_springs(qpos, qfa, aq, ad, aF0, ac, an)
+        applied_forces(qpos, qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an)
 
 
 @numba.njit(**_OPTS)
@@ -125,12 +130,10 @@ def later_step(k, qpos, qvel, qacc, ctrl, qfa, ACC, pd, qa, da, ids, cmd2, x2, v
             ACC[k, r] = qacc[pd + r]
     pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, 0, P, G)
     if fr_dofs.shape[0] or aq.shape[0]:
-        qfa[:] = 0.0
-        presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt)
-        air_springs(qpos, qfa, aq, ad, aF0, ac, an)
+        applied_forces(qpos, qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an)
 
 
-__all__ = ["presliding_friction", "air_springs", "pre_step_friction", "pre_step", "record", "loop_gap", "all_finite",
+__all__ = ["presliding_friction", "air_springs", "applied_forces", "pre_step_friction", "pre_step", "record", "loop_gap", "all_finite",
            "tick_first_step", "later_step"]
 
 

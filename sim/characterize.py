@@ -667,7 +667,7 @@ def write_report(out: Path, summary: dict, rows: list[dict], figures: list[str])
               "| axis | tau (ms) | tau, magnitude fit (ms) | K (1st) | w (Hz) | xi | K (2nd) |",
               "|---|---|---|---|---|---|---|"]
         for d, p in sv["per_axis"].items():
-            L.append(f"| {d} | {1e3 * p['tau_s']:.3f} | {1e3 * p.get('tau_s_magnitude_fit', float('nan')):.3f} "
+            L.append(f"| {d} | {1e3 * p['tau_s']:.3f} | {1e3 * p['tau_s_magnitude_fit']:.3f} "
                      f"| {p['K_first']:.3f} | {p['wn_hz']:.2f} | {p['zeta']:.3f} | {p['K_second']:.3f} |")
         L.append("")
     if summary.get("harmonic"):

@@ -107,6 +107,14 @@ def _spring(spec, p, where="effect platen_spring"):
     return None
 
 
+def dahl_step(z, v, zss: float, dt: float):
+    """The pre-sliding state after one step at velocity ``v`` (Dahl: dz/dt = v - |v| z / zss,
+    advanced exactly for the velocity held; at rest z stays). Scalars or arrays; the
+    numpy reference of ``sim._fastloop.presliding_friction``."""
+    target = np.sign(v) * zss
+    return np.where(v != 0.0, target + (z - target) * np.exp(-np.abs(v) * dt / zss), z)
+
+
 @dataclass
 class PreslidingFriction(StepEffect):
     """Dry friction with pre-sliding on one platen slide: the Dahl law of the
@@ -139,11 +147,8 @@ class PreslidingFriction(StepEffect):
 
     def advance(self, v: float, dt: float) -> float:
         """Advance z over one step at velocity ``v``; returns the friction force."""
-        zss = self.presliding_m
-        if v != 0.0:
-            target = zss if v > 0.0 else -zss
-            self.z = target + (self.z - target) * np.exp(-abs(v) * dt / zss)
-        return -self.force_n / zss * self.z
+        self.z = float(dahl_step(self.z, v, self.presliding_m, dt))
+        return -self.force_n / self.presliding_m * self.z
 
     def apply(self, model, data):
         data.qfrc_applied[self._d] += self.advance(float(data.qvel[self._d]), self._dt)

@@ -240,7 +240,7 @@ def second_order(f, K: float, wn_hz: float, zeta: float) -> np.ndarray:
     return K * w * w / (s * s + 2 * zeta * w * s + w * w)
 
 
-def _fit(model, f, H, band, x0, fix_gain):
+def _fit(model, f, H, band, x0, fix_gain, magnitude=False):
     f = np.asarray(f, float)
     H = np.asarray(H)
     sel = (f >= band[0]) & (f <= band[1]) & np.isfinite(H) & (np.abs(H) > 0)
@@ -250,6 +250,8 @@ def _fit(model, f, H, band, x0, fix_gain):
 
     def res(p):
         pp = (1.0, *p) if fix_gain else p
+        if magnitude:  # linear magnitude only
+            return np.abs(model(fs_, *pp)) - np.abs(Hs)
         r = model(fs_, *pp) / Hs - 1.0
         return np.concatenate([r.real, r.imag])
 
@@ -269,18 +271,8 @@ def fit_first_order_magnitude(f, H, band: tuple[float, float] = (0.5, 125.0)) ->
     """1/(tau s + 1) fitted to |H| alone over ``band`` (linear magnitude, gain 1):
     {"tau_s", "rms_error"}. Another reading of a first-order valve fit, for comparison
     with :func:`fit_first_order` (complex, over the band where the phase holds)."""
-    f = np.asarray(f, float)
-    H = np.asarray(H)
-    sel = (f >= band[0]) & (f <= band[1]) & np.isfinite(H)
-    if sel.sum() < 2:
-        raise ValueError(f"band {band} holds too few bins for the fit")
-    fs_, mag = f[sel], np.abs(H[sel])
-
-    def res(p):
-        return np.abs(first_order(fs_, 1.0, p[0])) - mag
-
-    sol = scipy.optimize.least_squares(res, [0.005], method="lm")
-    return {"tau_s": float(abs(sol.x[0])), "rms_error": float(np.sqrt(np.mean(sol.fun ** 2)))}
+    p, e = _fit(first_order, f, H, band, [0.005], True, magnitude=True)
+    return {"tau_s": float(abs(p[0])), "rms_error": e}
 
 
 def fit_second_order(f, H, band: tuple[float, float] = (0.5, 50.0), *, fix_gain: bool = False) -> dict:

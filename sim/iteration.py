@@ -23,7 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-from sim.loop import Reference
+from mjcf.description import DOFS6 as DOFS
+from sim.loop import Reference, reference_from_motions
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -45,7 +46,6 @@ class IterationSettings:
     noise_duration_s: float = 40.0
     noise_band_hz: tuple[float, float] = (0.3, 45.0)
     seed: int = 0  #: seed of the identification noise
-
 
     @classmethod
     def from_scenario(cls, it: dict) -> "IterationSettings":
@@ -85,21 +85,17 @@ def identify_frf(sim, target: Reference, dofs: list[int], s: IterationSettings) 
     from sim.motions import white_noise
 
     rate = target.rate_hz
-    n = int(round(s.noise_duration_s * rate)) + 1
-    d = np.zeros((n, 6))
-    v = np.zeros((n, 6))
-    a = np.zeros((n, 6))
+    motions = {}
     for i in dofs:
         level = s.noise_level * float(np.sqrt(np.mean(target.a[:, i] ** 2)))
         if not level > 0:
             raise ValueError(f"DOF {i} has a displacement target but no acceleration to scale the noise to")
-        mo = white_noise(duration_s=s.noise_duration_s, sample_rate_hz=rate, band_hz=s.noise_band_hz,
-                         seed=(s.seed, i), rms_acceleration=level)
-        k = min(n, len(mo.d))
-        d[:k, i], v[:k, i], a[:k, i] = mo.d[:k], mo.v[:k], mo.a[:k]
-    t = np.arange(n) / rate
+        motions[DOFS[i]] = white_noise(duration_s=s.noise_duration_s, sample_rate_hz=rate, band_hz=s.noise_band_hz,
+                                       seed=(s.seed, i), rms_acceleration=level)
+    noise = reference_from_motions(motions, rate, s.noise_duration_s)
+    d, n = noise.d, len(noise.t)
     sim.reset()
-    res = sim.run(reference=Reference(t=t, d=d, v=v, a=a))
+    res = sim.run(reference=noise)
     if res.incomplete_reason:
         from sim.errors import ScenarioError
 

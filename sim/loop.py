@@ -38,6 +38,7 @@ from hydraulics import HydraulicParams, HydraulicSystem
 from mjcf.description import actuator_strokes
 from mjcf.model import TableModel
 from sim.controller import ControllerGains, TableController
+from sim.effects import dahl_step
 from sim.errors import DivergenceError, ScenarioError
 
 GAP_LIMIT_M = 1e-3  #: a swivel opening by more than 1 mm means the solve has failed
@@ -119,10 +120,7 @@ class Simulation:
 
     def _presliding_numpy(self, qvel, qfa, dofs, fc, z, zss):
         """Reference (numpy) version of :func:`sim._fastloop.presliding_friction`."""
-        v = qvel[dofs]
-        target = np.sign(v) * zss
-        moving = v != 0.0
-        z[moving] = target[moving] + (z[moving] - target[moving]) * np.exp(-np.abs(v[moving]) * self.dt / zss)
+        z[:] = dahl_step(z, qvel[dofs], zss, self.dt)
         qfa[dofs] += -fc / zss * z
 
     @staticmethod
@@ -247,7 +245,6 @@ class Simulation:
             first_args = (qpos, qvel, xmat, dctrl, qfa, Q, V, Hsp, Hf, Hpa, Hpb, H["valve_command"], Eps, Egas,
                           s_ref_all, v_ref_all, vff_all, qa64, da64, ids64, pd, pb_) + g + hyd_args[3:]
             later_args = (qpos, qvel, qacc, dctrl, qfa, ACC, pd) + hyd_args
-            t_fused = 0.0
         t_ctrl = t_hyd = t_phys = t_out = t_fused = 0.0
         reason = None
         clock = time.perf_counter
