@@ -25,10 +25,11 @@ import mujoco
 import numpy as np
 
 import mjcf
-from sim.loop import Simulation
-from sim.records import el_centro_motions
-from sim.scenario import DOFS
-from sim.loop import Reference
+from sim.loop.simulation import Simulation
+from sim.scenario.records import el_centro_motions
+from sim.scenario.files import DOFS
+from sim.scenario.reference import Reference
+from sim.effects import build_model
 
 SCENES = [("bare", None), ("rigid 20 t", "rigid_20t"), ("3-storey frame", "frame_3storey_297"),
           ("6 m tower", "tower_6m")]
@@ -104,7 +105,7 @@ def main(argv=None) -> int:
           f"{'unfused':>8s} {'ratio*':>6s} {'physics':>8s} {'hydr.':>7s} {'ctrl':>7s} {'output':>7s}  "
           "(us per physics step)")
     for label, payload in SCENES:
-        tm = mjcf.build(desc, mjcf.load_payload(payload) if payload else None)
+        tm = build_model(desc, mjcf.load_payload(payload) if payload else None)
         bare = bare_step_us(tm.model)
         f = loop_figures(tm, ref)
         print(f"{label:16s} {bare:8.1f} {f['wall_per_step_us']:9.1f} {f['wall_per_step_us'] / bare:6.2f} "

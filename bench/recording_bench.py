@@ -23,6 +23,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from sim.effects import build_model
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -63,13 +64,13 @@ def main(argv=None) -> int:
 
         # the recording alone: open (starts the writer) + write_run
         import mjcf
-        from sim import recording
-        from sim.runfile import read_run
+        from sim.report import rerun as recording
+        from sim.runs.runfile import read_run
 
         run_file = out / f"{args.scenario}.run.npz"
         run = read_run(run_file)
         run_size = run_file.stat().st_size
-        tm = mjcf.build(mjcf.load_table(run.meta["table"]),
+        tm = build_model(mjcf.load_table(run.meta["table"]),
                         mjcf.load_payload(run.meta["payload"]) if run.meta.get("payload") else None)
         import rerun  # noqa: F401  (import cost is in the end-to-end figures above)
 

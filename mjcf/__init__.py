@@ -1,8 +1,8 @@
 """MJCF scene of a shaking table, built with ``mujoco.MjSpec`` from one table description."""
 
 from mjcf.builder import BuildOptions, build, build_spec, write_xml
+from mjcf.errors import DescriptionError, MjcfError
 from mjcf.description import (
-    DescriptionError,
     TableDescription,
     actuator_strokes,
     load_payload,
@@ -12,6 +12,6 @@ from mjcf.description import (
 from mjcf.model import TableModel
 
 __all__ = [
-    "BuildOptions", "DescriptionError", "TableDescription", "TableModel", "actuator_strokes",
+    "BuildOptions", "DescriptionError", "MjcfError", "TableDescription", "TableModel", "actuator_strokes",
     "build", "build_spec", "load_payload", "load_table", "rotation_matrix", "write_xml",
 ]

@@ -118,14 +118,22 @@ class BuildInfo:
     payload_joints: list[str] = field(default_factory=list)
     payload_bodies: list[str] = field(default_factory=list)
     step_effects: list = field(default_factory=list)  #: effects applied every physics step
+    effects: list = field(default_factory=list)  #: every effect object (lifecycle run by the loop)
     friction_joints: list[str] = field(default_factory=list)  #: joints whose friction the loop applies
     friction_force_n: list[float] = field(default_factory=list)  #: their Coulomb levels (N or N m)
     air_joints: list[str] = field(default_factory=list)  #: support joints whose nonlinear air law the loop adds
 
 
 def build_spec(desc: TableDescription, payload: Payload | None = None,
-               options: BuildOptions | None = None) -> tuple[mujoco.MjSpec, BuildInfo]:
-    """Build the table's MjSpec (supports not yet preloaded: see :func:`build`)."""
+               options: BuildOptions | None = None, *, effects=None) -> tuple[mujoco.MjSpec, BuildInfo]:
+    """Build the table's MjSpec (supports not yet preloaded: see :func:`build`).
+
+    ``effects``: ``effects(spec, entries, desc) -> (step_effects, effects)`` builds the
+    description's ``[[effect]]`` entries into the spec and returns those applied every
+    physics step and every effect object. ``mjcf`` knows no
+    effects (they live in ``sim.effects``, a layer above): a description that declares
+    effects is built through ``sim.effects.build_model``, which passes it.
+    """
     opt = options or BuildOptions()
     info = BuildInfo()
     spec = mujoco.MjSpec()
@@ -283,9 +291,11 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
 
     _add_payload(spec, platen, payload, info)
     if desc.effects:
-        from sim.effects import build_effects
-
-        info.step_effects = build_effects(spec, list(desc.effects))
+        if effects is None:
+            raise DescriptionError(
+                f"{desc.source}: the description declares [[effect]] entries, which mjcf alone cannot build; "
+                "build it with sim.effects.build_model")
+        info.step_effects, info.effects = effects(spec, list(desc.effects), desc)
     return spec, info
 
 
@@ -417,7 +427,7 @@ def _generalized_eig(K, M):
 
 
 def build(desc: TableDescription, payload: Payload | None = None,
-          options: BuildOptions | None = None):
+          options: BuildOptions | None = None, *, effects=None):
     """Build and compile the table, with the static supports preloaded for equilibrium.
 
     Returns a :class:`mjcf.model.TableModel`. The supports' air springs are given the
@@ -428,7 +438,7 @@ def build(desc: TableDescription, payload: Payload | None = None,
     from mjcf.analysis import support_preloads
     from mjcf.model import TableModel
 
-    spec, info = build_spec(desc, payload, options)
+    spec, info = build_spec(desc, payload, options, effects=effects)
     model = spec.compile()
     if desc.supports is not None:
         sp = desc.supports
@@ -462,7 +472,7 @@ def build(desc: TableDescription, payload: Payload | None = None,
         jz.springref = payload.clamp_mass_fraction * payload.mass_kg * desc.gravity_m_s2 / jz.stiffness[0]
     if desc.friction_model == "presliding":
         # Dry friction leaves MuJoCo's frictionloss (a stiff stick constraint) and is applied
-        # by the loop as a pre-sliding (Dahl/LuGre-type) force; see sim/loop.py.
+        # by the loop as a pre-sliding (Dahl/LuGre-type) force; see sim/loop/simulation.py.
         for j in spec.joints:
             if j.frictionloss > 0:
                 info.friction_joints.append(j.name)

@@ -25,17 +25,26 @@ that offset, so that the *virtual tests* reproduce Table 2 (:func:`mass_targets`
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from pathlib import Path
 
 import numpy as np
 
+from mjcf.description import DOFS6 as DOF_NAMES
 from mjcf.description import DescriptionError, TableDescription, toml_key_index
 
-DOF_NAMES = ("x", "y", "z", "rx", "ry", "rz")
 
-#: Seed 000, Table 2: bare-table effective masses (kg, kg m^2).
-CGS_TABLE2 = {"x": 48.85e3, "y": 49.36e3, "z": 52.50e3, "rx": 208e3, "ry": 217e3, "rz": 354e3}
+def published_effective_mass(desc: TableDescription) -> dict[str, float]:
+    """The measured effective masses of the description's ``[published] effective_mass``
+    (kg for x, y, z; kg m^2 for rx, ry, rz)."""
+    em = (desc.raw.get("published") or {}).get("effective_mass")
+    if not isinstance(em, dict) or set(em) != set(DOF_NAMES) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+            for v in em.values()):
+        raise DescriptionError(f"{desc.source}: mass calibration needs '[published] effective_mass' with a positive "
+                               f"number for each of {', '.join(DOF_NAMES)} (the table's measured effective masses)")
+    return {d: float(em[d]) for d in DOF_NAMES}
 
 PARAMS = (
     ("platen", "mass_kg", None),
@@ -125,8 +134,10 @@ def mass_offset(desc: TableDescription) -> dict[str, float]:
     return dict(zip(DOF_NAMES, arr.tolist()))
 
 
-def mass_targets(desc: TableDescription, measured: dict[str, float] = CGS_TABLE2) -> dict[str, float]:
-    """Rigid-body effective masses that make the virtual tests read ``measured``."""
+def mass_targets(desc: TableDescription, measured: dict[str, float] | None = None) -> dict[str, float]:
+    """Rigid-body effective masses that make the virtual tests read ``measured`` (default:
+    the description's ``[published] effective_mass``)."""
+    measured = measured if measured is not None else published_effective_mass(desc)
     off = mass_offset(desc)
     return {d: measured[d] + off[d] for d in DOF_NAMES}
 

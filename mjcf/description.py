@@ -21,17 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.errors import UserError
+from mjcf.errors import DescriptionError
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 TABLES_DIR = REPO_ROOT / "scenarios" / "tables"
 PAYLOADS_DIR = REPO_ROOT / "scenarios" / "payloads"
 
 DOFS6 = ("x", "y", "z", "rx", "ry", "rz")
-
-
-class DescriptionError(UserError):
-    """A table or payload description that is incomplete or inconsistent."""
 
 
 # --------------------------------------------------------------------------- helpers
@@ -226,8 +222,8 @@ class TableDescription:
     accelerometer_bandwidth_hz: float
     source: str
     raw: dict = field(repr=False)
-    effects: tuple = ()  #: [[effect]] entries (sim/effects.py), validated when the model is built
-    friction_model: str = "coulomb"  #: "coulomb" (MuJoCo frictionloss) or "presliding" (sim/loop.py)
+    effects: tuple = ()  #: [[effect]] entries (sim/effects/registry.py), validated when the model is built
+    friction_model: str = "coulomb"  #: "coulomb" (MuJoCo frictionloss) or "presliding" (sim/loop/simulation.py)
     friction_presliding_m: float = 1e-4  #: pre-sliding displacement of the "presliding" model
 
     @property
@@ -243,7 +239,7 @@ class TableDescription:
         )
 
 
-def load_toml(path: Path, error: type[UserError] = DescriptionError, what: str = "file") -> dict:
+def load_toml(path: Path, error: type[Exception] = DescriptionError, what: str = "file") -> dict:
     """Parse a TOML file; a missing, unreadable or malformed file raises ``error`` (one line)."""
     try:
         with open(path, "rb") as f:
@@ -430,6 +426,10 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         top.raw("controller")
     if top.has("calibration"):
         top.raw("calibration")  # read by mjcf/calibrate.py (validated there)
+    if top.has("published"):
+        pub = top.raw("published")  # what the table's own tests measured (read by characterize / calibrate)
+        if not isinstance(pub, dict):
+            raise DescriptionError(f"{src}: '[published]' must be a table of measured values")
     fmodel, fpre = "coulomb", 1e-4
     if top.has("friction"):
         fr = top.sub("friction")

@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 
 from mjcf import analysis
-from mjcf.description import Payload, TableDescription, rotation_matrix
+from mjcf.description import DOFS6, Payload, TableDescription, rotation_matrix
 
 
 def quat_to_xyz(q: np.ndarray) -> np.ndarray:
@@ -75,7 +75,7 @@ class TableModel:
         self.friction_dofs = np.array([m.jnt_dofadr[jid(n)] for n in fj], dtype=np.int64)
         self.friction_force = np.array(getattr(self.info, "friction_force_n", []), dtype=float)
         self.friction_presliding_m = self.desc.friction_presliding_m
-        # static supports' air chambers beyond their linear part (sim._fastloop.air_springs):
+        # static supports' air chambers beyond their linear part (sim.loop._kernels.air_springs):
         # preload F0, A / V0 and the exponent n per support
         aj = list(getattr(self.info, "air_joints", []))
         self.air_qadr = np.array([m.jnt_qposadr[jid(n)] for n in aj], dtype=np.int64)
@@ -86,8 +86,10 @@ class TableModel:
         self.air_area_over_volume = sp.piston_area_m2 / sp.chamber_volume_m3 if aj else 0.0
         self.air_exponent = sp.polytropic_exponent if aj else 1.0
         self.step_effects = list(getattr(self.info, "step_effects", []))
+        self.effects = list(getattr(self.info, "effects", []))  # bound by the loop (with its hydraulics)
         for e in self.step_effects:
-            e.bind(m)
+            if not any(e is x for x in self.effects):
+                e.bind(m)
         self.payload_dadr = np.array([m.jnt_dofadr[jid(n)] for n in getattr(self.info, "payload_joints", [])], dtype=int)
 
     # ------------------------------------------------------------------ data
@@ -163,7 +165,7 @@ class TableModel:
     def effective_mass(self) -> dict[str, float]:
         """Diagonal of the effective mass about the reference point, by DOF name."""
         Me = self.effective_mass_matrix()
-        names = ("x", "y", "z", "rx", "ry", "rz")
+        names = DOFS6
         return {names[j]: float(Me[i, i]) for i, j in enumerate(self.platen_dof_index)}
 
     def total_mass(self) -> float:

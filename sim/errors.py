@@ -30,3 +30,13 @@ class DivergenceError(Exception):
         super().__init__(f"simulation diverged at t = {time_s:.4f} s: {reason}")
         self.time_s = time_s
         self.reason = reason
+
+
+def user_errors() -> tuple[type[BaseException], ...]:
+    """Every exception class a user can fix: ``sim``'s own, the model layer's
+    (:class:`mjcf.errors.MjcfError`) and the hydraulic parameters'. The layers below
+    ``sim`` import nothing from it, so their errors are gathered here."""
+    from hydraulics import HydraulicsParamError
+    from mjcf.errors import MjcfError
+
+    return (UserError, MjcfError, HydraulicsParamError)

@@ -1,6 +1,7 @@
 import pytest
 
 import mjcf
+from sim.effects import build_model
 
 
 @pytest.fixture(scope="session")
@@ -10,4 +11,4 @@ def cgs_desc():
 
 @pytest.fixture(scope="session")
 def cgs(cgs_desc):
-    return mjcf.build(cgs_desc)
+    return build_model(cgs_desc)

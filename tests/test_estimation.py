@@ -1,11 +1,10 @@
-"""Estimation tools against closed forms (sim/estimation.py)."""
+"""Estimation tools against closed forms (sim/signals/estimation.py)."""
 
 import numpy as np
 import pytest
 import scipy.signal
 
-from sim import estimation as E
-
+from sim.signals import estimation as E
 FS = 1024.0
 
 
@@ -160,8 +159,7 @@ def test_first_order_magnitude_fit_recovers_tau_and_reads_a_second_order_valve()
     """The magnitude-only first-order fit recovers an exact first-order tau, and on the
     paper's 41.5 Hz / 0.75 valve over 0.5-125 Hz gives the 5.59 ms computed in
     docs/characterization.md (the complex 0.5-20 Hz fit gives 5.84 ms)."""
-    from sim import estimation as E
-
+    from sim.signals import estimation as E
     f = np.linspace(0.25, 130.0, 520)
     assert E.fit_first_order_magnitude(f, E.first_order(f, 1.0, 0.0042))["tau_s"] == pytest.approx(0.0042, rel=1e-6)
     H = E.second_order(f, 1.0, 41.5, 0.75)

@@ -7,10 +7,12 @@ import pytest
 
 import mjcf
 from mjcf.description import parse_table
-from sim import fit as F
-from sim import motions as M
-from sim.loop import Simulation, reference_from_motions
-from sim.run_cli import build_runfile
+from sim.calibrate import fit as F
+from sim.scenario import motions as M
+from sim.loop.simulation import Simulation
+from sim.scenario.reference import reference_from_motions
+from sim.runs.build import build_runfile
+from sim.effects import build_model
 
 
 def _measured_run(modify, seconds=4.0, seed=3):
@@ -19,7 +21,7 @@ def _measured_run(modify, seconds=4.0, seed=3):
     raw = copy.deepcopy(desc.raw)
     modify(raw)
     true_desc = parse_table(raw, src="<truth>")
-    tm = mjcf.build(true_desc)
+    tm = build_model(true_desc)
     rate = 1024.0
     mo = {"x": M.white_noise(duration_s=seconds, sample_rate_hz=rate, band_hz=(0.5, 30.0), seed=(seed, 0),
                              rms_acceleration=1.0),
@@ -60,7 +62,7 @@ def test_fit_finds_undeclared_valve_delay():
 
 def test_fit_cli_refuses_a_run_without_valve_commands(tmp_path, capsys):
     from sim.cli import main
-    from sim.runfile import RunFile, write_run
+    from sim.runs.runfile import RunFile, write_run
 
     t = np.arange(10) / 1024
     meta = {"format": "shaketable-run/1", "table": "cgs", "sample_rate_hz": 1024.0,

@@ -8,7 +8,7 @@ import numpy as np
 import mjcf
 from mjcf.description import actuator_strokes, envelope_corners
 from sim.cli import main
-from sim.geometry import forward_kinematics, study
+from sim.assess.geometry import forward_kinematics, study
 
 
 def test_second_order_stroke_matches_closed_form(cgs_desc):

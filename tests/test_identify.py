@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from sim import identify as I
+from sim.identify import least_squares as I
+from sim.papers import uniaxial as U
 from sim.cli import main
 
 TRUE = dict(M=144e3, K=1.263e6, C=45.9e3, F=26.5e3)
@@ -101,9 +102,9 @@ def test_alpha_scan_minimum_at_truth():
 def test_table8_closed_form_from_paper_parameters():
     g1, g2 = I.gamma_factors(0.5)
     assert g1 == pytest.approx(1.273, abs=5e-4) and g2 == pytest.approx(1.113, abs=5e-4)
-    P = I.PAPER_PARAMS
-    rows = I.table8([p[0] / 100 for p in I.PAPER_TABLE8], P["M_e_kg"], P["K_e_N_per_m"], P["C_e"], P["F_mu_N"])
-    for row, p in zip(rows, I.PAPER_TABLE8):
+    P = U.PAPER_PARAMS
+    rows = I.table8([p[0] / 100 for p in U.PAPER_TABLE8], P["M_e_kg"], P["K_e_N_per_m"], P["C_e"], P["F_mu_N"])
+    for row, p in zip(rows, U.PAPER_TABLE8):
         got = [row["xi_pct"], row["f_m_hz"], row["A_m"], row["u_max_cm"], row["F0_kN"]]
         for g, want in zip(got, p[1:]):
             assert g == pytest.approx(want, rel=0.005)
@@ -115,7 +116,7 @@ def test_table8_closed_form_from_paper_parameters():
 
 
 def test_harmonic_amplification_near_locus_at_large_force():
-    P = I.PAPER_PARAMS
+    P = U.PAPER_PARAMS
     row = I.table8([1.005], P["M_e_kg"], P["K_e_N_per_m"], P["C_e"], P["F_mu_N"])[0]
     h = I.harmonic_amplification(row["F0_kN"] * 1e3, P["M_e_kg"], P["K_e_N_per_m"], P["C_e"], P["F_mu_N"],
                                  cycles=20, steps_per_cycle=800)
@@ -124,7 +125,7 @@ def test_harmonic_amplification_near_locus_at_large_force():
 
 
 def _write(tmp_path, rec, name="t.run.npz", **over):
-    from sim.runfile import FORMAT, RunFile, write_run
+    from sim.runs.runfile import FORMAT, RunFile, write_run
 
     n = len(rec.force)
     z6 = lambda c: np.column_stack([c] + [np.zeros(n)] * 5)  # noqa: E731

@@ -1,10 +1,11 @@
-"""Drive-signal iteration (sim/iteration.py) on stand-in plants with a known response."""
+"""Drive-signal iteration (sim/control/iteration.py) on stand-in plants with a known response."""
 
 import numpy as np
 from scipy import signal
 
-from sim.iteration import IterationSettings, identify_frf, iterate, update_drive
-from sim.loop import Reference, RunResult
+from sim.control.iteration import IterationSettings, identify_frf, iterate, update_drive
+from sim.loop.simulation import RunResult
+from sim.scenario.reference import Reference
 
 RATE = 1024.0
 

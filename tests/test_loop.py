@@ -8,9 +8,10 @@ import pytest
 
 import mjcf
 from sim.cli import main
-from sim.controller import ControllerGains
-from sim.loop import Simulation
-from sim.scenario import build_motions, build_reference, load_scenario
+from sim.control.tvc import ControllerGains
+from sim.loop.simulation import Simulation
+from sim.scenario.files import build_motions, build_reference, load_scenario
+from sim.effects import build_model
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +24,7 @@ def loaded_no_supports():
     for cls in raw["actuator_class"].values():  # and no seal friction sharing the load
         cls["seal_friction_n"] = 0.0
     d2 = dataclasses.replace(mjcf.description.parse_table(raw, src="<no friction>"), supports=None)
-    return mjcf.build(d2, mjcf.load_payload("rigid_20t"))
+    return build_model(d2, mjcf.load_payload("rigid_20t"))
 
 
 def test_closed_valves_hold_the_loaded_table(loaded_no_supports):
@@ -50,7 +51,7 @@ def test_closed_valves_hold_the_loaded_table(loaded_no_supports):
 
 
 def test_closed_valves_hold_with_supports():
-    tm = mjcf.build(mjcf.load_table("cgs"), mjcf.load_payload("rigid_20t"))
+    tm = build_model(mjcf.load_table("cgs"), mjcf.load_payload("rigid_20t"))
     sim = Simulation(tm)
     res = sim.run(valve_command=np.zeros((3 * 1024, tm.n_act)))
     pose = res.channels["table_displacement"]
@@ -61,7 +62,7 @@ def test_closed_valves_hold_with_supports():
 def harmonic():
     sc = load_scenario("harmonic_bare")
     desc = mjcf.load_table(sc.table)
-    tm = mjcf.build(desc)
+    tm = build_model(desc)
     ref = build_reference(sc, build_motions(sc))
     return tm, ref
 
@@ -139,7 +140,7 @@ def test_run_cli_writes_run_file_and_summary(tmp_path, capsys):
     assert set(s["tracking"]) == {"x", "y", "z"}
     for e in s["tracking"].values():
         assert {"nrmse_displacement", "nrmse_acceleration", "pga_ratio"} <= set(e)
-    from sim.runfile import CHANNELS, read_run
+    from sim.runs.runfile import CHANNELS, read_run
 
     run = read_run(tmp_path / "harmonic_bare.run.npz", require=CHANNELS)
     assert run.sample_rate_hz == 1024.0 and run.n_samples == 2 * 1024 + 1
@@ -209,14 +210,14 @@ def test_feasibility_verdict_flags_a_motion_beyond_the_stroke(tmp_path, capsys):
 
 
 def test_diverged_run_is_kept_and_marked_incomplete(tmp_path, capsys, monkeypatch):
-    import sim.loop
+    import sim.loop.simulation
 
-    monkeypatch.setattr(sim.loop, "GAP_LIMIT_M", 1.5e-7)  # a 0.15 um gap now counts as a failed loop closure
+    monkeypatch.setattr(sim.loop.simulation, "GAP_LIMIT_M", 1.5e-7)  # a 0.15 um gap now counts as a failed loop closure
     rc = main(["run", "harmonic_bare", "--out", str(tmp_path), "--duration", "1"])
     err = capsys.readouterr().err
     assert rc == 3
     assert "diverged at t = " in err and "swivel opened" in err and "marked incomplete" in err
-    from sim.runfile import read_run
+    from sim.runs.runfile import read_run
 
     run = read_run(tmp_path / "harmonic_bare.run.npz")
     assert run.incomplete and "swivel" in run.incomplete_reason
@@ -234,7 +235,7 @@ def test_presliding_friction_model_compiled_matches_numpy(harmonic):
 
     raw = tomllib.loads((TABLES_DIR / "cgs.toml").read_text())
     raw["friction"]["model"] = "presliding"
-    tm = mjcf.build(parse_table(raw, src="<presliding>"))
+    tm = build_model(parse_table(raw, src="<presliding>"))
     assert len(tm.friction_dofs) == 24 and tm.model.dof_frictionloss.max() == 0.0
     _, ref = harmonic
     a = Simulation(tm).run(reference=ref, duration_s=2.0, fast=True)
@@ -244,8 +245,7 @@ def test_presliding_friction_model_compiled_matches_numpy(harmonic):
         assert np.abs(a.channels[ch] - b.channels[ch]).max() / scale < 1e-7, ch
     # the exact pre-sliding update: 1 mm of travel (10 zss) from z = 0 gives
     # z = zss (1 - e^-10), force -Fc (1 - e^-10)
-    from sim import _fastloop as FL
-
+    from sim.loop import _kernels as FL
     z = np.zeros(1)
     q = np.zeros(1)
     FL.presliding_friction(np.array([0.1]), q, np.array([0]), np.array([1000.0]), z, 1e-4, 0.01)
@@ -254,9 +254,9 @@ def test_presliding_friction_model_compiled_matches_numpy(harmonic):
 
 
 def test_air_spring_kernel_matches_the_polytropic_law():
-    """MuJoCo's joint spring plus sim._fastloop.air_springs = F0 (V0 / (V0 + A q))^n."""
-    from sim import _fastloop as FL
-    from sim.loop import Simulation
+    """MuJoCo's joint spring plus sim.loop._kernels.air_springs = F0 (V0 / (V0 + A q))^n."""
+    from sim.loop import _kernels as FL
+    from sim.loop.simulation import Simulation
 
     F0, c, n = np.array([1.4e5, 1.2e5]), 0.2827 / 0.4, 1.4
     for q in (-0.1, -0.02, 0.0, 0.03, 0.1):

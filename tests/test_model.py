@@ -10,6 +10,7 @@ import pytest
 import mjcf
 from mjcf.analysis import linear_modes, projection
 from mjcf.description import actuator_strokes, envelope_corners
+from sim.effects import build_model
 
 # Seed 000, Table 2 (bare-table effective masses).
 TABLE2 = {"x": 48.85e3, "y": 49.36e3, "z": 52.50e3, "rx": 208e3, "ry": 217e3, "rz": 354e3}
@@ -64,7 +65,7 @@ def test_vertical_excess_is_mass_that_moves_only_vertically(cgs, cgs_desc):
     dm = 500.0
     heavier = dataclasses.replace(cgs_desc, supports=dataclasses.replace(
         cgs_desc.supports, piston_mass_kg=cgs_desc.supports.piston_mass_kg + dm))
-    e0, e1 = cgs.effective_mass(), mjcf.build(heavier).effective_mass()
+    e0, e1 = cgs.effective_mass(), build_model(heavier).effective_mass()
     n = len(cgs_desc.supports.positions_m)
     assert abs(e1["z"] - e0["z"] - n * dm) < 1e-6 * e0["z"]
     assert abs(e1["x"] - e0["x"]) < 1e-6 * e0["x"]
@@ -106,7 +107,7 @@ def test_loop_closure_tight_when_driven_hard(cgs_desc, dt):
     at a 0.5 ms step (and at the default 1/2048 s)."""
     from mjcf.builder import BuildOptions
 
-    cgs = mjcf.build(cgs_desc, options=BuildOptions(timestep_s=dt))
+    cgs = build_model(cgs_desc, options=BuildOptions(timestep_s=dt))
     m, d = cgs.model, cgs.new_data()
     eff = cgs.effective_mass()
     f = 5.0
@@ -157,7 +158,7 @@ def test_support_preload_equals_weight_share(cgs, cgs_desc):
 ])
 def test_shear_frame_modes_match_K_M_eigenvalues(cgs_desc, payload, published):
     p = mjcf.load_payload(payload)
-    tm = mjcf.build(cgs_desc, p)
+    tm = build_model(cgs_desc, p)
     f_model, _ = linear_modes(tm.model, tm.payload_dadr, gravity=True)
     w2 = np.sort(np.linalg.eigvals(np.linalg.solve(np.diag(p.mass_kg), p.stiffness_n_m)).real)
     f_exact = np.sqrt(w2) / (2 * np.pi)
@@ -167,7 +168,7 @@ def test_shear_frame_modes_match_K_M_eigenvalues(cgs_desc, payload, published):
 
 def test_cantilever_modes_match_beam_theory(cgs_desc):
     p = mjcf.load_payload("tower_6m")
-    tm = mjcf.build(cgs_desc, p)
+    tm = build_model(cgs_desc, p)
     f, _ = linear_modes(tm.model, tm.payload_dadr, gravity=False)
     f = f[::2]  # each bending mode appears twice (x and y)
     EI, mu, L = p.bending_stiffness_n_m2, p.mass_per_length_kg_m, p.height_m
@@ -200,7 +201,7 @@ def test_every_scene_compiles_and_steps_without_warnings(cgs_desc, payload, foun
         pl = parse_payload(tomllib.loads(CLAMPED))
     else:
         pl = mjcf.load_payload(payload) if payload else None
-    tm = mjcf.build(desc, pl)
+    tm = build_model(desc, pl)
     d = tm.new_data()
     z0 = tm.platen_pose(d)[2]
     for _ in range(int(1.0 / tm.model.opt.timestep)):

@@ -1,4 +1,4 @@
-"""Rerun recordings (sim/recording.py, ``shaketable view``, ``shaketable run --rrd``).
+"""Rerun recordings (sim/report/rerun.py, ``shaketable view``, ``shaketable run --rrd``).
 
 Run files are made here with the project's own simulator (2 s of harmonic_bare).
 """
@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from sim import cli
-from sim.runfile import read_run, write_run
+from sim.runs.runfile import read_run, write_run
+from sim.effects import build_model
 
 ACTS = [f"{a}{i}" for a in "XYZ" for i in range(1, 5)]
 DOFS = ["x", "y", "z", "rx", "ry", "rz"]
@@ -99,8 +100,7 @@ def test_recording_verifies(made):
 
 
 def test_recording_contents(made):
-    from sim import recording
-
+    from sim.report import rerun as recording
     _, run_path, rrd = made
     run = read_run(run_path)
     n = run.n_samples
@@ -177,8 +177,7 @@ def test_partial_nan_channel_splits_off(tmp_path):
     the rest of the group keeps every row, and no row carries a NaN."""
     import rerun as rr
 
-    from sim import recording
-
+    from sim.report import rerun as recording
     t = np.arange(40) / 100.0
     v = np.column_stack([np.sin(t), np.cos(t), t])
     v[5:9, 1] = np.nan
@@ -223,10 +222,9 @@ def test_view_compare_residuals(made, tmp_path):
 
 def test_fast_loop_closure_matches_set_platen_pose():
     import mjcf
-    from sim import recording
-
+    from sim.report import rerun as recording
     rng = np.random.default_rng(1)
-    tm = mjcf.build(mjcf.load_table("cgs"), mjcf.load_payload("frame_3storey_297"))
+    tm = build_model(mjcf.load_table("cgs"), mjcf.load_payload("frame_3storey_297"))
     assert recording._LoopSolver.build(tm) is not None
     poses = np.column_stack([rng.uniform(-0.15, 0.15, (5, 3)), rng.uniform(-0.02, 0.02, (5, 3))])
     pq = rng.uniform(-0.01, 0.01, (5, len(tm.info.payload_joints)))
@@ -286,11 +284,10 @@ def test_run_rrd_fails_early(tmp_path, capsys):
 
 def test_failure_leaves_no_partial_file(made, tmp_path, monkeypatch):
     import mjcf
-    from sim import recording
-
+    from sim.report import rerun as recording
     _, run_path, _ = made
     run = read_run(run_path)
-    tm = mjcf.build(mjcf.load_table("cgs"), None)
+    tm = build_model(mjcf.load_table("cgs"), None)
 
     def boom(*a, **k):
         raise RuntimeError("disk gone")
@@ -305,8 +302,7 @@ def test_failure_leaves_no_partial_file(made, tmp_path, monkeypatch):
 def test_blueprint_is_one_function(made):
     import rerun.blueprint as rrb
 
-    from sim import recording
-
+    from sim.report import rerun as recording
     run = read_run(made[1])
     bp = recording.blueprint(run)
     assert isinstance(bp, rrb.Blueprint)
@@ -314,7 +310,7 @@ def test_blueprint_is_one_function(made):
 
 
 def test_force_colours():
-    from sim.recording import force_colors
+    from sim.report.rerun import force_colors
 
     c = force_colors(np.array([0.0, 0.5, 1.0, 3.0, np.nan]))
     assert c.shape == (5, 4) and c.dtype == np.uint8
@@ -327,10 +323,9 @@ def test_writer_process(made, tmp_path):
     """A file target imports rerun in a writer process started by ``open``; its failures come back
     here (an unwritable file as RecordingError), and no partial file is left."""
     import mjcf
-    from sim import recording
-
+    from sim.report import rerun as recording
     run = read_run(made[1])
-    tm = mjcf.build(mjcf.load_table("cgs"), None)
+    tm = build_model(mjcf.load_table("cgs"), None)
     target = recording.RrdTarget.open(tmp_path / "w.rrd")
     assert target._worker is not None and target._worker.poll() is None
     assert target.write_run(run, tm) == tmp_path / "w.rrd" and target._worker is None

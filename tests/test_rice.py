@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from sim import rice as R
-
+from sim.papers import rice as R
+from sim.effects import build_model
 F = np.linspace(0.1, 120.0, 12000)
 
 
@@ -27,7 +27,7 @@ def test_known_parameters_from_the_description():
     # k_t: 170 in^3/(V s) (Table 1, d0) in SI; k_le -> leakage k_le * A in the hydraulics
     assert tb.sets["d0"].kt_m3_per_v_s == pytest.approx(170 * 0.0254 ** 3, rel=1e-4)
     assert tb.sets["pfr"].kle_m3_per_n_s == pytest.approx(7.0e-9)
-    from sim.uniaxial import rice_description
+    from sim.papers.uniaxial import rice_description
 
     desc, kt = rice_description("pfr")
     assert desc.raw["actuator_class"]["main"]["leakage_cross_m3_s_pa"] == pytest.approx(7.0e-9 * 82.13e-4)
@@ -110,8 +110,7 @@ def test_controller_volts():
 def test_model_frf_matches_analytical_optimal():
     """The issue's acceptance: bare optimal gains, |T| within 10 % from 0 to 100 Hz,
     estimated the paper's way (11 x 2^14 at 4000 Hz, Bartlett, Blackman-Harris)."""
-    from sim import uniaxial as U
-
+    from sim.papers import uniaxial as U
     r = U.run_rice_case(U.RiceCase("optimal", R.OPTIMAL, "d18"))
     print(f"max |model/analytical - 1| 0-100 Hz = {r['max_error_0_100']:.3f} at {r['f_max_error']:.1f} Hz")
     assert r["max_error_0_100"] < 0.10
@@ -121,8 +120,7 @@ def test_model_frf_matches_analytical_optimal():
 
 @pytest.mark.slow
 def test_model_reproduces_payload_and_gain_effects():
-    from sim import uniaxial as U
-
+    from sim.papers import uniaxial as U
     cases = [U.RiceCase("P3", R.Gains(p=3.0), "d0"),
              U.RiceCase("rigid 408", R.PAYLOAD_GAINS, "pr", "rice_rigid_408"),
              U.RiceCase("rigid 68 clamp", R.PAYLOAD_GAINS, "pfr", "rice_rigid_68_clamp"),
@@ -139,13 +137,13 @@ def test_model_reproduces_payload_and_gain_effects():
 
 
 def test_shaketable_run_rice_scenario_tracks_a_low_frequency_sine(tmp_path):
-    """`shaketable run` on a Rice scenario: the Rice controller ([controller] type = "rice")
+    """`shaketable run` on a Rice scenario: the Rice controller ([controller] type = "analog")
     at 8 kHz physics steps, run file + summary.json at 4000 Hz; the achieved 1 Hz response
     is Eq. 1's T(j 2 pi 1 Hz) (x_ta / x_d, optimal gains, set d18)."""
     import json
 
     from sim.cli import main
-    from sim.runfile import read_run
+    from sim.runs.runfile import read_run
 
     assert main(["run", "scenarios/rice_sine.toml", "--out", str(tmp_path)]) == 0
     s = json.loads((tmp_path / "summary.json").read_text())
@@ -190,7 +188,7 @@ def test_clamp_mass_fraction_in_the_payload_and_the_model():
 
     from mjcf.builder import BuildOptions, build
     from mjcf.description import DescriptionError, load_payload, parse_payload
-    from sim.uniaxial import rice_description
+    from sim.papers.uniaxial import rice_description
 
     p = load_payload("rice_rigid_204_clamp")
     a = p.clamp_mass_fraction
@@ -200,7 +198,7 @@ def test_clamp_mass_fraction_in_the_payload_and_the_model():
     assert [md.mass_kg for md in modes if md.f_hz == 52.0] == pytest.approx([a * 204.0])
     # MuJoCo: the clamped part on the 52 Hz spring, the rest a rigid body of the platen
     desc, _ = rice_description("pfr")
-    tm = build(desc, p, BuildOptions(timestep_s=1 / 8000))
+    tm = build_model(desc, p, BuildOptions(timestep_s=1 / 8000))
     m = tm.model
     body = lambda n: m.body(n).id  # noqa: E731
     assert m.body_mass[body("payload")] == pytest.approx(a * 204.0)
@@ -219,7 +217,7 @@ def test_clamp_mass_fraction_in_the_payload_and_the_model():
     p1 = parse_payload(raw)
     assert p1.clamp_mass_fraction == 1.0
     assert R.rigid_modes(204.0, 52.0, 0.02) == [R.Mode(204.0, 52.0, 0.02)]
-    tm1 = build(desc, p1, BuildOptions(timestep_s=1 / 8000))
+    tm1 = build_model(desc, p1, BuildOptions(timestep_s=1 / 8000))
     assert tm1.model.body("payload").mass[0] == pytest.approx(204.0)
     assert mujoco.mj_name2id(tm1.model, mujoco.mjtObj.mjOBJ_BODY, "payload_fixed") == -1
     for bad in ({"clamp_mass_fraction": 1.5}, {"clamp_mass_fraction": 0.0}):
@@ -296,8 +294,7 @@ def test_clamp_fraction_chosen_on_one_block_predicts_the_others():
 def test_model_clamp_split_small_peak():
     """One model FRF (the paper's estimate): 408 kg, the block whose small peak is the most
     sensitive to the split, with the payload file's fraction."""
-    from sim import uniaxial as U
-
+    from sim.papers import uniaxial as U
     r = U.run_rice_case(U.RiceCase("rigid 408 clamp", R.PAYLOAD_GAINS, "pfr", "rice_rigid_408_clamp"))
     f = r["f"]
     hm = U._smooth(np.abs(r["model"]))

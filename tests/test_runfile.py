@@ -7,9 +7,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from sim import runfile
+from sim.runs import runfile
 from sim.errors import RunFileError, UserError
-from sim.runfile import CHANNELS, RunFile, read_run, write_run
+from sim.runs.runfile import CHANNELS, RunFile, read_run, write_run
 
 ACTS = [f"{a}{i}" for a in "XYZ" for i in range(1, 5)]
 DOFS = ["x", "y", "z", "rx", "ry", "rz"]

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from sim.cli import main
-from sim.metrics import spectrum_ratio
-from sim.runfile import read_run
+from sim.assess.metrics import spectrum_ratio
+from sim.runs.runfile import read_run
 
 _CACHE = {}
 

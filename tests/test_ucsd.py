@@ -6,13 +6,12 @@ import numpy as np
 import pytest
 
 from mjcf.builder import build
-from sim import identify as I
-from sim import uniaxial as U
-
-
+from sim.identify import least_squares as I
+from sim.papers import uniaxial as U
+from sim.effects import build_model
 def test_description_matches_the_paper():
     desc = U.ucsd_description(13.8)
-    tm = build(desc)
+    tm = build_model(desc)
     assert tm.effective_mass()["x"] == pytest.approx(144e3, rel=1e-3)          # M_e 144 t
     assert desc.actuator_names == ("E", "W")
     eff = {e["type"]: e for e in desc.effects}
@@ -61,8 +60,8 @@ def test_periodic_identification_recovers_friction_and_table8():
     assert con.M_e_kg == pytest.approx(144e3, rel=0.005)
     assert con.K_e_N_per_m == pytest.approx(1.263e6, rel=0.005)
     assert unc.C_e == pytest.approx(45.9e3, rel=0.05)
-    rows = I.table8([p[0] / 100 for p in I.PAPER_TABLE8], con.M_e_kg, con.K_e_N_per_m, con.C_e, con.F_mu_N)
-    for row, p in zip(rows, I.PAPER_TABLE8):
+    rows = I.table8([p[0] / 100 for p in U.PAPER_TABLE8], con.M_e_kg, con.K_e_N_per_m, con.C_e, con.F_mu_N)
+    for row, p in zip(rows, U.PAPER_TABLE8):
         got = [row["xi_pct"], row["f_m_hz"], row["A_m"], row["u_max_cm"], row["F0_kN"]]
         for g, want in zip(got, p[1:]):
             assert g == pytest.approx(want, rel=0.01)
@@ -104,8 +103,8 @@ def test_presliding_platen_friction_law():
     """The platen_coulomb effect with presliding_m (Dahl): a spring F_mu/delta for travels
     much smaller than delta, F_mu after a travel of many delta, bounded at any v dt, and
     the MuJoCo stick constraint replaced (no frictionloss on the slide), reset by the loop."""
-    from sim.effects import PreslidingFriction
-    from sim.loop import Simulation
+    from sim.effects.registry import PreslidingFriction
+    from sim.loop.simulation import Simulation
 
     fc, delta, dt = 26.65e3, 0.4e-3, 1 / 2048
     e = PreslidingFriction(dof="x", force_n=fc, presliding_m=delta)
@@ -121,7 +120,7 @@ def test_presliding_platen_friction_law():
         f = e.advance(0.1, dt)
     assert f == pytest.approx(-fc, rel=1e-9)
     assert e.advance(-1e3, dt) == pytest.approx(fc, rel=1e-9)  # a huge step stays bounded
-    tm = build(U.ucsd_description(13.8, presliding_m=delta))
+    tm = build_model(U.ucsd_description(13.8, presliding_m=delta))
     j = tm.model.joint("platen_x")
     assert float(j.frictionloss[0]) == 0.0
     (pf,) = [s for s in tm.step_effects if isinstance(s, PreslidingFriction)]

@@ -1,0 +1,208 @@
+"""Run a scenario: the one library function behind ``shaketable run`` (and behind
+anything else that runs scenarios: a sweep, a notebook, a Dask worker).
+
+:func:`run_scenario` builds the table, the controller and the reference from a
+:class:`sim.scenario.files.Scenario`, runs the drive iterations the scenario asks for,
+and returns a :class:`RunOutcome`: the chosen run as a run file, the summary (tracking,
+drive-iteration history, diagnostics) and the feasibility verdict, as data. Nothing is
+written: :meth:`RunOutcome.write` puts the run file, ``summary.json`` and, optionally,
+a rerun recording in a folder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, is_dataclass
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from sim.errors import ScenarioError, UserError
+
+SCHEMA = "shaketable-summary/1"
+
+
+class DivergenceAtStart(UserError):
+    """Diverged before a second sample: nothing to keep (a run file needs two samples)."""
+
+
+def gains_json(g) -> dict:
+    """A controller's settings as plain JSON data."""
+    return {k: (v.tolist() if isinstance(v, np.ndarray) else asdict(v) if is_dataclass(v) else v)
+            for k, v in g.__dict__.items()}
+
+
+@dataclass
+class RunOutcome:
+    """What a scenario run gives back.
+
+    ``run``: the chosen run (:class:`sim.runs.runfile.RunFile`); ``result``: the loop's
+    :class:`sim.loop.simulation.RunResult`; ``summary``: the figures of ``summary.json``
+    (``summary["feasibility"]`` is the verdict); ``tm``: the compiled table model;
+    ``warnings``: the reference beyond the rated envelope, as text.
+    """
+
+    run: object
+    result: object
+    summary: dict
+    tm: object
+    warnings: list = field(default_factory=list)
+
+    @property
+    def verdict(self) -> dict:
+        return self.summary["feasibility"]
+
+    @property
+    def feasible(self) -> bool:
+        return bool(self.summary["feasibility"]["feasible"])
+
+    @property
+    def complete(self) -> bool:
+        return self.result.incomplete_reason is None
+
+    def write(self, out) -> dict:
+        """Write ``<scenario>.run.npz`` and ``summary.json`` to folder ``out``; returns the
+        summary with the written paths."""
+        from sim.runs.files import out_dir, write_json_atomic
+        from sim.runs.runfile import write_run
+
+        out = out_dir(out)
+        path = out / f"{self.summary['scenario']}.run.npz"
+        write_run(path, self.run)
+        self.summary["run_file"] = str(path)
+        write_json_atomic(out / "summary.json", self.summary)
+        return self.summary
+
+
+def _tracking(res, ref):
+    from sim.assess.metrics import tracking
+
+    return tracking(res.t, ref.d, ref.a, res.channels["table_displacement"], res.channels["table_acceleration"])
+
+
+@dataclass
+class ScenarioPlan:
+    """A scenario made ready to run: the table model, the simulation with its controller,
+    the reference and the warnings of a reference beyond the rated envelope. Built by
+    :func:`plan_scenario`; :meth:`run` runs it (drive iterations included)."""
+
+    scenario: object
+    desc: object
+    payload: object
+    tm: object
+    sim: object
+    gains: object
+    reference: object
+    iteration: dict
+    warnings: list
+
+    def run(self, *, progress=None) -> RunOutcome:
+        """Run the plan; ``progress(text)`` is called once per stage (None: silent)."""
+        from sim.assess.feasibility import diagnostics
+        from sim.runs.build import build_runfile
+
+        say = progress or (lambda text: None)
+        sc, sim, ref = self.scenario, self.sim, self.reference
+        history = []
+        settings = None
+        if self.iteration.get("count", 0) > 0:
+            from sim.control.iteration import IterationSettings, iterate
+
+            settings = IterationSettings.from_scenario(self.iteration)
+            results, _drives = iterate(sim, ref, settings, progress=lambda i: say(
+                f"drive iteration {i} of {settings.count}"))
+            scores = []
+            for i, r in enumerate(results):
+                tr = _tracking(r, ref)
+                score = float(np.mean([e["nrmse_acceleration"] for e in tr.values()])) if tr else 0.0
+                scores.append(score if r.incomplete_reason is None else np.inf)
+                history.append({"iteration": i, "mean_nrmse_acceleration": score, "tracking": tr})
+            best = int(np.argmin(scores))
+            res, plain = results[best], results[0]
+            wall_total = sum(r.wall_s for r in results)
+        else:
+            say("simulating")
+            res = sim.run(reference=ref, progress=progress is not None and sys.stderr.isatty())
+            plain, best, wall_total = res, 0, res.wall_s
+        if len(res.t) < 2:
+            raise DivergenceAtStart(res.incomplete_reason or "the simulation stopped before its second sample")
+        run = build_runfile(res, self.tm, description=sc.description or sc.name,
+                            payload_name=self.payload.name if self.payload else None, reference=ref,
+                            extra_meta={"scenario": sc.name, "controller": gains_json(self.gains)})
+        summary = {
+            "schema": SCHEMA,
+            "scenario": sc.name,
+            "table": self.desc.name,
+            "payload": self.payload.name if self.payload else None,
+            "duration_s": float(res.sim_s),
+            "wall_s": float(res.wall_s),
+            "realtime_factor": float(res.realtime_factor),
+            "complete": res.incomplete_reason is None,
+            "incomplete_reason": res.incomplete_reason,
+            "tracking": _tracking(res, ref),
+            "drive_iterations": {"count": len(history) - 1 if history else 0, "chosen": best,
+                                 "frf": settings.frf if history else None,
+                                 "tracking_plain_controller": _tracking(plain, ref),
+                                 "history": [{"iteration": h["iteration"],
+                                              "mean_nrmse_acceleration": h["mean_nrmse_acceleration"]}
+                                             for h in history]},
+            "wall_s_all_runs": float(wall_total),
+            "warnings": self.warnings,
+        }
+        summary.update(diagnostics(res, self.tm, sim.hp))
+        return RunOutcome(run=run, result=res, summary=summary, tm=self.tm, warnings=self.warnings)
+
+
+def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None) -> ScenarioPlan:
+    """Build everything a run of ``scenario`` (a :class:`~sim.scenario.files.Scenario` or
+    its name/path) needs; raises :class:`~sim.errors.UserError` for bad inputs."""
+    import mjcf
+    from sim.control.tvc import ControllerGains
+    from sim.effects import build_model
+    from sim.loop.analog import RiceGains, RiceSimulation, is_rice
+    from sim.loop.simulation import Simulation
+    from sim.scenario.files import build_motions, build_reference, limit_warnings, load_scenario
+
+    sc = scenario if not isinstance(scenario, (str, Path)) else load_scenario(scenario)
+    if duration_s is not None and not duration_s > 0:
+        raise ScenarioError(f"--duration must be positive (got {duration_s})")
+    desc = mjcf.load_table(sc.table)
+    payload = mjcf.load_payload(sc.payload) if sc.payload else None
+    it = dict(sc.iteration)
+    if iterations is not None:
+        if iterations < 0 or iterations > 10:
+            raise ScenarioError(f"--iterations must be 0..10 (got {iterations})")
+        it["count"] = iterations
+    rice = None
+    if is_rice(desc):  # an analog controller acting at every physics step
+        if it.get("count", 0):
+            raise ScenarioError("drive iterations are not available with the rice controller")
+        gains = RiceGains.for_table(desc, sc.controller)
+        rice = RiceSimulation(desc, payload, gains)
+    else:
+        gains = ControllerGains.for_table(desc, sc.controller)
+    if abs(gains.rate_hz - sc.sample_rate_hz) > 1e-9:
+        raise ScenarioError(f"output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
+                            f"({gains.rate_hz:g}): the recorder samples at the controller ticks")
+    motions = build_motions(sc)
+    ref = build_reference(sc, motions, duration_s)
+    warns = limit_warnings(desc, motions)
+    tm = rice.tm if rice else build_model(desc, payload)
+    sim = rice or Simulation(tm, gains=gains)
+    return ScenarioPlan(scenario=sc, desc=desc, payload=payload, tm=tm, sim=sim, gains=gains, reference=ref,
+                        iteration=it, warnings=warns)
+
+
+def run_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
+                 progress=None) -> RunOutcome:
+    """Simulate ``scenario`` (a :class:`~sim.scenario.files.Scenario` or its name/path).
+
+    ``duration_s``: simulate only this long; ``iterations``: off-line drive iterations
+    (default: the scenario's ``[iteration] count``); ``progress``: ``progress(text)``
+    called once per stage (``None``: silent). Returns a :class:`RunOutcome`; raises
+    :class:`~sim.errors.UserError` for anything wrong with the inputs.
+    """
+    return plan_scenario(scenario, duration_s=duration_s, iterations=iterations).run(progress=progress)
+
+
+__all__ = ["DivergenceAtStart", "RunOutcome", "SCHEMA", "ScenarioPlan", "gains_json", "plan_scenario", "run_scenario"]

@@ -1,0 +1,5 @@
+"""THE TWIN: the stepping loop (MuJoCo + hydraulics + controller + recorder), its compiled kernels, and the loop of an analog controller."""
+
+from sim.loop.simulation import GAP_LIMIT_M, RunResult, Simulation
+
+__all__ = ["GAP_LIMIT_M", "RunResult", "Simulation"]

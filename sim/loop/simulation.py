@@ -1,0 +1,461 @@
+"""The coupled simulation: MuJoCo multibody table + hydraulic step + controller.
+
+Coupling order (one physics step, time t_n -> t_n + dt):
+
+1. MuJoCo state at t_n gives every linkage's stroke x_n and stroke rate v_n (named
+   accessors of :class:`mjcf.model.TableModel`).
+2. On a controller tick (every ``steps_per_tick`` steps) the driver produces the valve
+   commands, held until the next tick: either the closed-loop controller
+   (:class:`sim.control.tvc.TableController`) or the recorded commands of a run file
+   (open-loop replay).
+3. ``hydraulics.step(command, x_n, v_n)`` advances the servovalves, chambers and supply
+   over the step and returns the net piston forces (pressures at the end of the step;
+   see ``hydraulics/system.py`` for why).
+4. The forces go into ``data.ctrl`` of the gear-1 motors on the stroke slides (so each
+   force acts along its linkage, between cylinder and rod). With the table's
+   ``[friction] model = "presliding"``, dry friction of the seals, support pistons and
+   shoes is computed from the same state (pre-sliding model, ``sim.loop._kernels``) and
+   written to ``qfrc_applied``; named per-step effects add theirs there too.
+5. ``mj_step`` advances the mechanics t_n -> t_n + dt (``data.qacc`` then holds the
+   acceleration at t_n, which the recorder reads).
+
+The recorder samples at the controller tick (1024 Hz as the CGS data recorder): states
+at t_k, the command computed at t_k, and the accelerations of the step leaving t_k. The
+default physics step is 1/2048 s (0.49 ms), so a tick is exactly two steps and a replay
+of the recorded commands reproduces the run to round-off.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from hydraulics import HydraulicParams, HydraulicSystem
+from mjcf.description import actuator_strokes
+from mjcf.model import TableModel
+from sim.control.tvc import ControllerGains, TableController
+from sim.effects.registry import dahl_step
+from sim.errors import DivergenceError, ScenarioError
+from sim.scenario.reference import Reference, reference_from_motions
+
+GAP_LIMIT_M = 1e-3  #: a swivel opening by more than 1 mm means the solve has failed
+
+
+@dataclass
+class RunResult:
+    """Arrays recorded at the controller rate, plus timing and status."""
+
+    t: np.ndarray
+    channels: dict
+    extras: dict
+    wall_s: float
+    sim_s: float
+    timing: dict = field(default_factory=dict)
+    incomplete_reason: str | None = None
+
+    @property
+    def realtime_factor(self) -> float:
+        return self.sim_s / self.wall_s if self.wall_s > 0 else float("inf")
+
+
+class Simulation:
+    """One table simulation (one MjData, one hydraulic system)."""
+
+    def __init__(self, tm: TableModel, *, backend: str = "numba", gains: ControllerGains | None = None):
+        self.tm = tm
+        self.m = tm.model
+        self.dt = float(self.m.opt.timestep)
+        hp = HydraulicParams.from_table(tm.desc.raw)
+        for e in tm.effects:  # hydraulic effects (bulk modulus, leakage, valve delay, ...)
+            hp = e.edit_hydraulics(hp)
+        self.hp = hp
+        self.hs = HydraulicSystem(self.hp, n_sim=1, dt=self.dt, backend=backend)
+        for e in tm.effects:
+            e.bind(self.m, self.hs)
+        self.gains = gains or ControllerGains.for_table(tm.desc)
+        ratio = 1.0 / (self.gains.rate_hz * self.dt)
+        self.steps_per_tick = int(round(ratio))
+        if abs(ratio - self.steps_per_tick) > 1e-9 or self.steps_per_tick < 1:
+            raise ScenarioError(
+                f"controller rate {self.gains.rate_hz} Hz is not a whole fraction of the physics rate "
+                f"{1 / self.dt:.1f} Hz; use a rate that divides it (e.g. 1024 Hz with a 1/2048 s step)")
+        full_flow = float(self.hs.no_load_flow(1.0))
+        self.controller = TableController(
+            tm.desc, self.gains, area_m2=self.hp.area_a_m2, full_flow_m3_s=full_flow,
+            supply_pressure_pa=self.hp.supply_pressure_pa, return_pressure_pa=self.hp.return_pressure_pa)
+        self._prepare_gap()
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self, pose=None, forces=None):
+        """Back to the home keyframe (or ``pose``), hydraulics at rest.
+
+        ``forces`` (n_act,) presets the actuator forces (chamber pressures and ``ctrl``),
+        e.g. :meth:`static_forces` for a table whose actuators carry dead weight.
+        """
+        self.d = self.tm.new_data()
+        self._zfr = np.zeros(len(self.tm.friction_dofs))  # pre-sliding friction states
+        objs = {id(e): e for e in self.tm.step_effects + self.tm.effects}.values()
+        for e in objs:  # effects with a state of their own
+            reset = getattr(e, "reset", None)
+            if reset is not None:
+                reset()
+        if pose is not None:
+            self.tm.set_platen_pose(self.d, pose)
+        x = self.tm.actuator_strokes(self.d)[None, :]
+        self.hs.reset(x, force=None if forces is None else np.asarray(forces, float)[None, :])
+        self.d.ctrl[self.tm.actuator_ids] = self.hs.force[0]
+        mujoco.mj_forward(self.m, self.d)
+
+    def _presliding_numpy(self, qvel, qfa, dofs, fc, z, zss):
+        """Reference (numpy) version of :func:`sim.loop._kernels.presliding_friction`."""
+        z[:] = dahl_step(z, qvel[dofs], zss, self.dt)
+        qfa[dofs] += -fc / zss * z
+
+    @staticmethod
+    def _air_numpy(qpos, qfa, aq, ad, F0, c, n):
+        """Reference (numpy) version of :func:`sim.loop._kernels.air_springs`."""
+        x = c * qpos[aq]
+        qfa[ad] += F0 * ((1.0 + x) ** (-n) - 1.0 + n * x)
+
+    def static_forces(self) -> np.ndarray:
+        """Actuator forces (n_act,) that hold the home pose against gravity with the
+        supports at their preload (zero when the supports carry everything)."""
+        from mjcf.analysis import static_balance
+
+        return static_balance(self.m, self.tm.stroke_dadr, qpos=self.d.qpos.copy())
+
+    def _prepare_gap(self):
+        m = self.m
+        ids = [i for i in range(m.neq) if m.eq_type[i] == mujoco.mjtEq.mjEQ_CONNECT]
+        self._g_b1 = np.array([m.eq_obj1id[i] for i in ids])
+        self._g_b2 = np.array([m.eq_obj2id[i] for i in ids])
+        self._g_a1 = np.array([m.eq_data[i, 0:3] for i in ids])
+        self._g_a2 = np.array([m.eq_data[i, 3:6] for i in ids]).reshape(-1, 3)
+        self._g_a1 = self._g_a1.reshape(-1, 3)
+        self._g_b1 = self._g_b1.astype(np.int64)
+        self._g_b2 = self._g_b2.astype(np.int64)
+        try:
+            from sim.loop import _kernels as _fastloop
+            self._fl = _fastloop
+        except ImportError:  # pragma: no cover
+            self._fl = None
+
+    def loop_gap(self) -> float:
+        d = self.d
+        if self._fl is not None:
+            return float(self._fl.loop_gap(d.xpos, d.xmat, self._g_b1, self._g_b2, self._g_a1, self._g_a2))
+        x1 = d.xpos[self._g_b1] + np.einsum("nij,nj->ni", d.xmat[self._g_b1].reshape(-1, 3, 3), self._g_a1)
+        x2 = d.xpos[self._g_b2] + np.einsum("nij,nj->ni", d.xmat[self._g_b2].reshape(-1, 3, 3), self._g_a2)
+        return float(np.sqrt(((x1 - x2) ** 2).sum(axis=1).max()))
+
+    # ------------------------------------------------------------------ run
+    def run(self, *, reference: Reference | None = None, valve_command: np.ndarray | None = None,
+            duration_s: float | None = None, progress: bool = False, gap_every: int = 8,
+            fast: bool = True, fuse: bool = True) -> RunResult:
+        """Run closed loop on ``reference`` or open loop on recorded ``valve_command``.
+
+        Both inputs are sampled at the controller rate. Returns the recorder's arrays.
+        A simulation that leaves its physical bounds stops with the arrays up to then and
+        ``incomplete_reason`` set (never raises for divergence). The loop-closure gap is
+        evaluated every ``gap_every`` ticks (NaN in between).
+
+        Inside the loop only raw state is copied (qpos, qvel, the platen's qacc, the
+        hydraulic state); poses, velocities and accelerometer signals are derived from
+        those copies after the run, vectorised. ``fast`` uses the compiled per-step and
+        per-tick kernels of :mod:`sim.loop._kernels` (``False``: the plain numpy reference).
+        ``fuse`` (with ``fast``, closed loop on a free platen, no step effects, two or more
+        physics steps per tick): recorder, controller and pre-step in one compiled call per
+        physics step (same results; ``timing`` then has the three together under
+        ``fused_s`` and no separate hydraulics/controller split).
+        """
+        if fast:
+            from sim.loop import _kernels as FL
+            from hydraulics import _layout as HL
+        if (reference is None) == (valve_command is None):
+            raise ValueError("give exactly one of reference and valve_command")
+        tm, m, d, hs = self.tm, self.m, self.d, self.hs
+        ctrl = self.controller
+        ctrl.reset()
+        rate = self.gains.rate_hz
+        n_in = len(reference.t) if reference is not None else len(valve_command)
+        n = n_in if duration_s is None else min(n_in, int(round(duration_s * rate)) + 1)
+        na = tm.n_act
+        if reference is not None:
+            s_ref_all = actuator_strokes(tm.desc, reference.d[:n])
+            v_ref_all = np.ascontiguousarray(reference.v[:n])
+            vff_all = ctrl.feedforward(reference.v[:n], reference.a[:n], rate)  # feed-forward velocity demand
+        else:
+            vc_all = np.ascontiguousarray(valve_command[:n], dtype=np.float64)
+        Q = np.full((n, m.nq), np.nan)
+        V = np.full((n, m.nv), np.nan)
+        ACC = np.full((n, 6), np.nan)
+        H = {k: np.full((n, na), np.nan) for k in ("valve_command", "spool_position", "actuator_force",
+                                                   "pressure_a", "pressure_b")}
+        ex = {"supply_pressure": np.full(n, np.nan), "accumulator_gas_volume": np.full(n, np.nan),
+              "loop_gap": np.full(n, np.nan)}
+        Hsp, Hf, Hpa, Hpb = H["spool_position"], H["actuator_force"], H["pressure_a"], H["pressure_b"]
+        Eps, Egas = ex["supply_pressure"], ex["accumulator_gas_volume"]
+        st = hs.state
+        spool, pa, pb, force, psup, gasv = st.spool[0], st.p_a[0], st.p_b[0], hs.force[0], st.p_supply, st.gas_volume
+        ids = tm.actuator_ids
+        qa, da = tm.stroke_qadr, tm.stroke_dadr
+        pd, pb_ = tm.platen_dadr, tm.platen_body
+        spt = self.steps_per_tick
+        x2 = np.zeros((1, na))
+        v2 = np.zeros((1, na))
+        cmd2 = np.zeros((1, na))
+        cmd = cmd2[0]
+        vel6 = np.zeros(6)
+        xk = np.zeros(na)
+        qpos, qvel, qacc, dctrl = d.qpos, d.qvel, d.qacc, d.ctrl
+        qa64, da64, ids64 = (np.asarray(a, dtype=np.int64) for a in (qa, da, ids))
+        free = tm.platen_free
+        effects = tm.step_effects
+        fr_dofs, fr_fc, fr_zss = tm.friction_dofs, tm.friction_force, tm.friction_presliding_m
+        nfr = len(fr_dofs)
+        air = (tm.air_qadr, tm.air_dadr, tm.air_preload, float(tm.air_area_over_volume), float(tm.air_exponent))
+        nair = len(tm.air_qadr)
+        nq = nfr or nair  # qfrc_applied written by the loop every step
+        zfr = self._zfr
+        qfa = d.qfrc_applied
+        fused = fast and hs.delay_steps == 0 and hs.backend == "numba"  # one compiled call per step
+        slide_d, pdi, n_pd = tm.platen_slide_dadr, tm.platen_dof_index, len(tm.platen_dof_index)
+        xmat = d.xmat
+        step = mujoco.mj_step
+        fuse_tick = (fast and fuse and fused and free and reference is not None and not effects and spt >= 2
+                     and ctrl.has_compiled_tick())
+        if fuse_tick:
+            first, later = FL.tick_first_step, FL.later_step
+            g = ctrl.kernel_args()
+            hyd_args = (qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS, hs._buf, hs._P, hs._G,
+                        fr_dofs, fr_fc, zfr, fr_zss, self.dt) + air
+            first_args = (qpos, qvel, xmat, dctrl, qfa, Q, V, Hsp, Hf, Hpa, Hpb, H["valve_command"], Eps, Egas,
+                          s_ref_all, v_ref_all, vff_all, qa64, da64, ids64, pd, pb_) + g + hyd_args[3:]
+            later_args = (qpos, qvel, qacc, dctrl, qfa, ACC, pd) + hyd_args
+        t_ctrl = t_hyd = t_phys = t_out = t_fused = 0.0
+        reason = None
+        clock = time.perf_counter
+        wall0 = clock()
+        last_print = wall0
+        k = -1
+        for k in range(n):
+            if fuse_tick:
+                # ---- recorder, controller tick, hydraulics: one compiled call per physics step
+                t0 = clock()
+                first(k, *first_args)
+                t1 = clock()
+                step(m, d)
+                t2 = clock()
+                later(k, *later_args)  # also records the first step's platen acceleration
+                t3 = clock()
+                step(m, d)
+                t4 = clock()
+                t_fused += (t1 - t0) + (t3 - t2)
+                t_phys += (t2 - t1) + (t4 - t3)
+                for _ in range(spt - 2):
+                    later(-1, *later_args)
+                    t6 = clock()
+                    step(m, d)
+                    t7 = clock()
+                    t_fused += t6 - t4
+                    t_phys += t7 - t6
+                    t4 = t7
+            else:
+                # ---- recorder: raw state at t_k
+                t0 = clock()
+                if fast:
+                    FL.record(k, qpos, qvel, Q, V, hs._X, hs._Y, HL.SPOOL, HL.FORCE, HL.PA, HL.PB, Hsp, Hf, Hpa, Hpb,
+                              HL.PS, HL.GASV, Eps, Egas)
+                else:
+                    Q[k] = qpos
+                    V[k] = qvel
+                    Hsp[k] = spool
+                    Hf[k] = force
+                    Hpa[k] = pa
+                    Hpb[k] = pb
+                    Eps[k] = psup[0]
+                    Egas[k] = gasv[0]
+                t1 = clock()
+                t_out += t1 - t0
+                # ---- controller tick (valve commands held until the next tick)
+                if reference is not None:
+                    if not free:
+                        xk[:] = qpos[qa]
+                        vel6[:] = 0.0
+                        vel6[pdi] = qvel[slide_d]
+                        ctrl.command_fast(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0], cmd)
+                    elif fast:
+                        ctrl.command_from_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa64, pd, pb_,
+                                                force, psup[0], cmd)
+                    else:
+                        xk[:] = qpos[qa]
+                        vel6[:3] = qvel[pd:pd + 3]
+                        vel6[3:] = xmat[pb_].reshape(3, 3) @ qvel[pd + 3:pd + 6]
+                        cmd[:] = ctrl.command(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0])
+                else:
+                    cmd[:] = vc_all[k]
+                H["valve_command"][k] = cmd
+                t2 = clock()
+                t_ctrl += t2 - t1
+                # ---- physics steps of this tick: hydraulics, then mj_step
+                for j in range(spt):
+                    t3 = clock()
+                    if fused and nq:
+                        FL.pre_step_friction(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y,
+                                             hs._IC, hs._ICS, hs._buf, 0, hs._P, hs._G, qfa, fr_dofs, fr_fc, zfr,
+                                             fr_zss, self.dt, *air)
+                    elif fused:
+                        FL.pre_step(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS,
+                                    hs._buf, 0, hs._P, hs._G)
+                    else:
+                        x2[0] = qpos[qa]
+                        v2[0] = qvel[da]
+                        f = hs.step(cmd2, x2, v2)
+                        dctrl[ids] = f[0]
+                    if not (fused and nq) and (effects or nq):
+                        qfa[:] = 0.0
+                        if nfr:
+                            if fast:
+                                FL.presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
+                            else:
+                                self._presliding_numpy(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss)
+                        if nair:
+                            if fast:
+                                FL.air_springs(qpos, qfa, *air)
+                            else:
+                                self._air_numpy(qpos, qfa, *air)
+                    for e in effects:
+                        e.apply(m, d)
+                    t4 = clock()
+                    step(m, d)
+                    t5 = clock()
+                    t_hyd += t4 - t3
+                    t_phys += t5 - t4
+                    if j == 0:
+                        if free:
+                            ACC[k] = qacc[pd:pd + 6]
+                        else:
+                            ACC[k, :n_pd] = qacc[slide_d]
+            # ---- divergence checks
+            if k % gap_every == 0:
+                t6 = clock()
+                gap = self.loop_gap()
+                ex["loop_gap"][k] = gap
+                reason = self._check(k / rate, gap)
+                t_out += clock() - t6
+                if reason:
+                    break
+            if progress and clock() - last_print > 0.25:
+                last_print = clock()
+                frac = (k + 1) / n
+                bar = "#" * int(30 * frac)
+                sys.stderr.write(f"\r  [{bar:<30s}] {100 * frac:5.1f} %  t = {k / rate:7.2f} s")
+                sys.stderr.flush()
+        wall = clock() - wall0
+        if progress:
+            sys.stderr.write("\r" + " " * 70 + "\r")
+            sys.stderr.flush()
+        n_done = k + 1
+        t7 = clock()
+        ch = self._derive(Q[:n_done], V[:n_done], ACC[:n_done])
+        for key, arr in H.items():
+            ch[key] = arr[:n_done]
+        for key in ex:
+            ex[key] = ex[key][:n_done]
+        if "_payload_qpos" in ch:
+            ex["payload_qpos"] = ch.pop("_payload_qpos")
+        t_post = clock() - t7
+        return RunResult(t=np.arange(n_done) / rate, channels=ch, extras=ex, wall_s=wall + t_post,
+                         sim_s=n_done / rate,
+                         timing={"physics_s": t_phys, "hydraulics_s": t_hyd, "controller_s": t_ctrl,
+                                 "output_s": t_out + t_post, "fused_s": t_fused, "steps": n_done * spt},
+                         incomplete_reason=reason)
+
+    def _derive(self, Q, V, ACC) -> dict:
+        """Recorder channels from raw qpos/qvel/platen-qacc samples (vectorised)."""
+        tm = self.tm
+        pq, pd = tm.platen_qadr, tm.platen_dadr
+        if not tm.platen_free:
+            n = len(Q)
+            pose = np.zeros((n, 6))
+            vel = np.zeros((n, 6))
+            pose[:, tm.platen_dof_index] = Q[:, tm.platen_slide_qadr]
+            vel[:, tm.platen_dof_index] = V[:, tm.platen_slide_dadr]
+            acc = np.zeros((n, 6))
+            acc[:, tm.platen_dof_index] = ACC[:, :len(tm.platen_dof_index)]
+            out = {"table_displacement": pose, "table_velocity": vel, "table_acceleration": acc,
+                   "actuator_displacement": Q[:, tm.stroke_qadr].copy()}
+            accs = tm.desc.accelerometers
+            Dn = np.array([a.direction for a in accs]).reshape(-1, 3)
+            out["accelerometers"] = acc[:, :3] @ Dn.T  # no rotation: every point moves alike
+            if len(tm.payload_dadr):
+                qadr = [tm.model.jnt_qposadr[tm.model.dof_jntid[k]] for k in tm.payload_dadr]
+                out["_payload_qpos"] = Q[:, qadr].copy()
+            return out
+        quat = Q[:, pq + 3:pq + 7]
+        w, x, y, z = quat.T
+        # rotation matrices of the platen (rows of R for each sample)
+        R = np.empty((len(Q), 3, 3))
+        R[:, 0, 0] = 1 - 2 * (y * y + z * z)
+        R[:, 0, 1] = 2 * (x * y - z * w)
+        R[:, 0, 2] = 2 * (x * z + y * w)
+        R[:, 1, 0] = 2 * (x * y + z * w)
+        R[:, 1, 1] = 1 - 2 * (x * x + z * z)
+        R[:, 1, 2] = 2 * (y * z - x * w)
+        R[:, 2, 0] = 2 * (x * z - y * w)
+        R[:, 2, 1] = 2 * (y * z + x * w)
+        R[:, 2, 2] = 1 - 2 * (x * x + y * y)
+        angles = np.stack([np.arctan2(-R[:, 1, 2], R[:, 2, 2]), np.arcsin(np.clip(R[:, 0, 2], -1, 1)),
+                           np.arctan2(-R[:, 0, 1], R[:, 0, 0])], axis=1)
+        pose = np.concatenate([Q[:, pq:pq + 3], angles], axis=1)
+        w_world = np.einsum("nij,nj->ni", R, V[:, pd + 3:pd + 6])
+        vel = np.concatenate([V[:, pd:pd + 3], w_world], axis=1)
+        alin = ACC[:, :3]
+        aang = np.einsum("nij,nj->ni", R, ACC[:, 3:6])
+        acc = np.concatenate([alin, aang], axis=1)
+        out = {"table_displacement": pose, "table_velocity": vel, "table_acceleration": acc,
+               "actuator_displacement": Q[:, tm.stroke_qadr].copy()}
+        accs = tm.desc.accelerometers
+        if accs:
+            P = np.array([a.position_m for a in accs])
+            Dn = np.array([a.direction for a in accs])
+            r = np.einsum("nij,aj->nai", R, P)  # sensor offsets in world
+            a_site = (alin[:, None, :] + np.cross(aang[:, None, :], r)
+                      + np.cross(w_world[:, None, :], np.cross(w_world[:, None, :], r)))
+            dirs = np.einsum("nij,aj->nai", R, Dn)  # sensor axes in world
+            out["accelerometers"] = np.einsum("nai,nai->na", a_site, dirs)
+        else:
+            out["accelerometers"] = np.zeros((len(Q), 0))
+        # payload coordinates (for drawing a flexible payload): qpos of its joints
+        if len(tm.payload_dadr):
+            qadr = [tm.model.jnt_qposadr[tm.model.dof_jntid[k]] for k in tm.payload_dadr]
+            out["_payload_qpos"] = Q[:, qadr].copy()
+        return out
+
+    def _check(self, tk: float, gap: float) -> str | None:
+        d = self.d
+        st = self.hs.state
+        if self._fl is not None and self._fl.all_finite(d.qpos, d.qvel, st.p_a, st.p_b) and gap <= GAP_LIMIT_M:
+            pmax = max(st.p_a.max(), st.p_b.max())
+            if pmax <= self.hp.relief_pressure_pa * (1 + 1e-9):
+                return None
+        if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
+            return f"simulation diverged at t = {tk:.4f} s: the mechanical state is not finite (NaN/inf)"
+        if not (np.all(np.isfinite(st.p_a)) and np.all(np.isfinite(st.p_b))):
+            return f"simulation diverged at t = {tk:.4f} s: chamber pressures are not finite"
+        if gap > GAP_LIMIT_M:
+            return (f"simulation diverged at t = {tk:.4f} s: a swivel opened by {gap * 1e3:.3g} mm "
+                    f"(limit {GAP_LIMIT_M * 1e3:.3g} mm); the loop closure failed")
+        hp = self.hp
+        pmax = max(float(st.p_a.max()), float(st.p_b.max()))
+        if pmax > hp.relief_pressure_pa * (1 + 1e-9):
+            return f"simulation diverged at t = {tk:.4f} s: chamber pressure {pmax / 1e6:.1f} MPa above relief"
+        return None
+
+
+__all__ = ["Reference", "RunResult", "Simulation", "reference_from_motions"]

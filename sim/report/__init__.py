@@ -1,0 +1,1 @@
+"""PRESENT: rerun recordings, figures and markdown reports."""

@@ -1,0 +1,727 @@
+"""Rerun recordings of run files (``.rrd``): the table in 3-D and every channel as a time series.
+
+One recording holds one run (measured or simulated), optionally laid side by side with
+a second run (``compare``): its series next to the first run's and the residual
+``run - compare`` per channel, plus a translucent "ghost" platen at the compare run's pose.
+
+What goes in (entity paths follow the model):
+
+==========================================  ==========================================================
+``table/foundation``                        static world geoms (pit floor); ``table/ground`` if a foundation body moves
+``table/platen``                            platen body, its transform per display frame
+``table/platen/accelerometers``             sensor positions and directions (platen frame)
+``table/actuators/<A>/cylinder``, ``/rod``  the linkage bodies; geoms coloured by |force| / (A_a p_supply)
+``table/supports/S<i>/piston``, ``/shoe``   static supports (hydrostatic bearings)
+``table/payload/<body>``                    payload bodies (deformed when ``payload_qpos`` is given)
+``compare/platen``                          the compare run's platen (translucent)
+``plots/dof/<d>/displacement``              one entity, a value per series: ``reference``, ``achieved``
+``plots/dof/<d>/acceleration``              ``reference`` (second difference of the reference), ``achieved``
+``plots/actuators/<A>/valve``               ``command``, ``spool``
+``plots/actuators/<A>/pressure``            ``a``, ``b``
+``plots/actuators/force``, ``/stroke``      net piston force, stroke: one series per actuator
+``plots/accelerometers``                    one series per accelerometer channel
+``plots/hydraulics/<q>``                    ``supply_pressure``, ``accumulator_gas_volume`` (one series each)
+``plots/model/loop_gap``                    largest swivel opening of the model (finite samples only)
+``plots/compare/<same sub-path>``           the compare run's series (not its reference), on this run's time
+``plots/residual/<same sub-path>``          ``run - compare`` per series (with a compare run)
+==========================================  ==========================================================
+
+Time is the run's own time on the timeline ``time`` (a duration in s). Each body's geoms are
+logged once as static shapes in the body frame; per display frame (default 50 Hz, never
+every physics step) only the body transforms and linkage colours change. Each group of
+time series goes out in one ``send_columns`` call as one entity with one scalar per
+series and row (``rr.Scalars`` with several values per row, named by ``rr.SeriesLines``),
+so the time column and row ids are stored once per group, not once per channel. Time series
+keep every n-th sample, n the largest that keeps at least ``series_rate_hz`` (default
+250 Hz: every 4th sample of a 1024 Hz run); ``series_rate_hz=None`` keeps the full rate. A
+series with drop-outs (non-finite samples where the rest of its group is finite) leaves
+its group for ``<group>/<name>``, finite samples only. The blueprint (3-D view beside
+tabbed time-series panels) is built by :func:`blueprint` and travels with the recording.
+
+A recording file is written to a temporary file in the target folder and moved into
+place with ``os.replace`` only when complete; on any error the temporary file is removed,
+so a reader sees either no file or the whole recording.
+
+rerun itself (about 1 s to import, with pyarrow and pandas) runs in a writer process that
+:meth:`RrdTarget.open` starts for a file target, so the import happens beside the
+simulation rather than after it: :meth:`RrdTarget.write_run` notes the recording's rerun
+calls as plain data (:class:`_Ops`, :class:`_Lazy`), sends them in one pickle and waits
+for the writer; its failures come back as exceptions here. Viewer targets record
+in-process (:func:`_execute` either way).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sim.errors import RunFileError, UserError
+from sim.report.rerun_series import _aligned, _reference_acceleration, _Group, _channel_groups, _role_colors, series_stride, _C_REF, _C_ACH, _C_CMP, _C_RES, _ROLE_COLORS, _CMP_SHADES, _RES_SHADES  # noqa: F401
+from sim.report.rerun_scene import _quat_xyzw, body_entity, _geom_archetype, _Scene, _scene, _rotations_xyz, _LoopSolver, _body_poses  # noqa: F401
+
+TIMELINE = "time"
+DEFAULT_RATE_HZ = 50.0
+DEFAULT_SERIES_RATE_HZ = 250.0  # time series: every n-th sample, n the largest keeping >= this rate
+APPLICATION_ID = "shaketable"
+SUFFIX = ".rrd"
+DEFAULT_URL = "rerun+http://127.0.0.1:9876/proxy"
+
+# series colours (RGB)
+_FORCE_MAP = np.array([  # fraction of capacity -> colour
+    [0.0, 60, 100, 170],
+    [0.25, 60, 170, 200],
+    [0.5, 230, 200, 40],
+    [0.75, 240, 120, 30],
+    [1.0, 215, 25, 28],
+])
+
+
+_PRELOAD = None
+_TARGET = object()  # write_run: "the target's setting"
+
+
+def preload() -> None:
+    """Start importing rerun in a background thread (it takes ~1 s); :func:`_rerun` waits for it."""
+    global _PRELOAD
+    if os.environ.get("SHAKETABLE_RRD_PRELOAD", "1") == "0":  # for bench/recording_bench.py
+        return
+    if _PRELOAD is None and "rerun" not in __import__("sys").modules:
+        import threading
+
+        def work():
+            try:
+                import pyarrow as pa
+                import rerun  # noqa: F401
+                import rerun.blueprint  # noqa: F401
+
+                pa.array([0.0]).to_numpy()
+                try:  # pyarrow imports pandas lazily on first conversion; do it here too
+                    import pandas  # noqa: F401
+                except ImportError:
+                    pass
+            except Exception:  # noqa: BLE001 - the import is retried (and fails loudly) in the main thread
+                pass
+
+        _PRELOAD = threading.Thread(target=work, name="rerun-preload", daemon=True)
+        _PRELOAD.start()
+
+
+def _rerun():
+    if _PRELOAD is not None:
+        _PRELOAD.join()
+    import rerun
+
+    return rerun
+
+
+class RecordingError(UserError):
+    """A recording that cannot be written (bad name, missing or unwritable folder)."""
+
+
+def _one_line(text) -> str:
+    return " ".join(str(text).split())
+
+
+def force_colors(fraction: np.ndarray) -> np.ndarray:
+    """(n,) force fractions of capacity (|F| / (A_a p_supply)) -> (n, 4) uint8 RGBA.
+
+    Blue at 0, yellow at 0.5, red at 1 and beyond; NaN gives grey.
+    """
+    raw = np.asarray(fraction, dtype=float)
+    f = np.clip(np.nan_to_num(raw, nan=0.0), 0.0, 1.0)
+    out = np.empty(f.shape + (4,), dtype=np.uint8)
+    for k in range(3):
+        out[..., k] = np.interp(f, _FORCE_MAP[:, 0], _FORCE_MAP[:, k + 1]).round().astype(np.uint8)
+    out[..., 3] = 255
+    out[np.isnan(raw)] = (128, 128, 128, 255)
+    return out
+
+
+def check_path(path) -> Path:
+    """Check that a recording can be written at ``path``; RecordingError (one line) if not.
+
+    The name must end ``.rrd``, the folder must exist and be writable (tried by creating
+    and removing a temporary file there), and the path must not be a folder.
+    """
+    p = Path(path)
+    name = str(path)
+    if not p.name.endswith(SUFFIX) or p.name == SUFFIX:
+        raise RecordingError(f"recording {name} does not end with {SUFFIX!r}; name it like 'run01{SUFFIX}'")
+    if p.is_dir():
+        raise RecordingError(f"recording {name} is a folder; give a file name ending {SUFFIX!r}")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise RecordingError(f"recording {name} cannot be written: folder {folder} does not exist; "
+                             "create the folder first")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".probe", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise RecordingError(f"recording {name} cannot be written ({_one_line(exc.strerror or exc)}); "
+                             "choose a folder you can write to") from None
+    return p
+
+
+# ---------------------------------------------------------------------- geometry
+def blueprint(run, compare=None, *, tm=None):
+    """The recording's layout: 3-D table view on the left, tabbed time-series panels on the right.
+
+    Args:
+        run: the RunFile recorded (its actuators, DOFs and accelerometers name the panels).
+        compare: the compare RunFile, if any (adds a residual tab).
+        tm: unused; accepted so callers can pass the model.
+    """
+    import rerun.blueprint as rrb
+
+    acts = run.actuators
+    dofs = run.dofs
+
+    def ts(name, *subs, compare_too=True):
+        # each panel: plots/<sub> (with any channel split off below it) and, with a compare run,
+        # plots/compare/<sub>
+        contents = []
+        for sub in subs:
+            contents.append(f"plots/{sub}/**")
+            if compare is not None and compare_too:
+                contents.append(f"plots/compare/{sub}/**")
+        return rrb.TimeSeriesView(name=name, origin="/", contents=contents)
+
+    tabs = [
+        rrb.Grid(*[ts(f"{d} displacement", f"dof/{d}/displacement") for d in dofs], name="DOF displacement"),
+        rrb.Grid(*[ts(f"{d} acceleration", f"dof/{d}/acceleration") for d in dofs], name="DOF acceleration"),
+        rrb.Grid(*[ts(f"{a} valve", f"actuators/{a}/valve") for a in acts], name="valves"),
+        rrb.Grid(*[ts(f"{a} pressure", f"actuators/{a}/pressure") for a in acts], name="pressures"),
+        rrb.Vertical(ts("actuator force", "actuators/force", compare_too=False),
+                     ts("actuator stroke", "actuators/stroke", compare_too=False),
+                     name="forces"),
+        rrb.Vertical(ts("supply pressure", "hydraulics/supply_pressure"),
+                     ts("accumulator gas volume", "hydraulics/accumulator_gas_volume"),
+                     ts("loop-closure gap", "model/loop_gap", compare_too=False),
+                     name="hydraulics"),
+    ]
+    if run.accelerometers is not None:
+        tabs.append(rrb.Grid(ts("accelerometers", "accelerometers", compare_too=False), name="accelerometers"))
+    if compare is not None:
+        tabs.append(rrb.Grid(
+            *[ts(f"{d} residual", f"residual/dof/{d}", compare_too=False) for d in dofs],
+            ts("force residual", "residual/actuators/force", compare_too=False),
+            name="residuals"))
+    view3d = rrb.Spatial3DView(
+        name="table", origin="/", contents=["table/**", "compare/**"],
+        eye_controls=rrb.EyeControls3D(position=[11.0, -13.0, 7.0], look_target=[0.0, 0.0, 0.5],
+                                       eye_up=[0.0, 0.0, 1.0]),
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(view3d, rrb.Tabs(*tabs, active_tab=0), column_shares=[0.45, 0.55]),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed"),
+        auto_views=False,
+    )
+
+
+# ---------------------------------------------------------------------- series
+class _Lazy:
+    """Stand-in for the ``rerun`` module: notes attribute chains and calls (``rr.Boxes3D(...)``,
+    ``rr.components.FillMode.Solid``) as plain data, for :func:`_resolve` to replay."""
+
+    def __init__(self, path: tuple = ()):
+        self._path = path
+
+    def __getattr__(self, name):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return _Lazy(self._path + (name,))
+
+    def __call__(self, *args, **kwargs):
+        return _Call(self._path, args, kwargs)
+
+
+@dataclass
+class _Call:
+    path: tuple
+    args: tuple
+    kwargs: dict
+
+
+class _Ops:
+    """Stand-in for a ``rr.RecordingStream``: notes ``log``, ``send_columns``, ... calls in order."""
+
+    def __init__(self):
+        self.calls = []
+
+    def __getattr__(self, name):
+        if name.startswith("_"):
+            raise AttributeError(name)
+
+        def note(*args, **kwargs):
+            self.calls.append((name, args, kwargs))
+
+        return note
+
+
+def _resolve(rr, x):
+    if isinstance(x, _Lazy):
+        obj = rr
+        for n in x._path:
+            obj = getattr(obj, n)
+        return obj
+    if isinstance(x, _Call):
+        return _resolve(rr, _Lazy(x.path))(*_resolve(rr, x.args), **_resolve(rr, x.kwargs))
+    if isinstance(x, (list, tuple)):
+        return type(x)(_resolve(rr, v) for v in x)
+    if isinstance(x, dict):
+        return {k: _resolve(rr, v) for k, v in x.items()}
+    return x
+
+
+def _escape(part: str) -> str:
+    """An entity path part for ``part`` (as ``rr.escape_entity_path_part``, without importing rerun)."""
+    out = []
+    for c in part:
+        if c.isalnum() or c in "_-.":
+            out.append(c)
+        elif c.isascii() and c.isprintable():
+            out.append("\\" + c)
+        else:
+            out.append(f"\\u{{{ord(c):X}}}")
+    return "".join(out)
+
+
+def _execute(job: dict) -> None:
+    """Replay a recording job (from :meth:`RrdTarget.write_run`) with rerun: sinks, blueprint, calls."""
+    from types import SimpleNamespace
+
+    rr = _rerun()
+    rec = rr.RecordingStream(job["application_id"], recording_id=job["recording_id"])
+    acts, dofs, has_acc, has_cmp = job["blueprint"]
+    bp = blueprint(SimpleNamespace(actuators=acts, dofs=dofs, accelerometers=() if has_acc else None),
+                   True if has_cmp else None)
+    sinks = []
+    if job.get("file"):
+        try:
+            sinks.append(rr.FileSink(job["file"]))
+        except RuntimeError as exc:  # rerun reports the OS error in its message: "(os error 2)"
+            import re
+
+            m = re.search(r"os error (\d+)", str(exc))
+            if m is None:
+                raise
+            raise OSError(int(m.group(1)), os.strerror(int(m.group(1)))) from None
+    if job["spawn"]:
+        rr.spawn(connect=False)
+    if job["spawn"] or job["connect"] is not None:
+        sinks.append(rr.GrpcSink(job["connect"] or DEFAULT_URL))
+    done = False
+    try:
+        rec.set_sinks(*sinks, default_blueprint=bp)
+        for name, args, kwargs in job["ops"]:
+            getattr(rec, name)(*_resolve(rr, args), **_resolve(rr, kwargs))
+        rec.flush()
+        rec.disconnect()
+        done = True
+    finally:
+        if not done:
+            try:
+                rec.disconnect()
+            except Exception:  # noqa: BLE001 - best effort; the caller removes the partial file
+                pass
+
+
+_WORKER_CODE = "import sys; from sim.report.rerun import _worker_main; sys.exit(_worker_main())"
+
+
+def _start_worker():
+    import subprocess
+    import sys
+
+    root = str(Path(__file__).resolve().parents[2])  # the repository (sim/report/rerun.py)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return subprocess.Popen([sys.executable, "-c", _WORKER_CODE], stdin=subprocess.PIPE,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=root, env=env)
+
+
+def _stop_worker(proc) -> None:
+    if proc.poll() is None:
+        proc.kill()
+    try:
+        proc.communicate(timeout=10)
+    except Exception:  # noqa: BLE001 - it was killed; nothing more to do
+        pass
+
+
+def _run_in_worker(proc, job: dict) -> None:
+    """Hand ``job`` to the writer process and wait for it; its failure is raised here
+    (OSError for a file that cannot be written, RuntimeError otherwise)."""
+    import pickle
+
+    _, err = proc.communicate(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
+    if proc.returncode == 0:
+        return
+    lines = [ln for ln in err.decode("utf-8", "replace").splitlines() if ln.startswith(("OSError\t", "Error\t"))]
+    if lines:
+        kind, errno, msg = (lines[-1].split("\t", 2) + ["", ""])[:3]
+        if kind == "OSError":
+            raise OSError(int(errno or 0), msg)
+        raise RuntimeError(f"the recording's writer process failed: {msg}")
+    tail = _one_line(err.decode("utf-8", "replace")[-500:]) or f"exit code {proc.returncode}"
+    raise RuntimeError(f"the recording's writer process failed: {tail}")
+
+
+def _worker_main() -> int:
+    """The writer process: import rerun at once, then read one pickled job on stdin and run it."""
+    import pickle
+    import sys
+
+    try:
+        import pyarrow as pa
+        import rerun  # noqa: F401
+        import rerun.blueprint  # noqa: F401
+
+        pa.array([0.0]).to_numpy()
+        try:  # pyarrow imports pandas on its first conversion of a NumPy array; do it now
+            import pandas  # noqa: F401
+        except ImportError:
+            pass
+    except Exception:  # noqa: BLE001 - _execute imports again and reports the failure
+        pass
+    data = sys.stdin.buffer.read()
+    if not data:
+        return 0  # the target was never written
+    try:
+        _execute(pickle.loads(data))
+    except OSError as exc:
+        sys.stderr.write(f"OSError\t{exc.errno or 0}\t{_one_line(exc.strerror or exc)}\n")
+        return 1
+    except Exception as exc:  # noqa: BLE001 - reported to the parent in one line
+        sys.stderr.write(f"Error\t0\t{type(exc).__name__}: {_one_line(exc)}\n")
+        return 1
+    return 0
+
+
+# ---------------------------------------------------------------------- target
+class RrdTarget:
+    """Where a recording goes: an ``.rrd`` file and/or a live viewer.
+
+    Use :meth:`open` before a long computation (it fails early, as a one-line
+    :class:`~sim.errors.UserError`, when the file cannot be written), then
+    :meth:`write_run` once the run exists. ``path`` is the recording file (None for a
+    viewer-only target).
+    """
+
+    def __init__(self, path: Path | None, *, spawn: bool = False, connect: str | None = None,
+                 rate_hz: float = DEFAULT_RATE_HZ, series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ,
+                 application_id: str = APPLICATION_ID):
+        self.path = path
+        self.spawn = spawn
+        self.connect = connect
+        self.rate_hz = float(rate_hz)
+        self.series_rate_hz = None if series_rate_hz is None else float(series_rate_hz)
+        self.application_id = application_id
+        self.recording_id: str | None = None
+        self._worker = None  # writer process (subprocess.Popen) started by open()
+
+    @classmethod
+    def open(cls, path=None, *, spawn: bool = False, connect: str | None = None,
+             rate_hz: float = DEFAULT_RATE_HZ, series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ,
+             application_id: str = APPLICATION_ID) -> "RrdTarget":
+        """Check the target now; nothing is written until :meth:`write_run`.
+
+        Args:
+            path: ``.rrd`` file to write (its folder must exist and be writable), or None.
+            spawn: also stream to a viewer started here (needs a screen).
+            connect: also stream to a running viewer at this gRPC URL ("" for the default URL).
+            rate_hz: display rate of the 3-D transforms.
+            series_rate_hz: time series keep every n-th sample, n the largest that keeps at
+                least this rate (default 250 Hz: every 4th sample of a 1024 Hz run); None keeps
+                the run's full rate.
+        """
+        if path is None and not spawn and connect is None:
+            raise RecordingError("no recording target; give a .rrd file, spawn a viewer or connect to one")
+        if not (np.isfinite(rate_hz) and rate_hz > 0):
+            raise RecordingError(f"display rate {rate_hz!r} Hz is not a positive number; give e.g. 50")
+        if series_rate_hz is not None and not (np.isfinite(series_rate_hz) and series_rate_hz > 0):
+            raise RecordingError(f"time-series rate {series_rate_hz!r} Hz is not a positive number; "
+                                 "give e.g. 250, or None for the full rate")
+        p = check_path(path) if path is not None else None
+        target = cls(p, spawn=spawn, connect=connect, rate_hz=rate_hz, series_rate_hz=series_rate_hz,
+                     application_id=application_id)
+        if p is not None and not spawn and connect is None and os.environ.get("SHAKETABLE_RRD_PRELOAD", "1") != "0":
+            # a file only: rerun is imported (~1 s) and used in a writer process of its own,
+            # started now, so the import runs beside the simulation instead of after it
+            try:
+                target._worker = _start_worker()
+            except OSError:
+                target._worker = None
+        if target._worker is None:
+            preload()
+        return target
+
+    # ------------------------------------------------------------------ writing
+    def write_run(self, run, tm, payload_qpos: np.ndarray | None = None, *, compare=None,
+                  rate_hz: float | None = None, series_rate_hz=_TARGET, name: str | None = None) -> Path | None:
+        """Record ``run`` (a RunFile) with the geometry of ``tm`` (a TableModel).
+
+        Args:
+            run: the run to record.
+            tm: the table model the run belongs to (its actuators must match the run's).
+            payload_qpos: optional (N, n_payload_q) joint positions of a flexible payload
+                (``tm.info.payload_joints`` order) to show it deformed; run files do not carry them.
+            compare: optional second RunFile laid beside ``run`` (series, residuals, ghost platen).
+            rate_hz: display rate of the 3-D scene (default: the target's, 50 Hz).
+            series_rate_hz: least rate of the time series, None for the run's full rate
+                (default: the target's, 250 Hz).
+            name: recording name shown in the viewer (default: the run's description or path).
+
+        Returns:
+            The recording file written, or None for a viewer-only target.
+        """
+        if list(run.actuators) != list(tm.actuator_names):
+            raise RunFileError(f"run file {run.name} has actuators {', '.join(run.actuators)} but table "
+                               f"'{tm.desc.name}' has {', '.join(tm.actuator_names)}; give the matching --table")
+        if payload_qpos is not None:
+            payload_qpos = np.asarray(payload_qpos, dtype=float)
+            nj = len(getattr(tm.info, "payload_joints", []))
+            if payload_qpos.shape != (run.n_samples, nj):
+                raise ValueError(f"payload_qpos has shape {payload_qpos.shape}, need ({run.n_samples}, {nj})")
+        if compare is not None and list(compare.dofs) != list(run.dofs):
+            raise RunFileError(f"run file {compare.name} has DOFs {', '.join(compare.dofs)} but "
+                               f"{run.name} has {', '.join(run.dofs)}; compare runs of the same table")
+        rate = float(rate_hz) if rate_hz is not None else self.rate_hz
+        series_rate = self.series_rate_hz if series_rate_hz is _TARGET else series_rate_hz
+
+        self.recording_id = str(uuid.uuid4())
+        worker, self._worker = self._worker, None
+        tmp = None
+        try:
+            # the recording as a list of rerun calls (plain data and numpy arrays), made here;
+            # rerun itself runs in the writer process started by open() (or here)
+            ops = _Ops()
+            self._log(ops, _Lazy(), run, tm, payload_qpos, compare, rate, series_rate, name)
+            job = {"application_id": self.application_id, "recording_id": self.recording_id,
+                   "spawn": self.spawn,
+                   "connect": (self.connect or DEFAULT_URL) if self.connect is not None else None,
+                   "blueprint": ([str(a) for a in run.actuators], [str(d) for d in run.dofs],
+                                 run.accelerometers is not None, compare is not None),
+                   "ops": ops.calls}
+            if self.path is not None:
+                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp",
+                                           dir=self.path.parent if str(self.path.parent) else ".")
+                os.close(fd)
+            job["file"] = tmp
+            if worker is not None and worker.poll() is None:
+                _run_in_worker(worker, job)
+                worker = None
+            else:
+                _execute(job)
+            if tmp is not None:
+                umask = os.umask(0)
+                os.umask(umask)
+                os.chmod(tmp, 0o666 & ~umask)
+                os.replace(tmp, self.path)
+                tmp = None
+        except OSError as exc:
+            raise RecordingError(f"recording {self.path} cannot be written ({_one_line(exc.strerror or exc)}); "
+                                 "choose a folder you can write to, with free space") from None
+        finally:
+            if worker is not None:
+                _stop_worker(worker)
+            if tmp is not None:
+                try:
+                    os.unlink(tmp)
+                except OSError:
+                    pass
+        return self.path
+
+    def close(self) -> None:
+        """Stop the background writer process, if any (a target never written)."""
+        worker, self._worker = getattr(self, "_worker", None), None
+        if worker is not None:
+            _stop_worker(worker)
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - interpreter shutdown
+            pass
+
+    # ------------------------------------------------------------------ content
+    def _log(self, rec, rr, run, tm, payload_qpos, compare, rate_hz, series_rate_hz, name) -> None:
+        """Make the recording: ``rec`` and ``rr`` are the recording stream and the rerun module,
+        or stand-ins (:class:`_Ops`, :class:`_Lazy`) that note the calls for :func:`_execute`."""
+
+        title = name or run.meta.get("description") or Path(run.name).name
+        rec.send_recording_name(str(title))
+        props = {k: str(run.meta[k]) for k in ("table", "source", "description", "scenario", "payload")
+                 if run.meta.get(k) is not None}
+        props["run_file"] = run.name
+        if compare is not None:
+            props["compare_file"] = compare.name
+        if run.incomplete:
+            props["incomplete_reason"] = str(run.incomplete_reason)
+        rec.send_property("run", rr.AnyValues(**props))
+        rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self._log_scene(rec, rr, run, tm, payload_qpos, compare, rate_hz)
+        self._log_series(rec, rr, run, compare, series_rate_hz)
+
+    def _log_scene(self, rec, rr, run, tm, payload_qpos, compare, rate_hz) -> None:
+        import mujoco
+
+        m = tm.model
+        sc = _scene(tm)
+        colored = {g for gs in sc.force_geoms.values() for g in gs} if run.actuator_force is not None else set()
+        for g, gent, _ in sc.geoms:
+            arch = _geom_archetype(rr, m, g, color=gent not in colored)
+            if arch is None:
+                continue
+            rec.log(gent, rr.Transform3D(translation=m.geom_pos[g], quaternion=_quat_xyzw(m.geom_quat[g])),
+                    arch, static=True)
+        # accelerometers, in the frame of the body that carries them
+        acc_by_body: dict[int, list] = {}
+        for a, s in zip(tm.desc.accelerometers, tm.acc_sites):
+            if s >= 0:
+                acc_by_body.setdefault(int(m.site_bodyid[s]), []).append((a, s))
+        ents = dict(sc.bodies)
+        for b, items in acc_by_body.items():
+            ent = ents.get(b, "table/foundation") + "/accelerometers"
+            p = np.array([m.site_pos[s] for _, s in items])
+            rec.log(ent, rr.Points3D(p, radii=0.05, colors=(255, 215, 0), labels=[a.name for a, _ in items],
+                                     show_labels=False),
+                    rr.Arrows3D(origins=p, vectors=np.array([0.5 * a.direction for a, _ in items]),
+                                colors=(255, 215, 0), radii=0.02), static=True)
+
+        # display frames
+        pose_src = run.table_displacement if run.table_displacement is not None else run.reference
+        if pose_src is None or pose_src.shape[1] != 6:
+            return  # not a 6-DOF pose: no motion to show (the static scene stays at home)
+        step = max(1, int(round(run.sample_rate_hz / rate_hz)))
+        idx = np.arange(0, run.n_samples, step)
+        idx = idx[np.all(np.isfinite(pose_src[idx]), axis=1)]
+        if len(idx) == 0:
+            return
+        times = rr.TimeColumn(TIMELINE, duration=run.t[idx])
+        pq = payload_qpos[idx] if payload_qpos is not None else None
+        pos, quat = _body_poses(tm, pose_src[idx], pq, sc.bodies)
+        for k, (_, ent) in enumerate(sc.bodies):
+            rec.send_columns(ent, indexes=[times],
+                             columns=rr.Transform3D.columns(translation=pos[:, k], quaternion=_quat_xyzw(quat[:, k])))
+        if colored:
+            cap = np.array([a.cls.area_a_m2 for a in tm.desc.actuators]) * float(tm.desc.raw["supply"]["pressure_pa"])
+            frac = np.abs(run.actuator_force[idx]) / cap
+            for i, gents in sc.force_geoms.items():
+                cols = force_colors(frac[:, i])
+                for gent in gents:
+                    arch = rr.Cylinders3D if gent.endswith(("cylinder", "rod")) else None
+                    g = next(gg for gg, e, _ in sc.geoms if e == gent)
+                    arch = {int(mujoco.mjtGeom.mjGEOM_BOX): rr.Boxes3D,
+                            int(mujoco.mjtGeom.mjGEOM_CYLINDER): rr.Cylinders3D,
+                            int(mujoco.mjtGeom.mjGEOM_CAPSULE): rr.Capsules3D}.get(int(m.geom_type[g]), arch)
+                    if arch is not None:
+                        rec.send_columns(gent, indexes=[times], columns=arch.columns(colors=cols))
+        # the compare run's platen, translucent
+        if compare is not None and compare.table_displacement is not None and compare.table_displacement.shape[1] == 6:
+            from mjcf.model import xyz_to_quat
+
+            other = _aligned(run, compare.t, compare.table_displacement)[idx]
+            ok = np.all(np.isfinite(other), axis=1)
+            if np.any(ok):
+                pb = tm.platen_body
+                for g in range(int(m.body_geomadr[pb]), int(m.body_geomadr[pb]) + int(m.body_geomnum[pb])):
+                    arch = _geom_archetype(rr, m, g, alpha=0.35)
+                    if arch is not None:
+                        rec.log(f"compare/platen/g{g}", rr.Transform3D(translation=m.geom_pos[g],
+                                                                        quaternion=_quat_xyzw(m.geom_quat[g])),
+                                arch, static=True)
+                # platen body frame relative to the reference point pose (home offset)
+                d = tm.new_data()
+                tm.set_platen_pose(d, np.zeros(6))
+                off_p, off_q = d.xpos[pb].copy(), d.xquat[pb].copy()
+                qs = np.array([xyz_to_quat(*o[3:6]) for o in other[ok]])
+                tr = np.empty((int(ok.sum()), 3))
+                qq = np.empty((int(ok.sum()), 4))
+                for k, (o, q) in enumerate(zip(other[ok], qs)):
+                    # world pose = pose(o) * home body offset (home reference pose is the identity)
+                    R = np.zeros(9)
+                    mujoco.mju_quat2Mat(R, q)
+                    tr[k] = o[:3] + R.reshape(3, 3) @ off_p
+                    mujoco.mju_mulQuat(qq[k], q, off_q)
+                rec.send_columns("compare/platen", indexes=[rr.TimeColumn(TIMELINE, duration=run.t[idx][ok])],
+                                 columns=rr.Transform3D.columns(translation=tr, quaternion=_quat_xyzw(qq)))
+
+    def _log_series(self, rec, rr, run, compare, series_rate_hz) -> None:
+        stride = series_stride(run.sample_rate_hz, series_rate_hz)
+        idx = np.arange(0, run.n_samples, stride)
+        t = run.t[idx]
+        theirs = {}
+        if compare is not None:
+            for g in _channel_groups(compare):
+                for lab, role, j in zip(g.labels, g.roles, range(len(g.labels))):
+                    if role != "reference":
+                        theirs[(g.sub, lab)] = g.values[:, j]
+        for g in _channel_groups(run):
+            self._send_group(rr, rec, t, f"plots/{g.sub}", g.labels, g.unit, _role_colors(g.roles, "run"),
+                             g.values[idx])
+            pick = [j for j, lab in enumerate(g.labels) if (g.sub, lab) in theirs]
+            if not pick:
+                continue
+            # the compare run, resampled onto this run's time, and the residual run - compare
+            other = _aligned(run, compare.t, np.column_stack([theirs[(g.sub, g.labels[j])] for j in pick]))[idx]
+            labels = [g.labels[j] for j in pick]
+            roles = [g.roles[j] for j in pick]
+            self._send_group(rr, rec, t, f"plots/compare/{g.sub}", [f"{lab} (compare)" for lab in labels], g.unit,
+                             _role_colors(roles, "compare"), other)
+            self._send_group(rr, rec, t, f"plots/residual/{g.sub}", [f"{lab}: run - compare" for lab in labels],
+                             g.unit, _role_colors(roles, "residual"), g.values[idx][:, pick] - other)
+
+    @staticmethod
+    def _send_group(rr, rec, t, ent, labels, unit, colors, values) -> None:
+        """One entity with one scalar per column and row (``send_columns``, one call).
+
+        Rows where no column is finite are left out. A column that is not finite exactly
+        where the others are (a sensor drop-out, a channel that starts late) goes to its own
+        entity ``<ent>/<label>`` with its finite samples only, so no row carries a NaN.
+        """
+        values = np.asarray(values, dtype=float).reshape(len(t), -1)
+        fin = np.isfinite(values)
+        rows = fin.any(axis=1)
+        if not rows.any():
+            return
+        together = np.all(fin == rows[:, None], axis=0)
+        names = [f"{lab} [{unit}]" if unit else str(lab) for lab in labels]
+        widths = 1.5
+
+        def send(path, cols, keep):
+            rec.log(path, rr.SeriesLines(names=[names[j] for j in cols],
+                                         colors=[colors[j] for j in cols] if colors else None,
+                                         widths=[widths] * len(cols)), static=True)
+            v = values[np.ix_(keep, cols)] if len(cols) > 1 else values[keep, cols[0]]
+            rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t[keep])],
+                             columns=rr.Scalars.columns(scalars=v))
+
+        cols = np.flatnonzero(together)
+        if len(cols):
+            send(ent, list(cols), np.flatnonzero(rows))
+        for j in np.flatnonzero(~together):
+            keep = np.flatnonzero(fin[:, j])
+            if len(keep):
+                send(f"{ent}/{_escape(str(labels[j]))}", [j], keep)
+
+
+def record_run(path, run, tm, *, compare=None, payload_qpos=None, rate_hz: float = DEFAULT_RATE_HZ,
+               series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ, spawn: bool = False,
+               connect: str | None = None) -> Path | None:
+    """Convenience: ``RrdTarget.open(path, ...).write_run(run, tm, ...)``."""
+    return RrdTarget.open(path, spawn=spawn, connect=connect, rate_hz=rate_hz,
+                          series_rate_hz=series_rate_hz).write_run(
+        run, tm, payload_qpos, compare=compare)
+
+
+__all__ = ["DEFAULT_RATE_HZ", "DEFAULT_SERIES_RATE_HZ", "TIMELINE", "RecordingError", "RrdTarget", "blueprint", "body_entity",
+           "check_path", "force_colors", "record_run", "series_stride"]

@@ -1,0 +1,42 @@
+"""A run file from what the loop recorded (:class:`sim.loop.simulation.RunResult`)."""
+
+from __future__ import annotations
+
+from mjcf.description import DOFS6
+
+
+def build_runfile(res, tm, *, source="simulated", description="", payload_name=None, reference=None, extra_meta=None):
+    """RunFile from a :class:`sim.loop.simulation.RunResult` (every channel of the format)."""
+    from sim.runs.runfile import FORMAT, RunFile
+
+    desc = tm.desc
+    n = len(res.t)
+    meta = {
+        "format": FORMAT,
+        "table": desc.name,
+        "sample_rate_hz": 1.0 / float(res.t[1] - res.t[0]) if n > 1 else 1024.0,
+        "actuators": list(desc.actuator_names),
+        "dofs": list(DOFS6),
+        "source": source,
+        "description": description,
+        "payload": payload_name,
+        "accelerometers": [{"name": a.name, "position": a.position_m.tolist(), "direction": a.direction.tolist()}
+                           for a in desc.accelerometers],
+        "accelerometer_convention": "kinematic acceleration along the sensor direction, gravity removed",
+        "angle_convention": "intrinsic x-y-z rotation of the platen from home",
+    }
+    if extra_meta:
+        meta.update(extra_meta)
+    ch = dict(res.channels)
+    for e in getattr(tm, "effects", []):  # sensor effects: what the table's sensors report
+        ch = e.measure(res.t, ch, None)
+    run = RunFile(t=res.t, meta=meta, valve_command=ch["valve_command"], spool_position=ch["spool_position"],
+                  actuator_displacement=ch["actuator_displacement"], actuator_force=ch["actuator_force"],
+                  pressure_a=ch["pressure_a"], pressure_b=ch["pressure_b"],
+                  table_displacement=ch["table_displacement"], table_velocity=ch["table_velocity"],
+                  table_acceleration=ch["table_acceleration"], accelerometers=ch["accelerometers"],
+                  reference=None if reference is None else reference.d[:n].copy(),
+                  extras=dict(res.extras))
+    if res.incomplete_reason:
+        run.mark_incomplete(res.incomplete_reason)
+    return run

@@ -1,0 +1,492 @@
+"""Run files: one table test, measured or simulated (format ``shaketable-run/1``).
+
+The format is specified in ``docs/run-file.md``. In short: a ``numpy.savez_compressed``
+archive whose name ends ``.run.npz``, holding a uniform time vector ``t`` (s), a JSON
+``meta`` string and any of the channels below, each shaped ``(N, n_columns)`` and in SI
+units (m, rad, N, Pa, m/s^2; valve and spool channels as a fraction of rated opening).
+
+| channel group | channels | columns named by |
+|---|---|---|
+| actuator | valve_command, spool_position, actuator_displacement, actuator_force, pressure_a, pressure_b | ``meta["actuators"]`` |
+| DOF | reference, table_displacement, table_velocity, table_acceleration | ``meta["dofs"]`` |
+| accelerometer | accelerometers | ``meta["accelerometers"][i]["name"]`` (if given) |
+
+Missing samples are NaN, never zero. Readers that need a channel pass it in
+``require=``; a NaN there is an error that names the channel, the first bad sample and
+its time. A simulation that diverged keeps what it had and marks the file with
+``meta["incomplete"] = true`` and ``meta["incomplete_reason"]``.
+
+Every problem a user can fix raises :class:`sim.errors.RunFileError` with a one-line
+message naming the file, the problem and the fix.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+from sim.errors import RunFileError
+
+FORMAT = "shaketable-run/1"
+EXTRA_PREFIX = "x_"  #: project extension channels (supply pressure, loop gap, ...)
+SUFFIX = ".run.npz"
+SOURCES = ("measured", "simulated")
+REQUIRED_META = ("format", "table", "sample_rate_hz", "actuators", "dofs", "source")
+
+ACTUATOR_CHANNELS = (
+    "valve_command",
+    "spool_position",
+    "actuator_displacement",
+    "actuator_force",
+    "pressure_a",
+    "pressure_b",
+)
+DOF_CHANNELS = ("reference", "table_displacement", "table_velocity", "table_acceleration")
+ACCELEROMETER_CHANNELS = ("accelerometers",)
+#: Every optional channel, in the order of the format table.
+CHANNELS = (
+    "valve_command",
+    "reference",
+    "spool_position",
+    "actuator_displacement",
+    "actuator_force",
+    "pressure_a",
+    "pressure_b",
+    "table_displacement",
+    "table_velocity",
+    "table_acceleration",
+    "accelerometers",
+)
+#: At least one of these must be present (what drives the plant or the controller).
+INPUT_CHANNELS = ("valve_command", "reference")
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _error(name: str, problem: str, fix: str) -> RunFileError:
+    return RunFileError(_one_line(f"run file {name} {problem}; {fix}"))
+
+
+@dataclass(eq=False)
+class RunFile:
+    """One table test in memory.
+
+    Attributes:
+        t: sample times, shape (N,), s; uniform step, strictly increasing.
+        meta: the JSON metadata (see docs/run-file.md); required keys ``format``,
+            ``table``, ``sample_rate_hz``, ``actuators``, ``dofs``, ``source``.
+        valve_command ... accelerometers: optional channels, each (N, n_columns)
+            float64 or None when absent. Actuator channels have one column per name
+            in ``meta["actuators"]``, DOF channels one per name in ``meta["dofs"]``.
+        path: the file this run was read from or last written to (for messages only).
+    """
+
+    t: np.ndarray
+    meta: dict
+    valve_command: np.ndarray | None = None
+    reference: np.ndarray | None = None
+    spool_position: np.ndarray | None = None
+    actuator_displacement: np.ndarray | None = None
+    actuator_force: np.ndarray | None = None
+    pressure_a: np.ndarray | None = None
+    pressure_b: np.ndarray | None = None
+    table_displacement: np.ndarray | None = None
+    table_velocity: np.ndarray | None = None
+    table_acceleration: np.ndarray | None = None
+    accelerometers: np.ndarray | None = None
+    path: str | None = field(default=None, kw_only=True)
+    #: Project extension channels, stored as ``x_<name>`` arrays with one row per sample
+    #: (e.g. supply_pressure, loop_gap). Readers of the plain format may ignore them.
+    extras: dict = field(default_factory=dict, kw_only=True)
+
+    # -- descriptive helpers -------------------------------------------------------
+    @property
+    def name(self) -> str:
+        """How messages refer to this run: its path, or ``(unsaved run)``."""
+        return str(self.path) if self.path else "(unsaved run)"
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples N."""
+        return int(np.shape(self.t)[0])
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """Sample rate from ``meta`` (validated against ``t`` on read and write), Hz."""
+        return float(self.meta["sample_rate_hz"])
+
+    @property
+    def dt(self) -> float:
+        """Sample step 1 / sample_rate_hz, s."""
+        return 1.0 / self.sample_rate_hz
+
+    @property
+    def duration_s(self) -> float:
+        """t[-1] - t[0], s."""
+        return float(self.t[-1] - self.t[0]) if self.n_samples else 0.0
+
+    @property
+    def actuators(self) -> list[str]:
+        """Actuator column names, in order (e.g. X1..X4, Y1..Y4, Z1..Z4)."""
+        return list(self.meta.get("actuators", []))
+
+    @property
+    def dofs(self) -> list[str]:
+        """DOF column names, in order (e.g. x, y, z, rx, ry, rz)."""
+        return list(self.meta.get("dofs", []))
+
+    @property
+    def accelerometer_names(self) -> list[str] | None:
+        """Accelerometer column names from ``meta["accelerometers"]``, or None."""
+        acc = self.meta.get("accelerometers")
+        if acc is None:
+            return None
+        return [str(a.get("name", f"acc{i}")) if isinstance(a, dict) else str(a)
+                for i, a in enumerate(acc)]
+
+    @property
+    def source(self) -> str:
+        """``"measured"`` or ``"simulated"``."""
+        return str(self.meta.get("source"))
+
+    @property
+    def incomplete(self) -> bool:
+        """True when the run stopped early (e.g. the simulation diverged)."""
+        return bool(self.meta.get("incomplete", False))
+
+    @property
+    def incomplete_reason(self) -> str | None:
+        """Why the run is incomplete, or None."""
+        return self.meta.get("incomplete_reason") if self.incomplete else None
+
+    def mark_incomplete(self, reason: str) -> None:
+        """Flag the run as stopped early, keeping what it has."""
+        self.meta["incomplete"] = True
+        self.meta["incomplete_reason"] = _one_line(reason)
+
+    def present_channels(self) -> list[str]:
+        """Names of the channels this run carries, in format order."""
+        return [c for c in CHANNELS if getattr(self, c) is not None]
+
+    def channel(self, name: str) -> np.ndarray:
+        """The (N, n_columns) array of a channel; RunFileError if absent."""
+        if name not in CHANNELS:
+            raise _error(self.name, f"has no channel kind {name!r}",
+                         f"channels are {', '.join(CHANNELS)}")
+        arr = getattr(self, name)
+        if arr is None:
+            have = ", ".join(self.present_channels()) or "none"
+            raise _error(self.name, f"has no channel {name!r}",
+                         f"record or convert it into the run file (channels present: {have})")
+        return arr
+
+    def column_names(self, channel: str) -> list[str]:
+        """Column names of a channel (actuators, dofs or accelerometer names)."""
+        if channel in ACTUATOR_CHANNELS:
+            return self.actuators
+        if channel in DOF_CHANNELS:
+            return self.dofs
+        if channel in ACCELEROMETER_CHANNELS:
+            names = self.accelerometer_names
+            if names is None:
+                arr = self.channel(channel)
+                return [f"acc{i}" for i in range(arr.shape[1])]
+            return names
+        raise _error(self.name, f"has no channel kind {channel!r}",
+                     f"channels are {', '.join(CHANNELS)}")
+
+    def column(self, channel: str, column_name: str) -> np.ndarray:
+        """One column of a channel by name, shape (N,), e.g. column("actuator_force", "Z3")."""
+        arr = self.channel(channel)
+        names = self.column_names(channel)
+        if column_name not in names:
+            raise _error(self.name, f"channel {channel!r} has no column {column_name!r}",
+                         f"columns are {', '.join(names)}")
+        return arr[:, names.index(column_name)]
+
+    def validate(self, require: Iterable[str] = ()) -> None:
+        """Check the run against the format; RunFileError on the first problem."""
+        _validate(self, self.name, tuple(require))
+
+
+# -- validation --------------------------------------------------------------------
+def _validate_meta(meta: Any, name: str) -> None:
+    if not isinstance(meta, dict):
+        raise _error(name, "has a meta that is not a JSON object",
+                     "store meta as a JSON object with keys " + ", ".join(REQUIRED_META))
+    missing = [k for k in REQUIRED_META if k not in meta]
+    if missing:
+        raise _error(name, f"meta lacks required key(s) {', '.join(missing)}",
+                     "add them (see docs/run-file.md, section meta)")
+    if meta["format"] != FORMAT:
+        raise _error(name, f"has format {meta['format']!r}, not {FORMAT!r}",
+                     f"convert it to {FORMAT} (docs/run-file.md) and set meta format to {FORMAT!r}")
+    if not isinstance(meta["table"], str) or not meta["table"]:
+        raise _error(name, f"meta table {meta['table']!r} is not a table name",
+                     "set it to the name of a table description in scenarios/ (e.g. 'cgs')")
+    fs = meta["sample_rate_hz"]
+    if isinstance(fs, bool) or not isinstance(fs, (int, float)) or not math.isfinite(fs) or fs <= 0:
+        raise _error(name, f"meta sample_rate_hz {fs!r} is not a positive number",
+                     "set it to 1 / (t[1] - t[0]) in Hz")
+    for key in ("actuators", "dofs"):
+        cols = meta[key]
+        if not isinstance(cols, list) or not all(isinstance(c, str) and c for c in cols):
+            raise _error(name, f"meta {key} is not a list of names",
+                         f"set meta {key} to the column names in order, e.g. "
+                         + ('["X1", "X2"]' if key == "actuators" else '["x", "y", "z", "rx", "ry", "rz"]'))
+        dup = sorted({c for c in cols if cols.count(c) > 1})
+        if dup:
+            raise _error(name, f"meta {key} repeats {', '.join(dup)}",
+                         f"give every {key[:-1]} column a unique name")
+    if not meta["dofs"]:
+        raise _error(name, "meta dofs is empty", 'list the table DOFs, e.g. ["x"] for a uni-axial table')
+    if meta["source"] not in SOURCES:
+        raise _error(name, f"meta source {meta['source']!r} is not 'measured' or 'simulated'",
+                     "set meta source to 'measured' or 'simulated'")
+    acc = meta.get("accelerometers")
+    if acc is not None and not isinstance(acc, list):
+        raise _error(name, "meta accelerometers is not a list",
+                     "make it a list of {name, position, direction} objects")
+    inc = meta.get("incomplete", False)
+    if not isinstance(inc, bool):
+        raise _error(name, f"meta incomplete {inc!r} is not true/false", "set it to true or false")
+    if inc and not isinstance(meta.get("incomplete_reason"), str):
+        raise _error(name, "is marked incomplete without an incomplete_reason",
+                     "add meta incomplete_reason with why the run stopped")
+
+
+def _validate_time(t: Any, fs: float, name: str) -> None:
+    t = np.asarray(t)
+    if t.ndim != 1 or t.shape[0] < 2:
+        raise _error(name, f"has t of shape {t.shape}, need (N,) with N >= 2",
+                     "store t as a 1-D array of sample times in s")
+    if not np.issubdtype(t.dtype, np.number):
+        raise _error(name, f"has t of type {t.dtype}", "store t as float64 seconds")
+    if not np.all(np.isfinite(t)):
+        i = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise _error(name, f"has a non-finite time at sample {i}",
+                     "store t as t0 + arange(N) / sample_rate_hz")
+    dt = np.diff(t.astype(np.float64))
+    if np.any(dt <= 0):
+        i = int(np.flatnonzero(dt <= 0)[0])
+        raise _error(name, f"has t not strictly increasing at sample {i + 1} (t = {t[i + 1]:.6g} s)",
+                     "sort the samples and drop duplicates, or regenerate t as t0 + arange(N) / sample_rate_hz")
+    step = float(np.median(dt))
+    tol = 1e-6 * step + 8 * np.finfo(np.float64).eps * float(np.max(np.abs(t)))
+    bad = np.abs(dt - step) > tol
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise _error(name, f"has a non-uniform time step at sample {i + 1} "
+                           f"(step {dt[i]:.6g} s, usual step {step:.6g} s)",
+                     "resample to a uniform rate or fill gaps with NaN samples")
+    if abs(fs * step - 1.0) > 1e-6:
+        raise _error(name, f"meta sample_rate_hz {fs:g} disagrees with t (1/step = {1.0 / step:.9g} Hz)",
+                     "set meta sample_rate_hz to 1 / (t[1] - t[0])")
+
+
+def _expected_columns(channel: str, meta: dict, arr: np.ndarray) -> tuple[int | None, str]:
+    if channel in ACTUATOR_CHANNELS:
+        return len(meta["actuators"]), "actuators in meta actuators"
+    if channel in DOF_CHANNELS:
+        return len(meta["dofs"]), "DOFs in meta dofs"
+    acc = meta.get("accelerometers")
+    return (len(acc) if acc is not None else None), "accelerometers in meta accelerometers"
+
+
+def _validate(run: RunFile, name: str, require: tuple[str, ...]) -> None:
+    _validate_meta(run.meta, name)
+    _validate_time(run.t, float(run.meta["sample_rate_hz"]), name)
+    n = int(np.shape(run.t)[0])
+    for unknown in [c for c in require if c not in CHANNELS]:
+        raise _error(name, f"was asked for unknown channel {unknown!r}",
+                     f"channels are {', '.join(CHANNELS)}")
+    for channel in CHANNELS:
+        arr = getattr(run, channel)
+        if arr is None:
+            continue
+        arr = np.asarray(arr)
+        if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+            raise _error(name, f"channel {channel!r} has type {arr.dtype}", "store it as float64")
+        if arr.ndim != 2:
+            raise _error(name, f"channel {channel!r} has shape {arr.shape}, need (N, n_columns)",
+                         "store one column per actuator/DOF/accelerometer (a[:, None] for one column)")
+        if arr.shape[0] != n:
+            raise _error(name, f"channel {channel!r} has {arr.shape[0]} samples but t has {n}",
+                         "give every channel one row per sample time (NaN for missing samples)")
+        ncol, what = _expected_columns(channel, run.meta, arr)
+        if ncol is not None and arr.shape[1] != ncol:
+            raise _error(name, f"channel {channel!r} has {arr.shape[1]} columns but there are {ncol} {what}",
+                         f"make the {what} match the channel's columns")
+    for key, arr in run.extras.items():
+        arr = np.asarray(arr)
+        if not key.replace("_", "").isalnum() or arr.ndim not in (1, 2) or arr.shape[0] != n:
+            raise _error(name, f"extension channel {key!r} has shape {arr.shape}, need ({n},) or ({n}, k)",
+                         "give extension channels one row per sample and a plain name")
+    if all(getattr(run, c) is None for c in INPUT_CHANNELS):
+        raise _error(name, "has neither valve_command nor reference",
+                     "add the servovalve commands (open-loop replay) or the reference displacement (needs a controller)")
+    for channel in require:
+        arr = getattr(run, channel)
+        if arr is None:
+            have = ", ".join(c for c in CHANNELS if getattr(run, c) is not None)
+            raise _error(name, f"has no channel {channel!r}",
+                         f"record or convert it into the run file (channels present: {have})")
+        bad = ~np.isfinite(np.asarray(arr, dtype=np.float64))
+        if np.any(bad):
+            i, j = (int(k) for k in np.argwhere(bad)[0])
+            cols = run.meta["actuators"] if channel in ACTUATOR_CHANNELS else (
+                run.meta["dofs"] if channel in DOF_CHANNELS else None)
+            col = f" column {cols[j]!r}" if cols and j < len(cols) else f" column {j}"
+            kind = "NaN" if np.isnan(arr[i, j]) else "an infinite value"
+            raise _error(name, f"has {kind} in channel {channel!r}{col} at sample {i} "
+                               f"(t = {float(run.t[i]):.6g} s)",
+                         "fill or cut the missing samples, or use a run where this channel is complete")
+
+
+# -- writing -----------------------------------------------------------------------
+def write_run(path: str | os.PathLike, run: RunFile) -> Path:
+    """Validate ``run`` and write it to ``path`` (must end ``.run.npz``) atomically.
+
+    The archive is written to a temporary file in the same folder and moved into place
+    with ``os.replace``, so a reader sees either the old file or the whole new one,
+    and a failure leaves no partial file. Returns the path written; sets ``run.path``.
+    """
+    path = Path(path)
+    name = str(path)
+    if not path.name.endswith(SUFFIX) or path.name == SUFFIX:
+        raise _error(name, f"does not end with {SUFFIX!r}", f"name it like 'test01{SUFFIX}'")
+    _validate(run, name, ())
+    try:
+        meta_text = json.dumps(run.meta, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise _error(name, f"has meta that cannot be written as JSON ({_one_line(exc)})",
+                     "keep meta to strings, finite numbers, lists and dicts") from None
+    arrays: dict[str, np.ndarray] = {"t": np.asarray(run.t, dtype=np.float64), "meta": np.array(meta_text)}
+    for channel in CHANNELS:
+        arr = getattr(run, channel)
+        if arr is not None:
+            arrays[channel] = np.asarray(arr, dtype=np.float64)
+    for key, arr in run.extras.items():
+        arrays[EXTRA_PREFIX + key] = np.asarray(arr, dtype=np.float64)
+
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise _error(name, f"cannot be written: folder {folder} does not exist", "create the folder first")
+    tmp_name = None
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+        with os.fdopen(fd, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+            fh.flush()
+            os.fsync(fh.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp_name, 0o666 & ~umask)
+        os.replace(tmp_name, path)
+        tmp_name = None
+    except OSError as exc:
+        raise _error(name, f"cannot be written ({_one_line(exc.strerror or exc)})",
+                     "choose a folder you can write to, with free space") from None
+    finally:
+        if tmp_name is not None:
+            try:
+                os.unlink(tmp_name)
+            except OSError:
+                pass
+    run.path = name
+    return path
+
+
+# -- reading -----------------------------------------------------------------------
+def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
+    """Read and validate a run file.
+
+    Args:
+        path: a ``.run.npz`` file.
+        require: channels the caller needs: each must be present and free of NaN.
+
+    Returns:
+        The RunFile, channels as float64 arrays (None when absent).
+
+    Raises:
+        RunFileError: one line naming the file, the problem and the fix.
+    """
+    path = Path(path)
+    name = str(path)
+    if not path.exists():
+        raise _error(name, "does not exist", "check the path")
+    if path.is_dir():
+        raise _error(name, "is a folder", f"give the path of a {SUFFIX} file")
+    if not zipfile.is_zipfile(path):
+        raise _error(name, "is not a NumPy .npz archive",
+                     f"write it with shaketable (sim.runs.runfile.write_run) or numpy.savez_compressed as {FORMAT}")
+    known = set(CHANNELS) | {"t", "meta"}
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            keys = list(npz.files)
+            unknown = sorted(k for k in set(keys) - known if not k.startswith(EXTRA_PREFIX))
+            if unknown:
+                raise _error(name, f"has unknown array(s) {', '.join(unknown)}",
+                             f"rename them to format keys ({', '.join(CHANNELS)}) or drop them")
+            for key in ("t", "meta"):
+                if key not in keys:
+                    raise _error(name, f"has no {key!r} array",
+                                 "add it (t: sample times in s; meta: JSON text), see docs/run-file.md")
+            data = {k: npz[k] for k in keys}
+    except RunFileError:
+        raise
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+        raise _error(name, f"is a damaged or unreadable archive ({_one_line(exc)})",
+                     "write it again, or restore it from the recorder export") from None
+
+    if not all(isinstance(a, np.ndarray) for a in data.values()):
+        bad = sorted(k for k, a in data.items() if not isinstance(a, np.ndarray))
+        raise _error(name, f"is a damaged archive (member(s) {', '.join(bad)} are not NumPy arrays)",
+                     "write it again, or restore it from the recorder export")
+    meta_arr = data.pop("meta")
+    if meta_arr.shape != () or meta_arr.dtype.kind not in "US":
+        raise _error(name, "has a meta that is not a single string", "store meta as np.array(json.dumps(meta))")
+    meta_text = meta_arr.item()
+    if isinstance(meta_text, bytes):
+        meta_text = meta_text.decode("utf-8", "replace")
+    try:
+        meta = json.loads(meta_text)
+    except json.JSONDecodeError as exc:
+        raise _error(name, f"has meta that is not valid JSON ({exc.msg} at char {exc.pos})",
+                     "store meta as json.dumps(meta)") from None
+
+    t = data.pop("t")
+    channels: dict[str, np.ndarray] = {}
+    extras = {k[len(EXTRA_PREFIX):]: data.pop(k).astype(np.float64) for k in list(data) if k.startswith(EXTRA_PREFIX)}
+    for key, arr in data.items():
+        if arr.dtype.kind not in "fiu":
+            raise _error(name, f"channel {key!r} has type {arr.dtype}", "store it as float64")
+        channels[key] = arr.astype(np.float64, copy=False)
+    if t.dtype.kind not in "fiu":
+        raise _error(name, f"has t of type {t.dtype}", "store t as float64 seconds")
+    run = RunFile(t=t.astype(np.float64, copy=False), meta=meta, **channels, path=name, extras=extras)
+    _validate(run, name, tuple(require))
+    return run
+
+
+__all__ = [
+    "ACCELEROMETER_CHANNELS",
+    "ACTUATOR_CHANNELS",
+    "CHANNELS",
+    "DOF_CHANNELS",
+    "FORMAT",
+    "INPUT_CHANNELS",
+    "RunFile",
+    "read_run",
+    "write_run",
+]

@@ -1,0 +1,253 @@
+"""Scenarios: table + payload + motion + controller + duration + outputs, as TOML data.
+
+A scenario file (``scenarios/<name>.toml``)::
+
+    [scenario]
+    name = "elcentro_20t"
+    table = "cgs"                 # scenarios/tables/cgs.toml
+    payload = "rigid_20t"         # optional, scenarios/payloads/rigid_20t.toml
+    duration_s = 60.0             # optional: default = the motion's length
+    pad_to_duration = false       # allow a duration longer than the motion (quiet padding)
+    description = "..."
+
+    [motion]                      # either one multi-DOF motion ...
+    type = "el_centro_1940"       # the real 1940 El Centro record (3 components)
+    amplitude_factor = 0.8
+
+    [motion.x]                    # ... or one table per DOF
+    type = "tapered_sine"         # sine | tapered_sine | triangle | white_noise | at2
+    amplitude = 0.1
+    frequency_hz = 0.25
+
+    [controller]                  # optional gains (see sim.control.tvc.ControllerGains)
+    kp_per_s = 25.0
+
+    [output]
+    sample_rate_hz = 1024.0       # recorder = controller rate
+
+Relative paths (AT2 files, tables, payloads given as paths) are taken relative to the
+scenario file. Every key is checked: an unknown key is an error that lists the known
+ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mjcf.description import DOFS6, REPO_ROOT, load_toml, resolve
+from sim.scenario import motions as M
+from sim.scenario import records as R
+from sim.errors import MotionError, ScenarioError
+from sim.scenario.reference import Reference, reference_from_motions
+
+SCENARIOS_DIR = REPO_ROOT / "scenarios"
+DOFS = DOFS6
+
+_SCEN_KEYS = {"name", "table", "payload", "duration_s", "pad_to_duration", "description"}
+_MOTION_KEYS = {
+    "sine": {"type", "amplitude", "frequency_hz", "phase_rad", "delay_s"},
+    "tapered_sine": {"type", "amplitude", "frequency_hz", "phase_rad", "taper_cycles", "delay_s"},
+    "triangle": {"type", "peak_displacement", "peak_velocity", "n_cycles", "rounding_fraction",
+                 "max_acceleration", "delay_s"},
+    "white_noise": {"type", "band_hz", "seed", "rms_acceleration", "rms_displacement", "taper_s"},
+    "at2": {"type", "file", "amplitude_factor", "target_pga", "time_factor", "highpass_hz", "filter_order",
+            "baseline"},
+}
+_EQ_KEYS = {"type", "amplitude_factor", "time_factor", "highpass_hz", "filter_order", "baseline", "mapping"}
+
+
+@dataclass
+class Scenario:
+    name: str
+    table: str
+    payload: str | None
+    duration_s: float | None
+    pad_to_duration: bool
+    description: str
+    motion: dict
+    controller: dict
+    sample_rate_hz: float
+    path: Path | None = None
+    iteration: dict = field(default_factory=dict)
+    raw: dict = field(default_factory=dict, repr=False)
+
+
+def _load(path: Path) -> dict:
+    return load_toml(path, ScenarioError, "scenario file")
+
+
+def _unknown(keys, known, where, src):
+    extra = sorted(set(keys) - set(known))
+    if extra:
+        raise ScenarioError(f"{src}: unknown key '{extra[0]}' in [{where}]; known keys: {', '.join(sorted(known))}")
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load and check a scenario by name (``scenarios/<name>.toml``) or path."""
+    try:
+        path = resolve(name_or_path, SCENARIOS_DIR, "scenario")
+    except Exception as e:  # DescriptionError from resolve: re-badge as a scenario problem
+        raise ScenarioError(str(e)) from None
+    data = _load(path)
+    src = str(path)
+    _unknown(data, {"scenario", "motion", "controller", "output", "iteration"}, "top level", src)
+    sc = data.get("scenario")
+    if not isinstance(sc, dict):
+        raise ScenarioError(f"{src}: missing the [scenario] table (name, table, ...)")
+    _unknown(sc, _SCEN_KEYS, "scenario", src)
+    for k in ("name", "table"):
+        if not isinstance(sc.get(k), str):
+            raise ScenarioError(f"{src}: [scenario] needs '{k}' as text")
+    dur = sc.get("duration_s")
+    if dur is not None and (isinstance(dur, bool) or not isinstance(dur, (int, float)) or not dur > 0):
+        raise ScenarioError(f"{src}: 'scenario.duration_s' must be a positive number of seconds (got {dur!r})")
+    mo = data.get("motion")
+    if not isinstance(mo, dict) or not mo:
+        raise ScenarioError(f"{src}: missing the [motion] table")
+    out = data.get("output", {})
+    _unknown(out, {"sample_rate_hz"}, "output", src)
+    rate = out.get("sample_rate_hz", 1024.0)
+    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or rate <= 0:
+        raise ScenarioError(f"{src}: 'output.sample_rate_hz' must be positive (got {rate!r})")
+    it = data.get("iteration", {"count": 0})
+    if not isinstance(it, dict):
+        raise ScenarioError(f"{src}: [iteration] must be a table (count, gain, band_hz)")
+    _unknown(it, {"count", "gain", "band_hz", "h_min", "frf", "noise_level", "seed"}, "iteration", src)
+    cnt = it.get("count", 0)
+    if isinstance(cnt, bool) or not isinstance(cnt, int) or not 0 <= cnt <= 10:
+        raise ScenarioError(f"{src}: 'iteration.count' must be an integer 0..10 (got {cnt!r})")
+    if it.get("frf", "noise") not in ("noise", "record"):
+        raise ScenarioError(f"{src}: 'iteration.frf' must be \"noise\" or \"record\" (got {it['frf']!r})")
+    for key in ("gain", "noise_level", "h_min"):
+        v = it.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 1e3):
+            raise ScenarioError(f"{src}: 'iteration.{key}' must be a positive number (got {v!r})")
+    seed = it.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ScenarioError(f"{src}: 'iteration.seed' must be a non-negative integer (got {seed!r})")
+    ctrl = data.get("controller", {})
+    if not isinstance(ctrl, dict):
+        raise ScenarioError(f"{src}: [controller] must be a table of gains")
+    payload = sc.get("payload")
+    if payload is not None and not isinstance(payload, str):
+        raise ScenarioError(f"{src}: 'scenario.payload' must be a payload name or path")
+    base = path.parent
+    table = sc["table"]
+    if table.endswith(".toml") and not Path(table).is_absolute():
+        table = str(base / table)
+    if payload and payload.endswith(".toml") and not Path(payload).is_absolute():
+        payload = str(base / payload)
+    pad = sc.get("pad_to_duration", False)
+    if not isinstance(pad, bool):
+        raise ScenarioError(f"{src}: 'scenario.pad_to_duration' must be true or false")
+    s = Scenario(name=sc["name"], table=table, payload=payload, duration_s=float(dur) if dur else None,
+                 pad_to_duration=pad, description=str(sc.get("description", "")), motion=mo,
+                 controller=ctrl, sample_rate_hz=float(rate), path=path, raw=data, iteration=dict(it))
+    _check_motion(s)
+    return s
+
+
+def _check_motion(s: Scenario):
+    src = str(s.path)
+    mo = s.motion
+    if "type" in mo:
+        if mo["type"] != "el_centro_1940":
+            raise ScenarioError(f"{src}: [motion] type '{mo['type']}' is not a multi-DOF motion; "
+                                "use type = \"el_centro_1940\" or one [motion.<dof>] table per DOF")
+        _unknown(mo, _EQ_KEYS, "motion", src)
+        return
+    for dof, m in mo.items():
+        if dof not in DOFS:
+            raise ScenarioError(f"{src}: [motion.{dof}]: '{dof}' is not a DOF; DOFs are {', '.join(DOFS)}")
+        if not isinstance(m, dict) or "type" not in m:
+            raise ScenarioError(f"{src}: [motion.{dof}] needs a 'type' ({', '.join(_MOTION_KEYS)})")
+        if m["type"] not in _MOTION_KEYS:
+            raise ScenarioError(f"{src}: [motion.{dof}] type '{m['type']}' is unknown; types: {', '.join(_MOTION_KEYS)}")
+        _unknown(m, _MOTION_KEYS[m["type"]], f"motion.{dof}", src)
+
+
+def _shift(mo: M.Motion, delay_s: float, rate: float) -> M.Motion:
+    n = int(round(delay_s * rate))
+    if n <= 0:
+        return mo
+    z = np.zeros(n)
+    t = np.arange(len(mo.t) + n) / rate
+    return M.Motion(t, np.concatenate([z, mo.d]), np.concatenate([z, mo.v]), np.concatenate([z, mo.a]),
+                    mo.name, mo.info)
+
+
+def build_motions(s: Scenario) -> dict[str, M.Motion]:
+    """Per-DOF motions at the scenario's rate (SI: m, rad)."""
+    rate = s.sample_rate_hz
+    mo = s.motion
+    if mo.get("type") == "el_centro_1940":
+        kw = {k: v for k, v in mo.items() if k in ("time_factor", "highpass_hz", "filter_order", "baseline")}
+        return R.el_centro_motions(sample_rate_hz=rate, amplitude_factor=float(mo.get("amplitude_factor", 1.0)),
+                                   mapping=mo.get("mapping"), **kw)
+    out = {}
+    default_dur = s.duration_s
+    for i, (dof, m) in enumerate(mo.items()):
+        m = dict(m)
+        kind = m.pop("type")
+        delay = float(m.pop("delay_s", 0.0))
+        if kind in ("sine", "tapered_sine", "white_noise"):
+            if default_dur is None:
+                raise ScenarioError(f"{s.path}: a {kind} motion needs 'scenario.duration_s'")
+            dur = default_dur - delay
+        if kind == "sine":
+            x = M.sine(duration_s=dur, sample_rate_hz=rate, **m)
+        elif kind == "tapered_sine":
+            x = M.tapered_sine(duration_s=dur, sample_rate_hz=rate, **m)
+        elif kind == "triangle":
+            x = M.triangle(sample_rate_hz=rate, **m)
+        elif kind == "white_noise":
+            seed = m.pop("seed", 0)
+            band = tuple(m.pop("band_hz"))
+            x = M.white_noise(duration_s=dur, sample_rate_hz=rate, band_hz=band, seed=(int(seed), i), **m)
+        else:  # at2
+            f = Path(m.pop("file"))
+            if not f.is_absolute():
+                f = s.path.parent / f
+            rec = R.read_at2(f)
+            x = R.process_record(rec.acceleration, rec.dt, sample_rate_hz=rate, name=f.name, **m)
+        out[dof] = _shift(x, delay, rate)
+    return out
+
+
+def build_reference(s: Scenario, motions: dict[str, M.Motion], duration_s: float | None = None) -> Reference:
+    """Stack the motions into a 6-DOF reference over the run's duration."""
+    rate = s.sample_rate_hz
+    length = max(m.duration_s for m in motions.values())
+    dur = duration_s if duration_s is not None else (s.duration_s if s.duration_s is not None else length)
+    if dur > length + 1.5 / rate and not s.pad_to_duration:
+        raise ScenarioError(
+            f"duration {dur:g} s is longer than the motion ({length:.2f} s); shorten --duration or set "
+            "'scenario.pad_to_duration = true' to pad with rest")
+    return reference_from_motions(motions, rate, dur)
+
+
+def limit_warnings(desc, motions: dict[str, M.Motion]) -> list[str]:
+    """Warnings for a reference beyond the table's rated stroke, velocity or acceleration."""
+    lim = desc.limits
+    limits = {
+        "stroke_m": {d: float(v) for d, v in zip(("x", "y", "z"), lim.stroke_m)},
+        "rotation_rad": {d: float(v) for d, v in zip(("rx", "ry", "rz"), lim.rotation_rad)},
+        "velocity_m_s": {d: float(v) for d, v in zip(("x", "y", "z"), lim.velocity_m_s)},
+        "acceleration_m_s2": {d: float(v) for d, v in zip(("x", "y", "z"), lim.acceleration_m_s2)},
+    }
+    try:
+        return M.check_limits(motions, limits)
+    except MotionError:
+        raise
+    except Exception:  # pragma: no cover - defensive: the check must never stop a run
+        return []
+
+
+def list_scenarios() -> list[str]:
+    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
+
+
+__all__ = ["Scenario", "build_motions", "build_reference", "limit_warnings", "list_scenarios", "load_scenario"]

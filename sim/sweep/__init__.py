@@ -1,0 +1,1 @@
+"""MANY: run one function over many cases (serial or a process pool)."""

@@ -1,0 +1,101 @@
+"""The house rules of ``sim/`` (see docs/architecture.md): layers import downwards only,
+``mjcf`` and ``hydraulics`` import nothing from ``sim``, only ``sim/papers`` names a
+table, and no module grows past 800 lines."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: rank of each layer: a module may import its own layer or lower ones, never higher.
+LAYERS = {
+    "sim.errors": 0, "sim.signals": 0,
+    "sim.scenario": 1,
+    "sim.effects": 2, "sim.control": 2,
+    "sim.loop": 3,
+    "sim.runs": 4,
+    "sim.assess": 5, "sim.identify": 5,
+    "sim.calibrate": 6,
+    "sim.sweep": 7,
+    "sim.papers": 8,
+    "sim.report": 9,
+    "sim.cli": 10, "sim.__main__": 10,
+}
+TABLE_NAMES = {"cgs", "rice", "ucsd"}
+
+
+def _modules(pkg: str):
+    for path in sorted((ROOT / pkg).rglob("*.py")):
+        yield ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"), path
+
+
+def _imports(path: Path):
+    """Every module imported anywhere in the file (function-local imports too)."""
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                yield a.name, node.lineno
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            yield node.module, node.lineno
+            for a in node.names:  # "from sim.loop import _kernels" imports sim.loop._kernels
+                yield f"{node.module}.{a.name}", node.lineno
+
+
+def _layer(module: str):
+    best = None
+    for name, rank in LAYERS.items():
+        if module == name or module.startswith(name + "."):
+            best = rank
+    return best
+
+
+def test_every_sim_module_belongs_to_a_layer():
+    stray = [m for m, _ in _modules("sim") if m != "sim" and _layer(m) is None]
+    assert not stray, f"modules outside the layers of LAYERS: {stray}"
+
+
+def test_imports_go_downwards_only():
+    bad = []
+    for mod, path in _modules("sim"):
+        own = _layer(mod)
+        if own is None:
+            continue
+        for imp, line in _imports(path):
+            other = _layer(imp)
+            if other is not None and other > own:
+                bad.append(f"{path.relative_to(ROOT)}:{line} ({mod}, layer {own}) imports {imp} (layer {other})")
+    assert not bad, "upward imports:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("pkg", ["mjcf", "hydraulics"])
+def test_model_layers_import_nothing_from_sim(pkg):
+    bad = [f"{p.relative_to(ROOT)}:{line} imports {imp}" for _, p in _modules(pkg)
+           for imp, line in _imports(p) if imp == "sim" or imp.startswith("sim.")]
+    assert not bad, bad
+
+
+def test_only_papers_name_a_table():
+    """Generic code dispatches on declared fields, never on a table's name."""
+    bad = []
+    for pkg in ("sim", "mjcf", "hydraulics"):
+        for mod, path in _modules(pkg):
+            if mod.startswith("sim.papers"):
+                continue
+            tree = ast.parse(path.read_text())
+            docstrings = {id(n.body[0].value) for n in ast.walk(tree)
+                          if isinstance(n, (ast.Module, ast.FunctionDef, ast.ClassDef, ast.AsyncFunctionDef))
+                          and n.body and isinstance(n.body[0], ast.Expr)
+                          and isinstance(n.body[0].value, ast.Constant)}
+            for node in ast.walk(tree):
+                if (isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings
+                        and node.value.strip().lower() in TABLE_NAMES):
+                    bad.append(f"{path.relative_to(ROOT)}:{node.lineno} names table '{node.value}'")
+    assert not bad, "\n".join(bad)
+
+
+def test_no_module_over_800_lines():
+    long = [f"{p.relative_to(ROOT)}: {n}" for pkg in ("sim", "mjcf", "hydraulics") for _, p in _modules(pkg)
+            if (n := len(p.read_text().splitlines())) > 800]
+    assert not long, long
