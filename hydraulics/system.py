@@ -70,7 +70,7 @@ import math
 import numpy as np
 
 from . import _layout as L
-from ._kernel import step_loops, store_of_p
+from ._kernel import store_of_p
 from ._numpy_step import step_numpy
 from .params import HydraulicParams
 

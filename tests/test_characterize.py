@@ -94,7 +94,6 @@ def test_vertical_loop_is_shaped_by_the_support_air_chambers(quick):
     """The z friction loop is tilted by the air chambers' compression/suction: the fitted
     loop stiffness is the supports' air-spring stiffness sum n p0 A^2 / V (closed form, at
     the preload that carries the dead weight); the horizontal loops are not tilted."""
-    import mjcf
 
     s, _ = quick
     desc, _ = C.load_inputs("cgs", None)
@@ -130,9 +129,7 @@ def test_calibrate_command_restores_perturbed_unknowns(tmp_path):
     seal friction x0.6), one quick pass of virtual tests brings each back near the
     committed value and rewrites the file in place with its sources kept."""
     import tomllib
-    from pathlib import Path
 
-    import mjcf
     from mjcf.description import parse_table
 
     src = TABLES_DIR / "cgs.toml"
@@ -199,7 +196,6 @@ def test_vertical_loop_is_curved_by_the_air_law():
     F0 (1 + A q / V)^-n), and does not with the linearised law."""
     import copy
 
-    import mjcf
 
     desc, _ = C.load_inputs("cgs", None)
     sp = desc.supports

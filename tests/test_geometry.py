@@ -5,7 +5,6 @@ import math
 
 import numpy as np
 
-import mjcf
 from mjcf.description import actuator_strokes, envelope_corners
 from sim.cli import main
 from sim.assess.geometry import forward_kinematics, study

@@ -1,7 +1,6 @@
 """The CGS table model: effective mass, kinematics, loop closure, equilibrium, payload modes."""
 
 import dataclasses
-import itertools
 
 import mujoco
 import numpy as np

@@ -186,7 +186,7 @@ def test_clamp_mass_fraction_in_the_payload_and_the_model():
 
     import mujoco
 
-    from mjcf.builder import BuildOptions, build
+    from mjcf.builder import BuildOptions
     from mjcf.description import DescriptionError, load_payload, parse_payload
     from sim.papers.uniaxial import rice_description
 

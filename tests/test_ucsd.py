@@ -5,7 +5,6 @@ import math
 import numpy as np
 import pytest
 
-from mjcf.builder import build
 from sim.identify import least_squares as I
 from sim.papers import uniaxial as U
 from sim.effects import build_model

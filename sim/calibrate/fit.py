@@ -25,7 +25,6 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-import mjcf
 from mjcf.description import parse_table
 from sim.errors import RunFileError
 from sim.assess.metrics import nrmse

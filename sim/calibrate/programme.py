@@ -79,7 +79,6 @@ def calibrate(table: str, *, quick: bool = False, workers: int | None = None, pr
     """Choose the moving masses (effective-mass tests, Table 2), dead volumes (oil
     columns, Table 1) and seal friction per class (friction tests) from virtual tests
     (one correction pass); returns the values and the before/after figures."""
-    import mjcf
     from mjcf.calibrate import calibrate_masses
 
     desc, _ = load_inputs(table, None)

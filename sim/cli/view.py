@@ -21,7 +21,6 @@ fed together. ``--spawn`` and ``--connect`` map onto ``rr.spawn`` and ``rr.GrpcS
 from __future__ import annotations
 
 import json
-import sys
 
 from sim.errors import UserError
 from sim.effects import build_model

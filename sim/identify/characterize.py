@@ -44,10 +44,8 @@ import copy
 import dataclasses
 import math
 import os
-import re
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -188,7 +186,6 @@ def linear_oil_columns(desc, payload=None) -> dict:
     share of the mode's kinetic energy)."""
     import scipy.linalg
 
-    import mjcf
     from hydraulics import HydraulicParams
 
     hp = HydraulicParams.from_table(desc.raw)

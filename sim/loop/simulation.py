@@ -39,7 +39,7 @@ from mjcf.description import actuator_strokes
 from mjcf.model import TableModel
 from sim.control.tvc import ControllerGains, TableController
 from sim.effects.registry import dahl_step
-from sim.errors import DivergenceError, ScenarioError
+from sim.errors import ScenarioError
 from sim.scenario.reference import Reference, reference_from_motions
 
 GAP_LIMIT_M = 1e-3  #: a swivel opening by more than 1 mm means the solve has failed

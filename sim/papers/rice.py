@@ -36,11 +36,9 @@ k_t unit correction and why the paper's dP values are negative.
 
 from __future__ import annotations
 
-import copy
 import math
 import tomllib
-from dataclasses import dataclass, field, replace
-from pathlib import Path
+from dataclasses import dataclass, field
 
 import numpy as np
 

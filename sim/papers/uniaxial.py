@@ -27,10 +27,8 @@ import math
 import time
 from dataclasses import dataclass
 
-import mujoco
 import numpy as np
 
-from hydraulics import HydraulicParams, HydraulicSystem
 from mjcf.description import DOFS6, load_payload, parse_table
 from sim.loop.analog import RICE_FS_HZ, RICE_RATE_HZ, RiceGains, RiceSimulation, _apply_parameter_set, is_rice  # noqa: F401
 from sim.papers import rice as R

@@ -4,7 +4,7 @@ on this run's time. Used by :mod:`sim.report.rerun`."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
