@@ -4,6 +4,7 @@ import json
 import math
 
 import numpy as np
+import pytest
 
 from mjcf.description import actuator_strokes, envelope_corners
 from sim.cli import main
@@ -27,10 +28,60 @@ def test_forward_kinematics_inverts_the_exact_geometry(cgs_desc):
 
 
 def test_geometry_cli_json(capsys, cgs_desc):
-    assert main(["geometry", "cgs", "--json"]) == 0
+    assert main(["geometry", "cgs", "--json", "--static"]) == 0
     r = json.loads(capsys.readouterr().out)
     # a 250 mm longitudinal stroke through a linear DOF map drops the platen by the
     # vertical linkages' tilt: 16 mm on the CGS layout
     assert r["parasitic_motion_linear_map"]["x+"]["z"] < -0.015
     assert 0.0 < r["oil_column_max_relative_change"] < 0.5
     assert len(r["oil_column_hz"]["centre"]) == 6
+
+
+def test_linearised_length_error_is_d2_over_2L(cgs_desc):
+    """A longitudinal linkage (along x) moved sideways by d: the home-pose map gives no
+    stroke, the exact one sqrt(L^2 + d^2) - L = d^2 / (2 L) to first order (within 2 %)."""
+    from sim.control.tvc import dof_jacobian
+
+    x1 = cgs_desc.actuator("X1")
+    L = x1.length0_m
+    J0 = dof_jacobian(cgs_desc)
+    i = list(cgs_desc.actuator_names).index("X1")
+    for d in (0.005, 0.02, 0.05):
+        p = np.array([0, d, 0, 0, 0, 0.0])
+        miss = actuator_strokes(cgs_desc, p)[i] - J0[i] @ p
+        assert miss == pytest.approx(d * d / (2 * L), rel=0.02), d
+
+
+def test_exact_map_agrees_with_mujoco(cgs, cgs_desc):
+    """The exact inverse kinematics equals MuJoCo's own configuration with the loops closed
+    at the pose (1e-6 m), over corners of the envelope and random poses."""
+    d = cgs.new_data()
+    rng = np.random.default_rng(3)
+    half = np.concatenate([cgs_desc.limits.stroke_m, cgs_desc.limits.rotation_rad])
+    for p in list(envelope_corners(cgs_desc)[::9]) + list(rng.uniform(-1, 1, (4, 6)) * half):
+        cgs.set_platen_pose(d, p)
+        assert np.abs(cgs.actuator_strokes(d) - actuator_strokes(cgs_desc, p)).max() < 1e-6
+
+
+def test_envelope_and_maps(cgs_desc):
+    from sim.assess.geometry import envelope_study, offset_plane_maps
+
+    r = envelope_study(cgs_desc, n=300)
+    corners = study(cgs_desc)["kinematic_nonlinearity_m"]
+    for n, v in r["max_length_error_m"].items():
+        assert v >= corners[n] - 1e-12  # the corners are in the sample
+    assert 1.0 <= r["jacobian_condition"]["min"] <= r["jacobian_condition"]["max"]
+    m = offset_plane_maps(cgs_desc, n=5)
+    err = np.array(m["max_length_error_m"])
+    assert err[2, 2] == pytest.approx(0.0, abs=1e-12) and err.max() > 0.01  # zero at home, cm at the corners
+
+
+def test_crosstalk_exact_map_removes_most_of_it(cgs_desc):
+    """250 mm longitudinal sine: the linearised DOF transformation drops the platen by the
+    vertical linkages' tilt (z crosstalk of order d^2/(2L)); the exact one removes most."""
+    from sim.assess.crosstalk import crosstalk
+
+    c = crosstalk(cgs_desc, motions=("x_250mm_sine",), quick=True)
+    z = c.table["x_250mm_sine"]["z"]
+    assert z["linearised_peak"] > 0.010
+    assert z["exact_peak"] < 0.2 * z["linearised_peak"]

@@ -129,7 +129,147 @@ def print_report(r: dict) -> None:
                         for d, v in big.items()) or "none"
         print(f"    {k:4s}: {txt}")
     print(f"  actuator-to-DOF force map: largest entry change over the envelope {r['force_map_change_max']:.4f}")
+    if "max_tilt_rad" in r:
+        jc = r["jacobian_condition"]
+        print(f"  over {r['n_poses']} poses of the rated envelope: largest length error "
+              f"{1e3 * max(r['max_length_error_m'].values()):.2f} mm, largest linkage tilt "
+              f"{np.degrees(max(r['max_tilt_rad'].values())):.1f} deg, Jacobian condition {jc['min']:.2f}-{jc['max']:.2f}")
+    for name, row in r.get("crosstalk", {}).items():
+        txt = ", ".join(f"{d} {1e3 * v['linearised_peak']:.3f} vs {1e3 * v['exact_peak']:.4f}"
+                        for d, v in row.items() if v["ratio"] is not None)
+        print(f"  crosstalk {name} (peak, mm or mrad, linearised vs exact): {txt or 'none'}")
     if "oil_column_hz" in r:
         oc = r["oil_column_hz"]
         print("  oil-column frequencies (Hz), centre: " + ", ".join(f"{v:.2f}" for v in oc["centre"]))
         print(f"  largest change across the envelope: {100 * r['oil_column_max_relative_change']:.1f} %")
+
+
+# ---------------------------------------------------------------- over the whole envelope
+def envelope_samples(desc: TableDescription, n: int = 4000, seed: int = 0) -> np.ndarray:
+    """The rated envelope's corners plus ``n`` poses drawn uniformly inside it (seeded)."""
+    half = np.concatenate([desc.limits.stroke_m, desc.limits.rotation_rad])
+    mask = np.array([d in desc.dofs for d in DOFS6], dtype=float)
+    rng = np.random.default_rng(seed)
+    inside = rng.uniform(-1.0, 1.0, size=(n, 6)) * half * mask
+    return np.vstack([envelope_corners(desc), inside])
+
+
+def actuator_axes(desc: TableDescription, pose) -> np.ndarray:
+    """Unit vectors base -> platen swivel of every actuator at ``pose`` ((n_act, 3))."""
+    from mjcf.description import rotation_matrix
+
+    pose = np.asarray(pose, float)
+    base = np.array([a.base_m for a in desc.actuators])
+    plat = np.array([a.platen_m for a in desc.actuators])
+    pts = pose[:3] + plat @ rotation_matrix(*pose[3:6]).T
+    v = pts - base
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def envelope_study(desc: TableDescription, *, n: int = 4000, seed: int = 0) -> dict:
+    """Over the rated envelope (corners + ``n`` interior poses): the largest error of the
+    linearised map per actuator (m), the largest tilt of each linkage from its home axis
+    (rad), and the range of the condition number of the actuator Jacobian J(q)."""
+    names = list(desc.actuator_names)
+    dofs = [i for i, d in enumerate(DOFS6) if d in desc.dofs]
+    P = envelope_samples(desc, n, seed)
+    J0 = dof_jacobian(desc)
+    err = np.abs(actuator_strokes(desc, P) - P @ J0.T)
+    a0 = actuator_axes(desc, np.zeros(6))
+    tilt = np.zeros(len(names))
+    conds = []
+    for p in P[:: max(1, len(P) // 400)]:  # the Jacobian by finite differences: a subsample
+        ax = actuator_axes(desc, p)
+        tilt = np.maximum(tilt, np.arccos(np.clip(np.sum(ax * a0, axis=1), -1, 1)))
+        conds.append(np.linalg.cond(dof_jacobian(desc, p)[:, dofs]))
+    return {"max_length_error_m": {nm: float(v) for nm, v in zip(names, err.max(axis=0))},
+            "max_tilt_rad": {nm: float(v) for nm, v in zip(names, tilt)},
+            "jacobian_condition": {"home": float(np.linalg.cond(J0[:, dofs])), "min": float(np.min(conds)),
+                                   "max": float(np.max(conds))},
+            "n_poses": int(len(P))}
+
+
+def offset_plane_maps(desc: TableDescription, tm=None, hydraulics=None, *, n: int = 11) -> dict:
+    """Over the x-y offset plane (the platen held at each offset, other DOFs at home): the
+    largest linearised-map length error of any actuator (m) and, with the compiled model
+    ``tm`` and ``hydraulics``, the lowest and the x oil-column frequency (Hz) from the
+    stiffness and mass matrices in DOF space at that pose (mass matrix from MuJoCo with
+    the loops closed at the offset)."""
+    from mjcf import analysis
+
+    hx, hy = float(desc.limits.stroke_m[0]), float(desc.limits.stroke_m[1])
+    xs, ys = np.linspace(-hx, hx, n), np.linspace(-hy, hy, n)
+    J0 = dof_jacobian(desc)
+    err = np.zeros((n, n))
+    f_low = np.full((n, n), np.nan)
+    f_x = np.full((n, n), np.nan)
+    dofs = [i for i, d in enumerate(DOFS6) if d in desc.dofs]
+    d = tm.new_data() if tm is not None else None
+    for i, y in enumerate(ys):
+        for j, x in enumerate(xs):
+            p = np.zeros(6)
+            p[0], p[1] = x, y
+            err[i, j] = float(np.max(np.abs(actuator_strokes(desc, p) - J0 @ p)))
+            if tm is not None and hydraulics is not None:
+                hp = hydraulics
+                tm.set_platen_pose(d, p)
+                M = analysis.effective_mass_matrix(tm.model, d)
+                s = actuator_strokes(desc, p)
+                va = hp.dead_volume_a_m3 + hp.area_a_m2 * (hp.half_stroke_m + s)
+                vb = hp.dead_volume_b_m3 + hp.area_b_m2 * (hp.half_stroke_m - s)
+                k = hp.bulk_modulus_pa * (hp.area_a_m2 ** 2 / va + hp.area_b_m2 ** 2 / vb)
+                J = dof_jacobian(desc, p)[:, dofs]
+                K = J.T @ np.diag(k) @ J
+                w2, vec = np.linalg.eig(np.linalg.solve(M, K))
+                f = np.sqrt(np.clip(w2.real, 0, None)) / (2 * np.pi)
+                f_low[i, j] = float(f.min())
+                f_x[i, j] = float(f[int(np.argmax(np.abs(vec[0].real)))])  # the mode most in x
+    return {"x_m": xs.tolist(), "y_m": ys.tolist(), "max_length_error_m": err.tolist(),
+            "lowest_oil_column_hz": f_low.tolist(), "x_oil_column_hz": f_x.tolist()}
+
+
+def stroke_for_error(desc: TableDescription, dof: str, error_m: float) -> float | None:
+    """The pure ``dof`` offset (m) at which the linearised map first misses some actuator's
+    length by ``error_m`` (None if not within the rated stroke). The miss grows as d^2."""
+    i = DOFS6.index(dof)
+    half = float(np.concatenate([desc.limits.stroke_m, desc.limits.rotation_rad])[i])
+    J0 = dof_jacobian(desc)
+    ds = np.linspace(0.0, half, 2001)
+    P = np.zeros((len(ds), 6))
+    P[:, i] = ds
+    miss = np.abs(actuator_strokes(desc, P) - P @ J0.T).max(axis=1)
+    hit = np.nonzero(miss >= error_m)[0]
+    return float(ds[hit[0]]) if len(hit) else None
+
+
+def geometry(desc: TableDescription, payload=None, *, quick: bool = False, crosstalk_motions=None,
+             envelope_poses: int = 4000, map_points: int = 11) -> dict:
+    """The whole geometric-nonlinearity study of a table, as data: the static report
+    (:func:`study`), the envelope (:func:`envelope_study`), the x-y offset-plane maps
+    (:func:`offset_plane_maps`), the strokes at which the linearised map misses by 0.1, 1
+    and 10 mm, and the closed-loop crosstalk (:func:`sim.assess.crosstalk.crosstalk`;
+    ``crosstalk_motions=()`` skips it). The crosstalk time histories are under
+    ``"_histories"`` (arrays, for the report's figures)."""
+    from hydraulics import HydraulicParams
+    from sim.assess.crosstalk import crosstalk
+    from sim.effects import build_model
+
+    tm = build_model(desc, payload)
+    hp = HydraulicParams.from_table(desc.raw)
+    out = study(desc, tm.effective_mass_matrix(), hp)
+    env = envelope_study(desc, n=1000 if quick else envelope_poses)
+    out.update(env)
+    out["maps"] = offset_plane_maps(desc, tm, hp, n=5 if quick else map_points)
+    out["stroke_for_length_error_m"] = {
+        d: {f"{e * 1e3:g}mm": stroke_for_error(desc, d, e) for e in (1e-4, 1e-3, 1e-2)}
+        for d in ("x", "y", "z") if d in desc.dofs}
+    if crosstalk_motions is None:
+        crosstalk_motions = ("x_250mm_sine", "y_150mm_sine") if quick else (
+            "x_250mm_sine", "y_150mm_sine", "elcentro_3c")
+    if crosstalk_motions:
+        c = crosstalk(desc, payload, motions=tuple(m for m in crosstalk_motions
+                                                   if m == "elcentro_3c" or m.split("_")[0] in desc.dofs),
+                      quick=quick)
+        out["crosstalk"] = c.table
+        out["_histories"] = c.histories
+    return out

@@ -124,7 +124,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     from sim.cli import characterize as characterize_cli, identify as identify_cli, run as run_cli, view as view_cli
 
-    run_cli.add_parsers(sub)  # run, replay, fit, geometry
+    run_cli.add_parsers(sub)  # run, replay, fit
+    from sim.cli import geometry as geometry_cli
+
+    geometry_cli.add_parsers(sub)  # geometric nonlinearity
     view_cli.add_parsers(sub)  # rerun recordings of run files
     characterize_cli.add_parsers(sub)  # the CGS identification programme (and rice/ucsd dispatch)
     identify_cli.add_parsers(sub)  # uni-axial identification, Rice/UCSD programmes

@@ -137,28 +137,7 @@ def cmd_fit(args) -> int:
     return 0
 
 
-def cmd_geometry(args) -> int:
-    import mjcf
-    from hydraulics import HydraulicParams
-    from sim.assess import geometry
-    desc = mjcf.load_table(args.table)
-    payload = mjcf.load_payload(args.payload) if args.payload else None
-    tm = build_model(desc, payload)
-    r = geometry.study(desc, tm.effective_mass_matrix(), HydraulicParams.from_table(desc.raw))
-    if args.json:
-        print(json.dumps(r, indent=2))
-    else:
-        geometry.print_report(r)
-    return 0
-
-
 def add_parsers(sub) -> None:
-    g = sub.add_parser("geometry", help="geometric nonlinearity of a table over its rated envelope")
-    g.add_argument("table")
-    g.add_argument("--payload")
-    g.add_argument("--json", action="store_true")
-    g.set_defaults(func=cmd_geometry)
-
     f = sub.add_parser("fit", help="replay a measured run, find the residual and add the effect the model lacks")
     f.add_argument("run", help="a measured .run.npz with valve_command")
     f.add_argument("--table", help="table (default: the run's meta.table)")

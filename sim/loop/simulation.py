@@ -156,8 +156,13 @@ class Simulation:
     # ------------------------------------------------------------------ run
     def run(self, *, reference: Reference | None = None, valve_command: np.ndarray | None = None,
             duration_s: float | None = None, progress: bool = False, gap_every: int = 8,
-            fast: bool = True, fuse: bool = True) -> RunResult:
+            fast: bool = True, fuse: bool = True, kinematics: str = "exact") -> RunResult:
         """Run closed loop on ``reference`` or open loop on recorded ``valve_command``.
+
+        ``kinematics``: how the controller turns the DOF reference into actuator strokes:
+        ``"exact"`` (the inverse kinematics of the linkage geometry, as the table's
+        controller does) or ``"linear"`` (the home Jacobian, ``s = J(0) r``: a
+        small-motion DOF transformation; for the geometric-nonlinearity study).
 
         Both inputs are sampled at the controller rate. Returns the recorder's arrays.
         A simulation that leaves its physical bounds stops with the arrays up to then and
@@ -186,7 +191,12 @@ class Simulation:
         n = n_in if duration_s is None else min(n_in, int(round(duration_s * rate)) + 1)
         na = tm.n_act
         if reference is not None:
-            s_ref_all = actuator_strokes(tm.desc, reference.d[:n])
+            if kinematics == "exact":
+                s_ref_all = actuator_strokes(tm.desc, reference.d[:n])
+            elif kinematics == "linear":
+                s_ref_all = np.ascontiguousarray(reference.d[:n] @ ctrl.J.T)
+            else:
+                raise ValueError(f"kinematics must be 'exact' or 'linear' (got {kinematics!r})")
             v_ref_all = np.ascontiguousarray(reference.v[:n])
             vff_all = ctrl.feedforward(reference.v[:n], reference.a[:n], rate)  # feed-forward velocity demand
         else:
