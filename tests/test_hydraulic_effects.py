@@ -356,3 +356,17 @@ def test_effects_are_parameters_for_calibration():
     e2 = e.with_values({"bandwidth_hz": 50.0})
     assert e2.entry() == {"type": "valve_bandwidth", "where": "class:east", "bandwidth_hz": 50.0}
     assert e.values["bandwidth_hz"] == 40.0
+
+
+def test_the_analog_loop_takes_hydraulic_effects_too():
+    """The uni-axial analog-controller loop (sim/loop/analog.py) edits its hydraulics
+    with the description's effects, as the digital loop does."""
+    from sim.loop.analog import RiceSimulation
+
+    desc = mjcf.load_table(TABLES / "rice.toml")
+    raw = copy.deepcopy(desc.raw)
+    name = raw["actuator"][0]["name"]
+    raw.setdefault("effect", []).append({"type": "valve_null_offset", "where": f"actuator:{name}", "offset": 0.02})
+    sim = RiceSimulation(parse_table(raw, "test"))
+    assert sim.hp.per_actuator("valve_null_offset")[0] == 0.02
+    assert RiceSimulation(desc).hp.valve_null_offset is None
