@@ -11,10 +11,11 @@ import math
 
 from ._layout import (
     C_CAV, C_RELIEF, CS_LOW, CS_PUMPSAT, FCUSH, FLOWA, FLOWB, FORCE,
-    G_A1, G_AIR, G_AIRN, G_BETA, G_CLINE, G_DL, G_DT, G_F00, G_F01, G_F10, G_F11, G_G0, G_G1,
-    G_K, G_MODEL, G_NACC, G_ND, G_OLEAK, G_OV, G_PATM, G_PPRE, G_PREL, G_PSET, G_PT, G_PV,
+    G_AIR, G_AIRN, G_CLINE, G_DL, G_DT,
+    G_MODEL, G_NACC, G_ND, G_OLEAK, G_OV, G_PATM, G_PPRE, G_PREL, G_PSET, G_PT, G_PV,
     G_QMAX, G_SLEW, G_SQDL, G_SSET, G_V0, GASV,
-    P_AA, P_AB, P_H, P_KC, P_KCUSH, P_KE, P_LC, P_VDA, P_VDB,
+    P_A1, P_AA, P_AB, P_BETA, P_F00, P_F01, P_F10, P_F11, P_G0, P_G1, P_H, P_K, P_KC, P_KCUSH,
+    P_KE, P_LC, P_ND, P_U0, P_VDA, P_VDB,
     PA, PB, PS, QAT, QBT, QDEMAND, QPA, QPB, QPUMP, RATE, SPOOL, STORE,
     S_CA, S_CB, S_GAT, S_GBT, S_GPA, S_GPB, S_UA, S_UB, S_WA, S_WB,
     V_ACC_OUT, V_CAV_A, V_CAV_B, V_COMP_A, V_COMP_B, V_CROSS, V_DISP_A, V_DISP_B,
@@ -82,7 +83,6 @@ def step_loops(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
     ns = cmd.shape[0]
     na = cmd.shape[1]
     dt = G[G_DT]
-    beta = G[G_BETA]
     pv = G[G_PV]
     prel = G[G_PREL]
     air = G[G_AIR]
@@ -96,19 +96,11 @@ def step_loops(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
     nacc = G[G_NACC]
     cline = G[G_CLINE]
     sset = G[G_SSET]
-    K = G[G_K]
     oleak = G[G_OLEAK]
     dl = G[G_DL]
     sqdl = G[G_SQDL]
     ov = G[G_OV]
     model = G[G_MODEL]
-    a1 = G[G_A1]
-    f00 = G[G_F00]
-    f01 = G[G_F01]
-    f10 = G[G_F10]
-    f11 = G[G_F11]
-    g0 = G[G_G0]
-    g1 = G[G_G1]
     slew = G[G_SLEW]
     nd = int(G[G_ND])
 
@@ -120,15 +112,26 @@ def step_loops(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
         for i in range(na):
             u = cmd[s, i]
             if nd > 0:
-                ud = buf[s, i, head]
+                # delay line of nd steps shared by the actuators; actuator i reads the
+                # command of nd_i <= nd steps ago (slot head is the oldest, nd steps)
+                ndi = int(P[P_ND, i])
+                if ndi > 0:
+                    j = head + nd - ndi
+                    if j >= nd:
+                        j -= nd
+                    ud = buf[s, i, j]
+                else:
+                    ud = u
                 buf[s, i, head] = u
                 u = ud
+            u = u + P[P_U0, i]
             y = X[SPOOL, s, i]
             r = X[RATE, s, i]
             if model > 0.5:
-                yn = f00 * y + f01 * r + g0 * u
-                rn = f10 * y + f11 * r + g1 * u
+                yn = P[P_F00, i] * y + P[P_F01, i] * r + P[P_G0, i] * u
+                rn = P[P_F10, i] * y + P[P_F11, i] * r + P[P_G1, i] * u
             else:
+                a1 = P[P_A1, i]
                 yn = a1 * y + (1.0 - a1) * u
                 rn = 0.0
             if slew > 0.0:
@@ -168,6 +171,7 @@ def step_loops(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
 
             pa = X[PA, s, i]
             pb = X[PB, s, i]
+            K = P[P_K, i]
             q, gd = land_flow(ps - pa, dl, sqdl)
             qpa = K * op * q
             gpa = K * op * gd
@@ -195,6 +199,7 @@ def step_loops(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
                 xc = -h
             va = P[P_VDA, i] + aa * (h + xc)
             vb = P[P_VDB, i] + ab * (h - xc)
+            beta = P[P_BETA, i]
             cva = va * inv_beta(pa, beta, air, airn, patm)
             cvb = vb * inv_beta(pb, beta, air, airn, patm)
             fa = qpa - qat - kc * (pa - pb) - ke * pa - aa * v

@@ -74,7 +74,19 @@ P_KC = 5
 P_KE = 6
 P_LC = 7
 P_KCUSH = 8
-NP = 9
+# per-actuator servovalve and fluid (the globals' values unless HydraulicParams overrides them)
+P_BETA = 9  # bulk modulus of the oil in this actuator's chambers, Pa
+P_K = 10  # land coefficient K x flow gain factor, m^3/s/sqrt(Pa)
+P_U0 = 11  # null offset added to the (delayed) command, fraction of rated opening
+P_A1 = 12  # first-order spool: exp(-dt / tau)
+P_F00 = 13  # second-order spool: exact ZOH discretisation
+P_F01 = 14
+P_F10 = 15
+P_F11 = 16
+P_G0 = 17
+P_G1 = 18
+P_ND = 19  # delay in steps (<= G_ND, the delay line's length)
+NP = 20
 
 # ---- global parameters, array G of shape (NG,)
 G_DT = 0
@@ -106,7 +118,7 @@ G_F11 = 25
 G_G0 = 26
 G_G1 = 27
 G_SLEW = 28
-G_ND = 29  # delay in steps
+G_ND = 29  # delay line length in steps (the largest actuator delay)
 NG = 30
 
 X_FIELDS = {

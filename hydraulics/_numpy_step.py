@@ -11,10 +11,11 @@ import numpy as np
 from ._kernel import NEWTON_ITERS
 from ._layout import (
     C_CAV, C_RELIEF, CS_LOW, CS_PUMPSAT, FCUSH, FLOWA, FLOWB, FORCE,
-    G_A1, G_AIR, G_AIRN, G_BETA, G_CLINE, G_DL, G_DT, G_F00, G_F01, G_F10, G_F11, G_G0, G_G1,
-    G_K, G_MODEL, G_NACC, G_ND, G_OLEAK, G_OV, G_PATM, G_PPRE, G_PREL, G_PSET, G_PT, G_PV,
+    G_AIR, G_AIRN, G_CLINE, G_DL, G_DT,
+    G_MODEL, G_NACC, G_ND, G_OLEAK, G_OV, G_PATM, G_PPRE, G_PREL, G_PSET, G_PT, G_PV,
     G_QMAX, G_SLEW, G_SQDL, G_SSET, G_V0, GASV,
-    P_AA, P_AB, P_H, P_KC, P_KCUSH, P_KE, P_LC, P_VDA, P_VDB,
+    P_A1, P_AA, P_AB, P_BETA, P_F00, P_F01, P_F10, P_F11, P_G0, P_G1, P_H, P_K, P_KC, P_KCUSH,
+    P_KE, P_LC, P_ND, P_U0, P_VDA, P_VDB,
     PA, PB, PS, QAT, QBT, QDEMAND, QPA, QPB, QPUMP, RATE, SPOOL, STORE,
     V_ACC_OUT, V_CAV_A, V_CAV_B, V_COMP_A, V_COMP_B, V_CROSS, V_DISP_A, V_DISP_B,
     V_EXT_A, V_EXT_B, V_IN_A, V_IN_B, V_OUT_A, V_OUT_B, V_PUMP, V_RELIEF_A, V_RELIEF_B,
@@ -36,7 +37,7 @@ def inv_beta_np(p, beta, air, airn, patm):
     if air > 0.0:
         pp = np.maximum(p, 1.0e-3 * patm)
         return 1.0 / beta + air * (patm / pp) ** (1.0 / airn) / (airn * pp)
-    return np.full_like(p, 1.0 / beta)
+    return np.zeros_like(p) + 1.0 / beta  # beta: a scalar or per actuator
 
 
 def store_of_p_np(p, cline, v0, ppre, nacc):
@@ -71,23 +72,27 @@ def step_numpy(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
     pv, prel, pt = G[G_PV], G[G_PREL], G[G_PT]
     pset, qmax = G[G_PSET], G[G_QMAX]
     v0, ppre, nacc, cline, sset = G[G_V0], G[G_PPRE], G[G_NACC], G[G_CLINE], G[G_SSET]
-    K, oleak, dl, sqdl, ov = G[G_K], G[G_OLEAK], G[G_DL], G[G_SQDL], G[G_OV]
+    oleak, dl, sqdl, ov = G[G_OLEAK], G[G_DL], G[G_SQDL], G[G_OV]
+    K = P[P_K]
     slew = G[G_SLEW]
     nd = int(G[G_ND])
 
     # ---- servovalve: delay line, spool dynamics, slew, saturation
     if nd > 0:
-        u = buf[:, :, head].copy()
+        ndi = P[P_ND].astype(np.int64)
+        slot = (head + nd - ndi) % nd  # actuator i reads the command of ndi steps ago
+        u = np.where(ndi > 0, buf[:, np.arange(buf.shape[1]), slot], cmd)
         buf[:, :, head] = cmd
     else:
         u = cmd
+    u = u + P[P_U0]
     y = X[SPOOL]
     r = X[RATE]
     if G[G_MODEL] > 0.5:
-        yn = G[G_F00] * y + G[G_F01] * r + G[G_G0] * u
-        rn = G[G_F10] * y + G[G_F11] * r + G[G_G1] * u
+        yn = P[P_F00] * y + P[P_F01] * r + P[P_G0] * u
+        rn = P[P_F10] * y + P[P_F11] * r + P[P_G1] * u
     else:
-        a1 = G[G_A1]
+        a1 = P[P_A1]
         yn = a1 * y + (1.0 - a1) * u
         rn = np.zeros_like(y)
     if slew > 0.0:
@@ -124,8 +129,8 @@ def step_numpy(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
     xc = np.clip(xin, -h, h)
     va = P[P_VDA] + aa * (h + xc)
     vb = P[P_VDB] + ab * (h - xc)
-    cva = va * inv_beta_np(pa, G[G_BETA], G[G_AIR], G[G_AIRN], G[G_PATM])
-    cvb = vb * inv_beta_np(pb, G[G_BETA], G[G_AIR], G[G_AIRN], G[G_PATM])
+    cva = va * inv_beta_np(pa, P[P_BETA], G[G_AIR], G[G_AIRN], G[G_PATM])
+    cvb = vb * inv_beta_np(pb, P[P_BETA], G[G_AIR], G[G_AIRN], G[G_PATM])
     fa = qpa - qat - kc * (pa - pb) - ke * pa - aa * vin
     fb = qpb - qbt + kc * (pa - pb) - ke * pb + ab * vin
     m00 = cva / dt + gpa + gat + kc + ke

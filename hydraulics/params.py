@@ -6,7 +6,11 @@ given in the description to override them.
 
 Per-actuator quantities (geometry, leakage, friction, cushions) are numpy arrays of shape
 ``(n_act,)`` in ``[[actuator]]`` order; fluid, supply and servovalve quantities are
-scalars (one servovalve specification serves every actuator).
+scalars (one servovalve specification serves every actuator). A few of those scalars can
+be overridden per actuator (``PER_ACTUATOR``: valve delay, time constant, natural
+frequency, flow gain, null offset, chamber bulk modulus): the override arrays are None
+(every actuator takes the scalar) unless an effect sets them
+(``sim.effects.hydraulic``); :meth:`HydraulicParams.per_actuator` gives the values in use.
 """
 
 from __future__ import annotations
@@ -125,10 +129,27 @@ class HydraulicParams:
     seal_static_friction_n: np.ndarray
     stribeck_velocity_m_s: np.ndarray
     friction_smoothing_m_s: np.ndarray
+    # per-actuator overrides (None: the scalar above for every actuator; see PER_ACTUATOR)
+    valve_delay_s: np.ndarray | None = None
+    valve_tau_s: np.ndarray | None = None
+    valve_natural_frequency_hz: np.ndarray | None = None
+    valve_flow_gain: np.ndarray | None = None
+    valve_null_offset: np.ndarray | None = None
+    chamber_bulk_modulus_pa: np.ndarray | None = None
 
     @property
     def n_act(self) -> int:
         return len(self.names)
+
+    def per_actuator(self, name: str) -> np.ndarray:
+        """The (n_act,) values in use of an overridable quantity (a copy): the override
+        array if set, else its scalar (``PER_ACTUATOR[name]``) for every actuator."""
+        base, _rule = PER_ACTUATOR[name]
+        arr = getattr(self, name)
+        if arr is not None:
+            return np.array(arr, dtype=np.float64)
+        val = getattr(self, base) if isinstance(base, str) else base
+        return np.full(self.n_act, float(val))
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -321,6 +342,16 @@ class HydraulicParams:
             setattr(self, key, arr)
             for i in range(n):
                 num(f"{self._where(i)}.{key}", arr[i], cond, expect)
+        for key, (_base, (cond, expect)) in PER_ACTUATOR.items():
+            arr = getattr(self, key)
+            if arr is None:
+                continue
+            arr = np.asarray(arr, dtype=np.float64)
+            if arr.shape != (n,):
+                raise HydraulicsParamError(f"{key} must have shape ({n},) (got {arr.shape})")
+            setattr(self, key, arr)
+            for i in range(n):
+                num(f"actuator {self.names[i]} {key}", arr[i], cond, expect)
         for i in range(n):
             if self.cushion_length_m[i] >= self.half_stroke_m[i]:
                 raise HydraulicsParamError(
@@ -333,3 +364,15 @@ class HydraulicParams:
             v = getattr(self, f.name)
             kw[f.name] = v.copy() if isinstance(v, np.ndarray) else v
         return HydraulicParams(**kw)
+
+
+#: overridable per-actuator quantities: name -> (the scalar field or the default value,
+#: (condition, expectation) of its values)
+PER_ACTUATOR = {
+    "valve_delay_s": ("delay_s", (lambda v: v >= 0, ">= 0")),
+    "valve_tau_s": ("tau_s", (lambda v: v > 0, "> 0")),
+    "valve_natural_frequency_hz": ("natural_frequency_hz", (lambda v: v > 0, "> 0")),
+    "valve_flow_gain": (1.0, (lambda v: v > 0, "> 0")),
+    "valve_null_offset": (0.0, (lambda v: -1.0 < v < 1.0, "in (-1, 1)")),
+    "chamber_bulk_modulus_pa": ("bulk_modulus_pa", (lambda v: v > 0, "> 0")),
+}

@@ -20,7 +20,12 @@ steps (ring buffer; the realised delay is that integer number of steps, within d
 delay_s) -> first-order (tau) or second-order (wn, zeta) main stage, discretised EXACTLY
 for a zero-order-held input (y_{n+1} = e^{A dt} y_n + A^-1 (e^{A dt} - I) B u_n) -> optional
 slew limit -> saturation at +/-1. With no delay, the spool after step n already
-responds to command n (the command is held over the step).
+responds to command n (the command is held over the step). Per actuator (overrides in
+``HydraulicParams.PER_ACTUATOR``, set by hydraulic effects): the delay (each actuator
+reads the shared delay line at its own depth), tau or wn, a null offset added to the
+delayed command (a valve bias), a flow gain factor on K (all four lands, null leakage
+included) and the chamber bulk modulus. ``no_load_flow`` and ``valve_gain`` stay the
+nominal (scalar) valve: what a controller designed from the data sheet assumes.
 
 Metering: four lands, critically lapped unless ``overlap`` > 0 (the opening starts at
 |y| = overlap and reaches 1 at |y| = 1). Land flow Q = K o g(dp) with
@@ -188,6 +193,7 @@ class HydraulicSystem:
         P[L.P_KE] = p.leakage_external_m3_s_pa
         P[L.P_LC] = p.cushion_length_m
         P[L.P_KCUSH] = p.cushion_stiffness_n_m
+        P[L.P_BETA] = p.per_actuator("chamber_bulk_modulus_pa")
         G = np.zeros(L.NG)
         G[L.G_DT] = dt
         G[L.G_BETA] = p.bulk_modulus_pa
@@ -206,6 +212,8 @@ class HydraulicSystem:
         G[L.G_SSET] = store_of_p(p.supply_pressure_pa, G[L.G_CLINE], G[L.G_V0], G[L.G_PPRE], G[L.G_NACC])
         K = p.rated_flow_m3_s / math.sqrt(0.5 * p.rated_drop_pa)
         G[L.G_K] = K
+        P[L.P_K] = K * p.per_actuator("valve_flow_gain")
+        P[L.P_U0] = p.per_actuator("valve_null_offset")
         dl = p.laminar_drop_pa
         G[L.G_DL] = dl
         G[L.G_SQDL] = math.sqrt(dl)
@@ -220,21 +228,27 @@ class HydraulicSystem:
             G[L.G_MODEL] = 1.0
             from scipy.linalg import expm
 
-            wn = 2.0 * math.pi * p.natural_frequency_hz
             z = p.damping_ratio
-            M = np.zeros((3, 3))
-            M[0, 1] = 1.0
-            M[1, 0] = -wn * wn
-            M[1, 1] = -2.0 * z * wn
-            M[1, 2] = wn * wn
-            E = expm(M * dt)
-            G[L.G_F00], G[L.G_F01], G[L.G_F10], G[L.G_F11] = E[0, 0], E[0, 1], E[1, 0], E[1, 1]
-            G[L.G_G0], G[L.G_G1] = E[0, 2], E[1, 2]
+            for i, fn in enumerate(p.per_actuator("valve_natural_frequency_hz")):
+                wn = 2.0 * math.pi * fn
+                M = np.zeros((3, 3))
+                M[0, 1] = 1.0
+                M[1, 0] = -wn * wn
+                M[1, 1] = -2.0 * z * wn
+                M[1, 2] = wn * wn
+                E = expm(M * dt)
+                P[L.P_F00, i], P[L.P_F01, i], P[L.P_F10, i], P[L.P_F11, i] = E[0, 0], E[0, 1], E[1, 0], E[1, 1]
+                P[L.P_G0, i], P[L.P_G1, i] = E[0, 2], E[1, 2]
+            # the globals keep the nominal (scalar) valve, for reference
+            G[L.G_F00], G[L.G_F01], G[L.G_F10], G[L.G_F11], G[L.G_G0], G[L.G_G1] = (
+                P[L.P_F00, 0], P[L.P_F01, 0], P[L.P_F10, 0], P[L.P_F11, 0], P[L.P_G0, 0], P[L.P_G1, 0])
         else:
             G[L.G_MODEL] = 0.0
+        P[L.P_A1] = np.exp(-dt / p.per_actuator("valve_tau_s"))
         G[L.G_A1] = math.exp(-dt / p.tau_s)
         G[L.G_SLEW] = p.slew_limit_per_s
-        G[L.G_ND] = float(int(round(p.delay_s / dt)))
+        P[L.P_ND] = np.round(p.per_actuator("valve_delay_s") / dt)
+        G[L.G_ND] = float(np.max(P[L.P_ND]))  # length of the delay line
         return P, G
 
     @property

@@ -24,6 +24,11 @@ def cmd_run(args) -> int:
     from sim.assess.run import plan_scenario
 
     plan = plan_scenario(args.scenario, duration_s=args.duration, iterations=args.iterations)
+    sensors = None
+    if getattr(args, "measure", None) is not None:  # a bad sensor model fails before anything is written
+        from sim.runs.measure import load_sensors
+
+        sensors = load_sensors(None if args.measure is True else args.measure, sample_rate_hz=plan.gains.rate_hz)
     for w in plan.warnings:
         print(f"warning: {w}", file=sys.stderr)
     out = out_dir(args.out)  # checked before the work starts
@@ -36,6 +41,12 @@ def cmd_run(args) -> int:
     if target is not None:
         target.write_run(outcome.run, outcome.tm)
         outcome.summary["recording"] = str(target.path)
+    if sensors is not None:
+        from sim.runs.measure import write_measured
+
+        outcome.summary["measured_run_file"] = str(write_measured(
+            outcome.run, out, outcome.summary["scenario"], sensors, seed=args.measure_seed,
+            model_file=None if args.measure is True else args.measure))
     summary = outcome.write(out)
     if args.json:
         print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
@@ -70,6 +81,8 @@ def _print_summary(s: dict) -> None:
         hist = ", ".join(f"{100 * h['mean_nrmse_acceleration']:.1f}%" for h in di["history"])
         print(f"  drive iterations: mean acceleration NRMSE per run {hist}; using run {di['chosen']}")
     print(f"  wrote {s['run_file']}" + (f" and {s['recording']}" if s.get("recording") else ""))
+    if s.get("measured_run_file"):
+        print(f"  wrote {s['measured_run_file']} (through the sensor model)")
 
 
 def cmd_replay(args) -> int:
@@ -156,6 +169,10 @@ def add_parsers(sub) -> None:
     r.add_argument("--rrd", metavar="FILE", help="also write a rerun recording")
     r.add_argument("--iterations", type=int, default=None,
                    help="off-line drive iterations on the model (default: the scenario's [iteration] count)")
+    r.add_argument("--measure", nargs="?", const=True, default=None, metavar="SENSORS.toml",
+                   help="also write <scenario>.measured.run.npz through a sensor model (docs/sensors.md; "
+                        "default: the built-in 1024 Hz recorder, scenarios/sensors/recorder_1024hz.toml)")
+    r.add_argument("--measure-seed", type=int, default=0, help="seed of the measurement noise (default 0)")
     r.set_defaults(func=cmd_run)
 
     p = sub.add_parser("replay", help="replay a run file's valve commands open loop through the model")

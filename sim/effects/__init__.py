@@ -8,6 +8,7 @@ effects (``mjcf`` itself knows none).
 from __future__ import annotations
 
 from sim.effects.registry import StepEffect, build_effects, dahl_step, known, register
+from sim.effects import hydraulic, sensors  # noqa: F401  (register the hydraulic and sensor effects)
 
 
 def build_model(desc, payload=None, options=None):

@@ -112,8 +112,13 @@ class RiceSimulation:
         self.tm = build_model(desc, payload, BuildOptions(timestep_s=1.0 / self.gains.physics_rate_hz))
         self.m = self.tm.model
         self.dt = float(self.m.opt.timestep)
-        self.hp = HydraulicParams.from_table(desc.raw)
+        hp = HydraulicParams.from_table(desc.raw)
+        for e in self.tm.effects:  # hydraulic effects, as in sim.loop.simulation.Simulation
+            hp = e.edit_hydraulics(hp)
+        self.hp = hp
         self.hs = HydraulicSystem(self.hp, n_sim=1, dt=self.dt, backend=backend)
+        for e in self.tm.effects:
+            e.bind(self.m, self.hs)
         self.q_full = float(self.hs.no_load_flow(1.0))
         self.ctl = RiceController(self.gains.gains, conditioning(desc.raw), kt, self.q_full, self.dt)
         self.steps_per_tick = int(round(self.gains.physics_rate_hz / self.gains.rate_hz))
