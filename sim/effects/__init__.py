@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from sim.effects.base import EFFECTS, Effect, Parameter, create, register
 from sim.effects.registry import build_effects, dahl_step, known, load_user_effect
+from sim.effects.table import table_parameters, with_parameter_values
 
 
 def build_model(desc, payload=None, options=None):
@@ -25,4 +26,4 @@ def build_model(desc, payload=None, options=None):
 
 
 __all__ = ["EFFECTS", "Effect", "Parameter", "build_effects", "build_model", "create", "dahl_step", "known",
-           "load_user_effect", "register"]
+           "load_user_effect", "register", "table_parameters", "with_parameter_values"]

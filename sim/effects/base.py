@@ -80,9 +80,16 @@ def parse_where(where: str, source: str = "effect") -> tuple[str, str]:
         raise ScenarioError(f"{source}: 'where' must name a place ({', '.join(k + ':...' for k in PLACE_KINDS)})")
     kind, _, name = where.partition(":")
     if kind not in PLACE_KINDS:
-        raise ScenarioError(f"{source}: where = '{where}' is not a place; places are "
-                            + ", ".join(PLACE_KINDS))
+        raise ScenarioError(f"{source}: where = '{where}' is not a place{_did_you_mean(kind, PLACE_KINDS)}; "
+                            "places are " + ", ".join(PLACE_KINDS))
     return kind, name
+
+
+def _did_you_mean(word: str, known) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(str(word), sorted(known), n=1)
+    return f" (did you mean '{close[0]}'?)" if close else ""
 
 
 class Effect:
@@ -113,7 +120,7 @@ class Effect:
         kind, _ = parse_where(self.where, source)
         if self.places and kind not in self.places:
             raise ScenarioError(f"{source}: a {self.type} effect acts at {', '.join(self.places)}, "
-                                f"not at '{self.where}'")
+                                f"not at '{self.where}'{_did_you_mean(kind, self.places)}")
         known = set(self.SPEC) | set(self.OPTIONS)
         for k in entry:
             if k not in known:

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import difflib
 import math
+from dataclasses import replace
 
 import mujoco
 import numpy as np
@@ -149,7 +150,7 @@ class StepForce(Effect):
 
     def bind(self, model, hydraulics=None):
         p = self._place
-        jid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)  # noqa: E731
+        jid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)
         self._dt = float(model.opt.timestep)
         self._i = p.free_dof
         if p.free_dof is None:
@@ -233,11 +234,15 @@ class PowerDamping(StepForce):
     type = "power_damping"
     places = ("dof", "actuator", "class")
     SPEC = {"coefficient": ("N (s/m)^alpha", 0.0, INF, None),
-            "exponent": ("1", 1e-3, 5.0, None),
-            "linear_below_m_s": ("m/s", 1e-9, INF, 1e-3)}  # assumed: regularisation below 1 mm/s
+            "exponent": ("1", 1e-3, 5.0, None)}
+    OPTIONS = {"linear_below_m_s": 1e-3}  # assumed: regularisation below 1 mm/s (a setting, not calibrated)
+
+    def __init__(self, entry, *, source="effect"):
+        super().__init__(entry, source=source)
+        _positive_option(self, "linear_below_m_s")
 
     def force(self, v):
-        c, a, v0 = self.values["coefficient"], self.values["exponent"], self.values["linear_below_m_s"]
+        c, a, v0 = self.values["coefficient"], self.values["exponent"], self.options["linear_below_m_s"]
         av = np.abs(v)
         return np.where(av >= v0, -c * av ** a * np.sign(v), -c * v0 ** a * (v / v0))
 
@@ -272,12 +277,12 @@ class CoulombFriction(StepForce):
     places = ("dof", "actuator", "class")
     SPEC = {"force_n": ("N", 0.0, INF, None),
             "coefficient": ("1 (load) or N/m (displacement)", 0.0, INF, 0.0),
-            "presliding_m": ("m", 0.0, INF, 0.0),
-            "linear_below_m_s": ("m/s", 1e-9, INF, 1e-3)}  # assumed: regularisation below 1 mm/s
-    OPTIONS = {"grows_with": "none"}
+            "presliding_m": ("m", 0.0, INF, 0.0)}
+    OPTIONS = {"grows_with": "none", "linear_below_m_s": 1e-3}  # assumed: regularisation below 1 mm/s
 
     def __init__(self, entry, *, source="effect"):
         super().__init__(entry, source=source)
+        _positive_option(self, "linear_below_m_s")
         g = self.options["grows_with"]
         if g not in GROWS:
             raise ScenarioError(f"{source}: grows_with = '{g}' is not one of {', '.join(GROWS)}{_hint(g, GROWS)}")
@@ -285,9 +290,12 @@ class CoulombFriction(StepForce):
         self.per_step = self._needs_step(None)
 
     def parameters(self):
-        unit = {"load": "1", "displacement": "N/m"}.get(self.options["grows_with"], "N/m")
-        return [p if p.name != "coefficient" else type(p)(**{**p.__dict__, "unit": unit})
-                for p in super().parameters()]
+        """Without ``grows_with`` the coefficient is no parameter; with it, its unit is
+        1 (load) or N/m (displacement)."""
+        g = self.options["grows_with"]
+        unit = {"load": "1", "displacement": "N/m"}.get(g)
+        return [p if p.name != "coefficient" else replace(p, unit=unit)
+                for p in super().parameters() if p.name != "coefficient" or unit]
 
     def _needs_step(self, desc) -> bool:
         v = self.values
@@ -350,7 +358,7 @@ class CoulombFriction(StepForce):
             self.z = dahl_step(self.z, v, d, dt)
             f = -fc / d * self.z
         else:
-            f = -fc * np.clip(np.asarray(v, float) / self.values["linear_below_m_s"], -1.0, 1.0)
+            f = -fc * np.clip(np.asarray(v, float) / self.options["linear_below_m_s"], -1.0, 1.0)
         return float(np.ravel(f)[0]) if np.ndim(v) == 0 else f
 
     def apply(self, model, data):
@@ -490,11 +498,21 @@ class FoundationMode(Effect):
         jz.springref = total * desc.gravity_m_s2 / float(jz.stiffness[0])
 
 
+_MOVED = "moved_"
+_EQ_KEYS = ("name", "type", "objtype", "name1", "name2", "data", "solref", "solimp", "active")
+_ACT_KEYS = ("name", "target", "trntype", "gear", "ctrllimited", "ctrlrange", "forcelimited", "forcerange",
+             "dyntype", "gaintype", "biastype", "dynprm", "gainprm", "biasprm")
+
+
+def _copy(v):
+    return v.copy() if isinstance(v, np.ndarray) else v
+
+
 def _make_foundation(spec, desc):
     """A foundation body on three slides; every body standing on the world (swivel
     bases, supports) is moved onto it."""
     world = spec.worldbody
-    movers = [b for b in world.bodies if b.name != "platen"]
+    movers = [b for b in world.bodies if b.name != "platen" or desc.platen.guided]
     fd = world.add_body(name="foundation", pos=[0, 0, 0])
     fd.explicitinertial = True
     fd.ipos = [0, 0, -3.0]  # assumed: as mjcf.builder's spring foundation
@@ -503,14 +521,45 @@ def _make_foundation(spec, desc):
         axis = [0.0, 0.0, 0.0]
         axis[k] = 1.0
         fd.add_joint(name=f"foundation_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
+    # MjSpec moves a subtree by attaching a copy of it (from a copy of the spec, under a
+    # prefix that is taken off again); the copy brings the equalities and actuators that
+    # name its bodies and joints, so the originals go
+    if len(spec.tendons):
+        raise ScenarioError("foundation_mode must come before the effects that act on a DOF of a free platen "
+                            "(they make tendons); move its [[effect]] entry up")
+    src = spec.copy()
+    eqs = [{k: _copy(getattr(e, k)) for k in _EQ_KEYS} for e in spec.equalities]
+    acts = [{k: _copy(getattr(a, k)) for k in _ACT_KEYS} for a in spec.actuators]
+    for el in list(spec.equalities) + list(spec.actuators):
+        spec.delete(el)
     for b in movers:
-        frame = fd.add_frame()
-        frame.attach_body(b, "", "")
+        name = b.name
         spec.delete(b)
+        fd.add_frame().attach_body(src.body(name), _MOVED, "")
+    for el in [*spec.bodies, *spec.joints, *spec.geoms, *spec.sites, *spec.equalities, *spec.actuators]:
+        for k in ("name", "name1", "name2", "target"):
+            v = getattr(el, k, None)
+            if isinstance(v, str) and v.startswith(_MOVED):
+                setattr(el, k, v[len(_MOVED):])
+    # those the copy did not bring (they also name a body that stayed): made again
+    have = {e.name for e in spec.equalities} | {"act:" + a.name for a in spec.actuators}
+    for saved, add, tag in ((eqs, spec.add_equality, ""), (acts, spec.add_actuator, "act:")):
+        for e in saved:
+            if tag + e["name"] not in have:
+                new = add()
+                for k, v in e.items():
+                    setattr(new, k, v)
     return fd
 
 
 # ------------------------------------------------------------------------ helpers
+def _positive_option(effect, key) -> None:
+    v = effect.options[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+        raise ScenarioError(f"{effect.source}: '{key}' must be a positive number (got {v!r})")
+    effect.options[key] = float(v)
+
+
 def _vector(val, effect, key) -> np.ndarray:
     if val is None:
         return np.zeros(3)
