@@ -22,7 +22,10 @@ def build_model(desc, payload=None, options=None):
     ``[[effect]]`` entries built in (``tm.step_effects``: those applied every step)."""
     import mjcf
 
-    return mjcf.build(desc, payload, options, effects=build_effects)
+    tm = mjcf.build(desc, payload, options, effects=build_effects)
+    for e in tm.effects:
+        e.edit_model(tm.model)
+    return tm
 
 
 __all__ = ["EFFECTS", "Effect", "Parameter", "build_effects", "build_model", "create", "dahl_step", "known",

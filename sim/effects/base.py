@@ -17,6 +17,8 @@ Lifecycle (every method optional but the parameters):
 
 * ``edit_spec(spec, desc)``: what it adds to the MJCF before compiling (joint friction,
   springs, bodies of a payload mode);
+* ``edit_model(model)``: once after compiling, per-DOF numbers MjSpec cannot address
+  (called by :func:`sim.effects.build_model`);
 * ``edit_hydraulics(params)``: hydraulic effects return a changed
   :class:`hydraulics.HydraulicParams` (bulk modulus, leakage, valve delay, ...);
 * ``bind(model, hydraulics)``: indices and compiled parameters, once after compiling;
@@ -171,6 +173,11 @@ class Effect:
     # ---------------------------------------------------------------- lifecycle
     def edit_spec(self, spec, desc) -> None:
         """Add to the MJCF before compiling."""
+
+    def edit_model(self, model) -> None:
+        """Change the compiled ``mujoco.MjModel`` once after the build (per-DOF numbers
+        that MjSpec cannot address, e.g. one DOF of a free joint); called by
+        :func:`sim.effects.build_model`."""
 
     def edit_hydraulics(self, params):
         """Return the hydraulic parameters with this effect applied."""

@@ -313,6 +313,12 @@ class CoulombFriction(StepForce):
     def edit_spec(self, spec, desc):
         super().edit_spec(spec, desc)
         self.per_step = self._needs_step(desc)
+        self._zss = self.values["presliding_m"]
+        if (not self.per_step and self._place.free_dof is not None and self._zss == 0
+                and desc.friction_model == "presliding"):
+            # a table whose joint friction is pre-sliding: a free platen's DOF friction too
+            # (its tendon has no place in the loop's pre-sliding law), with the table's travel
+            self.per_step, self._zss = True, float(desc.friction_presliding_m)
         self._constant_load = not self.per_step and self.options["grows_with"] == "load" \
             and self.values["coefficient"] > 0
         if not self.per_step:
@@ -353,7 +359,7 @@ class CoulombFriction(StepForce):
         """Pre-sliding: advance z over one step at velocity ``v``; returns the force.
         (Without ``presliding_m``: the force linear below ``linear_below_m_s``.)"""
         fc = self.values["force_n"] if level is None else level
-        d = self.values["presliding_m"]
+        d = getattr(self, "_zss", None) or self.values["presliding_m"]
         if d > 0:
             self.z = dahl_step(self.z, v, d, dt)
             f = -fc / d * self.z
@@ -379,9 +385,10 @@ class AddedMass(Effect):
 
     ``where = "payload"``: a rigid body on the payload (its first body, or the platen's
     reference point without a payload) at ``position_m`` from that body's frame;
-    ``dof:<d>``, ``actuator:``, ``class:``: mass along that coordinate only (joint or DOF
-    tendon ``armature``: oil columns, rods, the moving part of a bearing); on a rotation
-    the mass is read as kg m^2."""
+    ``dof:<d>``, ``actuator:``, ``class:``: mass along that coordinate only (the slide's
+    ``armature``; on a free platen the free joint's armature of that DOF, set in
+    :meth:`edit_model`: oil columns, rods, the moving part of a bearing); on a rotation
+    the mass is read as kg m^2 (about the platen's own axes)."""
 
     type = "added_mass"
     places = ("payload", "dof", "actuator", "class")
@@ -391,10 +398,23 @@ class AddedMass(Effect):
             "inertia_z_kg_m2": ("kg m^2", 0.0, INF, 0.0)}
     OPTIONS = {"position_m": None}
 
+    def __init__(self, entry, *, source="effect"):
+        super().__init__(entry, source=source)
+        a, b, c = sorted(self.values[f"inertia_{k}_kg_m2"] for k in "xyz")
+        if a + b < c * (1 - 1e-12):
+            raise ScenarioError(f"{source}: inertia_x/y/z_kg_m2 are not the principal moments of a body (the two "
+                                "smaller must sum to at least the largest); give all three, e.g. equal ones for a "
+                                "compact mass")
+
     def edit_spec(self, spec, desc):
         v = self.values
+        self._free = None
         if self.where != "payload":
-            _add(_elements(self, spec, desc), "armature", v["mass_kg"])
+            place = Place(self, desc, spec)
+            if place.free_dof is not None:  # one DOF of the free joint: edit_model
+                self._free = place.free_dof
+            else:
+                _add([spec.joint(j) for j in place.joints], "armature", v["mass_kg"])
             return
         parent = _payload_body(spec) or spec.body("platen")
         pos = _vector(self.options["position_m"], self, "position_m")
@@ -404,6 +424,13 @@ class AddedMass(Effect):
         b.ipos = [0, 0, 0]
         # a welded body: its inertia only adds to the parent's (zero is allowed)
         b.inertia = [v["inertia_x_kg_m2"], v["inertia_y_kg_m2"], v["inertia_z_kg_m2"]]
+
+    def edit_model(self, model):
+        # a free platen's DOF: the free joint's own armature on that DOF (a tendon's armature
+        # would only add m c_i^2 on each stroke: MuJoCo keeps the mass matrix tree-sparse)
+        if getattr(self, "_free", None) is not None:
+            j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "platen")
+            model.dof_armature[model.jnt_dofadr[j] + self._free] += self.values["mass_kg"]
 
 
 @register
