@@ -13,6 +13,7 @@ a built-in one (see docs/effects.md).
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import importlib.util
 import sys
@@ -62,7 +63,9 @@ def load_user_effect(kind: str, folder: Path, source: str = "effect") -> type[Ef
     cls = getattr(module, cls_name, None)
     if not (isinstance(cls, type) and issubclass(cls, Effect)):
         have = [n for n, v in vars(module).items() if isinstance(v, type) and issubclass(v, Effect) and v is not Effect]
-        hint = f"; its Effect classes: {', '.join(have)}" if have else "; it defines no subclass of sim.effects.Effect"
+        close = difflib.get_close_matches(cls_name, have, n=1)
+        hint = (f" (did you mean '{close[0]}'?)" if close else f"; its Effect classes: {', '.join(have)}") if have \
+            else "; it defines no subclass of sim.effects.Effect"
         raise ScenarioError(f"{source}: type = '{kind}': '{cls_name}' in {path.name} is not an Effect{hint}")
     if not cls.type:
         cls.type = kind
@@ -82,7 +85,7 @@ def build_effects(spec, effects: list[dict], desc=None) -> tuple[list, list]:
         if not isinstance(p, dict) or "type" not in p:
             raise ScenarioError(f"effect[{i}] needs a 'type' (one of {', '.join(known())}, or 'file.py:Class')")
         kind = str(p["type"])
-        src = f"{getattr(desc, 'source', 'description')}: effect[{i}] {kind}"
+        src = f"{getattr(desc, 'source', 'description')}: effect[{i}]"
         if kind not in EFFECTS and ".py:" in kind:
             load_user_effect(kind, folder, src)
         e = create(p, source=src)

@@ -22,7 +22,8 @@ import math
 import re
 
 from mjcf.description import TableDescription, parse_table
-from sim.effects.base import Parameter, create
+from sim.effects.base import EFFECTS, Parameter, create
+from sim.effects.registry import description_folder, load_user_effect
 from sim.errors import ScenarioError
 
 INF = math.inf
@@ -88,11 +89,13 @@ def table_parameters(desc: TableDescription) -> list[Parameter]:
         n = max(len(raw["supports"].get("positions_m", [])), 1)
         out = [p if not p.name.endswith(("piston_friction_n", "shoe_friction_n")) else
                Parameter(p.name, p.value, p.unit, p.lower, 0.1 * cap / n, p.where) for p in out]
+    folder = description_folder(desc)
     for i, e in enumerate(desc.effects):
-        try:
-            eff = create(e, source=f"{desc.source}: effect[{i}]")
-        except ScenarioError:  # a user's effect not loaded yet: its parameters appear once it is built
-            continue
+        src = f"{desc.source}: effect[{i}]"
+        kind = str(e.get("type", ""))
+        if kind not in EFFECTS and ".py:" in kind:
+            load_user_effect(kind, folder, src)
+        eff = create(e, source=src)
         out += [Parameter(f"effect[{i}].{p.name}", p.value, p.unit, p.lower, p.upper, p.where, p.scale)
                 for p in eff.parameters()]
     return out
