@@ -284,6 +284,27 @@ def test_per_step_friction_laws_give_their_force(ucsd_desc, cgs):
     assert torque == pytest.approx([0, 0, -fr], rel=1e-6, abs=1e-6 * fr)
 
 
+def test_one_slide_fast_path_is_the_general_law(ucsd_desc):
+    """On one slide the per-step friction and power damping run scalar code every step;
+    over a velocity history it gives the general (array) law's forces to round-off."""
+    tm = build_model(_with_effects(ucsd_desc, [
+        {"type": "coulomb_friction", "where": "dof:x", "force_n": 26.65e3, "presliding_m": 0.4e-3},
+        {"type": "power_damping", "where": "dof:x", "coefficient": 45.9e3, "exponent": 0.5}]))
+    fr, pw = tm.step_effects
+    d = _bound(tm)
+    ref = CoulombFriction({"where": "dof:x", "force_n": 26.65e3, "presliding_m": 0.4e-3})
+    dt = tm.model.opt.timestep
+    rng = np.random.default_rng(1)
+    for v in np.concatenate([rng.normal(0, 2e-3, 300), [0.0, 0.0], rng.normal(0, 0.3, 300)]):
+        d.qvel[tm.platen_dadr] = v
+        d.qfrc_applied[:] = 0.0
+        fr.apply(tm.model, d)
+        assert d.qfrc_applied[tm.platen_dadr] == pytest.approx(ref.advance(v, dt), rel=1e-12, abs=1e-9)
+        d.qfrc_applied[:] = 0.0
+        pw.apply(tm.model, d)
+        assert d.qfrc_applied[tm.platen_dadr] == pytest.approx(float(pw.force(v)), rel=1e-12, abs=1e-12)
+
+
 def test_power_damping_force(ucsd_desc, cgs):
     """C |v|^alpha against the motion at a known velocity (linear below v0), on a slide and
     on a rotated free platen's rz."""

@@ -161,7 +161,9 @@ class StepForce(Effect):
             self._act = np.array([mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, j[:-len("_stroke")])
                                   for j in p.joints], dtype=int) if p.kind in ("actuator", "class") else None
             self.n = len(ids)
+            self._d0 = int(self._d[0]) if self.n == 1 else None  # one slide: the scalar fast path
         else:
+            self._d0 = None
             j = jid("platen")
             self._pd, self._pq = int(model.jnt_dofadr[j]), int(model.jnt_qposadr[j])
             self._body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "platen")
@@ -246,8 +248,20 @@ class PowerDamping(StepForce):
         av = np.abs(v)
         return np.where(av >= v0, -c * av ** a * np.sign(v), -c * v0 ** a * (v / v0))
 
+    def bind(self, model, hydraulics=None):
+        super().bind(model, hydraulics)
+        c, a, v0 = self.values["coefficient"], self.values["exponent"], self.options["linear_below_m_s"]
+        self._k = (c, a, v0, c * v0 ** a / v0)
+
     def apply(self, model, data):
-        self.add(data, self.force(self.velocity(data)))
+        d = self._d0
+        if d is None:
+            self.add(data, self.force(self.velocity(data)))
+            return
+        c, a, v0, slope = self._k  # one slide: scalar arithmetic (this runs every physics step)
+        v = float(data.qvel[d])
+        av = abs(v)
+        data.qfrc_applied[d] -= c * av ** a * math.copysign(1.0, v) if av >= v0 else slope * v
 
 
 # ------------------------------------------------------------------------ friction
@@ -313,12 +327,12 @@ class CoulombFriction(StepForce):
     def edit_spec(self, spec, desc):
         super().edit_spec(spec, desc)
         self.per_step = self._needs_step(desc)
-        self._zss = self.values["presliding_m"]
-        if (not self.per_step and self._place.free_dof is not None and self._zss == 0
+        self._table_zss = 0.0
+        if (not self.per_step and self._place.free_dof is not None and self.values["presliding_m"] == 0
                 and desc.friction_model == "presliding"):
             # a table whose joint friction is pre-sliding: a free platen's DOF friction too
             # (its tendon has no place in the loop's pre-sliding law), with the table's travel
-            self.per_step, self._zss = True, float(desc.friction_presliding_m)
+            self.per_step, self._table_zss = True, float(desc.friction_presliding_m)
         self._constant_load = not self.per_step and self.options["grows_with"] == "load" \
             and self.values["coefficient"] > 0
         if not self.per_step:
@@ -327,8 +341,14 @@ class CoulombFriction(StepForce):
                 level += self.values["coefficient"] * _platen_weight(spec, desc)
             _add(_elements(self, spec, desc), "frictionloss", level)
 
+    def with_values(self, values):
+        new = super().with_values(values)
+        new.per_step = new._needs_step(getattr(self, "_desc", None)) or bool(getattr(self, "_table_zss", 0.0))
+        return new
+
     def bind(self, model, hydraulics=None):
         super().bind(model, hydraulics)
+        self._zss = self.values["presliding_m"] or getattr(self, "_table_zss", 0.0)
         pb = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "platen")
         self._weight = float(model.body_subtreemass[pb]) * float(-model.opt.gravity[2])
         self._pzd = None
@@ -359,7 +379,7 @@ class CoulombFriction(StepForce):
         """Pre-sliding: advance z over one step at velocity ``v``; returns the force.
         (Without ``presliding_m``: the force linear below ``linear_below_m_s``.)"""
         fc = self.values["force_n"] if level is None else level
-        d = getattr(self, "_zss", None) or self.values["presliding_m"]
+        d = self.values["presliding_m"] or getattr(self, "_table_zss", 0.0)
         if d > 0:
             self.z = dahl_step(self.z, v, d, dt)
             f = -fc / d * self.z
@@ -368,6 +388,20 @@ class CoulombFriction(StepForce):
         return float(np.ravel(f)[0]) if np.ndim(v) == 0 else f
 
     def apply(self, model, data):
+        d = self._d0
+        if d is not None and self.options["grows_with"] == "none":  # one slide, constant level: scalars
+            v = float(data.qvel[d])
+            fc, zss = self.values["force_n"], self._zss
+            if zss > 0:
+                z = float(self.z[0])
+                if v != 0.0:
+                    t = math.copysign(zss, v)
+                    z = t + (z - t) * math.exp(-abs(v) * self._dt / zss)
+                    self.z[0] = z
+                data.qfrc_applied[d] -= fc / zss * z
+            else:
+                data.qfrc_applied[d] -= fc * max(-1.0, min(1.0, v / self.options["linear_below_m_s"]))
+            return
         self.add(data, np.atleast_1d(self.advance(self.velocity(data), self._dt, self.level(data))))
 
 
