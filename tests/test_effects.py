@@ -391,6 +391,7 @@ def test_user_effect_is_loaded_and_applied(tmp_path):
     tm = build_model(desc)
     (e,) = [e for e in tm.step_effects if type(e).__name__ == "Pickup"]
     assert EFFECTS["my_effects.py:Pickup"] is type(e)
+    assert e.entry() == {"type": "my_effects.py:Pickup", "where": "dof:x", "force_n": 1234.0}  # writes back
     d = _bound(tm)
     d.qfrc_applied[:] = 0.0
     e.apply(tm.model, d)

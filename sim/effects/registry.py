@@ -7,8 +7,9 @@ and a user's own effects loaded from a Python file named in the description::
     where = "dof:x"
     gain = 2.0
 
-The class is registered under that type string, so it is created, checked and run like
-a built-in one (see docs/effects.md).
+The class is registered (as a subclass whose ``type`` is that string) under that type
+string, so it is created, checked, written back and run like a built-in one (see
+docs/effects.md).
 """
 
 from __future__ import annotations
@@ -67,10 +68,11 @@ def load_user_effect(kind: str, folder: Path, source: str = "effect") -> type[Ef
         hint = (f" (did you mean '{close[0]}'?)" if close else f"; its Effect classes: {', '.join(have)}") if have \
             else "; it defines no subclass of sim.effects.Effect"
         raise ScenarioError(f"{source}: type = '{kind}': '{cls_name}' in {path.name} is not an Effect{hint}")
-    if not cls.type:
-        cls.type = kind
-    EFFECTS[kind] = cls
-    return cls
+    # registered as a subclass whose type is the entry's string, so that Effect.entry()
+    # writes back a type that loads again (the user's class itself is left as it is)
+    reg = type(cls.__name__, (cls,), {"type": kind, "__module__": cls.__module__, "__doc__": cls.__doc__})
+    EFFECTS[kind] = reg
+    return reg
 
 
 def build_effects(spec, effects: list[dict], desc=None) -> tuple[list, list]:
