@@ -246,6 +246,17 @@ def test_coulomb_friction_sticks_and_slides(ucsd_desc):
         assert v == pytest.approx(want * t, rel=0.01, abs=1e-4)
 
 
+def test_friction_growing_with_a_constant_load_stays_implicit(ucsd_desc):
+    """On a platen on bearings without z the weight it carries is constant: F_c = F0 + mu m g
+    is the slide's frictionloss (no per-step work)."""
+    f0, mu = 4.1e3, 0.0039
+    tm = build_model(_with_effects(ucsd_desc, [{"type": "coulomb_friction", "where": "dof:x", "force_n": f0,
+                                                "grows_with": "load", "coefficient": mu}]))
+    assert tm.step_effects == []
+    w = ucsd_desc.platen.mass_kg * ucsd_desc.gravity_m_s2
+    assert float(tm.model.joint("platen_x").frictionloss[0]) == pytest.approx(f0 + mu * w, rel=1e-12)
+
+
 def test_per_step_friction_laws_give_their_force(ucsd_desc, cgs):
     """Forces at a known state: grows with displacement (F0 + c |x|), with the actuator's
     load (F0 + mu |F|), and a free platen's rz friction on a pre-sliding table reaches F_c

@@ -107,7 +107,11 @@ def dof_tendon(spec, desc, i: int):
     t = spec.tendon(name)
     if t is not None:
         return t
-    c = np.linalg.pinv(dof_jacobian(desc))[i]
+    J = dof_jacobian(desc)
+    if np.linalg.matrix_rank(J, tol=1e-9 * np.abs(J).max()) < 6:
+        raise ScenarioError(f"{desc.source}: the actuators do not fix all six DOF of the free platen, so an effect "
+                            f"at dof:{DOFS6[i]} has no linkage to act through; put it at 'actuator:<name>'")
+    c = np.linalg.pinv(J)[i]
     t = spec.add_tendon(name=name)
     for a, coef in zip(desc.actuators, c):
         if abs(coef) > 1e-12:
