@@ -499,3 +499,19 @@ def test_the_analog_loop_runs_the_effect_lifecycle(tmp_path):
     sim.steps(np.zeros(40), np.zeros(40))
     assert calls["reset"] == before["reset"] + 1 and calls["apply"] == before["apply"] + 40
     assert sim.d.qfrc_applied[sim.tm.platen_dadr] == 10.0
+
+
+def test_effects_command_lists_the_library_and_a_tables_parameters(capsys, ucsd_desc):
+    import json
+
+    from sim.cli import main
+
+    assert main(["effects"]) == 0
+    out = capsys.readouterr().out
+    for kind in ("spring", "viscous_damping", "power_damping", "coulomb_friction", "added_mass", "cg_offset",
+                 "payload_mode", "foundation_mode", "platen_spring"):
+        assert f"\n{kind}  [" in "\n" + out, kind
+    assert main(["effects", str(mjcf.description.TABLES_DIR / "ucsd.toml"), "--json"]) == 0
+    rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)}
+    assert rows["effect[0].stiffness_n_m"]["value"] == 1.263e6 and rows["effect[0].stiffness_n_m"]["where"] == "dof:x"
+    assert len(rows) == len(table_parameters(ucsd_desc))

@@ -13,7 +13,7 @@ effects (``mjcf`` itself knows none).
 from __future__ import annotations
 
 from sim.effects.base import EFFECTS, Effect, Parameter, create, register
-from sim.effects.registry import build_effects, dahl_step, known, load_user_effect
+from sim.effects.registry import build_effects, catalogue, dahl_step, known, load_user_effect
 from sim.effects.table import table_parameters, with_parameter_values
 
 
@@ -28,5 +28,5 @@ def build_model(desc, payload=None, options=None):
     return tm
 
 
-__all__ = ["EFFECTS", "Effect", "Parameter", "build_effects", "build_model", "create", "dahl_step", "known",
+__all__ = ["EFFECTS", "Effect", "Parameter", "build_effects", "build_model", "catalogue", "create", "dahl_step", "known",
            "load_user_effect", "register", "table_parameters", "with_parameter_values"]

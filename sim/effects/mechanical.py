@@ -293,6 +293,7 @@ class CoulombFriction(StepForce):
 
     type = "coulomb_friction"
     places = ("dof", "actuator", "class")
+    per_step = False  # per instance: only a level that changes, pre-sliding, or a free platen's DOF on a pre-sliding table
     SPEC = {"force_n": ("N", 0.0, INF, None),
             "coefficient": ("1 (load) or N/m (displacement)", 0.0, INF, 0.0),
             "presliding_m": ("m", 0.0, INF, 0.0)}

@@ -75,6 +75,20 @@ def load_user_effect(kind: str, folder: Path, source: str = "effect") -> type[Ef
     return reg
 
 
+def catalogue() -> list[dict]:
+    """Every registered effect type: its places, whether it runs every step, its
+    parameters (unit, bounds, default: None when required), its settings and its doc line."""
+    out = []
+    for kind in known():
+        cls = EFFECTS[kind]
+        doc = (cls.__doc__ or "").strip().split("\n\n")[0]
+        out.append({"type": kind, "places": list(cls.places), "per_step": bool(cls.per_step),
+                    "parameters": {k: {"unit": u, "lower": lo, "upper": hi, "default": d}
+                                   for k, (u, lo, hi, d) in cls.SPEC.items()},
+                    "settings": dict(cls.OPTIONS), "doc": " ".join(doc.split())})
+    return out
+
+
 def build_effects(spec, effects: list[dict], desc=None) -> tuple[list, list]:
     """Build a description's ``[[effect]]`` entries into ``spec``.
 
@@ -98,4 +112,4 @@ def build_effects(spec, effects: list[dict], desc=None) -> tuple[list, list]:
     return steps, objs
 
 
-__all__ = ["build_effects", "dahl_step", "description_folder", "known", "load_user_effect"]
+__all__ = ["build_effects", "catalogue", "dahl_step", "description_folder", "known", "load_user_effect"]
