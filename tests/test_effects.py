@@ -515,3 +515,21 @@ def test_effects_command_lists_the_library_and_a_tables_parameters(capsys, ucsd_
     rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)}
     assert rows["effect[0].stiffness_n_m"]["value"] == 1.263e6 and rows["effect[0].stiffness_n_m"]["where"] == "dof:x"
     assert len(rows) == len(table_parameters(ucsd_desc))
+
+
+def test_the_worked_example_of_docs_effects_md_runs(tmp_path):
+    """The user effect of docs/effects.md, as printed there, loads and gives its force."""
+    import re
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "effects.md").read_text()
+    (tmp_path / "my_effects.py").write_text(re.findall(r"```python\n(.*?)```", doc, re.S)[0])
+    entry = re.findall(r"```toml\n(.*?)```", doc, re.S)[-1]
+    desc = mjcf.load_table(_user_table(tmp_path, entry.split("[[effect]]\n", 1)[1]))
+    tm = build_model(desc)
+    (e,) = [e for e in tm.step_effects if type(e).__name__ == "CableDrag"]
+    d = _bound(tm)
+    tm.set_platen_pose(d, [0.1, 0, 0, 0, 0, 0])
+    d.qvel[tm.platen_dadr] = 1.0
+    d.qfrc_applied[:] = 0.0
+    e.apply(tm.model, d)
+    assert d.qfrc_applied[tm.platen_dadr] == pytest.approx(-(800.0 + 2000.0 * 0.1) * math.tanh(1.0 / 0.01))
