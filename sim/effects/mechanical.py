@@ -355,7 +355,8 @@ class CoulombFriction(StepForce):
         super().bind(model, hydraulics)
         self._zss = self.values["presliding_m"] or getattr(self, "_table_zss", 0.0)
         pb = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "platen")
-        self._weight = float(model.body_subtreemass[pb]) * float(-model.opt.gravity[2])
+        self._g = float(-model.opt.gravity[2])
+        self._weight = float(model.body_subtreemass[pb]) * self._g
         self._pzd = None
         if not self._place.joints or self._place.kind == "dof":
             j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "platen")
@@ -376,7 +377,7 @@ class CoulombFriction(StepForce):
                 load = np.abs(data.ctrl[self._act])
             else:  # the weight the bearings carry, with the platen's vertical acceleration
                 az = float(data.qacc[self._pzd]) if self._pzd is not None else 0.0
-                load = self._weight * (1.0 + az / 9.80665)
+                load = self._weight * (1.0 + az / self._g) if self._g else 0.0
             return v["force_n"] + v["coefficient"] * load
         return v["force_n"]
 
