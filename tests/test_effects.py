@@ -533,3 +533,29 @@ def test_the_worked_example_of_docs_effects_md_runs(tmp_path):
     d.qfrc_applied[:] = 0.0
     e.apply(tm.model, d)
     assert d.qfrc_applied[tm.platen_dadr] == pytest.approx(-(800.0 + 2000.0 * 0.1) * math.tanh(1.0 / 0.01))
+
+
+def test_free_platen_dof_friction_is_an_implicit_tendon_constraint(cgs):
+    """CGS with Coulomb joint friction (no pre-sliding) and no other friction: a
+    coulomb_friction at dof:x is the DOF tendon's frictionloss. Pushed along x for 0.25 s:
+    below F_c the platen stays (creep < 1 um, the loops' compliance); at 2 F_c it moves
+    as the frictionless platen under a push of F_c (x-pitch coupling included)."""
+    raw = copy.deepcopy(cgs.desc.raw)
+    raw["friction"]["model"] = "coulomb"
+    for c in raw["actuator_class"].values():
+        c["seal_friction_n"] = 0.0
+    raw["supports"]["piston_friction_n"] = raw["supports"]["shoe_friction_n"] = 0.0
+    bare = build_model(parse_table(raw, cgs.desc.source))
+    raw["effect"] = [{"type": "coulomb_friction", "where": "dof:x", "force_n": 30e3}]
+    tm = build_model(parse_table(raw, cgs.desc.source))
+    assert tm.step_effects == [] and float(tm.model.tendon_frictionloss[tm.model.tendon("dof_x").id]) == 30e3
+
+    def push(t, f):
+        d = t.new_data()
+        for _ in range(512):
+            d.qfrc_applied[t.platen_dadr] = f
+            mujoco.mj_step(t.model, d)
+        return d.qpos[t.platen_qadr], d.qvel[t.platen_dadr]
+
+    assert abs(push(tm, 15e3)[0]) < 1e-6
+    assert push(tm, 60e3)[1] == pytest.approx(push(bare, 30e3)[1], rel=0.01)
