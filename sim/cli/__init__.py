@@ -131,6 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
     view_cli.add_parsers(sub)  # rerun recordings of run files
     characterize_cli.add_parsers(sub)  # the CGS identification programme (and rice/ucsd dispatch)
     identify_cli.add_parsers(sub)  # uni-axial identification, Rice/UCSD programmes
+    from sim.cli import effects as effects_cli
+
+    effects_cli.add_parsers(sub)  # the effect library and a table's parameters
     return p
 
 
