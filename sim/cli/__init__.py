@@ -123,11 +123,13 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_calibrate)
 
     from sim.cli import characterize as characterize_cli, identify as identify_cli, run as run_cli, view as view_cli
+    from sim.cli import feasibility as feasibility_cli
 
     run_cli.add_parsers(sub)  # run, replay, fit, geometry
     view_cli.add_parsers(sub)  # rerun recordings of run files
     characterize_cli.add_parsers(sub)  # the CGS identification programme (and rice/ucsd dispatch)
     identify_cli.add_parsers(sub)  # uni-axial identification, Rice/UCSD programmes
+    feasibility_cli.add_parsers(sub)  # will it work on this table, and the largest scale
     return p
 
 
