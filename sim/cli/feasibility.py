@@ -40,12 +40,16 @@ def verdict_lines(fe: dict, top: int = 6) -> list[str]:
     if lim is not None:
         head += f"; limiting: {lim['name']} at {100 * lim['utilisation']:.0f} %"
     lines.append(head)
-    ranked = sorted((c for c in fe["checks"] if c["utilisation"] == c["utilisation"]),
+    from sim.assess.feasibility import is_tracking
+
+    ranked = sorted((c for c in fe["checks"] if c["utilisation"] == c["utilisation"] and not is_tracking(c)),
                     key=lambda c: -c["utilisation"])[:top]
+    ranked += [c for c in fe["checks"] if is_tracking(c)]
     for c in ranked:
         margin = 100 * (1 - c["utilisation"])
         lines.append(f"  {c['name']:28s} {_fmt(c['demand'], c['unit']):>12s} of {_fmt(c['capacity'], c['unit']):>12s}"
-                     f"  {100 * c['utilisation']:6.0f} %  margin {margin:+.0f} %" + ("" if c["pass"] else "  FAIL"))
+                     f"  {100 * c['utilisation']:6.0f} %  margin {margin:+.0f} %"
+                     + ("" if c["pass"] else "  (tracking)" if is_tracking(c) else "  FAIL"))
     for w in fe.get("warnings", []):
         lines.append(f"warning: {w}")
     return lines
