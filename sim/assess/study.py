@@ -362,6 +362,9 @@ def max_scale(case: Case, *, rel_tol: float = 0.02, max_runs: int = 6, progress=
         return result
     above = cache.get(hi) if hi is not None else None
     at = cache[lo]
+    if result.get("_outcome") is None and at.get("_outcome") is not None:
+        result["_outcome"] = at["_outcome"]  # the report's figures: the run at the largest scale
+        result["figures_scale"] = float(lo)
     result.update(max_scale=float(lo), max_scale_upper=None if hi is None else float(hi),
                   max_scale_limiting=(above or at)["limiting"] if above is None else _first_failed(above),
                   at_max=_strip(at), limiting_above=None if above is None else _first_failed(above),

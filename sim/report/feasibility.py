@@ -149,12 +149,14 @@ def write_report(out: Path, res: dict, outcome=None) -> Path:
     if "max_scale" in res:
         lines.append(f"Largest scale: {res['max_scale']}" + (f" (limited by `{res['limiting_above']}`)"
                                                             if res.get("limiting_above") else ""))
+    if res.get("figures_scale") is not None:
+        lines.append(f"The figures show the run at the largest scale, {res['figures_scale']:.3f}.")
     if res.get("note"):
         lines.append(res["note"])
     lines += ["", "| check | demand | capacity | unit | utilisation | pass |", "|---|---|---|---|---|---|"]
     for c in sorted(res["checks"], key=lambda c: -c["utilisation"] if np.isfinite(c["utilisation"]) else -1e9):
         lines.append(f"| {c['name']} | {c['demand']:.4g} | {c['capacity']:.4g} | {c['unit']} | "
-                     f"{100 * c['utilisation']:.1f} % | {'yes' if c['pass'] else 'NO'} |")
+                     f"{100 * c['utilisation']:.1f} % | {'yes' if c['pass'] else 'no (tracking)' if c['name'].startswith(('pga_error_', 'spectrum_')) else 'NO'} |")
     for w in res.get("warnings", []):
         lines.append(f"\nWarning: {w}")
     inter = res.get("interaction")
