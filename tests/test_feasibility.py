@@ -187,3 +187,25 @@ def test_ucsd_t8_is_feasible(tmp_path, capsys):
     assert 0.3 < c["supply_pressure_drop"]["utilisation"] < 1.0
     stroke = next(v for k, v in c.items() if k.startswith("actuator_stroke_"))
     assert 0.9 < stroke["utilisation"] <= 1.0  # +/-0.75 m of the 0.76 m usable half-stroke
+
+
+def test_shear_frame_response_balances_the_floor_inertia():
+    """Base shear from the storey springs (K q) equals the floors' inertia forces
+    sum m_i (a_platen + q_i'') up to the 2 % damping force."""
+    frame = specimen_from_numbers(mass_kg=20000, cg_height_m=3.0, modes_hz=[2.0, 5.0, 9.0])
+    v = study.assess(study.Case(table="cgs", motion="elcentro1940", payload=frame, window_s=2.0))
+    out = v["_outcome"]
+    res = out.result
+    from sim.assess.feasibility import specimen_response
+
+    resp = specimen_response(res, out.tm)
+    q = res.extras["payload_qpos"]
+    dt = float(res.t[1] - res.t[0])
+    qdd = np.gradient(np.gradient(q, dt, axis=0), dt, axis=0)
+    inertia = (frame.mass_kg * (res.channels["table_acceleration"][:, :1] + qdd)).sum(axis=1)
+    k = slice(50, -50)
+    peak = np.max(np.abs(inertia[k]))
+    assert np.max(np.abs(np.abs(inertia[k]) - resp["base_shear_n"][k])) < 0.1 * peak
+    h = frame.storey_height_m * np.arange(1, 4)
+    assert v["figures"]["specimen"]["peak_overturning_n_m"] <= np.max(resp["base_shear_n"]) * h[-1]
+    assert v["figures"]["specimen"]["peak_storey_drift_m"] > 0

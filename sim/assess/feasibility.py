@@ -193,7 +193,7 @@ def specimen_response(res, tm) -> dict:
         h = p.storey_height_m * np.arange(1, len(p.mass_kg) + 1)
         drift = np.diff(np.concatenate([np.zeros((len(q), 1)), q], axis=1), axis=1)
         return {"kind": "shear_frame", "base_shear_n": np.abs(f.sum(axis=1)), "overturning_n_m": np.abs(f @ h),
-                "deformation": np.max(np.abs(drift), axis=1), "deformation_name": "peak_storey_drift_m"}
+                "deformation": np.max(np.abs(drift), axis=1), "deformation_name": "storey_drift_m"}
     if isinstance(p, CantileverPayload):
         n = p.n_segments
         seg = p.height_m / n
@@ -263,7 +263,7 @@ def run_checks(res, tm, hp, ref) -> tuple[list[dict], dict]:
         if n * dt > 2.0 / SPECTRUM_BAND_HZ[0]:
             j = DOFS6.index(dof)
             m = min(n, len(ref.a))
-            f, r = spectrum_ratio(ch["table_acceleration"][:m, j], ref.a[:m, j], dt)
+            _, r = spectrum_ratio(ch["table_acceleration"][:m, j], ref.a[:m, j], dt)
             out = float(np.mean(np.abs(r - 1.0) > TOLERANCES["spectrum"]))
             e["spectrum_band_fraction_outside"] = out
             checks.append(check(f"spectrum_{dof}", out, TOLERANCES["spectrum_band_fraction"], "-"))

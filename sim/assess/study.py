@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcf.description import DOFS6
-from sim.errors import MotionError, UserError
+from sim.errors import UserError
 
 #: Built-in records: name -> what it is. Aliases map to the same record.
 BUILTIN_RECORDS = {"elcentro1940": "1940 Imperial Valley, El Centro Array #9 (PEER RSN6), 3 components"}
@@ -202,7 +202,7 @@ def prepare(case: Case) -> Prepared:
         payload = mjcf.load_payload(sc.payload)
     scen = _scenario_for(case, desc)
     if case.motion is not None:
-        motions, label = record_motions(case.motion, rate_hz=scen.sample_rate_hz)
+        motions, _ = record_motions(case.motion, rate_hz=scen.sample_rate_hz)
         where = f"--motion {case.motion}"
     elif sc is not None:
         motions, where = build_motions(sc), str(sc.path or sc.name)
