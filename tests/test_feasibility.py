@@ -209,3 +209,12 @@ def test_shear_frame_response_balances_the_floor_inertia():
     h = frame.storey_height_m * np.arange(1, 4)
     assert v["figures"]["specimen"]["peak_overturning_n_m"] <= np.max(resp["base_shear_n"]) * h[-1]
     assert v["figures"]["specimen"]["peak_storey_drift_m"] > 0
+
+
+def test_a_zero_scale_scenario_is_refused(tmp_path, capsys):
+    p = tmp_path / "zero.toml"
+    p.write_text('[scenario]\nname = "zero"\ntable = "cgs"\n[motion]\ntype = "el_centro_1940"\namplitude_factor = 0.0\n')
+    for cmd in (["run", str(p)], ["feasibility", str(p)]):
+        assert main([*cmd, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert "amplitude_factor' must be a positive scale" in err and err.count("\n") == 1
