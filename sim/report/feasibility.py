@@ -41,8 +41,9 @@ def utilisation_chart(res: dict, path: Path) -> str:
 
 
 def envelope_chart(res: dict, outcome, path: Path) -> str | None:
-    """Per translational DOF: the rated stroke, velocity and acceleration as the box of a
-    tripartite-style plot (|d| against |v| and |v| against |a|) with the demand."""
+    """Per translational DOF, the rated displacement-velocity-acceleration box with the
+    demand of the simulated reference drawn in it: |v| against |d| (top), |a| against
+    |v| (bottom); the peaks of the whole motion are in the checks."""
     if outcome is None:
         return None
     plt = _plt()
@@ -50,20 +51,30 @@ def envelope_chart(res: dict, outcome, path: Path) -> str | None:
     ref = run.reference
     desc = outcome.tm.desc
     lim = desc.limits
-    dofs = [d for d in ("x", "y", "z") if d in desc.dofs]
-    fig, axes = plt.subplots(1, len(dofs), figsize=(4 * len(dofs), 3.5), squeeze=False)
+    dofs = [d for d in ("x", "y", "z") if d in desc.dofs and np.max(np.abs(ref[:, DOFS6.index(d)])) > 0]
+    if not dofs:
+        return None
+    fig, axes = plt.subplots(2, len(dofs), figsize=(3.6 * len(dofs), 6), squeeze=False)
     dt = run.dt
-    for ax, d in zip(axes[0], dofs):
+    for j, d in enumerate(dofs):
         i = DOFS6.index(d)
         dd = ref[:, i]
         vv = np.gradient(dd, dt)
-        ax.plot(np.abs(vv), np.abs(np.gradient(vv, dt)) / 9.81, ".", ms=1, alpha=0.3, label="demand")
-        ax.axvline(lim.velocity_m_s[i], color="r", lw=1, label="rated velocity")
-        ax.axhline(lim.acceleration_m_s2[i] / 9.81, color="m", lw=1, label="rated acceleration")
-        ax.set_xlabel(f"|v_{d}|, m/s")
-        ax.set_ylabel(f"|a_{d}|, g")
-        ax.set_title(f"{d}: peak |d| {1e3 * np.max(np.abs(dd)):.0f} mm of {1e3 * lim.stroke_m[i]:.0f} mm")
-    axes[0][0].legend(fontsize=7)
+        aa = np.gradient(vv, dt)
+        top, bot = axes[0][j], axes[1][j]
+        top.plot(1e3 * np.abs(dd), np.abs(vv), ".", ms=1, alpha=0.3)
+        top.add_patch(plt.Rectangle((0, 0), 1e3 * lim.stroke_m[i], lim.velocity_m_s[i], fill=False, ec="r"))
+        top.set_xlabel(f"|d_{d}|, mm")
+        top.set_ylabel(f"|v_{d}|, m/s")
+        top.set_title(f"{d}: rated box in red")
+        bot.plot(np.abs(vv), np.abs(aa) / 9.81, ".", ms=1, alpha=0.3)
+        bot.add_patch(plt.Rectangle((0, 0), lim.velocity_m_s[i], lim.acceleration_m_s2[i] / 9.81, fill=False, ec="r"))
+        bot.set_xlabel(f"|v_{d}|, m/s")
+        bot.set_ylabel(f"|a_{d}|, g")
+        for ax in (top, bot):
+            ax.autoscale()
+            ax.set_xlim(left=0)
+            ax.set_ylim(bottom=0)
     fig.tight_layout()
     return _save(fig, path)
 
