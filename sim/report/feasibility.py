@@ -97,7 +97,7 @@ def histories_chart(res: dict, outcome, path: Path) -> str | None:
     ax[0].plot(r.t, r.channels["actuator_force"][:, a] / 1e3, label=f"{name} force")
     ax[0].plot(r.t, cap[:, a] / 1e3 * np.sign(r.channels["actuator_force"][:, a]), "r--", lw=1, label="capacity A p_s(t)")
     ax[0].set_ylabel("kN")
-    ax[0].legend(fontsize=7)
+    ax[0].legend(fontsize=7, loc="upper right")
     ax[1].plot(r.t, 1e3 * r.channels["actuator_displacement"])
     ax[1].axhline(1e3 * (hp.half_stroke_m[a] - hp.cushion_length_m[a]), color="r", lw=1)
     ax[1].axhline(-1e3 * (hp.half_stroke_m[a] - hp.cushion_length_m[a]), color="r", lw=1)
@@ -109,7 +109,7 @@ def histories_chart(res: dict, outcome, path: Path) -> str | None:
     ax[3].axhline(1e3 * hp.pump_flow_m3_s, color="r", lw=1, label="pumps")
     ax[3].set_ylabel("l/s")
     ax[3].set_xlabel("t, s")
-    ax[3].legend(fontsize=7)
+    ax[3].legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     return _save(fig, path)
 
@@ -137,7 +137,7 @@ def spectrum_chart(res: dict, outcome, path: Path) -> str | None:
         ax.loglog(f, response_spectrum(ach, dt, freqs=f, damping=0.05) / 9.81, label=f"{d} achieved")
     ax.set_xlabel("frequency, Hz")
     ax.set_ylabel("Sa (5 %), g")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     return _save(fig, path)
 
