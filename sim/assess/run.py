@@ -95,6 +95,7 @@ class ScenarioPlan:
     reference: object
     iteration: dict
     warnings: list
+    envelope_reference: object = None  #: the whole demanded motion when ``reference`` is a window of it
 
     def run(self, *, progress=None) -> RunOutcome:
         """Run the plan; ``progress(text)`` is called once per stage (None: silent)."""
@@ -149,13 +150,19 @@ class ScenarioPlan:
             "wall_s_all_runs": float(wall_total),
             "warnings": self.warnings,
         }
-        summary.update(diagnostics(res, self.tm, sim.hp))
+        summary.update(diagnostics(res, self.tm, sim.hp, ref, payload=self.payload,
+                                   envelope_reference=self.envelope_reference, warnings=self.warnings))
         return RunOutcome(run=run, result=res, summary=summary, tm=self.tm, warnings=self.warnings)
 
 
-def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None) -> ScenarioPlan:
+def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
+                  payload=..., motions: dict | None = None) -> ScenarioPlan:
     """Build everything a run of ``scenario`` (a :class:`~sim.scenario.files.Scenario` or
-    its name/path) needs; raises :class:`~sim.errors.UserError` for bad inputs."""
+    its name/path) needs; raises :class:`~sim.errors.UserError` for bad inputs.
+
+    ``payload``: a payload description (``mjcf.description`` object, or None for the bare
+    table) instead of the scenario's; ``motions``: {dof: Motion} instead of the
+    scenario's ``[motion]`` (both used by ``shaketable feasibility``)."""
     import mjcf
     from sim.control.tvc import ControllerGains
     from sim.effects import build_model
@@ -167,7 +174,8 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
     if duration_s is not None and not duration_s > 0:
         raise ScenarioError(f"--duration must be positive (got {duration_s})")
     desc = mjcf.load_table(sc.table)
-    payload = mjcf.load_payload(sc.payload) if sc.payload else None
+    if payload is ...:
+        payload = mjcf.load_payload(sc.payload) if sc.payload else None
     it = dict(sc.iteration)
     if iterations is not None:
         if iterations < 0 or iterations > 10:
@@ -184,7 +192,12 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
     if abs(gains.rate_hz - sc.sample_rate_hz) > 1e-9:
         raise ScenarioError(f"output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
                             f"({gains.rate_hz:g}): the recorder samples at the controller ticks")
-    motions = build_motions(sc)
+    if motions is None:
+        motions = build_motions(sc)
+    for dof, mo in motions.items():
+        if dof not in desc.dofs and np.any(mo.d != 0):
+            raise ScenarioError(f"{sc.path or sc.name}: a motion in {dof} but table '{desc.name}' moves only "
+                                f"{', '.join(desc.dofs)}; remove [motion.{dof}] or use a table with {dof}")
     ref = build_reference(sc, motions, duration_s)
     warns = limit_warnings(desc, motions)
     tm = rice.tm if rice else build_model(desc, payload)

@@ -123,6 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_calibrate)
 
     from sim.cli import characterize as characterize_cli, identify as identify_cli, run as run_cli, view as view_cli
+    from sim.cli import feasibility as feasibility_cli
 
     run_cli.add_parsers(sub)  # run, replay, fit
     from sim.cli import geometry as geometry_cli
@@ -134,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
     from sim.cli import effects as effects_cli
 
     effects_cli.add_parsers(sub)  # the effect library and a table's parameters
+    feasibility_cli.add_parsers(sub)  # will it work on this table, and the largest scale
     return p
 
 

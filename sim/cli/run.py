@@ -71,7 +71,10 @@ def _print_summary(s: dict) -> None:
               f"{e['pga_ratio']:9.3f} {sr:>28s}")
     fe = s.get("feasibility")
     if fe is not None:
-        print("  feasible on this table: " + ("yes" if fe["feasible"] else "NO (" + ", ".join(fe["failed"]) + ")"))
+        from sim.cli.feasibility import verdict_lines
+
+        for line in verdict_lines(fe):
+            print("  " + line)
     ff = max(s["peak_force_fraction_of_capacity"].values())
     sf = max(s["peak_stroke_fraction"].values())
     print(f"  peak force {100 * ff:.0f} % of capacity, peak stroke {100 * sf:.0f} % of half-stroke, "

@@ -150,6 +150,13 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     return s
 
 
+def _check_factor(m: dict, where: str, src: str):
+    f = m.get("amplitude_factor", 1.0)
+    if isinstance(f, bool) or not isinstance(f, (int, float)) or not f > 0:
+        raise ScenarioError(f"{src}: '{where}.amplitude_factor' must be a positive scale (got {f!r}); "
+                            "1.0 is the record as recorded")
+
+
 def _check_motion(s: Scenario):
     src = str(s.path)
     mo = s.motion
@@ -158,6 +165,7 @@ def _check_motion(s: Scenario):
             raise ScenarioError(f"{src}: [motion] type '{mo['type']}' is not a multi-DOF motion; "
                                 "use type = \"el_centro_1940\" or one [motion.<dof>] table per DOF")
         _unknown(mo, _EQ_KEYS, "motion", src)
+        _check_factor(mo, "motion", src)
         return
     for dof, m in mo.items():
         if dof not in DOFS:
@@ -167,6 +175,8 @@ def _check_motion(s: Scenario):
         if m["type"] not in _MOTION_KEYS:
             raise ScenarioError(f"{src}: [motion.{dof}] type '{m['type']}' is unknown; types: {', '.join(_MOTION_KEYS)}")
         _unknown(m, _MOTION_KEYS[m["type"]], f"motion.{dof}", src)
+        if m["type"] == "at2":
+            _check_factor(m, f"motion.{dof}", src)
 
 
 def _shift(mo: M.Motion, delay_s: float, rate: float) -> M.Motion:
