@@ -98,17 +98,14 @@ def cmd_replay(args) -> int:
 
 
 def cmd_fit(args) -> int:
-    import mjcf
     from sim.calibrate import fit as F
-    from sim.runs.runfile import read_run
+    from sim.runs.runfile import payload_of, read_run, table_of
 
     run = read_run(args.run, require=("valve_command",))
-    table = args.table or run.meta["table"]
-    desc = mjcf.load_table(table)
+    desc = table_of(run, args.table)  # --table, else the description the run carries, else the stock file
     if list(run.actuators) != list(desc.actuator_names):
         raise RunFileError(f"{args.run}: actuators {run.actuators} do not match table '{desc.name}'; give --table")
-    pay = args.payload if args.payload is not None else run.meta.get("payload")
-    payload = mjcf.load_payload(pay) if pay else None
+    payload = payload_of(run, args.payload)
     cands = F.CANDIDATES
     if args.effects:
         names = [x.strip() for x in args.effects.split(",") if x.strip()]
@@ -161,8 +158,8 @@ def add_parsers(sub) -> None:
 
     f = sub.add_parser("fit", help="replay a measured run, find the residual and add the effect the model lacks")
     f.add_argument("run", help="a measured .run.npz with valve_command")
-    f.add_argument("--table", help="table (default: the run's meta.table)")
-    f.add_argument("--payload", help="payload (default: the run's meta.payload)")
+    f.add_argument("--table", help="table (default: the description the run carries, else its meta.table)")
+    f.add_argument("--payload", help="payload (default: the description the run carries; 'none' for a bare table)")
     f.add_argument("--effects", help="comma-separated candidate effects (default: all)")
     f.add_argument("--rounds", type=int, default=2, help="effects to add at most (default 2)")
     f.add_argument("--out", default="out", help="output folder")
@@ -181,8 +178,8 @@ def add_parsers(sub) -> None:
 
     p = sub.add_parser("replay", help="replay a run file's valve commands open loop through the model")
     p.add_argument("run", help="a .run.npz file with valve_command")
-    p.add_argument("--table", help="table (default: the run's meta.table)")
-    p.add_argument("--payload", help="payload (default: the run's meta.payload)")
+    p.add_argument("--table", help="table (default: the description the run carries, else its meta.table)")
+    p.add_argument("--payload", help="payload (default: the description the run carries; 'none' for a bare table)")
     p.add_argument("--out", default="out", help="output folder")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_replay)
