@@ -64,3 +64,45 @@ def test_tampered_description_is_a_user_error(modified_run, tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and "table_sha256" in err and "Traceback" not in err
     assert not (tmp_path / "o" / "bad.replay.run.npz").exists()
+
+
+# ------------------------------------------------------------------ one process-pool helper
+@pytest.mark.parametrize("workers", [1, 2])
+def test_map_jobs_keeps_the_jobs_order(workers):
+    import functools
+
+    from sim.parallel import map_jobs
+
+    seen = []
+    jobs = [7, 1, 5, 3, 0]
+    out = map_jobs(functools.partial(pow, 3), jobs, workers=workers, progress=lambda d, n: seen.append((d, n)))
+    assert out == [3 ** j for j in jobs]
+    assert seen == [(i, len(jobs)) for i in range(1, len(jobs) + 1)]
+    assert map_jobs(abs, [], workers=workers) == []
+
+
+def test_one_pool_helper():
+    """No module starts its own process pool: they all go through sim.parallel.map_jobs."""
+    bad = [str(p.relative_to(ROOT)) for p in (ROOT / "sim").rglob("*.py")
+           if p.name != "parallel.py" and any(s in p.read_text() for s in ("ProcessPoolExecutor", ".Pool(", "get_context("))]
+    assert not bad, bad
+
+
+def test_iteration_frf_is_the_estimation_frf():
+    """Drive iteration estimates its FRF with sim.signals.estimation.frf: on bins with input
+    power it equals the Welch H1 it used before (scipy welch/csd, Hann, half overlap)."""
+    from scipy import signal
+
+    from sim.control.iteration import _welch_frf
+    from sim.scenario.motions import white_noise
+
+    x = white_noise(duration_s=20, sample_rate_hz=1024, band_hz=(0.5, 25), seed=(0, 0), rms_acceleration=1.0).d
+    b, a = signal.butter(2, 20, fs=1024)
+    y = signal.lfilter(b, a, x) + 1e-6 * np.random.default_rng(0).standard_normal(len(x))
+    f, H = _welch_frf(x, y, 1024.0, 4096)
+    _, pxx = signal.welch(x, fs=1024.0, nperseg=4096)
+    _, pxy = signal.csd(x, y, fs=1024.0, nperseg=4096)
+    live = pxx > 1e-30
+    assert live[(f > 0.2) & (f < 25)].all()
+    np.testing.assert_allclose(H[live], pxy[live] / pxx[live], rtol=1e-12, atol=0)
+    assert abs(H[np.argmin(abs(f - 20))]) == pytest.approx(1 / np.sqrt(2), rel=0.05)  # the 20 Hz Butterworth

@@ -43,7 +43,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import os
 import time
 from dataclasses import dataclass, field
 
@@ -396,24 +395,10 @@ def programme_jobs(desc, payload_name, dur: Durations, *, parts=("valve", "oil",
 
 
 def run_jobs(jobs: list[dict], workers: int | None = None, progress=None) -> list[dict]:
-    workers = workers or min(len(jobs), os.cpu_count() or 1)
-    if workers <= 1:
-        out = []
-        for j in jobs:
-            out.append(run_test(j))
-            if progress:
-                progress(len(out), len(jobs))
-        return out
-    import multiprocessing as mp
+    """The tests ``jobs`` (from :func:`programme_jobs`) in parallel, results in the jobs' order."""
+    from sim.parallel import map_jobs
 
-    ctx = mp.get_context("fork")
-    out = []
-    with ctx.Pool(workers) as pool:
-        for r in pool.imap_unordered(run_test, jobs):
-            out.append(r)
-            if progress:
-                progress(len(out), len(jobs))
-    return out
+    return map_jobs(run_test, jobs, workers=workers, progress=progress)
 
 
 def summarize(results: list[dict], desc, payload) -> dict:

@@ -202,15 +202,12 @@ def run_rice_case(case: RiceCase, n_segments: int = RICE_SEGMENTS, rms_m_s2: flo
             "rms_error_0_100": float(np.sqrt((err ** 2).mean())), "wall_s": run.wall_s}
 
 
-def run_rice_programme(cases=None, workers: int = 2, **kw) -> list[dict]:
-    cases = cases or rice_cases()
-    if workers <= 1:
-        return [run_rice_case(c, **kw) for c in cases]
-    from concurrent.futures import ProcessPoolExecutor
+def run_rice_programme(cases=None, workers: int = 2, progress=None, **kw) -> list[dict]:
     from functools import partial
 
-    with ProcessPoolExecutor(workers) as ex:
-        return list(ex.map(partial(run_rice_case, **kw), cases))
+    from sim.parallel import map_jobs
+
+    return map_jobs(partial(run_rice_case, **kw), cases or rice_cases(), workers=workers, progress=progress)
 
 
 # ------------------------------------------------------------------ UCSD (seed 002)
@@ -472,18 +469,14 @@ def write_measured_run(meas: dict, desc, name: str, out_dir):
 
 
 def ucsd_programme(names=None, pressure_mpa: float = 13.8, *, workers: int = 2, seed: int = 0, out_dir=None,
-                   cycles: float = 2.0, presliding_m: float | None = None) -> list[dict]:
-    names = names or ucsd_tests()
+                   cycles: float = 2.0, presliding_m: float | None = None, progress=None) -> list[dict]:
     from functools import partial
+
+    from sim.parallel import map_jobs
 
     fn = partial(ucsd_run_test, pressure_mpa=pressure_mpa, seed=seed, out_dir=out_dir, cycles=cycles,
                  presliding_m=presliding_m)
-    if workers <= 1:
-        return [fn(n) for n in names]
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(workers) as ex:
-        return list(ex.map(fn, names))
+    return map_jobs(fn, names or ucsd_tests(), workers=workers, progress=progress)
 
 
 def ucsd_records(results) -> list:
