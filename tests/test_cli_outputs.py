@@ -106,3 +106,62 @@ def test_iteration_frf_is_the_estimation_frf():
     assert live[(f > 0.2) & (f < 25)].all()
     np.testing.assert_allclose(H[live], pxy[live] / pxx[live], rtol=1e-12, atol=0)
     assert abs(H[np.argmin(abs(f - 20))]) == pytest.approx(1 / np.sqrt(2), rel=0.05)  # the 20 Hz Butterworth
+
+
+# ------------------------------------------------------------------ --duration keeps the strong motion
+def _record_like(rate=256.0, quiet_s=20.0, strong_s=6.0, tail_s=14.0):
+    """A synthetic 'record': quiet precursor, a burst of strong motion, a quiet tail."""
+    from sim.scenario.motions import Motion
+    from sim.scenario.records import end_correction, integrate
+
+    n = int((quiet_s + strong_s + tail_s) * rate)
+    t = np.arange(n) / rate
+    rng = np.random.default_rng(3)
+    a = 1e-3 * rng.standard_normal(n)
+    burst = (t >= quiet_s) & (t < quiet_s + strong_s)
+    a[burst] += 3.0 * np.sin(2 * np.pi * 1.5 * t[burst]) * np.sin(np.pi * (t[burst] - quiet_s) / strong_s) ** 2
+    v, d = integrate(a, 1 / rate)
+    d, v, a, _ = end_correction(t, d, v, a)
+    return Motion(t, d, v, a, "synthetic", {"kind": "record"})
+
+
+def _scenario(rate=256.0, duration_s=None):
+    from sim.scenario.files import Scenario
+
+    return Scenario(name="w", table="cgs", payload=None, duration_s=duration_s, pad_to_duration=False,
+                    description="", motion={}, controller={}, sample_rate_hz=rate)
+
+
+def test_window_keeps_the_strong_motion():
+    from sim.scenario.files import build_window
+    from sim.scenario.records import arias_interval
+
+    m = _record_like()
+    t5, t95 = arias_interval(m.a, 1 / 256.0)
+    assert 20.0 <= t5 < t95 <= 26.0
+    ref, w = build_window(_scenario(), {"x": m}, 10.0)
+    assert w["of_record_s"] == pytest.approx(m.duration_s)
+    assert w["start_s"] < 20.5 and w["end_s"] > 25.5 and w["end_s"] - w["start_s"] == pytest.approx(10.0)
+    assert "Arias" in w["why"]
+    x = ref.a[:, 0]
+    assert np.abs(x).max() == pytest.approx(np.abs(m.a).max(), rel=1e-6)  # the peak is inside, untapered
+    assert abs(ref.d[0, 0]) < 1e-12 and abs(ref.d[-1, 0]) < 1e-12 and abs(ref.v[0, 0]) < 1e-12  # rest to rest
+    # consistent: the trapezoid integral of a is v, of v is d (to the step's accuracy)
+    h = 1 / 256.0
+    v = np.concatenate([[0.0], np.cumsum(0.5 * h * (x[1:] + x[:-1]))])
+    assert np.abs(v - ref.v[:, 0]).max() < 1e-3 * np.abs(ref.v[:, 0]).max()
+    # a window shorter than the strong motion: the part holding the most intensity
+    ref3, w3 = build_window(_scenario(), {"x": m}, 2.0)
+    assert 20.0 <= w3["start_s"] and w3["end_s"] <= 26.0 and "most Arias intensity" in w3["why"]
+
+
+def test_window_of_other_motions_is_their_start():
+    from sim.scenario.files import build_window
+    from sim.scenario.motions import sine
+
+    m = sine(amplitude=0.01, frequency_hz=1.0, duration_s=20.0, sample_rate_hz=256.0)
+    ref, w = build_window(_scenario(), {"x": m}, 5.0)
+    assert w["start_s"] == 0.0 and w["end_s"] == 5.0 and "not an earthquake record" in w["why"]
+    np.testing.assert_array_equal(ref.d[:, 0], m.d[:len(ref.t)])
+    _, whole = build_window(_scenario(), {"x": m}, None)
+    assert whole["why"] == "the whole motion"

@@ -95,6 +95,7 @@ class ScenarioPlan:
     reference: object
     iteration: dict
     warnings: list
+    window: dict = field(default_factory=dict)  #: which part of the motion runs (start_s, end_s, of_record_s, why)
 
     def run(self, *, progress=None) -> RunOutcome:
         """Run the plan; ``progress(text)`` is called once per stage (None: silent)."""
@@ -135,6 +136,7 @@ class ScenarioPlan:
             "table": self.desc.name,
             "payload": self.payload.name if self.payload else None,
             "duration_s": float(res.sim_s),
+            "window": dict(self.window),
             "wall_s": float(res.wall_s),
             "realtime_factor": float(res.realtime_factor),
             "complete": res.incomplete_reason is None,
@@ -161,7 +163,7 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
     from sim.effects import build_model
     from sim.loop.analog import RiceGains, RiceSimulation, is_rice
     from sim.loop.simulation import Simulation
-    from sim.scenario.files import build_motions, build_reference, limit_warnings, load_scenario
+    from sim.scenario.files import build_motions, build_window, limit_warnings, load_scenario
 
     sc = scenario if not isinstance(scenario, (str, Path)) else load_scenario(scenario)
     if duration_s is not None and not duration_s > 0:
@@ -185,12 +187,12 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
         raise ScenarioError(f"output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
                             f"({gains.rate_hz:g}): the recorder samples at the controller ticks")
     motions = build_motions(sc)
-    ref = build_reference(sc, motions, duration_s)
+    ref, window = build_window(sc, motions, duration_s)
     warns = limit_warnings(desc, motions)
     tm = rice.tm if rice else build_model(desc, payload)
     sim = rice or Simulation(tm, gains=gains)
     return ScenarioPlan(scenario=sc, desc=desc, payload=payload, tm=tm, sim=sim, gains=gains, reference=ref,
-                        iteration=it, warnings=warns)
+                        iteration=it, warnings=warns, window=window)
 
 
 def run_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,

@@ -95,7 +95,7 @@ def cmd_calibrate(args) -> int:
     if args.json:
         print(json.dumps({k: res[k] for k in ("values", "before", "after", "target")}, indent=2))
         return 0
-    print(f"effective-mass calibration of {desc.name} against seed 000 Table 2")
+    print(f"effective-mass calibration of {desc.name} against its published effective masses")
     print(f"  {'dof':4s} {'target':>10s} {'before':>10s} {'after':>10s}")
     for k in res["target"]:
         print(f"  {k:4s} {res['target'][k] / 1e3:10.2f} {res['before'][k] / 1e3:10.2f} {res['after'][k] / 1e3:10.2f}")
@@ -126,8 +126,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     run_cli.add_parsers(sub)  # run, replay, fit, geometry
     view_cli.add_parsers(sub)  # rerun recordings of run files
-    characterize_cli.add_parsers(sub)  # the CGS identification programme (and rice/ucsd dispatch)
-    identify_cli.add_parsers(sub)  # uni-axial identification, Rice/UCSD programmes
+    characterize_cli.add_parsers(sub)  # the identification programme each table declares
+    identify_cli.add_parsers(sub)  # least squares on run files
     return p
 
 

@@ -58,6 +58,9 @@ def _print_summary(s: dict) -> None:
               if "spectrum_ratio_min" in e else "-")
         print(f"  {dof:4s} {100 * e['nrmse_displacement']:7.2f}% {100 * e['nrmse_acceleration']:7.1f}% "
               f"{e['pga_ratio']:9.3f} {sr:>28s}")
+    w = s.get("window")
+    if w and (w["start_s"] > 0 or w["end_s"] < w["of_record_s"] - 1e-6):
+        print(f"  ran {w['start_s']:.1f}-{w['end_s']:.1f} s of the {w['of_record_s']:.1f} s motion ({w['why']})")
     fe = s.get("feasibility")
     if fe is not None:
         print("  feasible on this table: " + ("yes" if fe["feasible"] else "NO (" + ", ".join(fe["failed"]) + ")"))
@@ -169,7 +172,9 @@ def add_parsers(sub) -> None:
     r = sub.add_parser("run", help="simulate a scenario and write its run file and summary")
     r.add_argument("scenario", help="scenario name in scenarios/ or a .toml path")
     r.add_argument("--out", default="out", help="output folder (default: out)")
-    r.add_argument("--duration", type=float, default=None, help="simulate only the first S seconds")
+    r.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="simulate S seconds: of an earthquake record its strongest S s (tapered), "
+                        "of other motions the first S s")
     r.add_argument("--json", action="store_true", help="print the summary as JSON")
     r.add_argument("--rrd", metavar="FILE", help="also write a rerun recording")
     r.add_argument("--iterations", type=int, default=None,

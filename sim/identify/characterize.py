@@ -98,6 +98,7 @@ class Published:
     servovalve: dict | None = None  #: K, tau_s, wn_hz, zeta
     friction_fraction: float | None = None  #: friction / capability
     labels: dict = field(default_factory=dict)  #: how reports name each source ("Table 1")
+    programme: str | None = None  #: which characterize programme fits this table (default: this module's)
 
     def label(self, key: str) -> str:
         return str(self.labels.get(key, "published"))

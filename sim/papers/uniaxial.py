@@ -592,24 +592,3 @@ def ucsd_report(results, ident: dict | None = None) -> list[str]:
                          f"{vals[3]:.2f} ({p[4]}) | {vals[4]:.1f} ({p[5]}) | {100 * rel:.2f} % | "
                          f"{h['f_peak_hz']:.3f}, {h['R_peak']:.2f} ({100 * (h['R_peak'] / vals[2] - 1):+.0f} % vs A_m) |")
     return lines
-
-
-# ------------------------------------------------------------------ the programmes, by table
-def rice_programme_report(out, *, workers: int = 2, quick: bool = False) -> list[str]:
-    """Seed 001's programme on the model; returns the report's lines (FRFs kept under ``out``)."""
-    import pickle
-
-    res = run_rice_programme(workers=workers, n_segments=3 if quick else RICE_SEGMENTS)
-    with open(out / "rice_frf.pkl", "wb") as fh:
-        pickle.dump([{k: v for k, v in r.items()} for r in res], fh)
-    return rice_report(res)
-
-
-def ucsd_programme_report(out, *, workers: int = 2, quick: bool = False) -> list[str]:
-    """Seed 002's programme on the model; returns the report's lines (run files under ``out/runs``)."""
-    names = ucsd_tests("triangular") + ucsd_tests("sinusoidal") if quick else None
-    return ucsd_report(ucsd_programme(names, workers=workers, out_dir=out / "runs"))
-
-
-#: the papers' own programmes, by the table they were run on
-PROGRAMMES = {"rice": rice_programme_report, "ucsd": ucsd_programme_report}
