@@ -165,3 +165,121 @@ def test_window_of_other_motions_is_their_start():
     np.testing.assert_array_equal(ref.d[:, 0], m.d[:len(ref.t)])
     _, whole = build_window(_scenario(), {"x": m}, None)
     assert whole["why"] == "the whole motion"
+
+
+# ------------------------------------------------------------------ progress
+def test_progress_lines_in_a_log_and_a_bar_on_a_terminal():
+    import io
+
+    from sim.cli.progress import Progress
+
+    log = io.StringIO()
+    p = Progress(stream=log, tty=False, unit="tests")
+    p.stage("characterising")
+    for i in range(1, 4):
+        p.count(i, 3)
+    lines = log.getvalue().splitlines()
+    assert len(lines) == 4 and lines[0].startswith("  characterising") and lines[-1].startswith("  3/3 tests done")
+    term = io.StringIO()
+    p = Progress(stream=term, tty=True, unit="tests")
+    for i in range(1, 4):
+        p.count(i, 3)
+    out = term.getvalue()
+    assert out.count("\r") == 3 and out.count("\n") == 1 and "[" + "#" * 30 + "] 3/3 tests" in out
+    quiet = io.StringIO()
+    p = Progress(stream=quiet, enabled=False)
+    p.stage("x")
+    p.count(1, 1)
+    assert quiet.getvalue() == "" and p.count_callback() is None and p.text_callback() is None
+
+
+def test_no_paper_jargon_in_cli_text():
+    """The CLI's messages and help speak of tables and papers, not of the project's seed numbers."""
+    bad = [f"{p.relative_to(ROOT)}:{i}" for p in (ROOT / "sim" / "cli").glob("*.py")
+           for i, line in enumerate(p.read_text().splitlines(), 1) if "seed 00" in line.lower()]
+    assert not bad, bad
+
+
+# ------------------------------------------------------------------ format documentation
+def _documented(page: str) -> set[str]:
+    """The keys of a docs page's key tables: the first cell of rows starting with | `key`."""
+    keys = set()
+    for line in (ROOT / "docs" / page).read_text().splitlines():
+        if line.startswith("| `"):
+            keys.add(line.split("`")[1])
+    return keys
+
+
+def _asked_keys(monkeypatch, load, names):
+    """Every key the description loader asks for (present or defaulted) while loading ``names``."""
+    import re
+
+    import mjcf.description as D
+
+    asked = set()
+    orig = D._Section.raw
+
+    def raw(self, key, default=...):
+        path = re.sub(r"\[\d+\]", "[]", re.sub(r"^actuator_class\.[^.]+", "actuator_class.<name>", self.path))
+        if path and path != "actuator_class":  # top-level keys are sections, actuator_class keys class names
+            asked.add(f"{path}.{key}")
+        return orig(self, key, default)
+
+    monkeypatch.setattr(D._Section, "raw", raw)
+    for n in names:
+        load(n)
+    return asked
+
+
+def _file_keys(raw: dict, prefix=""):
+    """Dotted keys of a parsed TOML, lists of tables as ``name[]``, named sub-tables as ``<name>``."""
+    for k, v in raw.items():
+        if isinstance(v, dict) and prefix in ("actuator_class.", "controller.parameter_sets."):
+            yield from _file_keys(v, f"{prefix}<name>.")
+        elif isinstance(v, dict) and not prefix.startswith("published."):
+            yield from _file_keys(v, f"{prefix}{k}.")
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for item in v:
+                yield from _file_keys(item, f"{prefix}{k}[].")
+        else:
+            yield f"{prefix}{k}"
+
+
+def test_table_file_doc_covers_every_key(monkeypatch):
+    import dataclasses
+    import tomllib
+
+    import mjcf
+    from hydraulics import params as HP
+    from sim.control.tvc import ControllerGains
+
+    tables = sorted(p.stem for p in (ROOT / "scenarios" / "tables").glob("*.toml"))
+    need = _asked_keys(monkeypatch, mjcf.load_table, tables)
+    for t in tables:
+        need |= set(_file_keys(tomllib.loads((ROOT / "scenarios" / "tables" / f"{t}.toml").read_text())))
+    need |= {f"actuator_class.<name>.{k}" if s == "actuator_class" else f"{s}.{k}" for s, k in HP._OPTIONAL}
+    need |= {f"actuator_class.<name>.{k}" for k in HP._CLASS_KEYS}
+    need |= {f"controller.{f.name}" for f in dataclasses.fields(ControllerGains)}
+    missing = sorted(need - _documented("table-file.md"))
+    assert not missing, f"docs/table-file.md lacks {missing}"
+
+
+def test_payload_file_doc_covers_every_key(monkeypatch):
+    import mjcf
+
+    payloads = sorted(str(p) for p in (ROOT / "scenarios" / "payloads").glob("*.toml"))
+    need = _asked_keys(monkeypatch, mjcf.load_payload, payloads)
+    assert {"payload.clamp_frequency_hz", "payload.bending_stiffness_n_m2", "payload.stiffness_n_m"} <= need
+    missing = sorted(need - _documented("payload-file.md"))
+    assert not missing, f"docs/payload-file.md lacks {missing}"
+
+
+def test_scenario_file_doc_covers_every_key():
+    from sim.scenario import files as F
+
+    accepted = ({f"scenario.{k}" for k in F._SCEN_KEYS} | {f"motion.{k}" for k in F._EQ_KEYS}
+                | {f"motion.<dof>.{k}" for keys in F._MOTION_KEYS.values() for k in keys}
+                | {f"iteration.{k}" for k in F._ITERATION_KEYS} | {f"output.{k}" for k in F._OUTPUT_KEYS})
+    doc = _documented("scenario-file.md")
+    assert not sorted(accepted - doc), f"docs/scenario-file.md lacks {sorted(accepted - doc)}"
+    assert not sorted(doc - accepted), f"docs/scenario-file.md documents keys the loader rejects: {sorted(doc - accepted)}"

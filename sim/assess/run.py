@@ -110,8 +110,10 @@ class ScenarioPlan:
             from sim.control.iteration import IterationSettings, iterate
 
             settings = IterationSettings.from_scenario(self.iteration)
+            if settings.frf == "noise":
+                say(f"measuring the table's FRF ({settings.noise_duration_s:g} s of white noise)")
             results, _drives = iterate(sim, ref, settings, progress=lambda i: say(
-                f"drive iteration {i} of {settings.count}"))
+                "run with the plain controller" if i == 0 else f"drive iteration {i} of {settings.count}"))
             scores = []
             for i, r in enumerate(results):
                 tr = _tracking(r, ref)

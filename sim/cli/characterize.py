@@ -76,7 +76,7 @@ def _calibrate(args, prog) -> int:
         print(json.dumps(jsonable(out), indent=2, allow_nan=False))
         return 0
     pub = C.published(desc)
-    print(f"calibrated {desc.name} against its published oil columns and friction ({pub.source}):")
+    print(f"calibrated {desc.name} against its published oil columns and friction:")
     for c, v in cal["dead_volume_m3"].items():
         print(f"  actuator_class.{c}.dead_volume_a/b_m3 = {v:.4e}")
     for c, v in cal["seal_friction_n"].items():

@@ -14,15 +14,16 @@ from sim.runs.files import jsonable, out_dir, write_json_atomic
 from sim.effects import build_model
 
 def _progress(args):
-    """One line per stage on stderr (a terminal or a log alike), none with --json."""
-    if getattr(args, "json", False):
-        return None
-    return lambda text: print(f"  {text}", file=sys.stderr, flush=True)
+    """Stage lines on stderr (a terminal or a log alike), a bar on a terminal; silent with --json."""
+    from sim.cli.progress import Progress
+
+    return Progress(enabled=not getattr(args, "json", False))
 
 
 def cmd_run(args) -> int:
     from sim.assess.run import plan_scenario
 
+    prog = _progress(args)
     plan = plan_scenario(args.scenario, duration_s=args.duration, iterations=args.iterations)
     for w in plan.warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -32,7 +33,8 @@ def cmd_run(args) -> int:
         from sim.report import rerun
 
         target = rerun.RrdTarget.open(args.rrd)  # fails early (exit 2) if unwritable; rerun loads beside the run
-    outcome = plan.run(progress=_progress(args))
+    outcome = plan.run(progress=prog.text_callback())
+    prog.close()
     if target is not None:
         target.write_run(outcome.run, outcome.tm)
         outcome.summary["recording"] = str(target.path)
@@ -40,7 +42,7 @@ def cmd_run(args) -> int:
     if args.json:
         print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
     else:
-        _print_summary(summary)
+        _print_summary(summary, prog.elapsed_s)
     res = outcome.result
     if res.incomplete_reason:
         print(f"error: {res.incomplete_reason}; kept {res.sim_s:.3f} s in {summary['run_file']} (marked incomplete)",
@@ -49,9 +51,15 @@ def cmd_run(args) -> int:
     return 0
 
 
-def _print_summary(s: dict) -> None:
+def _print_summary(s: dict, command_wall_s: float | None = None) -> None:
+    runs = 1 + s.get("drive_iterations", {}).get("count", 0)
+    last = "" if runs == 1 else " (the chosen run)"
     print(f"{s['scenario']}: {s['table']}" + (f" + {s['payload']}" if s["payload"] else "")
-          + f", {s['duration_s']:.2f} s simulated in {s['wall_s']:.1f} s ({s['realtime_factor']:.2f}x real time)")
+          + f", {s['duration_s']:.2f} s simulated in {s['wall_s']:.1f} s{last} ({s['realtime_factor']:.2f}x real time)")
+    if command_wall_s:
+        print(f"  whole command: {command_wall_s:.1f} s wall for {runs} run(s) of {s['duration_s']:.2f} s"
+              + (" and the FRF measurement" if s.get("drive_iterations", {}).get("frf") == "noise" and runs > 1 else "")
+              + f" ({s['duration_s'] / command_wall_s:.2f}x real time)")
     print(f"  {'dof':4s} {'NRMSE d':>8s} {'NRMSE a':>8s} {'PGA ratio':>9s} {'spectrum ratio (0.5-20 Hz)':>28s}")
     for dof, e in s["tracking"].items():
         sr = (f"{e['spectrum_ratio_min']:.2f} .. {e['spectrum_ratio_max']:.2f}"
@@ -79,8 +87,10 @@ def cmd_replay(args) -> int:
     from sim.calibrate.replay import replay
     from sim.runs.runfile import write_run
 
+    prog = _progress(args)
     out = out_dir(args.out)
-    rep = replay(args.run, table=args.table, payload=args.payload, progress=sys.stderr.isatty() and not args.json)
+    prog.stage(f"replaying {args.run} open loop")
+    rep = replay(args.run, table=args.table, payload=args.payload, progress=prog.enabled and prog.tty)
     res = rep.result
     stem = Path(args.run).name[: -len(".run.npz")] if args.run.endswith(".run.npz") else Path(args.run).stem
     path = out / f"{stem}.replay.run.npz"
@@ -92,7 +102,8 @@ def cmd_replay(args) -> int:
     if args.json:
         print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
     else:
-        print(f"replayed {args.run} open loop ({res.sim_s:.2f} s, {res.realtime_factor:.2f}x real time) -> {path}")
+        print(f"replayed {args.run} open loop ({res.sim_s:.2f} s, {res.realtime_factor:.2f}x real time; "
+              f"whole command {prog.elapsed_s:.1f} s) -> {path}")
         for ch, cols in rep.residual_nrmse.items():
             vals = ", ".join(f"{k} {100 * v:.2f}%" for k, v in cols.items() if np.isfinite(v))
             if vals:
@@ -118,8 +129,10 @@ def cmd_fit(args) -> int:
             raise UserError(f"unknown effect '{bad[0]}'; candidates: {', '.join(known)}")
         cands = tuple(known[n] for n in names)
     out = out_dir(args.out)
-    log = (lambda m: print(m, file=sys.stderr)) if not args.json else None
-    rep = F.fit(run, desc.raw, payload, candidates=cands, rounds=args.rounds, log=log)
+    prog = _progress(args)
+    prog.stage(f"fitting {args.run}: replays per candidate effect, {args.rounds} round(s) at most")
+    rep = F.fit(run, desc.raw, payload, candidates=cands, rounds=args.rounds,
+                log=(lambda m: prog.stage(m.strip())) if prog.enabled else None)
     toml_path = out / f"{desc.name}_calibrated.toml"
     note = ("calibrated: shaketable fit of " + Path(args.run).name + "; effects added: "
             + (", ".join(f"{e['effect']} = {e['value']:.6g} {e['unit']}" for e in rep["effects_added"]) or "none"))
@@ -133,7 +146,7 @@ def cmd_fit(args) -> int:
               f"{100 * rep['baseline_residual']:.2f} % -> {100 * rep['final_residual']:.2f} %")
         for e in rep["effects_added"]:
             print(f"  added {e['effect']} = {e['value']:.6g} {e['unit']} ({e['what']})")
-        print(f"  wrote {toml_path} and {out / 'fit.json'}")
+        print(f"  wrote {toml_path} and {out / 'fit.json'} ({prog.elapsed_s:.0f} s)")
     return 0
 
 

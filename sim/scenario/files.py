@@ -57,6 +57,8 @@ _MOTION_KEYS = {
             "baseline"},
 }
 _EQ_KEYS = {"type", "amplitude_factor", "time_factor", "highpass_hz", "filter_order", "baseline", "mapping"}
+_ITERATION_KEYS = {"count", "gain", "band_hz", "h_min", "frf", "noise_level", "seed"}
+_OUTPUT_KEYS = {"sample_rate_hz"}
 
 
 @dataclass
@@ -108,14 +110,14 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     if not isinstance(mo, dict) or not mo:
         raise ScenarioError(f"{src}: missing the [motion] table")
     out = data.get("output", {})
-    _unknown(out, {"sample_rate_hz"}, "output", src)
+    _unknown(out, _OUTPUT_KEYS, "output", src)
     rate = out.get("sample_rate_hz", 1024.0)
     if isinstance(rate, bool) or not isinstance(rate, (int, float)) or rate <= 0:
         raise ScenarioError(f"{src}: 'output.sample_rate_hz' must be positive (got {rate!r})")
     it = data.get("iteration", {"count": 0})
     if not isinstance(it, dict):
         raise ScenarioError(f"{src}: [iteration] must be a table (count, gain, band_hz)")
-    _unknown(it, {"count", "gain", "band_hz", "h_min", "frf", "noise_level", "seed"}, "iteration", src)
+    _unknown(it, _ITERATION_KEYS, "iteration", src)
     cnt = it.get("count", 0)
     if isinstance(cnt, bool) or not isinstance(cnt, int) or not 0 <= cnt <= 10:
         raise ScenarioError(f"{src}: 'iteration.count' must be an integer 0..10 (got {cnt!r})")
