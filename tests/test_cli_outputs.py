@@ -283,3 +283,70 @@ def test_scenario_file_doc_covers_every_key():
     doc = _documented("scenario-file.md")
     assert not sorted(accepted - doc), f"docs/scenario-file.md lacks {sorted(accepted - doc)}"
     assert not sorted(doc - accepted), f"docs/scenario-file.md documents keys the loader rejects: {sorted(doc - accepted)}"
+
+
+# ------------------------------------------------------------------ characterize for every table
+def _fake_programme(desc, *, quick=False, workers=None, progress=None, runs_dir=None):
+    """Stands in for a paper's programme (minutes of simulation): the summary shape of
+    the frf_random programme with two synthetic FRF cases."""
+    from sim.papers.uniaxial import rice_cases
+
+    f = np.linspace(0, 100, 201)
+    T = 1 / (1 - (f / 60.0) ** 2 + 0.2j * f / 60.0)
+    cases = rice_cases()[:2]
+    if progress:
+        for i in range(len(cases)):
+            progress(i + 1, len(cases))
+    res = [{"case": c, "f": f, "model": T * (1 + 0.01 * k), "analytical": T} for k, c in enumerate(cases)]
+    return {"table": desc.name, "payload": None, "programme": "frf_random", "mode": "quick" if quick else "full",
+            "oil_column_hz": {"x": 60.0}, "oil_column_analytical_hz": {"x": 60.0}, "wall_s": 0.0, "sim_s": 1.0,
+            "cases": [{"case": c.name, "max_error_0_100": 0.01 * k, "f_max_error_hz": 50.0} for k, c in enumerate(cases)],
+            "_report": ["# report", "", "numbers"], "_results": res}
+
+
+def test_characterize_dispatches_on_the_declared_programme(tmp_path, monkeypatch, capsys):
+    from sim.papers import programmes as P
+
+    monkeypatch.setitem(P.PROGRAMMES, "frf_random", _fake_programme)
+    out = tmp_path / "char"
+    assert cli.main(["characterize", "rice", "--quick", "--out", str(out), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    written = json.loads((out / "characterization.json").read_text())
+    assert printed == written and written["oil_column_hz"] == {"x": 60.0} and written["programme"] == "frf_random"
+    assert written["figures"] and all((out / n).is_file() for n in written["figures"])
+    report = (out / "report.md").read_text()
+    assert report.startswith("# report") and all(f"]({n})" in report for n in written["figures"])
+    assert not list(out.rglob("*.pkl"))
+    # the same table under another name dispatches alike: the field decides, not the name
+    text = (ROOT / "scenarios" / "tables" / "rice.toml").read_text()
+    (tmp_path / "mytable.toml").write_text(text)
+    assert cli.main(["characterize", str(tmp_path / "mytable.toml"), "--out", str(tmp_path / "c2"), "--json"]) == 0
+    assert json.loads((tmp_path / "c2" / "characterization.json").read_text())["programme"] == "frf_random"
+    # an undeclared programme is a one-line user error, nothing written
+    (tmp_path / "bad.toml").write_text(text.replace('programme = "frf_random"', 'programme = "nonesuch"'))
+    capsys.readouterr()
+    assert cli.main(["characterize", str(tmp_path / "bad.toml"), "--out", str(tmp_path / "c3")]) == 2
+    err = capsys.readouterr().err
+    errors = [x for x in err.splitlines() if x.startswith("error:")]
+    assert len(errors) == 1 and "programme 'nonesuch' is unknown" in errors[0] and "bad.toml" in errors[0]
+    assert "Traceback" not in err
+    assert not (tmp_path / "c3").exists()
+
+
+def test_uniaxial_command_is_gone(capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["uniaxial", "rice"])
+    assert "invalid choice" in capsys.readouterr().err
+
+
+def test_identification_figures(tmp_path):
+    from sim.report.programmes import identification_figures
+
+    t = np.linspace(0, 10, 500)
+    res = [{"name": n, "measured": {"disp": 0.1 * np.sin(t + k), "force": 1e5 * np.cos(t + k)}}
+           for k, n in enumerate(["T1", "T2", "S1"])]
+    ident = {"M_e_kg": 1.4e5, "K_e_N_per_m": 1.2e6, "C_e": 4.5e4, "F_mu_N": 2.6e4}
+    s = {"identification_sets": {"periodic": {"unconstrained": ident}}, "paper": ident}
+    names = identification_figures(res, s, tmp_path)
+    assert names == ["force_displacement.png", "identification.png"]
+    assert all((tmp_path / n).stat().st_size > 1000 for n in names)
