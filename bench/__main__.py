@@ -40,7 +40,7 @@ def bare_step_us(model, n=4000) -> float:
     mujoco.mj_resetDataKeyframe(model, d, 0)
     rng = np.random.default_rng(0)
     forces = rng.normal(0, 5e4, (64, model.nu))
-    for i in range(200):
+    for _ in range(200):
         mujoco.mj_step(model, d)
     t = time.perf_counter()
     for i in range(n):

@@ -16,8 +16,6 @@ from sim.effects import build_model
 
 # ------------------------------------------------------------------ model
 def cmd_model(args) -> int:
-    import numpy as np
-
     import mjcf
     from mjcf.builder import payload_mass
 

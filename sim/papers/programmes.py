@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 DEFAULT_PROGRAMME = "six_dof"
 
 

@@ -554,7 +554,6 @@ def ucsd_identification(results, *, accel_lowpass_hz: float = 100.0, deadband_m_
 def ucsd_report(results, ident: dict | None = None) -> list[str]:
     from sim.identify import least_squares as I
     ident = ident or ucsd_identification(results)
-    P = PAPER_PARAMS
     paper = {"triangular": (143.9, 1.261), "sinusoidal": (143.9, 1.246), "periodic": (144.0, 1.263),
              "El Centro": (146.0, 1.238), "WN 3-7 % g": (143.6, 2.024), "WN 10-13 % g": (144.0, 1.405)}
     paper_fmu = {"periodic": 26.5, "El Centro": 28.3, "WN 3-7 % g": 26.1, "WN 10-13 % g": 24.4}
