@@ -25,11 +25,11 @@ import mujoco
 import numpy as np
 
 import mjcf
-from sim.loop.simulation import Simulation
-from sim.scenario.records import el_centro_motions
-from sim.scenario.files import DOFS
-from sim.scenario.reference import Reference
 from sim.effects import build_model
+from sim.loop.simulation import Simulation
+from sim.scenario.files import DOFS
+from sim.scenario.records import el_centro_motions
+from sim.scenario.reference import Reference
 
 SCENES = [("bare", None), ("rigid 20 t", "rigid_20t"), ("3-storey frame", "frame_3storey_297"),
           ("6 m tower", "tower_6m")]

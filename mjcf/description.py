@@ -12,10 +12,10 @@ was expected.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import re
-import dataclasses
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path

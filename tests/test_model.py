@@ -194,8 +194,9 @@ def test_every_scene_compiles_and_steps_without_warnings(cgs_desc, payload, foun
     if foundation == "spring":
         desc = dataclasses.replace(desc, foundation=dataclasses.replace(desc.foundation, mode="spring"))
     if payload == "clamped":
-        from mjcf.description import parse_payload
         import tomllib
+
+        from mjcf.description import parse_payload
 
         pl = parse_payload(tomllib.loads(CLAMPED))
     else:

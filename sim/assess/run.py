@@ -11,8 +11,8 @@ a rerun recording in a folder.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, is_dataclass
 import sys
+from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 
 import numpy as np

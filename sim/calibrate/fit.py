@@ -26,9 +26,9 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from mjcf.description import parse_table
-from sim.errors import RunFileError
 from sim.assess.metrics import nrmse
 from sim.effects import build_model
+from sim.errors import RunFileError
 
 FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_displacement")
 

@@ -10,8 +10,8 @@ import argparse
 import json
 import sys
 
-from sim.errors import user_errors
 from sim.effects import build_model
+from sim.errors import user_errors
 
 
 # ------------------------------------------------------------------ model
@@ -120,7 +120,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=cmd_calibrate)
 
-    from sim.cli import characterize as characterize_cli, identify as identify_cli, run as run_cli, view as view_cli
+    from sim.cli import characterize as characterize_cli
+    from sim.cli import identify as identify_cli
+    from sim.cli import run as run_cli
+    from sim.cli import view as view_cli
 
     run_cli.add_parsers(sub)  # run, replay, fit, geometry
     view_cli.add_parsers(sub)  # rerun recordings of run files

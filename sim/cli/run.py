@@ -9,9 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from sim.assess.run import SCHEMA
+from sim.effects import build_model
 from sim.errors import RunFileError, UserError
 from sim.runs.files import jsonable, out_dir, write_json_atomic
-from sim.effects import build_model
+
 
 def _progress(args):
     """Stage lines on stderr (a terminal or a log alike), a bar on a terminal; silent with --json."""

@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import json
 
-from sim.errors import UserError
 from sim.effects import build_model
+from sim.errors import UserError
 
 
 def cmd_view(args) -> int:

@@ -49,9 +49,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mjcf.description import DOFS6
-from sim.signals import estimation as E
-from sim.errors import UserError, user_errors
 from sim.effects import build_model
+from sim.errors import UserError, user_errors
+from sim.signals import estimation as E
 
 DOFS = DOFS6
 G = 9.81  # m/s^2, as the table description's gravity

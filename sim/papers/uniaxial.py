@@ -30,9 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from mjcf.description import DOFS6, load_payload, parse_table
+from sim.effects import build_model
 from sim.loop.analog import RICE_FS_HZ, RICE_RATE_HZ, RiceGains, RiceSimulation, _apply_parameter_set, is_rice  # noqa: F401
 from sim.papers import rice as R
-from sim.effects import build_model
+
 RICE_NPERSEG = 2 ** 14
 RICE_SEGMENTS = 11
 

@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from mjcf.description import DOFS6, REPO_ROOT, load_toml, resolve
+from sim.errors import MotionError, ScenarioError
 from sim.scenario import motions as M
 from sim.scenario import records as R
-from sim.errors import MotionError, ScenarioError
 from sim.scenario.reference import Reference, reference_from_motions
 
 SCENARIOS_DIR = REPO_ROOT / "scenarios"
