@@ -15,7 +15,11 @@ Default processing (:func:`process_record`), in order:
    (1.5 * order / f_c of padding each side, Boore & Bommer 2005); the acausal
    filter's precursor and tail in the pads are kept (cutting them brings the drift
    back: 1.26 m of end drift on El Centro E-W) and only the part where d, v and a are
-   all below ``trim_tol`` (1e-3) of their peaks is trimmed; or
+   all below ``trim_tol`` (1e-3) of their peaks is trimmed (measured on El Centro at
+   80 %: 21 s of precursor kept before the record's start, end correction 4.3 mm on y;
+   trim_tol 3e-3 keeps 16 s and needs 17 mm, 1e-2 keeps 11 s and needs 55 mm, so the
+   precursor stays and ``--duration`` picks the strong motion instead:
+   :func:`sim.scenario.files.build_window`); or
    ``"polynomial"`` (least-squares polynomial in t^2..t^n fitted to the doubly
    integrated displacement, its second derivative taken off the acceleration),
    ``"linear"`` or ``"mean"`` trend removal, or ``"none"``;
