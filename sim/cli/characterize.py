@@ -17,9 +17,8 @@ def cmd_characterize(args) -> int:
     prog = Progress(enabled=not args.json, unit="tests")
     if args.calibrate:
         return _calibrate(args, prog)
-    prog.stage(f"characterising {args.table}" + (" (quick)" if args.quick else ""))
     s = characterize_table(args.table, args.payload, out=args.out, quick=args.quick, workers=args.workers,
-                           progress=prog.count_callback())
+                           progress=prog.count_callback(), stage=prog.text_callback())
     prog.close()
     if args.json:
         print(json.dumps(jsonable(s), indent=2, allow_nan=False))

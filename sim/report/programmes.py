@@ -108,10 +108,11 @@ FIGURES = {"frf_random": lambda s, out: frf_figures(s["_results"], out),
 
 
 def characterize_table(table: str, payload: str | None = None, *, out, quick: bool = False,
-                       workers: int | None = None, progress=None) -> dict:
+                       workers: int | None = None, progress=None, stage=None) -> dict:
     """Run the programme ``table`` declares and write its outputs into folder ``out``:
     ``characterization.json``, ``report.md`` and the figures. Returns the summary as
-    written to the JSON (with ``figures`` and ``programme``)."""
+    written to the JSON (with ``figures`` and ``programme``). ``progress(done, total)``
+    after each test; ``stage(text)`` once the inputs are checked and the tests start."""
     from sim.identify import characterize as C
     from sim.papers.programmes import DEFAULT_PROGRAMME, PROGRAMMES, declared_programme
 
@@ -120,7 +121,12 @@ def characterize_table(table: str, payload: str | None = None, *, out, quick: bo
     if prog != DEFAULT_PROGRAMME and prog not in PROGRAMMES:
         raise C.CharacterizeError(f"{desc.source}: [published] programme '{prog}' is unknown; use one of "
                                   f"{', '.join([DEFAULT_PROGRAMME, *PROGRAMMES])}")
+    if payload and prog != DEFAULT_PROGRAMME:
+        raise C.CharacterizeError(f"{desc.source} declares the '{prog}' programme, which runs on the bare table; "
+                                  "leave out --payload")
     outp = out_dir(out)  # checked before the work starts
+    if stage:
+        stage(f"characterising {desc.name} with the {prog} programme" + (" (quick)" if quick else ""))
     if prog == DEFAULT_PROGRAMME:
         from sim.report.characterization import write_characterization
 
@@ -130,9 +136,6 @@ def characterize_table(table: str, payload: str | None = None, *, out, quick: bo
         s.pop("_results", None)
         write_json_atomic(outp / "characterization.json", s)
         return s
-    if payload:
-        raise C.CharacterizeError(f"{desc.source} declares the '{prog}' programme, which runs on the bare table; "
-                                  "leave out --payload")
     s = PROGRAMMES[prog](desc, quick=quick, workers=workers, progress=progress, runs_dir=outp / "runs")
     names = FIGURES[prog](s, outp)
     s["figures"] = names
