@@ -7,13 +7,14 @@ and a layer may only import its own or lower ones: in ``sim.sweep`` (rank 7) the
 identification programme could not import it. It knows nothing of tables or models:
 it maps a function over jobs.
 
-Processes are started with the ``spawn`` method on every platform: a forked child
-inherits the parent's threads' locks (numba's and rerun's thread pools), which can
-deadlock, and spawn is what macOS and Windows use anyway, so a programme that works
-here works there. ``fn`` and the jobs must therefore be picklable (a module-level
-function, or a ``functools.partial`` of one). Results come back in the jobs' order,
-whatever order the workers finish in; ``workers=1`` runs serially in this process
-(no pickling, exceptions with their full traceback).
+Spawn-safe: ``fn`` and the jobs must be picklable (a module-level function, or a
+``functools.partial`` of one) and nothing may rely on state a forked child would
+inherit, so the programmes run alike under every start method: ``fork`` (Linux's
+default until Python 3.14, the fastest start), ``spawn`` (macOS and Windows; a script
+that calls it needs the ``if __name__ == "__main__":`` guard) or ``forkserver``.
+``context`` picks one (default: the platform's). Results come back in the jobs' order,
+whatever order the workers finish in; ``workers=1`` runs serially in this process (no
+pickling, exceptions with their full traceback).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ def default_workers(n_jobs: int) -> int:
 
 
 def map_jobs(fn: Callable, jobs: Iterable, *, workers: int | None = None,
-             progress: Callable[[int, int], None] | None = None) -> list:
+             progress: Callable[[int, int], None] | None = None, context: str | None = None) -> list:
     """``[fn(job) for job in jobs]``, in parallel processes, in the jobs' order.
 
     Args:
@@ -36,6 +37,8 @@ def map_jobs(fn: Callable, jobs: Iterable, *, workers: int | None = None,
         jobs: the arguments.
         workers: processes (default :func:`default_workers`); 1 runs serially here.
         progress: ``progress(done, total)`` after each finished job (in finishing order).
+        context: multiprocessing start method (``"fork"``, ``"spawn"``, ``"forkserver"``);
+            default the platform's.
     """
     jobs = list(jobs)
     total = len(jobs)
@@ -53,7 +56,7 @@ def map_jobs(fn: Callable, jobs: Iterable, *, workers: int | None = None,
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     out: list = [None] * total
-    with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as ex:
+    with ProcessPoolExecutor(workers, mp_context=mp.get_context(context)) as ex:
         futures = {ex.submit(fn, j): i for i, j in enumerate(jobs)}
         for done, fut in enumerate(as_completed(futures), start=1):
             out[futures[fut]] = fut.result()

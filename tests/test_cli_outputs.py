@@ -67,15 +67,16 @@ def test_tampered_description_is_a_user_error(modified_run, tmp_path, capsys):
 
 
 # ------------------------------------------------------------------ one process-pool helper
-@pytest.mark.parametrize("workers", [1, 2])
-def test_map_jobs_keeps_the_jobs_order(workers):
+@pytest.mark.parametrize("workers,context", [(1, None), (2, None), (2, "spawn")])
+def test_map_jobs_keeps_the_jobs_order(workers, context):
     import functools
 
     from sim.parallel import map_jobs
 
     seen = []
     jobs = [7, 1, 5, 3, 0]
-    out = map_jobs(functools.partial(pow, 3), jobs, workers=workers, progress=lambda d, n: seen.append((d, n)))
+    out = map_jobs(functools.partial(pow, 3), jobs, workers=workers, progress=lambda d, n: seen.append((d, n)),
+                   context=context)
     assert out == [3 ** j for j in jobs]
     assert seen == [(i, len(jobs)) for i in range(1, len(jobs) + 1)]
     assert map_jobs(abs, [], workers=workers) == []
