@@ -448,7 +448,7 @@ def write_measured_run(meas: dict, desc, name: str, out_dir):
     """A run file (512 Hz) of the measured channels: what the LHPOST recorder would give."""
     from pathlib import Path
 
-    from sim.runs.runfile import FORMAT, RunFile, write_run
+    from sim.runs.runfile import FORMAT, RunFile, description_meta, write_run
 
     n = len(meas["t"])
     z6 = lambda col: np.column_stack([col] + [np.zeros(n)] * 5)  # noqa: E731
@@ -461,6 +461,7 @@ def write_measured_run(meas: dict, desc, name: str, out_dir):
             "description": f"{name}: seed 002 test on the ucsd model (sim.papers.uniaxial), measured with the LHPOST DAQ "
                            "model; actuator_force holds the total measured "
                            "force in column E (W zero)"}
+    meta.update(description_meta("table", desc.source, desc.raw))  # the hold-down pressure's K_e and F_mu
     run = RunFile(t=np.arange(n) / meas["fs"], meta=meta, actuator_force=force, table_displacement=z6(meas["disp"]),
                   table_velocity=z6(meas["vel"]), table_acceleration=z6(meas["acc"]),
                   reference=z6(meas.get("reference", meas["disp"])))
