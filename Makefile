@@ -19,6 +19,7 @@ demo: setup
 	$(BIN)/shaketable run elcentro_20t --out out/demo --rrd out/demo/elcentro_20t.rrd
 
 test: setup
+	$(BIN)/ruff check sim mjcf hydraulics tests bench
 	$(BIN)/python -m pytest -q
 
 bench: setup

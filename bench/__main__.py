@@ -25,11 +25,11 @@ import mujoco
 import numpy as np
 
 import mjcf
-from sim.loop.simulation import Simulation
-from sim.scenario.records import el_centro_motions
-from sim.scenario.files import DOFS
-from sim.scenario.reference import Reference
 from sim.effects import build_model
+from sim.loop.simulation import Simulation
+from sim.scenario.files import DOFS
+from sim.scenario.records import el_centro_motions
+from sim.scenario.reference import Reference
 
 SCENES = [("bare", None), ("rigid 20 t", "rigid_20t"), ("3-storey frame", "frame_3storey_297"),
           ("6 m tower", "tower_6m")]
@@ -40,7 +40,7 @@ def bare_step_us(model, n=4000) -> float:
     mujoco.mj_resetDataKeyframe(model, d, 0)
     rng = np.random.default_rng(0)
     forces = rng.normal(0, 5e4, (64, model.nu))
-    for i in range(200):
+    for _ in range(200):
         mujoco.mj_step(model, d)
     t = time.perf_counter()
     for i in range(n):

@@ -23,6 +23,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
 from sim.effects import build_model
 
 ROOT = Path(__file__).resolve().parents[1]

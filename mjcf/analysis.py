@@ -12,8 +12,8 @@ velocities follow from the platen velocity as ``qdot_o = -J_o^-1 J_p v``; the pr
 
 from __future__ import annotations
 
-import numpy as np
 import mujoco
+import numpy as np
 
 
 def connect_rows(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:

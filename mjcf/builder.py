@@ -160,7 +160,7 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
     main.joint.solref_friction = list(opt.friction_solref)
     main.joint.solimp_friction = list(opt.friction_solimp)
     link_cls = {}
-    for cname, cls in desc.actuator_classes.items():
+    for cname in desc.actuator_classes:
         d = spec.add_default(f"linkage_{cname}", main)
         d.geom.rgba = _CYL
         link_cls[cname] = d

@@ -104,8 +104,8 @@ def values_into_raw(raw: dict, values: dict) -> None:
 
 
 def _eff(desc):
-    from mjcf.builder import build_spec
     from mjcf.analysis import effective_mass_matrix
+    from mjcf.builder import build_spec
 
     spec, _ = build_spec(desc)
     Me = effective_mass_matrix(spec.compile())

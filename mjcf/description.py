@@ -12,6 +12,7 @@ was expected.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import re
@@ -551,6 +552,8 @@ class RigidPayload:
     clamp_damping_ratio: float = 0.02
     #: with a clamp: the fraction of the mass on the clamping spring (the rest rigidly on the platen)
     clamp_mass_fraction: float = 1.0
+    source: str = ""  #: the file it was read from (or a label)
+    raw: dict = field(default_factory=dict, repr=False, compare=False)  #: the parsed TOML
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -563,6 +566,8 @@ class ShearFramePayload:
     storey_height_m: float
     base_m: np.ndarray  #: (3,) base centre on the platen
     footprint_m: np.ndarray  #: (2,)
+    source: str = ""
+    raw: dict = field(default_factory=dict, repr=False, compare=False)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -575,6 +580,8 @@ class CantileverPayload:
     damping_ratio: float
     base_m: np.ndarray
     width_m: float  #: drawing size
+    source: str = ""
+    raw: dict = field(default_factory=dict, repr=False, compare=False)
 
 
 Payload = RigidPayload | ShearFramePayload | CantileverPayload
@@ -652,7 +659,7 @@ def parse_payload(data: dict, src: str = "<payload>") -> Payload:
     p.raw("source", "")
     p.done()
     top.done()
-    return out
+    return dataclasses.replace(out, source=src, raw=data)
 
 
 def payload_mass(payload: Payload | None) -> float:

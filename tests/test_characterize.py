@@ -12,13 +12,12 @@ import numpy as np
 import pytest
 
 import mjcf
-
 from mjcf.description import TABLES_DIR
 from sim.calibrate import programme as P
-from sim.identify import characterize as C
-from sim.report.characterization import write_characterization
 from sim.cli import main
 from sim.effects import build_model
+from sim.identify import characterize as C
+from sim.report.characterization import write_characterization
 
 PUB = C.published(mjcf.load_table("cgs"))  # the paper's Tables 1-2 ([published] in cgs.toml)
 

@@ -5,6 +5,7 @@ import pytest
 import scipy.signal
 
 from sim.signals import estimation as E
+
 FS = 1024.0
 
 

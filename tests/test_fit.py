@@ -8,11 +8,11 @@ import pytest
 import mjcf
 from mjcf.description import parse_table
 from sim.calibrate import fit as F
-from sim.scenario import motions as M
-from sim.loop.simulation import Simulation
-from sim.scenario.reference import reference_from_motions
-from sim.runs.build import build_runfile
 from sim.effects import build_model
+from sim.loop.simulation import Simulation
+from sim.runs.build import build_runfile
+from sim.scenario import motions as M
+from sim.scenario.reference import reference_from_motions
 
 
 def _measured_run(modify, seconds=4.0, seed=3):

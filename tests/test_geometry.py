@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mjcf.description import actuator_strokes, envelope_corners
-from sim.cli import main
 from sim.assess.geometry import forward_kinematics, study
+from sim.cli import main
 
 
 def test_second_order_stroke_matches_closed_form(cgs_desc):

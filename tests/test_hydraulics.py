@@ -213,7 +213,7 @@ def test_closed_valve_holds_and_creeps_through_leakage(table):
     x = np.zeros((1, 12))
     v = np.zeros((1, 12))
     hs0.reset(x, force=np.full((1, 12), FL))
-    for i in range(200):
+    for _ in range(200):
         F = hs0.step(c, x, v)
         v = v + (F - FL) / m * DT
         x = x + v * DT
@@ -312,7 +312,7 @@ def test_spool_saturation_and_slew(table):
     x = np.zeros((1, 12))
     hs.reset(x)
     ys = []
-    for k in range(200):
+    for _ in range(200):
         hs.step(np.full((1, 12), 5.0), x, x)
         ys.append(hs.state.spool[0, 0])
     ys = np.array(ys)

@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
+from sim.cli import main
 from sim.identify import least_squares as I
 from sim.papers import uniaxial as U
-from sim.cli import main
 
 TRUE = dict(M=144e3, K=1.263e6, C=45.9e3, F=26.5e3)
 

@@ -88,7 +88,7 @@ def test_identified_frf_matches_the_plant():
     s = IterationSettings(noise_duration_s=40.0, noise_level=1.0)
     frf = identify_frf(plant, ref, [0, 2], s)
     assert plant.runs == 1
-    for i, fn in ((0, 16.0), (2, 25.0)):
+    for i, _fn in ((0, 16.0), (2, 25.0)):
         f, H = frf[i]
         w = 2 * np.pi * f
         b, a = plant.sos[i]

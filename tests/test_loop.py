@@ -9,9 +9,9 @@ import pytest
 import mjcf
 from sim.cli import main
 from sim.control.tvc import ControllerGains
+from sim.effects import build_model
 from sim.loop.simulation import Simulation
 from sim.scenario.files import build_motions, build_reference, load_scenario
-from sim.effects import build_model
 
 
 @pytest.fixture(scope="module")

@@ -119,7 +119,7 @@ def test_loop_closure_tight_when_driven_hard(cgs_desc, dt):
     signs = [float(np.sign(a.axis[k])) for a, k in zip(cgs_desc.actuators, groups)]
     gap = 0.0
     acc_peak = np.zeros(3)
-    for i in range(int(1.0 / m.opt.timestep)):
+    for _ in range(int(1.0 / m.opt.timestep)):
         t = d.time
         F = amp * np.array([np.sin(w * t), np.cos(w * t), np.sin(w * t)])
         d.ctrl[cgs.actuator_ids] = [F[k] / 4 * s for k, s in zip(groups, signs)]
@@ -194,8 +194,9 @@ def test_every_scene_compiles_and_steps_without_warnings(cgs_desc, payload, foun
     if foundation == "spring":
         desc = dataclasses.replace(desc, foundation=dataclasses.replace(desc.foundation, mode="spring"))
     if payload == "clamped":
-        from mjcf.description import parse_payload
         import tomllib
+
+        from mjcf.description import parse_payload
 
         pl = parse_payload(tomllib.loads(CLAMPED))
     else:

@@ -4,10 +4,28 @@ import numpy as np
 import pytest
 
 from sim.errors import MotionError, UserError
-from sim.scenario.motions import (G, Motion, Peaks, check_limits, response_spectrum, sine, tapered_sine,
-                         triangle, white_noise)
-from sim.scenario.records import (EL_CENTRO_MAPPING, el_centro_1940, el_centro_motions, integrate, process_record,
-                         read_at2, resample, scale_amplitude, time_scale)
+from sim.scenario.motions import (
+    G,
+    Motion,
+    Peaks,
+    check_limits,
+    response_spectrum,
+    sine,
+    tapered_sine,
+    triangle,
+    white_noise,
+)
+from sim.scenario.records import (
+    EL_CENTRO_MAPPING,
+    el_centro_1940,
+    el_centro_motions,
+    integrate,
+    process_record,
+    read_at2,
+    resample,
+    scale_amplitude,
+    time_scale,
+)
 
 FS = 1024.0
 

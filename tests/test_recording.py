@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from sim import cli
-from sim.runs.runfile import read_run, write_run
 from sim.effects import build_model
+from sim.runs.runfile import read_run, write_run
 
 ACTS = [f"{a}{i}" for a in "XYZ" for i in range(1, 5)]
 DOFS = ["x", "y", "z", "rx", "ry", "rz"]

@@ -5,8 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from sim.papers import rice as R
 from sim.effects import build_model
+from sim.papers import rice as R
+
 F = np.linspace(0.1, 120.0, 12000)
 
 

@@ -7,8 +7,8 @@ import zipfile
 import numpy as np
 import pytest
 
-from sim.runs import runfile
 from sim.errors import RunFileError, UserError
+from sim.runs import runfile
 from sim.runs.runfile import CHANNELS, RunFile, read_run, write_run
 
 ACTS = [f"{a}{i}" for a in "XYZ" for i in range(1, 5)]

@@ -15,8 +15,8 @@ import json
 import numpy as np
 import pytest
 
-from sim.cli import main
 from sim.assess.metrics import spectrum_ratio
+from sim.cli import main
 from sim.runs.runfile import read_run
 
 _CACHE = {}

@@ -5,9 +5,11 @@ import math
 import numpy as np
 import pytest
 
+from sim.effects import build_model
 from sim.identify import least_squares as I
 from sim.papers import uniaxial as U
-from sim.effects import build_model
+
+
 def test_description_matches_the_paper():
     desc = U.ucsd_description(13.8)
     tm = build_model(desc)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from mjcf.description import DOFS6
-
 from sim.scenario.motions import response_spectrum
 
 DOFS = DOFS6

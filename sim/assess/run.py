@@ -11,8 +11,8 @@ a rerun recording in a folder.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, is_dataclass
 import sys
+from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 
 import numpy as np
@@ -96,6 +96,7 @@ class ScenarioPlan:
     iteration: dict
     warnings: list
     envelope_reference: object = None  #: the whole demanded motion when ``reference`` is a window of it
+    window: dict = field(default_factory=dict)  #: which part of the motion runs (start_s, end_s, of_record_s, why)
 
     def run(self, *, progress=None) -> RunOutcome:
         """Run the plan; ``progress(text)`` is called once per stage (None: silent)."""
@@ -110,8 +111,10 @@ class ScenarioPlan:
             from sim.control.iteration import IterationSettings, iterate
 
             settings = IterationSettings.from_scenario(self.iteration)
+            if settings.frf == "noise":
+                say(f"measuring the table's FRF ({settings.noise_duration_s:g} s of white noise)")
             results, _drives = iterate(sim, ref, settings, progress=lambda i: say(
-                f"drive iteration {i} of {settings.count}"))
+                "run with the plain controller" if i == 0 else f"drive iteration {i} of {settings.count}"))
             scores = []
             for i, r in enumerate(results):
                 tr = _tracking(r, ref)
@@ -136,6 +139,7 @@ class ScenarioPlan:
             "table": self.desc.name,
             "payload": self.payload.name if self.payload else None,
             "duration_s": float(res.sim_s),
+            "window": dict(self.window),
             "wall_s": float(res.wall_s),
             "realtime_factor": float(res.realtime_factor),
             "complete": res.incomplete_reason is None,
@@ -168,7 +172,7 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
     from sim.effects import build_model
     from sim.loop.analog import RiceGains, RiceSimulation, is_rice
     from sim.loop.simulation import Simulation
-    from sim.scenario.files import build_motions, build_reference, limit_warnings, load_scenario
+    from sim.scenario.files import build_motions, build_window, limit_warnings, load_scenario
 
     sc = scenario if not isinstance(scenario, (str, Path)) else load_scenario(scenario)
     if duration_s is not None and not duration_s > 0:
@@ -198,12 +202,12 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
         if dof not in desc.dofs and np.any(mo.d != 0):
             raise ScenarioError(f"{sc.path or sc.name}: a motion in {dof} but table '{desc.name}' moves only "
                                 f"{', '.join(desc.dofs)}; remove [motion.{dof}] or use a table with {dof}")
-    ref = build_reference(sc, motions, duration_s)
+    ref, window = build_window(sc, motions, duration_s)
     warns = limit_warnings(desc, motions)
     tm = rice.tm if rice else build_model(desc, payload)
     sim = rice or Simulation(tm, gains=gains)
     return ScenarioPlan(scenario=sc, desc=desc, payload=payload, tm=tm, sim=sim, gains=gains, reference=ref,
-                        iteration=it, warnings=warns)
+                        iteration=it, warnings=warns, window=window)
 
 
 def run_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,

@@ -14,8 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mjcf.description import (DOFS6, CantileverPayload, RigidPayload, ShearFramePayload, payload_mass,
-                              parse_payload)
+from mjcf.description import DOFS6, CantileverPayload, RigidPayload, ShearFramePayload, parse_payload, payload_mass
 from sim.errors import UserError
 
 
@@ -144,8 +143,8 @@ def interaction(desc, payload) -> dict:
     specimen mass over the bare table's effective mass (how much of the actuators'
     force goes into the specimen's reaction rather than the platen's motion).
     Returns ``{"oil_columns_hz", "specimen_modes", "close", "inertia_ratio", "warnings"}``."""
-    from sim.identify.characterize import linear_oil_columns
     from sim.effects import build_model
+    from sim.identify.characterize import linear_oil_columns
 
     rigid = _as_rigid(payload)
     oil = linear_oil_columns(desc, rigid)

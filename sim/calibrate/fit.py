@@ -26,9 +26,9 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from mjcf.description import parse_table
-from sim.errors import RunFileError
 from sim.assess.metrics import nrmse
 from sim.effects import build_model
+from sim.errors import RunFileError
 
 FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_displacement")
 
@@ -149,6 +149,7 @@ def fit(measured, raw_table: dict, payload=None, *, candidates=CANDIDATES, round
                 return score(measured, rep)[0]
 
             lo, hi = c.bounds
+            say(f"round {rnd + 1}: trying {c.name} ({lo:g}..{hi:g} {c.unit})")
             res = minimize_scalar(obj, bounds=(lo, hi), method="bounded",
                                   options={"xatol": xatol_frac * (hi - lo), "maxiter": 25})
             tried.setdefault(c.name, []).append({"round": rnd, "value": float(res.x), "residual": float(res.fun)})

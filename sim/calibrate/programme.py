@@ -28,7 +28,6 @@ from sim.identify.characterize import (
     summarize,
 )
 
-
 CAL_CLASSES = ("longitudinal", "lateral", "vertical")
 CAL_CLASS_DOF = {"longitudinal": "x", "lateral": "y", "vertical": "z"}
 

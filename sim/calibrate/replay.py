@@ -28,24 +28,24 @@ class ReplayOutcome:
 def replay(source, *, table: str | None = None, payload: str | None = None, progress: bool = False) -> ReplayOutcome:
     """Replay ``source`` (a run-file path or :class:`~sim.runs.runfile.RunFile`) open loop.
 
-    ``table``/``payload``: override the run's ``meta.table``/``meta.payload``.
+    ``table``/``payload``: override the descriptions the run carries
+    (``meta.table_description``/``meta.payload_description``, else the stock files named
+    by ``meta.table``/``meta.payload``).
     """
-    import mjcf
     from sim.assess.metrics import channel_residuals
     from sim.control.tvc import ControllerGains
     from sim.effects import build_model
     from sim.loop.simulation import Simulation
     from sim.runs.build import build_runfile
-    from sim.runs.runfile import read_run
+    from sim.runs.runfile import payload_of, read_run, table_of
 
     name = str(source) if isinstance(source, (str, Path)) else "<run>"
     src = read_run(source, require=("valve_command",)) if isinstance(source, (str, Path)) else source
-    desc = mjcf.load_table(table or src.meta["table"])
+    desc = table_of(src, table)  # --table, else the description the run carries, else the stock file
     if list(src.actuators) != list(desc.actuator_names):
         raise RunFileError(f"{name}: actuators {src.actuators} do not match table '{desc.name}' "
                            f"({list(desc.actuator_names)}); give --table")
-    pay = payload if payload is not None else src.meta.get("payload")
-    pl = mjcf.load_payload(pay) if pay else None
+    pl = payload_of(src, payload)
     tm = build_model(desc, pl)
     sim = Simulation(tm, gains=ControllerGains(rate_hz=src.sample_rate_hz))
     res = sim.run(valve_command=src.valve_command, progress=progress)

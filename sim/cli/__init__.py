@@ -10,14 +10,12 @@ import argparse
 import json
 import sys
 
-from sim.errors import user_errors
 from sim.effects import build_model
+from sim.errors import user_errors
 
 
 # ------------------------------------------------------------------ model
 def cmd_model(args) -> int:
-    import numpy as np
-
     import mjcf
     from mjcf.builder import payload_mass
 
@@ -95,7 +93,7 @@ def cmd_calibrate(args) -> int:
     if args.json:
         print(json.dumps({k: res[k] for k in ("values", "before", "after", "target")}, indent=2))
         return 0
-    print(f"effective-mass calibration of {desc.name} against seed 000 Table 2")
+    print(f"effective-mass calibration of {desc.name} against its published effective masses")
     print(f"  {'dof':4s} {'target':>10s} {'before':>10s} {'after':>10s}")
     for k in res["target"]:
         print(f"  {k:4s} {res['target'][k] / 1e3:10.2f} {res['before'][k] / 1e3:10.2f} {res['after'][k] / 1e3:10.2f}")
@@ -122,16 +120,19 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=cmd_calibrate)
 
-    from sim.cli import characterize as characterize_cli, identify as identify_cli, run as run_cli, view as view_cli
+    from sim.cli import characterize as characterize_cli
     from sim.cli import feasibility as feasibility_cli
+    from sim.cli import identify as identify_cli
+    from sim.cli import run as run_cli
+    from sim.cli import view as view_cli
 
     run_cli.add_parsers(sub)  # run, replay, fit
     from sim.cli import geometry as geometry_cli
 
     geometry_cli.add_parsers(sub)  # geometric nonlinearity
     view_cli.add_parsers(sub)  # rerun recordings of run files
-    characterize_cli.add_parsers(sub)  # the CGS identification programme (and rice/ucsd dispatch)
-    identify_cli.add_parsers(sub)  # uni-axial identification, Rice/UCSD programmes
+    characterize_cli.add_parsers(sub)  # the identification programme each table declares
+    identify_cli.add_parsers(sub)  # least squares on run files
     from sim.cli import effects as effects_cli
 
     effects_cli.add_parsers(sub)  # the effect library and a table's parameters

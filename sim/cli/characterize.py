@@ -1,77 +1,68 @@
-"""``shaketable characterize``: the virtual identification programme (sim/identify/characterize.py)."""
+"""``shaketable characterize``: the identification programme a table declares
+(``[published] programme``: the 6-DOF programme of sim/identify/characterize.py, or a
+paper's, sim/papers/programmes.py), run on the model; writes ``characterization.json``,
+``report.md`` and figures (sim/report/programmes.py)."""
 
 from __future__ import annotations
 
 import json
-import sys
-import time
 
-from sim.runs.files import jsonable, out_dir
-
-
-def _progress(show: bool):
-    if not show:
-        return None
-    t0 = time.perf_counter()
-
-    def cb(done, total):
-        sys.stderr.write(f"\r  tests {done}/{total}  ({time.perf_counter() - t0:5.0f} s)")
-        sys.stderr.flush()
-        if done == total:
-            sys.stderr.write("\n")
-
-    return cb
+from sim.runs.files import jsonable
 
 
 def cmd_characterize(args) -> int:
-    from sim.identify import characterize as C
-    show = sys.stderr.isatty() and not args.json
-    from sim.papers.uniaxial import PROGRAMMES
+    from sim.cli.progress import Progress
+    from sim.report.programmes import characterize_table
 
-    if args.table in PROGRAMMES:
-        # the uni-axial tables of seeds 001/002 run their papers' own programmes (sim/papers/uniaxial.py)
-        if args.calibrate or args.payload:
-            raise C.CharacterizeError(f"characterize {args.table} runs its paper's programme; "
-                                      "--calibrate and --payload are for the CGS programme")
-        import argparse
-
-        from sim.cli.identify import cmd_uniaxial
-
-        return cmd_uniaxial(argparse.Namespace(table=args.table, out=args.out, workers=args.workers or 2,
-                                               quick=args.quick))
+    prog = Progress(enabled=not args.json, unit="tests")
     if args.calibrate:
-        return _calibrate(args, show)
-    from sim.report.characterization import write_characterization
-
-    out_dir(args.out)  # checked before the work starts
-    s = C.characterize(args.table, args.payload, quick=args.quick, workers=args.workers, progress=_progress(show))
-    write_characterization(args.out, s)
-    s.pop("_results", None)
+        return _calibrate(args, prog)
+    s = characterize_table(args.table, args.payload, out=args.out, quick=args.quick, workers=args.workers,
+                           progress=prog.count_callback(), stage=prog.text_callback())
+    prog.close()
     if args.json:
         print(json.dumps(jsonable(s), indent=2, allow_nan=False))
         return 0
-    print(f"characterisation of {s['table']}" + (f" + {s['payload']}" if s["payload"] else "")
-          + f" ({s['mode']}): {s['wall_s']:.0f} s wall, {s['sim_s']:.0f} s simulated")
+    print(f"characterisation of {s['table']}" + (f" + {s['payload']}" if s.get("payload") else "")
+          + f" ({s['mode']}, programme {s['programme']}): {s['wall_s']:.0f} s wall"
+          + (f", {s['sim_s']:.0f} s simulated" if s.get("sim_s") else ""))
+    if "comparison" in s:
+        _print_comparison(s)
+    if "cases" in s:
+        print(f"  oil column (model FRF, optimal gains): x {s['oil_column_hz']['x']:.2f} Hz "
+              f"(analytical {s['oil_column_analytical_hz']['x']:.2f} Hz)")
+        print(f"  {'case':28s} {'max |T| error 0-100 Hz':>24s}")
+        for c in s["cases"]:
+            print(f"  {c['case']:28s} {100 * c['max_error_0_100']:8.1f} % at {c['f_max_error_hz']:5.1f} Hz")
+    if "identification" in s:
+        i = s["identification"]
+        print(f"  identified ({i['test_set']} tests, least squares): M_e {i['M_e_kg'] / 1e3:.1f} t, "
+              f"K_e {i['K_e_N_per_m'] / 1e6:.3f} MN/m, C_e {i['C_e'] / 1e3:.1f} kN (s/m)^{i['alpha']:g}, "
+              f"F_mu {i['F_mu_N'] / 1e3:.2f} kN")
+    print(f"  wrote {args.out}/characterization.json, {args.out}/report.md and {len(s.get('figures', []))} figures")
+    return 0
+
+
+def _print_comparison(s: dict) -> None:
     print(f"  {'quantity':34s} {'dof':4s} {'paper':>9s} {'model':>9s} {'error':>8s}")
     for r in s["comparison"]:
         flag = "" if r["within"] is None else ("" if r["within"] else "  <- outside tolerance")
         print(f"  {r['quantity']:34s} {r['dof']:4s} {r['paper']:9.4g} {r['model']:9.4g} {100 * r['error']:+7.2f} %{flag}")
-    if s["failed_tests"]:
-        for f in s["failed_tests"]:
-            print(f"  test did not complete: {f}")
-    if s["payload"]:
+    for f in s.get("failed_tests", []):
+        print(f"  test did not complete: {f}")
+    if s.get("payload"):
         print("  (with a payload the paper's numbers are the bare table's: the differences are the payload's effect)")
-    print(f"  wrote {args.out}/characterization.json and {args.out}/report.md")
-    return 0
 
 
-def _calibrate(args, show) -> int:
+def _calibrate(args, prog) -> int:
     from sim.calibrate import programme as P
     from sim.identify import characterize as C
     if args.payload:
         raise C.CharacterizeError("--calibrate works on the bare table; leave out --payload")
     desc, _ = C.load_inputs(args.table, None)
-    cal = P.calibrate(args.table, quick=args.quick, workers=args.workers, progress=_progress(show))
+    prog.stage(f"calibrating {args.table} against its published values")
+    cal = P.calibrate(args.table, quick=args.quick, workers=args.workers, progress=prog.count_callback())
+    prog.close()
     P.write_calibration(desc.source, cal)
     out = {"dead_volume_m3": cal["dead_volume_m3"], "seal_friction_n": cal["seal_friction_n"],
            "oil_column_hz_before": cal["before"]["oil_column_hz"],
@@ -84,7 +75,7 @@ def _calibrate(args, show) -> int:
         print(json.dumps(jsonable(out), indent=2, allow_nan=False))
         return 0
     pub = C.published(desc)
-    print(f"calibrated {desc.name} against its published oil columns and friction ({pub.source}):")
+    print(f"calibrated {desc.name} against its published oil columns and friction:")
     for c, v in cal["dead_volume_m3"].items():
         print(f"  actuator_class.{c}.dead_volume_a/b_m3 = {v:.4e}")
     for c, v in cal["seal_friction_n"].items():
@@ -101,12 +92,15 @@ def _calibrate(args, show) -> int:
 
 
 def add_parsers(sub) -> None:
-    p = sub.add_parser("characterize", help="run the identification programme of the paper on the model")
+    p = sub.add_parser("characterize", help="run the table's identification programme on the model "
+                                            "(characterization.json, report.md, figures)")
     p.add_argument("table", help="table name in scenarios/tables (e.g. cgs) or a .toml path")
     p.add_argument("--payload", help="payload name in scenarios/payloads or a .toml path")
     p.add_argument("--out", default="characterization", help="output directory (default: ./characterization)")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
-    p.add_argument("--quick", action="store_true", help="shorter records (CI); coarser estimates")
+    p.add_argument("--quick", action="store_true",
+                   help="shorter records (CI), coarser estimates; a frf_random table: 3 segments per FRF; "
+                        "ls_identification: the periodic tests only")
     p.add_argument("--workers", type=int, default=None, help="parallel test processes (default: CPU count)")
     p.add_argument("--calibrate", action="store_true",
                    help="choose dead volumes and seal friction from the virtual tests and rewrite the table file")

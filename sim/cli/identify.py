@@ -1,10 +1,10 @@
-"""``shaketable identify`` (seed 002 least squares on run files) and ``shaketable uniaxial``
-(the Rice and UCSD papers' programmes on the model, paper-vs-model reports)."""
+"""``shaketable identify``: a uni-axial table's mechanical model by least squares on run
+files (the LHPOST paper's method). The papers' whole programmes run under
+``shaketable characterize`` (sim/cli/characterize.py)."""
 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 from sim.errors import UserError
@@ -14,10 +14,10 @@ def add_parsers(sub) -> None:
     p = sub.add_parser("identify", help="identify a uni-axial table's mechanical model from run files")
     p.add_argument("runs", nargs="+", metavar="RUN", help="run files (.run.npz), pooled")
     p.add_argument("--model", required=True, choices=["ucsd-ls"],
-                   help="ucsd-ls: M u'' + K u + C |u'|^alpha sign u' + F sign u' = F_act by least squares (seed 002)")
-    p.add_argument("--alpha", type=float, default=0.5, help="power-law exponent (default 0.5, seed 002)")
+                   help="ucsd-ls: M u'' + K u + C |u'|^alpha sign u' + F sign u' = F_act by least squares (the LHPOST paper)")
+    p.add_argument("--alpha", type=float, default=0.5, help="power-law exponent (default 0.5, as the LHPOST paper)")
     p.add_argument("--scan-alpha", action="store_true", help="also print the error for alpha = 0.1 ... 1.0")
-    p.add_argument("--ce", type=float, metavar="N(s/m)^a", help="constrain C_e to this value (seed 002: 45900)")
+    p.add_argument("--ce", type=float, metavar="N(s/m)^a", help="constrain C_e to this value (the LHPOST paper: 45900)")
     p.add_argument("--weights", default="force", choices=["force", "unit", "velocity", "velocity_sqrt"],
                    help="per-test weights (default force: 1/int F^2 dt, every test counts alike)")
     p.add_argument("--accel-lowpass", "--force-lowpass", dest="accel_lowpass", type=float, metavar="HZ",
@@ -29,16 +29,6 @@ def add_parsers(sub) -> None:
     p.add_argument("--no-trim", action="store_true", help="keep the rest before and after the motion")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_identify)
-
-    u = sub.add_parser("uniaxial", help="run the Rice (seed 001) or UCSD (seed 002) programme on the model, "
-                                        "write a paper-vs-model report")
-    from sim.papers.uniaxial import PROGRAMMES
-
-    u.add_argument("table", choices=sorted(PROGRAMMES))
-    u.add_argument("--out", default=None, help="output folder (default: uniaxial_<table>)")
-    u.add_argument("--workers", type=int, default=2)
-    u.add_argument("--quick", action="store_true", help="rice: 3 segments per FRF; ucsd: periodic tests only")
-    u.set_defaults(func=cmd_uniaxial)
 
 
 def cmd_identify(args) -> int:
@@ -77,16 +67,4 @@ def cmd_identify(args) -> int:
         print(f"    {e:8.4f}  {name}")
     for s in scan:
         print(f"  alpha {s.alpha:.1f}: error {s.error:.4f}")
-    return 0
-
-
-def cmd_uniaxial(args) -> int:
-    from sim.papers.uniaxial import PROGRAMMES
-    from sim.runs.files import out_dir, write_text_atomic
-
-    out = out_dir(args.out or f"uniaxial_{args.table}")
-    lines = PROGRAMMES[args.table](out, workers=args.workers, quick=args.quick)
-    write_text_atomic(out / "report.md", "\n".join(lines) + "\n")
-    print("\n".join(lines))
-    print(f"wrote {out / 'report.md'}", file=sys.stderr)
     return 0

@@ -11,18 +11,19 @@ import numpy as np
 from sim.assess.run import SCHEMA
 from sim.errors import RunFileError, UserError
 from sim.runs.files import jsonable, out_dir, write_json_atomic
-from sim.effects import build_model
+
 
 def _progress(args):
-    """One line per stage on stderr (a terminal or a log alike), none with --json."""
-    if getattr(args, "json", False):
-        return None
-    return lambda text: print(f"  {text}", file=sys.stderr, flush=True)
+    """Stage lines on stderr (a terminal or a log alike), a bar on a terminal; silent with --json."""
+    from sim.cli.progress import Progress
+
+    return Progress(enabled=not getattr(args, "json", False))
 
 
 def cmd_run(args) -> int:
     from sim.assess.run import plan_scenario
 
+    prog = _progress(args)
     plan = plan_scenario(args.scenario, duration_s=args.duration, iterations=args.iterations)
     sensors = None
     if getattr(args, "measure", None) is not None:  # a bad sensor model fails before anything is written
@@ -37,7 +38,8 @@ def cmd_run(args) -> int:
         from sim.report import rerun
 
         target = rerun.RrdTarget.open(args.rrd)  # fails early (exit 2) if unwritable; rerun loads beside the run
-    outcome = plan.run(progress=_progress(args))
+    outcome = plan.run(progress=prog.text_callback())
+    prog.close()
     if target is not None:
         target.write_run(outcome.run, outcome.tm)
         outcome.summary["recording"] = str(target.path)
@@ -51,7 +53,7 @@ def cmd_run(args) -> int:
     if args.json:
         print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
     else:
-        _print_summary(summary)
+        _print_summary(summary, prog.elapsed_s)
     res = outcome.result
     if res.incomplete_reason:
         print(f"error: {res.incomplete_reason}; kept {res.sim_s:.3f} s in {summary['run_file']} (marked incomplete)",
@@ -60,15 +62,24 @@ def cmd_run(args) -> int:
     return 0
 
 
-def _print_summary(s: dict) -> None:
+def _print_summary(s: dict, command_wall_s: float | None = None) -> None:
+    runs = 1 + s.get("drive_iterations", {}).get("count", 0)
+    last = "" if runs == 1 else " (the chosen run)"
     print(f"{s['scenario']}: {s['table']}" + (f" + {s['payload']}" if s["payload"] else "")
-          + f", {s['duration_s']:.2f} s simulated in {s['wall_s']:.1f} s ({s['realtime_factor']:.2f}x real time)")
+          + f", {s['duration_s']:.2f} s simulated in {s['wall_s']:.1f} s{last} ({s['realtime_factor']:.2f}x real time)")
+    if command_wall_s:
+        print(f"  whole command: {command_wall_s:.1f} s wall for {runs} run(s) of {s['duration_s']:.2f} s"
+              + (" and the FRF measurement" if s.get("drive_iterations", {}).get("frf") == "noise" and runs > 1 else "")
+              + f" ({s['duration_s'] / command_wall_s:.2f}x real time)")
     print(f"  {'dof':4s} {'NRMSE d':>8s} {'NRMSE a':>8s} {'PGA ratio':>9s} {'spectrum ratio (0.5-20 Hz)':>28s}")
     for dof, e in s["tracking"].items():
         sr = (f"{e['spectrum_ratio_min']:.2f} .. {e['spectrum_ratio_max']:.2f}"
               if "spectrum_ratio_min" in e else "-")
         print(f"  {dof:4s} {100 * e['nrmse_displacement']:7.2f}% {100 * e['nrmse_acceleration']:7.1f}% "
               f"{e['pga_ratio']:9.3f} {sr:>28s}")
+    w = s.get("window")
+    if w and (w["start_s"] > 0 or w["end_s"] < w["of_record_s"] - 1e-6):
+        print(f"  ran {w['start_s']:.1f}-{w['end_s']:.1f} s of the {w['of_record_s']:.1f} s motion ({w['why']})")
     fe = s.get("feasibility")
     if fe is not None:
         from sim.cli.feasibility import verdict_lines
@@ -92,8 +103,10 @@ def cmd_replay(args) -> int:
     from sim.calibrate.replay import replay
     from sim.runs.runfile import write_run
 
+    prog = _progress(args)
     out = out_dir(args.out)
-    rep = replay(args.run, table=args.table, payload=args.payload, progress=sys.stderr.isatty() and not args.json)
+    prog.stage(f"replaying {args.run} open loop")
+    rep = replay(args.run, table=args.table, payload=args.payload, progress=prog.enabled and prog.tty)
     res = rep.result
     stem = Path(args.run).name[: -len(".run.npz")] if args.run.endswith(".run.npz") else Path(args.run).stem
     path = out / f"{stem}.replay.run.npz"
@@ -105,7 +118,8 @@ def cmd_replay(args) -> int:
     if args.json:
         print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
     else:
-        print(f"replayed {args.run} open loop ({res.sim_s:.2f} s, {res.realtime_factor:.2f}x real time) -> {path}")
+        print(f"replayed {args.run} open loop ({res.sim_s:.2f} s, {res.realtime_factor:.2f}x real time; "
+              f"whole command {prog.elapsed_s:.1f} s) -> {path}")
         for ch, cols in rep.residual_nrmse.items():
             vals = ", ".join(f"{k} {100 * v:.2f}%" for k, v in cols.items() if np.isfinite(v))
             if vals:
@@ -114,17 +128,14 @@ def cmd_replay(args) -> int:
 
 
 def cmd_fit(args) -> int:
-    import mjcf
     from sim.calibrate import fit as F
-    from sim.runs.runfile import read_run
+    from sim.runs.runfile import payload_of, read_run, table_of
 
     run = read_run(args.run, require=("valve_command",))
-    table = args.table or run.meta["table"]
-    desc = mjcf.load_table(table)
+    desc = table_of(run, args.table)  # --table, else the description the run carries, else the stock file
     if list(run.actuators) != list(desc.actuator_names):
         raise RunFileError(f"{args.run}: actuators {run.actuators} do not match table '{desc.name}'; give --table")
-    pay = args.payload if args.payload is not None else run.meta.get("payload")
-    payload = mjcf.load_payload(pay) if pay else None
+    payload = payload_of(run, args.payload)
     cands = F.CANDIDATES
     if args.effects:
         names = [x.strip() for x in args.effects.split(",") if x.strip()]
@@ -134,8 +145,10 @@ def cmd_fit(args) -> int:
             raise UserError(f"unknown effect '{bad[0]}'; candidates: {', '.join(known)}")
         cands = tuple(known[n] for n in names)
     out = out_dir(args.out)
-    log = (lambda m: print(m, file=sys.stderr)) if not args.json else None
-    rep = F.fit(run, desc.raw, payload, candidates=cands, rounds=args.rounds, log=log)
+    prog = _progress(args)
+    prog.stage(f"fitting {args.run}: replays per candidate effect, {args.rounds} round(s) at most")
+    rep = F.fit(run, desc.raw, payload, candidates=cands, rounds=args.rounds,
+                log=(lambda m: prog.stage(m.strip())) if prog.enabled else None)
     toml_path = out / f"{desc.name}_calibrated.toml"
     note = ("calibrated: shaketable fit of " + Path(args.run).name + "; effects added: "
             + (", ".join(f"{e['effect']} = {e['value']:.6g} {e['unit']}" for e in rep["effects_added"]) or "none"))
@@ -149,15 +162,15 @@ def cmd_fit(args) -> int:
               f"{100 * rep['baseline_residual']:.2f} % -> {100 * rep['final_residual']:.2f} %")
         for e in rep["effects_added"]:
             print(f"  added {e['effect']} = {e['value']:.6g} {e['unit']} ({e['what']})")
-        print(f"  wrote {toml_path} and {out / 'fit.json'}")
+        print(f"  wrote {toml_path} and {out / 'fit.json'} ({prog.elapsed_s:.0f} s)")
     return 0
 
 
 def add_parsers(sub) -> None:
     f = sub.add_parser("fit", help="replay a measured run, find the residual and add the effect the model lacks")
     f.add_argument("run", help="a measured .run.npz with valve_command")
-    f.add_argument("--table", help="table (default: the run's meta.table)")
-    f.add_argument("--payload", help="payload (default: the run's meta.payload)")
+    f.add_argument("--table", help="table (default: the description the run carries, else its meta.table)")
+    f.add_argument("--payload", help="payload (default: the description the run carries; 'none' for a bare table)")
     f.add_argument("--effects", help="comma-separated candidate effects (default: all)")
     f.add_argument("--rounds", type=int, default=2, help="effects to add at most (default 2)")
     f.add_argument("--out", default="out", help="output folder")
@@ -167,7 +180,9 @@ def add_parsers(sub) -> None:
     r = sub.add_parser("run", help="simulate a scenario and write its run file and summary")
     r.add_argument("scenario", help="scenario name in scenarios/ or a .toml path")
     r.add_argument("--out", default="out", help="output folder (default: out)")
-    r.add_argument("--duration", type=float, default=None, help="simulate only the first S seconds")
+    r.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="simulate S seconds: of an earthquake record its strongest S s (tapered), "
+                        "of other motions the first S s")
     r.add_argument("--json", action="store_true", help="print the summary as JSON")
     r.add_argument("--rrd", metavar="FILE", help="also write a rerun recording")
     r.add_argument("--iterations", type=int, default=None,
@@ -180,8 +195,8 @@ def add_parsers(sub) -> None:
 
     p = sub.add_parser("replay", help="replay a run file's valve commands open loop through the model")
     p.add_argument("run", help="a .run.npz file with valve_command")
-    p.add_argument("--table", help="table (default: the run's meta.table)")
-    p.add_argument("--payload", help="payload (default: the run's meta.payload)")
+    p.add_argument("--table", help="table (default: the description the run carries, else its meta.table)")
+    p.add_argument("--payload", help="payload (default: the description the run carries; 'none' for a bare table)")
     p.add_argument("--out", default="out", help="output folder")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_replay)

@@ -3,8 +3,9 @@
     shaketable view RUN.run.npz --rrd FILE.rrd [--compare OTHER.run.npz] [--table T]
                     [--payload P] [--rate HZ] [--full-rate] [--spawn | --connect [URL]]
 
-The geometry comes from the table model named in the run's meta (or ``--table``), with
-the run's payload (or ``--payload``; ``--payload none`` for a bare table). ``--compare``
+The geometry comes from the table description the run carries (``meta.table_description``;
+the stock table named by ``meta.table`` for runs without it) or ``--table``, with the run's
+payload likewise (or ``--payload``; ``--payload none`` for a bare table). ``--compare``
 lays a second run beside the first (its series, the residual per channel and a ghost
 platen). Time series keep every n-th sample, n the largest that keeps at least 250 Hz
 (every 4th of a 1024 Hz run); ``--full-rate`` keeps every sample (a file ~3x larger).
@@ -22,14 +23,13 @@ from __future__ import annotations
 
 import json
 
-from sim.errors import UserError
 from sim.effects import build_model
+from sim.errors import UserError
 
 
 def cmd_view(args) -> int:
-    import mjcf
     from sim.report import rerun as recording
-    from sim.runs.runfile import read_run
+    from sim.runs.runfile import payload_of, read_run, table_of
 
     if not args.rrd and not args.spawn and args.connect is None:
         raise UserError("view needs a target: give --rrd FILE.rrd, --spawn or --connect [URL]")
@@ -38,12 +38,8 @@ def cmd_view(args) -> int:
                                       series_rate_hz=None if args.full_rate else recording.DEFAULT_SERIES_RATE_HZ)
     run = read_run(args.run)
     compare = read_run(args.compare) if args.compare else None
-    table = args.table or run.meta["table"]
-    desc = mjcf.load_table(table)
-    pay = args.payload if args.payload is not None else run.meta.get("payload")
-    if isinstance(pay, str) and pay.lower() in ("", "none"):
-        pay = None
-    payload = mjcf.load_payload(pay) if pay else None
+    desc = table_of(run, args.table)  # --table, else the description the run carries, else the stock file
+    payload = payload_of(run, args.payload)
     tm = build_model(desc, payload)
     path = target.write_run(run, tm, compare=compare)
     out = {"run": str(args.run), "compare": args.compare, "table": desc.name,

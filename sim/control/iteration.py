@@ -21,7 +21,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from mjcf.description import DOFS6 as DOFS
 from sim.scenario.reference import Reference, reference_from_motions
@@ -66,9 +65,13 @@ def _spectral_derivatives(d: np.ndarray, rate: float) -> tuple[np.ndarray, np.nd
 
 
 def _welch_frf(x: np.ndarray, y: np.ndarray, rate: float, nperseg: int):
-    fw, Pxx = signal.welch(x, fs=rate, nperseg=min(nperseg, len(x)))
-    _, Pxy = signal.csd(x, y, fs=rate, nperseg=min(nperseg, len(x)))
-    return fw, Pxy / np.maximum(Pxx, 1e-30)
+    """H1 estimate (Hann, half overlap, mean removed) by the project's one estimator,
+    :func:`sim.signals.estimation.frf`; bins without input power (0/0 at DC) read 0."""
+    from sim.signals.estimation import frf
+
+    nps = min(nperseg, len(x))
+    r = frf(x, y, rate, nperseg=nps, overlap=(nps // 2) / nps, window="hann", estimator="H1")
+    return r.f, np.where(np.isfinite(r.H), r.H, 0.0)
 
 
 def identify_frf(sim, target: Reference, dofs: list[int], s: IterationSettings) -> dict:

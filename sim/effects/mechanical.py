@@ -553,7 +553,7 @@ class FoundationMode(Effect):
         if fd is None:
             fd = _make_foundation(spec, desc)
         fd.mass = v["mass_kg"]
-        for k, ax in enumerate("xyz"):
+        for ax in "xyz":
             f = v["frequency_z_hz"] if ax == "z" and v["frequency_z_hz"] > 0 else v["frequency_hz"]
             w = 2 * math.pi * f
             j = spec.joint(f"foundation_{ax}")

@@ -43,16 +43,15 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import os
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from mjcf.description import DOFS6
-from sim.signals import estimation as E
-from sim.errors import UserError, user_errors
 from sim.effects import build_model
+from sim.errors import UserError, user_errors
+from sim.signals import estimation as E
 
 DOFS = DOFS6
 G = 9.81  # m/s^2, as the table description's gravity
@@ -99,6 +98,7 @@ class Published:
     servovalve: dict | None = None  #: K, tau_s, wn_hz, zeta
     friction_fraction: float | None = None  #: friction / capability
     labels: dict = field(default_factory=dict)  #: how reports name each source ("Table 1")
+    programme: str | None = None  #: which characterize programme fits this table (default: this module's)
 
     def label(self, key: str) -> str:
         return str(self.labels.get(key, "published"))
@@ -396,24 +396,10 @@ def programme_jobs(desc, payload_name, dur: Durations, *, parts=("valve", "oil",
 
 
 def run_jobs(jobs: list[dict], workers: int | None = None, progress=None) -> list[dict]:
-    workers = workers or min(len(jobs), os.cpu_count() or 1)
-    if workers <= 1:
-        out = []
-        for j in jobs:
-            out.append(run_test(j))
-            if progress:
-                progress(len(out), len(jobs))
-        return out
-    import multiprocessing as mp
+    """The tests ``jobs`` (from :func:`programme_jobs`) in parallel, results in the jobs' order."""
+    from sim.parallel import map_jobs
 
-    ctx = mp.get_context("fork")
-    out = []
-    with ctx.Pool(workers) as pool:
-        for r in pool.imap_unordered(run_test, jobs):
-            out.append(r)
-            if progress:
-                progress(len(out), len(jobs))
-    return out
+    return map_jobs(run_test, jobs, workers=workers, progress=progress)
 
 
 def summarize(results: list[dict], desc, payload) -> dict:

@@ -179,8 +179,8 @@ class Simulation:
         ``fused_s`` and no separate hydraulics/controller split).
         """
         if fast:
-            from sim.loop import _kernels as FL
             from hydraulics import _layout as HL
+            from sim.loop import _kernels as FL
         if (reference is None) == (valve_command is None):
             raise ValueError("give exactly one of reference and valve_command")
         tm, m, d, hs = self.tm, self.m, self.d, self.hs

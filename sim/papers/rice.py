@@ -42,9 +42,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mjcf.description import REPO_ROOT as ROOT  # noqa: E402
 from sim.control.analog import Conditioning, Gains, RiceController  # noqa: F401 (re-exported for the paper's code)
 
-from mjcf.description import REPO_ROOT as ROOT  # noqa: E402
 TABLE_FILE = ROOT / "scenarios" / "tables" / "rice.toml"
 
 # ------------------------------------------------------------------ seed 001 figures

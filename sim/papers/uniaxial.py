@@ -30,9 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from mjcf.description import DOFS6, load_payload, parse_table
+from sim.effects import build_model
 from sim.loop.analog import RICE_FS_HZ, RICE_RATE_HZ, RiceGains, RiceSimulation, _apply_parameter_set, is_rice  # noqa: F401
 from sim.papers import rice as R
-from sim.effects import build_model
+
 RICE_NPERSEG = 2 ** 14
 RICE_SEGMENTS = 11
 
@@ -202,15 +203,12 @@ def run_rice_case(case: RiceCase, n_segments: int = RICE_SEGMENTS, rms_m_s2: flo
             "rms_error_0_100": float(np.sqrt((err ** 2).mean())), "wall_s": run.wall_s}
 
 
-def run_rice_programme(cases=None, workers: int = 2, **kw) -> list[dict]:
-    cases = cases or rice_cases()
-    if workers <= 1:
-        return [run_rice_case(c, **kw) for c in cases]
-    from concurrent.futures import ProcessPoolExecutor
+def run_rice_programme(cases=None, workers: int = 2, progress=None, **kw) -> list[dict]:
     from functools import partial
 
-    with ProcessPoolExecutor(workers) as ex:
-        return list(ex.map(partial(run_rice_case, **kw), cases))
+    from sim.parallel import map_jobs
+
+    return map_jobs(partial(run_rice_case, **kw), cases or rice_cases(), workers=workers, progress=progress)
 
 
 # ------------------------------------------------------------------ UCSD (seed 002)
@@ -450,7 +448,7 @@ def write_measured_run(meas: dict, desc, name: str, out_dir):
     """A run file (512 Hz) of the measured channels: what the LHPOST recorder would give."""
     from pathlib import Path
 
-    from sim.runs.runfile import FORMAT, RunFile, write_run
+    from sim.runs.runfile import FORMAT, RunFile, description_meta, write_run
 
     n = len(meas["t"])
     z6 = lambda col: np.column_stack([col] + [np.zeros(n)] * 5)  # noqa: E731
@@ -463,6 +461,7 @@ def write_measured_run(meas: dict, desc, name: str, out_dir):
             "description": f"{name}: seed 002 test on the ucsd model (sim.papers.uniaxial), measured with the LHPOST DAQ "
                            "model; actuator_force holds the total measured "
                            "force in column E (W zero)"}
+    meta.update(description_meta("table", desc.source, desc.raw))  # the hold-down pressure's K_e and F_mu
     run = RunFile(t=np.arange(n) / meas["fs"], meta=meta, actuator_force=force, table_displacement=z6(meas["disp"]),
                   table_velocity=z6(meas["vel"]), table_acceleration=z6(meas["acc"]),
                   reference=z6(meas.get("reference", meas["disp"])))
@@ -472,18 +471,14 @@ def write_measured_run(meas: dict, desc, name: str, out_dir):
 
 
 def ucsd_programme(names=None, pressure_mpa: float = 13.8, *, workers: int = 2, seed: int = 0, out_dir=None,
-                   cycles: float = 2.0, presliding_m: float | None = None) -> list[dict]:
-    names = names or ucsd_tests()
+                   cycles: float = 2.0, presliding_m: float | None = None, progress=None) -> list[dict]:
     from functools import partial
+
+    from sim.parallel import map_jobs
 
     fn = partial(ucsd_run_test, pressure_mpa=pressure_mpa, seed=seed, out_dir=out_dir, cycles=cycles,
                  presliding_m=presliding_m)
-    if workers <= 1:
-        return [fn(n) for n in names]
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(workers) as ex:
-        return list(ex.map(fn, names))
+    return map_jobs(fn, names or ucsd_tests(), workers=workers, progress=progress)
 
 
 def ucsd_records(results) -> list:
@@ -561,7 +556,6 @@ def ucsd_identification(results, *, accel_lowpass_hz: float = 100.0, deadband_m_
 def ucsd_report(results, ident: dict | None = None) -> list[str]:
     from sim.identify import least_squares as I
     ident = ident or ucsd_identification(results)
-    P = PAPER_PARAMS
     paper = {"triangular": (143.9, 1.261), "sinusoidal": (143.9, 1.246), "periodic": (144.0, 1.263),
              "El Centro": (146.0, 1.238), "WN 3-7 % g": (143.6, 2.024), "WN 10-13 % g": (144.0, 1.405)}
     paper_fmu = {"periodic": 26.5, "El Centro": 28.3, "WN 3-7 % g": 26.1, "WN 10-13 % g": 24.4}
@@ -599,24 +593,3 @@ def ucsd_report(results, ident: dict | None = None) -> list[str]:
                          f"{vals[3]:.2f} ({p[4]}) | {vals[4]:.1f} ({p[5]}) | {100 * rel:.2f} % | "
                          f"{h['f_peak_hz']:.3f}, {h['R_peak']:.2f} ({100 * (h['R_peak'] / vals[2] - 1):+.0f} % vs A_m) |")
     return lines
-
-
-# ------------------------------------------------------------------ the programmes, by table
-def rice_programme_report(out, *, workers: int = 2, quick: bool = False) -> list[str]:
-    """Seed 001's programme on the model; returns the report's lines (FRFs kept under ``out``)."""
-    import pickle
-
-    res = run_rice_programme(workers=workers, n_segments=3 if quick else RICE_SEGMENTS)
-    with open(out / "rice_frf.pkl", "wb") as fh:
-        pickle.dump([{k: v for k, v in r.items()} for r in res], fh)
-    return rice_report(res)
-
-
-def ucsd_programme_report(out, *, workers: int = 2, quick: bool = False) -> list[str]:
-    """Seed 002's programme on the model; returns the report's lines (run files under ``out/runs``)."""
-    names = ucsd_tests("triangular") + ucsd_tests("sinusoidal") if quick else None
-    return ucsd_report(ucsd_programme(names, workers=workers, out_dir=out / "runs"))
-
-
-#: the papers' own programmes, by the table they were run on
-PROGRAMMES = {"rice": rice_programme_report, "ucsd": ucsd_programme_report}

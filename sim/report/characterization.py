@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from sim.identify.characterize import DEG, DOFS, MASS_BAND_HZ, MASS_LEVELS
-from sim.signals import estimation as E
 from sim.runs.files import write_json_atomic, write_text_atomic
+from sim.signals import estimation as E
 
 
 def figures(results: list[dict], summary: dict, out: Path) -> list[str]:

@@ -61,8 +61,31 @@ from pathlib import Path
 import numpy as np
 
 from sim.errors import RunFileError, UserError
-from sim.report.rerun_series import _aligned, _reference_acceleration, _Group, _channel_groups, _role_colors, series_stride, _C_REF, _C_ACH, _C_CMP, _C_RES, _ROLE_COLORS, _CMP_SHADES, _RES_SHADES  # noqa: F401
-from sim.report.rerun_scene import _quat_xyzw, body_entity, _geom_archetype, _Scene, _scene, _rotations_xyz, _LoopSolver, _body_poses  # noqa: F401
+from sim.report.rerun_scene import (  # noqa: F401
+    _body_poses,
+    _geom_archetype,
+    _LoopSolver,
+    _quat_xyzw,
+    _rotations_xyz,
+    _Scene,
+    _scene,
+    body_entity,
+)
+from sim.report.rerun_series import (  # noqa: F401
+    _C_ACH,
+    _C_CMP,
+    _C_REF,
+    _C_RES,
+    _CMP_SHADES,
+    _RES_SHADES,
+    _ROLE_COLORS,
+    _aligned,
+    _channel_groups,
+    _Group,
+    _reference_acceleration,
+    _role_colors,
+    series_stride,
+)
 
 TIMELINE = "time"
 DEFAULT_RATE_HZ = 50.0

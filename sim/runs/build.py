@@ -7,7 +7,7 @@ from mjcf.description import DOFS6
 
 def build_runfile(res, tm, *, source="simulated", description="", payload_name=None, reference=None, extra_meta=None):
     """RunFile from a :class:`sim.loop.simulation.RunResult` (every channel of the format)."""
-    from sim.runs.runfile import FORMAT, RunFile
+    from sim.runs.runfile import FORMAT, RunFile, description_meta
 
     desc = tm.desc
     n = len(res.t)
@@ -25,6 +25,11 @@ def build_runfile(res, tm, *, source="simulated", description="", payload_name=N
         "accelerometer_convention": "kinematic acceleration along the sensor direction, gravity removed",
         "angle_convention": "intrinsic x-y-z rotation of the platen from home",
     }
+    # the descriptions themselves, so replay/view/fit rebuild this table, not the stock file
+    meta.update(description_meta("table", desc.source, desc.raw))
+    payload = getattr(tm, "payload", None)
+    if payload is not None and getattr(payload, "raw", None):
+        meta.update(description_meta("payload", payload.source, payload.raw))
     if extra_meta:
         meta.update(extra_meta)
     ch = dict(res.channels)

@@ -479,6 +479,89 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
     return run
 
 
+# -- the descriptions a run was made with ------------------------------------------
+def description_text(source: str, raw: dict) -> str:
+    """The text of a table/payload description as the run carries it: the file's TOML
+    text when ``source`` is a file that still parses to ``raw``, else ``raw`` as JSON
+    (a description built or modified in memory)."""
+    import tomllib
+
+    try:
+        text = Path(source).read_text(encoding="utf-8") if source else None
+        if text is not None and tomllib.loads(text) == raw:
+            return text
+    except (OSError, ValueError):
+        pass
+    return json.dumps(raw, sort_keys=True, default=str)
+
+
+def description_meta(kind: str, source: str, raw: dict) -> dict:
+    """``{kind}_description`` (text) and ``{kind}_sha256`` (of that UTF-8 text) for meta."""
+    import hashlib
+
+    text = description_text(source, raw)
+    return {f"{kind}_description": text, f"{kind}_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest()}
+
+
+def _carried(run: RunFile, kind: str):
+    """The parsed dict of the description carried in ``meta.{kind}_description`` (or None)."""
+    import hashlib
+    import tomllib
+
+    text = run.meta.get(f"{kind}_description")
+    if not text:
+        return None
+    if not isinstance(text, str):
+        raise _error(run.name, f"has meta {kind}_description that is not text", "store the description's TOML text")
+    digest = run.meta.get(f"{kind}_sha256")
+    if digest is not None and hashlib.sha256(text.encode("utf-8")).hexdigest() != digest:
+        raise _error(run.name, f"has meta {kind}_description that does not match meta {kind}_sha256",
+                     f"restore the text or drop both keys (the stock {kind} file is used then)")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        pass
+    try:
+        raw = json.loads(text)
+    except json.JSONDecodeError:
+        raw = None
+    if not isinstance(raw, dict):
+        raise _error(run.name, f"has meta {kind}_description that is neither TOML nor a JSON object",
+                     f"store the {kind} file's text")
+    return raw
+
+
+def table_of(run: RunFile, override: str | None = None):
+    """The table description ``run`` was made with: ``override`` (a name or path) if
+    given, else the text carried in ``meta.table_description``, else the stock table
+    named by ``meta.table``. Returns a :class:`mjcf.description.TableDescription`."""
+    import mjcf
+    from mjcf.description import parse_table
+
+    if override:
+        return mjcf.load_table(override)
+    raw = _carried(run, "table")
+    if raw is None:
+        return mjcf.load_table(run.meta["table"])
+    return parse_table(raw, f"{run.name} [meta.table_description]")
+
+
+def payload_of(run: RunFile, override: str | None = None):
+    """The payload ``run`` was made with (or None for a bare table): ``override`` (a name
+    or path; ``"none"`` for a bare table) if given, else ``meta.payload_description``,
+    else the stock payload named by ``meta.payload``."""
+    import mjcf
+    from mjcf.description import parse_payload
+
+    if override is not None:
+        return None if override.strip().lower() in ("", "none") else mjcf.load_payload(override)
+    raw = _carried(run, "payload")
+    if raw is not None:
+        return parse_payload(raw, f"{run.name} [meta.payload_description]")
+    name = run.meta.get("payload")
+    return mjcf.load_payload(name) if isinstance(name, str) and name.strip().lower() not in ("", "none") else None
+
+
 __all__ = [
     "ACCELEROMETER_CHANNELS",
     "ACTUATOR_CHANNELS",
@@ -487,6 +570,9 @@ __all__ = [
     "FORMAT",
     "INPUT_CHANNELS",
     "RunFile",
+    "description_meta",
+    "payload_of",
     "read_run",
+    "table_of",
     "write_run",
 ]

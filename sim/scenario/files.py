@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from mjcf.description import DOFS6, REPO_ROOT, load_toml, resolve
+from sim.errors import MotionError, ScenarioError
 from sim.scenario import motions as M
 from sim.scenario import records as R
-from sim.errors import MotionError, ScenarioError
 from sim.scenario.reference import Reference, reference_from_motions
 
 SCENARIOS_DIR = REPO_ROOT / "scenarios"
@@ -57,6 +57,8 @@ _MOTION_KEYS = {
             "baseline"},
 }
 _EQ_KEYS = {"type", "amplitude_factor", "time_factor", "highpass_hz", "filter_order", "baseline", "mapping"}
+_ITERATION_KEYS = {"count", "gain", "band_hz", "h_min", "frf", "noise_level", "seed"}
+_OUTPUT_KEYS = {"sample_rate_hz"}
 
 
 @dataclass
@@ -108,14 +110,14 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     if not isinstance(mo, dict) or not mo:
         raise ScenarioError(f"{src}: missing the [motion] table")
     out = data.get("output", {})
-    _unknown(out, {"sample_rate_hz"}, "output", src)
+    _unknown(out, _OUTPUT_KEYS, "output", src)
     rate = out.get("sample_rate_hz", 1024.0)
     if isinstance(rate, bool) or not isinstance(rate, (int, float)) or rate <= 0:
         raise ScenarioError(f"{src}: 'output.sample_rate_hz' must be positive (got {rate!r})")
     it = data.get("iteration", {"count": 0})
     if not isinstance(it, dict):
         raise ScenarioError(f"{src}: [iteration] must be a table (count, gain, band_hz)")
-    _unknown(it, {"count", "gain", "band_hz", "h_min", "frf", "noise_level", "seed"}, "iteration", src)
+    _unknown(it, _ITERATION_KEYS, "iteration", src)
     cnt = it.get("count", 0)
     if isinstance(cnt, bool) or not isinstance(cnt, int) or not 0 <= cnt <= 10:
         raise ScenarioError(f"{src}: 'iteration.count' must be an integer 0..10 (got {cnt!r})")
@@ -228,7 +230,28 @@ def build_motions(s: Scenario) -> dict[str, M.Motion]:
 
 
 def build_reference(s: Scenario, motions: dict[str, M.Motion], duration_s: float | None = None) -> Reference:
-    """Stack the motions into a 6-DOF reference over the run's duration."""
+    """Stack the motions into a 6-DOF reference over the run's duration (see :func:`build_window`)."""
+    return build_window(s, motions, duration_s)[0]
+
+
+#: taper at each end of a record window, s (at most a fifth of the window); assumed: two
+#: seconds bring the table from rest into the strong motion with added accelerations
+#: (2 v w' + d w'') of a few tenths of m/s^2 for El Centro's 0.1 m, 0.3 m/s
+WINDOW_TAPER_S = 2.0
+
+
+def build_window(s: Scenario, motions: dict[str, M.Motion], duration_s: float | None = None
+                 ) -> tuple[Reference, dict]:
+    """The 6-DOF reference over the run's duration and the window of the motion it holds.
+
+    A duration (``duration_s``, else ``scenario.duration_s``) shorter than an earthquake
+    record keeps the strong motion (its Arias intensity, the translations' together):
+    centred on the record's 5-95 % Arias-intensity interval when it covers it, else the
+    window of that length holding the most intensity; the window's displacement is
+    tapered over :data:`WINDOW_TAPER_S` at both ends (:func:`sim.scenario.records.window_motion`),
+    so the table starts and ends at rest. Other motions run their first ``duration`` seconds.
+    The window: ``{"start_s", "end_s", "of_record_s", "why"}`` (s of the motion's time).
+    """
     rate = s.sample_rate_hz
     length = max(m.duration_s for m in motions.values())
     dur = duration_s if duration_s is not None else (s.duration_s if s.duration_s is not None else length)
@@ -236,7 +259,40 @@ def build_reference(s: Scenario, motions: dict[str, M.Motion], duration_s: float
         raise ScenarioError(
             f"duration {dur:g} s is longer than the motion ({length:.2f} s); shorten --duration or set "
             "'scenario.pad_to_duration = true' to pad with rest")
-    return reference_from_motions(motions, rate, dur)
+    record = any(m.info.get("kind") == "record" for m in motions.values())
+    n_win = int(round(dur * rate)) + 1
+    n_len = max(len(m.t) for m in motions.values())
+    if not record or n_win >= n_len:
+        why = ("the whole motion" if n_win >= n_len else
+               f"the first {dur:g} s (the motion is not an earthquake record)")
+        return reference_from_motions(motions, rate, dur), {"start_s": 0.0, "end_s": float(dur),
+                                                            "of_record_s": float(length), "why": why}
+    h = 1.0 / rate
+    # Arias intensity of the translations (m/s^2); of the rotations only if there are no translations
+    trans = [m for d, m in motions.items() if DOFS.index(d) < 3] or list(motions.values())
+    acc = np.zeros((n_len, len(trans)))
+    for k, m in enumerate(trans):
+        acc[:len(m.a), k] = m.a
+    t5, t95 = R.arias_interval(acc, h)
+    if dur >= t95 - t5:
+        i0 = int(round(min(max(0.5 * (t5 + t95) - dur / 2, 0.0), (n_len - n_win) * h) * rate))
+        how = f"centred on the record's 5-95 % Arias-intensity interval ({t5:.1f}-{t95:.1f} s)"
+    else:
+        cum = np.concatenate([[0.0], np.cumsum((acc ** 2).sum(axis=1))])
+        i0 = int(np.argmax(cum[n_win:] - cum[:-n_win]))
+        share = (cum[i0 + n_win] - cum[i0]) / cum[-1]
+        how = (f"the {dur:g} s holding the most Arias intensity ({100 * share:.0f} % of the record's; "
+               f"its 5-95 % interval is {t5:.1f}-{t95:.1f} s)")
+    i1 = i0 + n_win
+    taper = min(WINDOW_TAPER_S, 0.2 * dur)
+    cut = {}
+    for dof, m in motions.items():
+        if len(m.d) < n_len:  # at rest after its end
+            m = R.pad(m, 0.0, (n_len - len(m.d)) * h)
+        cut[dof] = R.window_motion(m, i0, i1, taper)
+    window = {"start_s": i0 * h, "end_s": (i1 - 1) * h, "of_record_s": float(length),
+              "why": f"strong motion: {how}; the displacement tapered over {taper:g} s at both ends"}
+    return reference_from_motions(cut, rate, dur), window
 
 
 def limit_warnings(desc, motions: dict[str, M.Motion]) -> list[str]:
@@ -260,4 +316,4 @@ def list_scenarios() -> list[str]:
     return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
 
 
-__all__ = ["Scenario", "build_motions", "build_reference", "limit_warnings", "list_scenarios", "load_scenario"]
+__all__ = ["Scenario", "WINDOW_TAPER_S", "build_motions", "build_reference", "build_window", "limit_warnings", "list_scenarios", "load_scenario"]

@@ -1,0 +1,68 @@
+"""One process-pool helper for every programme that runs independent simulations.
+
+:func:`map_jobs` is used by the CGS identification programme (``sim.identify``), its
+calibration (``sim.calibrate``) and the papers' programmes (``sim.papers``). It sits at
+the bottom layer (rank 0, beside ``sim.errors``) because its users sit at ranks 5 to 8
+and a layer may only import its own or lower ones: in ``sim.sweep`` (rank 7) the
+identification programme could not import it. It knows nothing of tables or models:
+it maps a function over jobs.
+
+Spawn-safe: ``fn`` and the jobs must be picklable (a module-level function, or a
+``functools.partial`` of one) and nothing may rely on state a forked child would
+inherit, so the programmes run alike under every start method: ``fork`` (Linux's
+default until Python 3.14, the fastest start), ``spawn`` (macOS and Windows; a script
+that calls it needs the ``if __name__ == "__main__":`` guard) or ``forkserver``.
+``context`` picks one (default: the platform's). Results come back in the jobs' order,
+whatever order the workers finish in; ``workers=1`` runs serially in this process (no
+pickling, exceptions with their full traceback).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable
+
+
+def default_workers(n_jobs: int) -> int:
+    """As many workers as CPUs, never more than jobs (at least 1)."""
+    return max(1, min(n_jobs, os.cpu_count() or 1))
+
+
+def map_jobs(fn: Callable, jobs: Iterable, *, workers: int | None = None,
+             progress: Callable[[int, int], None] | None = None, context: str | None = None) -> list:
+    """``[fn(job) for job in jobs]``, in parallel processes, in the jobs' order.
+
+    Args:
+        fn: a picklable function of one argument.
+        jobs: the arguments.
+        workers: processes (default :func:`default_workers`); 1 runs serially here.
+        progress: ``progress(done, total)`` after each finished job (in finishing order).
+        context: multiprocessing start method (``"fork"``, ``"spawn"``, ``"forkserver"``);
+            default the platform's.
+    """
+    jobs = list(jobs)
+    total = len(jobs)
+    if not total:
+        return []
+    workers = default_workers(total) if workers is None else max(1, min(int(workers), total))
+    if workers == 1:
+        out = []
+        for j in jobs:
+            out.append(fn(j))
+            if progress:
+                progress(len(out), total)
+        return out
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    out: list = [None] * total
+    with ProcessPoolExecutor(workers, mp_context=mp.get_context(context)) as ex:
+        futures = {ex.submit(fn, j): i for i, j in enumerate(jobs)}
+        for done, fut in enumerate(as_completed(futures), start=1):
+            out[futures[fut]] = fut.result()
+            if progress:
+                progress(done, total)
+    return out
+
+
+__all__ = ["default_workers", "map_jobs"]
