@@ -113,14 +113,16 @@ def score(measured, replayed) -> tuple[float, dict]:
 
 
 def _replay(raw: dict, payload, measured, src: str):
-    from sim.loop.simulation import Simulation
+    from sim.calibrate.replay import run_at_record
 
     desc = parse_table(raw, src=src)
     tm = build_model(desc, payload)
-    sim = Simulation(tm)
-    res = sim.run(valve_command=measured.valve_command)
-    out = dict(res.channels)
-    out["t"] = res.t
+    # at the record's own rate: commands held onto the model's ticks, channels sampled
+    # back at the record's instants in its DOF columns
+    t_rec = np.asarray(measured.t, float) - float(measured.t[0])
+    res, ch, _, n = run_at_record(tm, t_rec, measured.valve_command, measured.dofs)
+    out = dict(ch)
+    out["t"] = t_rec[:n]
     out["_incomplete"] = res.incomplete_reason
     return out
 

@@ -77,23 +77,29 @@ def cmd_replay(args) -> int:
     from sim.runs.runfile import write_run
 
     out = out_dir(args.out)
-    rep = replay(args.run, table=args.table, payload=args.payload, progress=sys.stderr.isatty() and not args.json)
+    bias = "none" if args.no_bias else (args.bias if args.bias is not None else "estimate")
+    rep = replay(args.run, table=args.table, payload=args.payload, progress=sys.stderr.isatty() and not args.json,
+                 bias=bias, drift=args.drift, hold=args.hold)
     res = rep.result
     stem = Path(args.run).name[: -len(".run.npz")] if args.run.endswith(".run.npz") else Path(args.run).stem
     path = out / f"{stem}.replay.run.npz"
     write_run(path, rep.run)
-    summary = {"schema": SCHEMA, "replay_of": str(args.run), "run_file": str(path),
-               "realtime_factor": float(res.realtime_factor), "complete": rep.complete,
-               "residual_nrmse": rep.residual_nrmse}
+    summary = {"schema": SCHEMA, "run_file": str(path), **rep.summary()}
     write_json_atomic(out / "replay_summary.json", summary)
     if args.json:
         print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
     else:
-        print(f"replayed {args.run} open loop ({res.sim_s:.2f} s, {res.realtime_factor:.2f}x real time) -> {path}")
+        print(f"replayed {args.run} open loop ({res.sim_s:.2f} s at the record's {rep.run.sample_rate_hz:g} Hz, "
+              f"model ticks {rep.tick_hz:g} Hz, {res.realtime_factor:.2f}x real time) -> {path}")
+        for note in rep.notes:
+            print(f"  note: {note}")
+        sf = ", ".join(f"{k} {100 * v:.0f}%" for k, v in rep.stroke_fraction.items())
+        print(f"  peak stroke (fraction of half-stroke): {sf}")
         for ch, cols in rep.residual_nrmse.items():
-            vals = ", ".join(f"{k} {100 * v:.2f}%" for k, v in cols.items() if np.isfinite(v))
-            if vals:
-                print(f"  {ch} NRMSE: {vals}")
+            vals = ", ".join(f"{k} {100 * v:.2f}%" if np.isfinite(v) else f"{k} -" for k, v in cols.items())
+            print(f"  {ch} NRMSE: {vals}")
+        if res.incomplete_reason:
+            print(f"error: {res.incomplete_reason}", file=sys.stderr)
     return 0 if rep.complete else 3
 
 
@@ -184,6 +190,13 @@ def add_parsers(sub) -> None:
     p.add_argument("--table", help="table (default: the run's meta.table)")
     p.add_argument("--payload", help="payload (default: the run's meta.payload)")
     p.add_argument("--out", default="out", help="output folder")
+    p.add_argument("--bias", type=float, default=None, metavar="FRACTION",
+                   help="valve null offset to add to every command (default: estimated from the recorded motion)")
+    p.add_argument("--no-bias", action="store_true", help="replay the commands as recorded (no valve null offset)")
+    p.add_argument("--drift", action="store_true",
+                   help="also estimate and apply a linear drift of the valve null over the record")
+    p.add_argument("--hold", choices=["zoh", "linear"], default="zoh",
+                   help="command onto the model's ticks: zero-order hold (a DAC, default) or linear")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_replay)
 
