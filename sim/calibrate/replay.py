@@ -26,6 +26,7 @@ from sim.errors import RunFileError
 
 PHYSICS_HZ = 2048.0  #: the model's physics rate (mjcf.builder default step 1/2048 s)
 TICK_HZ = 1024.0  #: replay tick for records whose rate does not divide the physics rate
+INPUTS = ("valve_command", "reference")  #: what drives the replay: not compared
 DISPLACEMENT_BAND_HZ = (0.2, 50.0)  #: band of the displacement comparison (open-loop drift removed)
 
 
@@ -43,6 +44,7 @@ class ReplayOutcome:
     tick_hz: float = TICK_HZ
     notes: list = field(default_factory=list)
     stroke_fraction: dict = field(default_factory=dict)
+    not_compared: dict = field(default_factory=dict)
 
     @property
     def complete(self) -> bool:
@@ -53,11 +55,16 @@ class ReplayOutcome:
                 "complete": self.complete, "incomplete_reason": self.result.incomplete_reason,
                 "realtime_factor": float(self.result.realtime_factor), "valve_null": self.valve_null,
                 "peak_stroke_fraction": self.stroke_fraction, "residual_nrmse": self.residual_nrmse,
+                "not_compared": self.not_compared,
                 "notes": self.notes}
 
 
-def tick_rate(record_hz: float) -> float:
-    """The record's own rate when it divides the physics rate, else :data:`TICK_HZ`."""
+def tick_rate(record_hz: float, hold: str = "zoh") -> float:
+    """The model's tick for a record at ``record_hz``: the record's own rate when it
+    divides the physics rate (a held command changes only there), else :data:`TICK_HZ`;
+    an interpolated command (``hold="linear"``) ticks at least at :data:`TICK_HZ`."""
+    if hold == "linear" and record_hz < TICK_HZ:
+        return TICK_HZ
     r = PHYSICS_HZ / record_hz
     return float(record_hz) if abs(r - round(r)) < 1e-9 and round(r) >= 1 else TICK_HZ
 
@@ -73,6 +80,31 @@ def _columns(src, ch: str, run) -> np.ndarray | None:
     return b[:, [names_b.index(n) for n in names_a]]
 
 
+def not_compared(src, run) -> dict:
+    """Every channel (and column) of the record that :func:`residuals` does not compare,
+    with the reason."""
+    from sim.runs.runfile import CHANNELS
+
+    out = {}
+    for ch in CHANNELS:
+        a = getattr(src, ch)
+        if a is None:
+            continue
+        if ch in INPUTS:
+            out[ch] = ("the replay's input" if ch == "valve_command"
+                       else "kept in the replay file; the open-loop replay does not use it")
+            continue
+        if getattr(run, ch) is None:
+            out[ch] = "the model does not record it"
+            continue
+        names_b = run.column_names(ch)
+        miss = [nm for nm in src.column_names(ch) if nm not in names_b]
+        if miss:
+            out[ch] = (f"column(s) {', '.join(miss)} are not sensors of the table description "
+                       f"(it has {', '.join(names_b) or 'none'}); declare them as [[accelerometer]] to compare")
+    return out
+
+
 def residuals(src, run) -> dict:
     """NRMSE of every channel the record and the replay share (by column name), plus the
     band-passed displacements and, for a record without velocity, the velocity from its
@@ -86,6 +118,8 @@ def residuals(src, run) -> dict:
     fs = src.sample_rate_hz
     out = {}
     for ch in CHANNELS:
+        if ch in INPUTS:
+            continue
         b = _columns(src, ch, run)
         if b is None:
             continue
@@ -160,7 +194,7 @@ def replay(source, *, table: str | None = None, payload: str | None = None, prog
             raise RunFileError(f"replay bias must be 'estimate', 'none' or a number (got {bias!r})") from None
         vn = {"offset": {a: b for a in src.actuators}, "method": "given"}
         u = u + b
-    rate = tick_rate(src.sample_rate_hz)
+    rate = tick_rate(src.sample_rate_hz, hold)
     if rate != src.sample_rate_hz:
         notes.append(f"record at {src.sample_rate_hz:g} Hz: command "
                      + ("held (zero-order hold)" if hold == "zoh" else "interpolated")
@@ -186,7 +220,7 @@ def replay(source, *, table: str | None = None, payload: str | None = None, prog
                  f"{min(DISPLACEMENT_BAND_HZ[1], 0.45 * src.sample_rate_hz):g} Hz; velocity and acceleration "
                  "are the meaningful comparisons")
     return ReplayOutcome(run=run, result=res, residual_nrmse=residuals(src, run), source=name, valve_null=vn,
-                         tick_hz=rate, notes=notes, stroke_fraction=frac)
+                         tick_hz=rate, notes=notes, stroke_fraction=frac, not_compared=not_compared(src, run))
 
 
 def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress: bool = False):
@@ -204,7 +238,7 @@ def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress
 
     t_rec = np.asarray(t_rec, float)
     fs = 1.0 / float(t_rec[1] - t_rec[0])
-    rate = tick_rate(fs)
+    rate = tick_rate(fs, hold)
     n_tick = int(np.floor(t_rec[-1] * rate + 1e-6)) + 1
     t_tick = np.arange(n_tick) / rate
     cmd = zoh(t_rec, valve_command, t_tick) if hold == "zoh" else interpolate(t_rec, valve_command, t_tick)

@@ -60,6 +60,8 @@ def cmd_identify(args) -> int:
         raise UserError(f"the least squares has no unique solution for these runs ({e}); give tests with "
                         "motion in both directions") from None
     scan = I.scan_alpha(recs, weights=args.weights, ce_fixed=args.ce) if args.scan_alpha else []
+    for w in res.warnings():
+        print(f"warning: {w}", file=sys.stderr)
     if args.json:
         out = {k: v for k, v in res.as_dict().items()}
         if scan:

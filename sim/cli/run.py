@@ -98,6 +98,8 @@ def cmd_replay(args) -> int:
         for ch, cols in rep.residual_nrmse.items():
             vals = ", ".join(f"{k} {100 * v:.2f}%" if np.isfinite(v) else f"{k} -" for k, v in cols.items())
             print(f"  {ch} NRMSE: {vals}")
+        for ch, why in rep.not_compared.items():
+            print(f"  {ch}: not compared ({why})")
         if res.incomplete_reason:
             print(f"error: {res.incomplete_reason}", file=sys.stderr)
     return 0 if rep.complete else 3
