@@ -9,7 +9,8 @@ noise test closed loop, with two things the lab's description does not declare:
   zero drive; the controller's recorded drive settles at ``-BIAS`` to hold the table).
 
 Its recorder samples at ``rate_hz`` (204.8 Hz by default: every fifth controller tick;
-any other rate samples the held drive and interpolates the sensors) and writes a CSV in
+at any other rate every channel is interpolated between the ticks, the drive as the
+smooth output of the DAC's reconstruction filter) and writes a CSV in
 lab units through ``lab_map.toml`` (volts, mm, mm/s^2, bar; timestamps rounded to
 1e-5 s; a seeded accelerometer noise). Run from the repository root:
 
@@ -65,7 +66,7 @@ def lab_record(run, *, rate_hz: float = 204.8, bias: float = BIAS, seed: int = S
     A, floor accelerometers F1/F2, force from the differential pressure), the drive
     biased by ``-bias``."""
     from sim.runs.runfile import FORMAT, RunFile
-    from sim.signals.resample import hold, interpolate
+    from sim.signals.resample import interpolate
 
     t = np.asarray(run.t, float)
     fs0 = run.sample_rate_hz
@@ -76,15 +77,18 @@ def lab_record(run, *, rate_hz: float = 204.8, bias: float = BIAS, seed: int = S
     n = int(np.floor(t[-1] * rate_hz + 1e-9)) + 1
     tr = np.arange(n) / rate_hz
     rng = np.random.default_rng(seed)
-    meas = lambda a: interpolate(t, a, tr)  # noqa: E731  (sensors sampled at the recorder's instants)
+    meas = lambda a: interpolate(t, a, tr)
     meta = {"format": FORMAT, "table": "lab", "sample_rate_hz": rate_hz, "actuators": ["A"], "dofs": ["x"],
             "source": "measured", "description": "synthetic lab export (worked example)", "payload": "lab_2storey",
             "accelerometers": [{"name": "F1", "position": [0.0, 0.0, 0.8], "direction": [1.0, 0.0, 0.0]},
                                {"name": "F2", "position": [0.0, 0.0, 1.6], "direction": [1.0, 0.0, 0.0]}]}
     return RunFile(
         t=tr, meta=meta,
-        valve_command=hold(t, run.valve_command, tr) - bias,  # the drive the controller put out
-        reference=hold(t, run.reference[:, [x]], tr),
+        # the drive the controller put out, as the recorder's input saw it: the DAC's staircase
+        # after its reconstruction filter (assumed smooth: interpolated between the ticks; at
+        # 204.8 Hz every sample is a tick's own value)
+        valve_command=interpolate(t, run.valve_command, tr) - bias,
+        reference=interpolate(t, run.reference[:, [x]], tr),
         table_displacement=meas(run.table_displacement[:, [x]]),
         table_acceleration=meas(acc_t[:, None]) + ACC_NOISE_M_S2 * rng.standard_normal((n, 1)),
         accelerometers=meas(floors) + ACC_NOISE_M_S2 * rng.standard_normal((n, 2)),

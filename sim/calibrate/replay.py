@@ -215,6 +215,12 @@ def replay(source, *, table: str | None = None, payload: str | None = None, prog
     half = np.array([a.cls.half_stroke_m for a in desc.actuators])
     peak = np.nanmax(np.abs(res.channels["actuator_displacement"]), axis=0) / half
     frac = {a: float(p) for a, p in zip(desc.actuator_names, peak)}
+    cush = np.array([1.0 - float(desc.raw["actuator_class"][a.cls.name].get("cushion_length_m", 0.0))
+                     / a.cls.half_stroke_m for a in desc.actuators])
+    hit = [a for a, p, c in zip(desc.actuator_names, peak, cush) if p >= c]
+    if hit:
+        notes.append(f"actuator(s) {', '.join(hit)} reached the end cushions: the replay drifted to the stroke end "
+                     "(a valve null bias not removed, or a flow-gain error); the comparison after that is meaningless")
     notes.append(f"open loop the displacement is the integral of the flow (a small flow error drifts): "
                  f"displacements are also compared band-passed {DISPLACEMENT_BAND_HZ[0]:g}-"
                  f"{min(DISPLACEMENT_BAND_HZ[1], 0.45 * src.sample_rate_hz):g} Hz; velocity and acceleration "
@@ -234,7 +240,8 @@ def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress
     from sim.loop.simulation import Simulation
     from sim.runs.build import build_runfile
     from sim.runs.runfile import ACTUATOR_CHANNELS, DOF_CHANNELS
-    from sim.signals.resample import hold as zoh, interpolate
+    from sim.signals.resample import hold as zoh
+    from sim.signals.resample import interpolate
 
     t_rec = np.asarray(t_rec, float)
     fs = 1.0 / float(t_rec[1] - t_rec[0])

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.errors import RunFileError, UserError
+from sim.errors import UserError
 
 G = 9.80665  #: standard gravity, m/s^2 (unit "g")
 IN = 0.0254
@@ -423,5 +423,13 @@ def export_csv(run, map_path, path) -> Path:
     return path
 
 
-__all__ = ["ImportMap", "Imported", "UNITS", "export_csv", "import_file", "import_files", "load_map",
-           "uniform_time"]
+__all__ = [
+    "UNITS",
+    "ImportMap",
+    "Imported",
+    "export_csv",
+    "import_file",
+    "import_files",
+    "load_map",
+    "uniform_time",
+]
