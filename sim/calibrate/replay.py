@@ -45,6 +45,7 @@ class ReplayOutcome:
     notes: list = field(default_factory=list)
     stroke_fraction: dict = field(default_factory=dict)
     not_compared: dict = field(default_factory=dict)
+    hold: str = "zoh"
 
     @property
     def complete(self) -> bool:
@@ -56,7 +57,7 @@ class ReplayOutcome:
                 "realtime_factor": float(self.result.realtime_factor), "valve_null": self.valve_null,
                 "peak_stroke_fraction": self.stroke_fraction, "residual_nrmse": self.residual_nrmse,
                 "not_compared": self.not_compared,
-                "notes": self.notes}
+                "command_hold": self.hold, "notes": self.notes}
 
 
 def tick_rate(record_hz: float, hold: str = "zoh") -> float:
@@ -141,7 +142,7 @@ def residuals(src, run) -> dict:
 
 
 def replay(source, *, table: str | None = None, payload: str | None = None, progress: bool = False,
-           bias: str | float = "estimate", drift: bool = False, hold: str = "zoh") -> ReplayOutcome:
+           bias: str | float = "estimate", drift: bool = False, hold: str | None = None) -> ReplayOutcome:
     """Replay ``source`` (a run-file path or :class:`~sim.runs.runfile.RunFile`) open loop.
 
     ``table``/``payload``: override the run's ``meta.table``/``meta.payload``.
@@ -156,12 +157,14 @@ def replay(source, *, table: str | None = None, payload: str | None = None, prog
     from sim.runs.build import build_runfile
     from sim.runs.runfile import RunFile, read_run
 
-    if hold not in ("zoh", "linear"):
-        raise RunFileError(f"replay hold must be 'zoh' or 'linear' (got {hold!r})")
     name = str(source) if isinstance(source, (str, Path)) else (source.path or "<run>")
     src = read_run(source, require=("valve_command",)) if isinstance(source, (str, Path)) else source
     if not isinstance(source, (str, Path)):
         src.validate(require=("valve_command",))
+    hold = hold or src.meta.get("command_hold", "zoh")
+    if hold not in ("zoh", "linear"):
+        raise RunFileError(f"{name}: command hold must be 'zoh' or 'linear' (got {hold!r}); fix meta.command_hold "
+                           "or --hold")
     desc = mjcf.load_table(table or src.meta["table"])
     if list(src.actuators) != list(desc.actuator_names):
         raise RunFileError(f"{name}: actuators {src.actuators} do not match table '{desc.name}' "
@@ -226,7 +229,7 @@ def replay(source, *, table: str | None = None, payload: str | None = None, prog
                  f"{min(DISPLACEMENT_BAND_HZ[1], 0.45 * src.sample_rate_hz):g} Hz; velocity and acceleration "
                  "are the meaningful comparisons")
     return ReplayOutcome(run=run, result=res, residual_nrmse=residuals(src, run), source=name, valve_null=vn,
-                         tick_hz=rate, notes=notes, stroke_fraction=frac, not_compared=not_compared(src, run))
+                         tick_hz=rate, notes=notes, stroke_fraction=frac, not_compared=not_compared(src, run), hold=hold)
 
 
 def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress: bool = False):

@@ -197,8 +197,10 @@ def add_parsers(sub) -> None:
     p.add_argument("--no-bias", action="store_true", help="replay the commands as recorded (no valve null offset)")
     p.add_argument("--drift", action="store_true",
                    help="also estimate and apply a linear drift of the valve null over the record")
-    p.add_argument("--hold", choices=["zoh", "linear"], default="zoh",
-                   help="command onto the model's ticks: zero-order hold (a DAC, default) or linear")
+    p.add_argument("--hold", choices=["zoh", "linear"], default=None,
+                   help="command onto the model's ticks: zero-order hold (the record is the controller's DAC "
+                        "rate) or linear (a slower recorder sampled the drive); default the run's "
+                        "meta.command_hold, else zoh")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_replay)
 

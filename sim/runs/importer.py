@@ -45,7 +45,7 @@ DIMENSION = {"valve_command": ("valve",), "spool_position": ("valve",), "actuato
 COLUMN_KEYS = {"name", "channel", "actuator", "dof", "accelerometer", "unit", "scale", "offset", "sign",
                "full_scale", "area_m2", "position_m", "direction", "note"}
 SOURCE_KEYS = {"table", "time_column", "time_unit", "sample_rate_hz", "delimiter", "skip_rows", "payload",
-               "description"}
+               "description", "command_hold"}
 #: calibration paths and the channels each needs (any one of a tuple)
 PATHS = {
     "replay (open loop)": (("valve_command",), ("table_displacement", "table_velocity", "table_acceleration",
@@ -80,6 +80,7 @@ class ImportMap:
     skip_rows: int
     payload: str | None
     description: str
+    command_hold: str = "zoh"
 
 
 def _err(where: str, problem: str, fix: str) -> UserError:
@@ -191,12 +192,18 @@ def load_map(path, table: str | None = None) -> ImportMap:
                 setattr(cm, "position" if key == "position_m" else "direction", [float(x) for x in v])
         cols.append(cm)
     delim = src.get("delimiter")
+    hold = src.get("command_hold", "zoh")
+    if hold not in ("zoh", "linear"):
+        raise _err(str(p), f"[source] command_hold {hold!r} is not known",
+                   "use \"zoh\" (the record is the controller's own rate) or \"linear\" (a slower recorder "
+                   "sampled the drive)")
     skip = src.get("skip_rows", 0)
     if not isinstance(skip, int) or skip < 0:
         raise _err(str(p), f"[source] skip_rows must be a whole number >= 0 (got {skip!r})", "count the lines above the header")
     return ImportMap(path=str(p), table=table, columns=cols, time_column=tcol, time_factor=tfac,
                      sample_rate_hz=None if fs is None else float(fs), delimiter=delim, skip_rows=skip,
-                     payload=src.get("payload"), description=str(src.get("description", "")))
+                     payload=src.get("payload"), description=str(src.get("description", "")),
+                     command_hold=hold)
 
 
 # ------------------------------------------------------------------ reading exports
@@ -341,7 +348,8 @@ def import_file(path, mp: ImportMap) -> Imported:
     meta = {"format": FORMAT, "table": desc.name, "sample_rate_hz": fs, "actuators": acts, "dofs": dofs,
             "source": "measured", "description": mp.description or f"imported from {path.name}",
             "payload": mp.payload, "accelerometers": acc_meta,
-            "imported_from": str(path), "import_map": mp.path, "time_origin_s": t0}
+            "imported_from": str(path), "import_map": mp.path, "time_origin_s": t0,
+            "command_hold": mp.command_hold}
     run = RunFile(t=t, meta=meta, **chans)
     if run.valve_command is None and run.reference is None:
         raise _err(f"{path} (map {mp.path})", "maps neither valve_command nor reference",
