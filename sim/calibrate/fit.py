@@ -114,16 +114,14 @@ def score(measured, replayed) -> tuple[float, dict]:
 
 def _replay(raw: dict, payload, measured, src: str):
     from sim.calibrate.replay import run_at_record
-    from sim.calibrate.valve_null import estimate
 
     desc = parse_table(raw, src=src)
     tm = build_model(desc, payload)
     # at the record's own rate: commands held (or interpolated, meta.command_hold) onto the
-    # model's ticks, channels sampled back at the record's instants in its DOF columns;
-    # the valve null offset estimated from the recorded motion first (as replay does)
+    # model's ticks, channels sampled back at the record's instants in its DOF columns
     t_rec = np.asarray(measured.t, float) - float(measured.t[0])
-    u = measured.valve_command + estimate(measured, desc, drift=False).at(np.asarray(measured.t, float))
-    res, ch, _, n = run_at_record(tm, t_rec, u, measured.dofs, hold=measured.meta.get("command_hold", "zoh"))
+    res, ch, _, n = run_at_record(tm, t_rec, measured.valve_command, measured.dofs,
+                                  hold=measured.meta.get("command_hold", "zoh"))
     out = dict(ch)
     out["t"] = t_rec[:n]
     out["_incomplete"] = res.incomplete_reason
