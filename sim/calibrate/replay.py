@@ -142,13 +142,14 @@ def residuals(src, run) -> dict:
 
 
 def replay(source, *, table: str | None = None, payload: str | None = None, progress: bool = False,
-           bias: str | float = "estimate", drift: bool = False, hold: str | None = None) -> ReplayOutcome:
+           bias: str | float | None = None, drift: bool = False, hold: str | None = None) -> ReplayOutcome:
     """Replay ``source`` (a run-file path or :class:`~sim.runs.runfile.RunFile`) open loop.
 
     ``table``/``payload``: override the run's ``meta.table``/``meta.payload``.
     ``bias``: ``"estimate"`` (the valve null offset, and with ``drift`` its linear drift,
     from the recorded motion), ``"none"``, or a number (the same offset, fraction of rated
-    opening, on every valve). ``hold``: ``"zoh"`` or ``"linear"`` (command onto the
+    opening, on every valve); default ``"estimate"`` for a measured run, ``"none"`` for a
+    simulated one (its valves had no hidden null: it replays to round-off). ``hold``: ``"zoh"`` or ``"linear"`` (command onto the
     model's ticks).
     """
     import mjcf
@@ -180,6 +181,8 @@ def replay(source, *, table: str | None = None, payload: str | None = None, prog
     tm = build_model(desc, pl)
 
     notes = []
+    if bias is None:
+        bias = "estimate" if src.source == "measured" else "none"
     t_rec = np.asarray(src.t, float) - float(src.t[0])
     u = np.asarray(src.valve_command, float)
     vn = None

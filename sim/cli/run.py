@@ -77,7 +77,7 @@ def cmd_replay(args) -> int:
     from sim.runs.runfile import write_run
 
     out = out_dir(args.out)
-    bias = "none" if args.no_bias else (args.bias if args.bias is not None else "estimate")
+    bias = "none" if args.no_bias else args.bias  # None: estimated for a measured run
     rep = replay(args.run, table=args.table, payload=args.payload, progress=sys.stderr.isatty() and not args.json,
                  bias=bias, drift=args.drift, hold=args.hold)
     res = rep.result
@@ -193,7 +193,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--payload", help="payload (default: the run's meta.payload)")
     p.add_argument("--out", default="out", help="output folder")
     p.add_argument("--bias", type=float, default=None, metavar="FRACTION",
-                   help="valve null offset to add to every command (default: estimated from the recorded motion)")
+                   help="valve null offset to add to every command (default: estimated from the recorded motion "
+                        "for a measured run, none for a simulated one)")
     p.add_argument("--no-bias", action="store_true", help="replay the commands as recorded (no valve null offset)")
     p.add_argument("--drift", action="store_true",
                    help="also estimate and apply a linear drift of the valve null over the record")
