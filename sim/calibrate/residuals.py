@@ -120,18 +120,26 @@ def places(desc, kinds) -> list[str]:
 
 
 def choose_path(runs) -> str:
-    """The residual path every run supports (mechanical first, then replay, then closed loop)."""
+    """The residual path every run supports (mechanical first, then replay, then closed
+    loop; the last two need a recorded output to compare: force, acceleration or
+    displacement)."""
     have = [{c for c in MECH_CHANNELS + ("valve_command", "reference") if getattr(r, c) is not None} for r in runs]
+    outputs = [bool(h & set(FIT_CHANNELS)) for h in have]
     if all(set(MECH_CHANNELS) <= h for h in have):
         return "mechanical"
-    if all("valve_command" in h for h in have):
+    if all("valve_command" in h and o for h, o in zip(have, outputs)):
         return "replay"
-    if all("reference" in h for h in have):
+    if all("reference" in h and o for h, o in zip(have, outputs)):
         return "closed_loop"
-    bad = next(r for r, h in zip(runs, have) if not (set(MECH_CHANNELS) <= h or {"valve_command", "reference"} & h))
-    miss = [c for c in MECH_CHANNELS if getattr(bad, c) is None]
-    raise CalibrationError(f"{bad.name}: lacks {', '.join(miss)} (mechanical path), valve_command (replay) and "
-                           "reference (closed loop); record table motion with actuator forces, or the valve commands")
+    for r, h, o in zip(runs, have, outputs):
+        if not (set(MECH_CHANNELS) <= h or (o and {"valve_command", "reference"} & h)):
+            miss = [c for c in MECH_CHANNELS if c not in h]
+            raise CalibrationError(f"{r.name}: lacks {', '.join(miss)} (mechanical path)"
+                                   + ("" if o else " and any output to compare a replay with")
+                                   + "; record table motion with actuator forces, or valve commands or the "
+                                   "reference with the force/acceleration/displacement they produced")
+    raise CalibrationError(f"{runs[0].name}: the runs support different residual paths; calibrate runs that "
+                           "record the same channels together")
 
 
 def check_finite(run, channels) -> None:
@@ -233,7 +241,8 @@ def spectra(x: np.ndarray, fs: float, states: dict | None = None, nperseg: int |
     import scipy.signal as sig
 
     n = len(x)
-    nper = nperseg or int(min(n, 2 ** int(math.log2(max(fs * 4, 64)))))
+    # segments of up to 4 s, at least 8 of them (a coherence from few segments is biased to 1)
+    nper = nperseg or 2 ** int(math.log2(max(min(fs * 4, n / 8), 64)))
     nper = max(16, min(nper, n))
     f, P = sig.welch(x, fs=fs, nperseg=nper)
     out = {"f": f, "psd": P, "coherence": {}}
