@@ -131,7 +131,7 @@ def cmd_fit(args) -> int:
     toml_path = out / f"{desc.name}_calibrated.toml"
     note = ("calibrated: shaketable fit of " + Path(args.run).name + "; effects added: "
             + (", ".join(f"{e['effect']} = {e['value']:.6g} {e['unit']}" for e in rep["effects_added"]) or "none"))
-    F.write_table_toml(rep.pop("calibrated_table"), toml_path, note)
+    F.write_table_toml(rep.pop("calibrated_table"), toml_path, note, original=desc.source)
     rep["calibrated_table_file"] = str(toml_path)
     write_json_atomic(out / "fit.json", rep)
     if args.json:
