@@ -50,18 +50,19 @@ def truth_table(folder: Path) -> Path:
     return p
 
 
-def simulate(folder: Path, duration_s: float):
-    """Closed-loop run of the example test on the truth table (1024 Hz RunFile, model)."""
+def simulate(folder: Path, duration_s: float, *, bare: bool = False):
+    """Closed-loop run of the example test on the truth table (1024 Hz RunFile, model);
+    ``bare``: the same test without the specimen (a lab's shake-down of the bare table)."""
     from sim.assess.run import plan_scenario
     from sim.scenario.files import load_scenario
 
     sc = load_scenario(HERE / "lab_noise.toml")
-    sc = dataclasses.replace(sc, table=str(truth_table(folder)))
+    sc = dataclasses.replace(sc, table=str(truth_table(folder)), **({"payload": None} if bare else {}))
     out = plan_scenario(sc, duration_s=duration_s).run()
     return out.run, out.tm
 
 
-def lab_record(run, *, rate_hz: float = 204.8, bias: float = BIAS, seed: int = SEED):
+def lab_record(run, *, rate_hz: float = 204.8, bias: float = BIAS, seed: int = SEED, bare: bool = False):
     """What the lab's recorder holds: a uni-axial RunFile at ``rate_hz`` (DOF x, actuator
     A, floor accelerometers F1/F2, force from the differential pressure), the drive
     biased by ``-bias``."""
@@ -72,14 +73,16 @@ def lab_record(run, *, rate_hz: float = 204.8, bias: float = BIAS, seed: int = S
     fs0 = run.sample_rate_hz
     x = run.dofs.index("x")
     acc_t = run.table_acceleration[:, x]
-    drift = np.asarray(run.extras["payload_qpos"], float)  # floor drifts relative to the platen
+    # floor drifts relative to the platen (none on the bare table: the floor channels read the platen)
+    drift = np.zeros((len(t), 2)) if bare else np.asarray(run.extras["payload_qpos"], float)
     floors = acc_t[:, None] + np.gradient(np.gradient(drift, 1 / fs0, axis=0), 1 / fs0, axis=0)
     n = int(np.floor(t[-1] * rate_hz + 1e-9)) + 1
     tr = np.arange(n) / rate_hz
     rng = np.random.default_rng(seed)
     meas = lambda a: interpolate(t, a, tr)
     meta = {"format": FORMAT, "table": "lab", "sample_rate_hz": rate_hz, "actuators": ["A"], "dofs": ["x"],
-            "source": "measured", "description": "synthetic lab export (worked example)", "payload": "lab_2storey",
+            "source": "measured", "description": "synthetic lab export (worked example)",
+            "payload": None if bare else "lab_2storey",
             "accelerometers": [{"name": "F1", "position": [0.0, 0.0, 0.8], "direction": [1.0, 0.0, 0.0]},
                                {"name": "F2", "position": [0.0, 0.0, 1.6], "direction": [1.0, 0.0, 0.0]}]}
     return RunFile(
@@ -95,21 +98,24 @@ def lab_record(run, *, rate_hz: float = 204.8, bias: float = BIAS, seed: int = S
         actuator_force=meas(run.actuator_force))
 
 
-def make_export(out, *, duration_s: float = 20.0, rates=(204.8,), bias: float = BIAS) -> dict:
-    """Simulate once, write ``export_<rate>hz.csv`` per rate into ``out`` and
-    ``truth.json`` (what was planted); returns {rate: csv path}."""
+def make_export(out, *, duration_s: float = 20.0, rates=(204.8,), bias: float = BIAS, bare: bool = True) -> dict:
+    """Simulate once, write ``export_<rate>hz.csv`` per rate into ``out`` (and, with
+    ``bare``, ``bare_<rate>hz.csv``: the same test on the bare table) and ``truth.json``
+    (what was planted); returns {name: csv path}."""
     import json
 
     from sim.runs.files import out_dir
     from sim.runs.importer import export_csv
 
     folder = out_dir(out)
-    run, _ = simulate(folder, duration_s)
     paths = {}
-    for r in rates:
-        rec = lab_record(run, rate_hz=r, bias=bias)
-        name = f"export_{r:g}hz".replace(".", "p") + ".csv"  # export_204p8hz.csv
-        paths[r] = export_csv(rec, HERE / "lab_map.toml", folder / name)
+    for kind in ("export", "bare") if bare else ("export",):
+        run, _ = simulate(folder, duration_s, bare=kind == "bare")
+        for r in rates:
+            rec = lab_record(run, rate_hz=r, bias=bias, bare=kind == "bare")
+            name = f"{kind}_{r:g}hz".replace(".", "p")  # export_204p8hz
+            mp = HERE / ("lab_map.toml" if kind == "export" else "lab_map_bare.toml")
+            paths[name] = export_csv(rec, mp, folder / f"{name}.csv")
     (folder / "truth.json").write_text(json.dumps({"valve_null_bias": bias, "bearing_friction_n": FRICTION_N,
                                                    "accelerometer_noise_m_s2": ACC_NOISE_M_S2, "seed": SEED,
                                                    "duration_s": duration_s}, indent=2))
@@ -121,9 +127,11 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="out/lab_example")
     p.add_argument("--duration", type=float, default=20.0)
     p.add_argument("--rate", type=float, action="append", help="recorder rate(s) in Hz (default 204.8)")
+    p.add_argument("--no-bare", action="store_true", help="skip the bare-table test")
     a = p.parse_args(argv)
-    for r, path in make_export(a.out, duration_s=a.duration, rates=tuple(a.rate or (204.8,))).items():
-        print(f"{r:g} Hz -> {path}")
+    for name, path in make_export(a.out, duration_s=a.duration, rates=tuple(a.rate or (204.8,)),
+                                  bare=not a.no_bare).items():
+        print(f"{name} -> {path}")
     return 0
 
 

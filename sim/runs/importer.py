@@ -45,7 +45,7 @@ DIMENSION = {"valve_command": ("valve",), "spool_position": ("valve",), "actuato
 COLUMN_KEYS = {"name", "channel", "actuator", "dof", "accelerometer", "unit", "scale", "offset", "sign",
                "full_scale", "area_m2", "position_m", "direction", "note"}
 SOURCE_KEYS = {"table", "time_column", "time_unit", "sample_rate_hz", "delimiter", "skip_rows", "payload",
-               "description", "command_hold"}
+               "description", "command_hold", "derive_velocity"}
 #: calibration paths and the channels each needs (any one of a tuple)
 PATHS = {
     "replay (open loop)": (("valve_command",), ("table_displacement", "table_velocity", "table_acceleration",
@@ -81,6 +81,7 @@ class ImportMap:
     payload: str | None
     description: str
     command_hold: str = "zoh"
+    derive_velocity: bool = False
 
 
 def _err(where: str, problem: str, fix: str) -> UserError:
@@ -203,7 +204,14 @@ def load_map(path, table: str | None = None) -> ImportMap:
     return ImportMap(path=str(p), table=table, columns=cols, time_column=tcol, time_factor=tfac,
                      sample_rate_hz=None if fs is None else float(fs), delimiter=delim, skip_rows=skip,
                      payload=src.get("payload"), description=str(src.get("description", "")),
-                     command_hold=hold)
+                     command_hold=hold, derive_velocity=_bool(src, "derive_velocity", str(p)))
+
+
+def _bool(src: dict, key: str, where: str) -> bool:
+    v = src.get(key, False)
+    if not isinstance(v, bool):
+        raise _err(where, f"[source] {key} must be true or false (got {v!r})", f"set {key} = true or false")
+    return v
 
 
 # ------------------------------------------------------------------ reading exports
@@ -341,6 +349,13 @@ def import_file(path, mp: ImportMap) -> Imported:
             names = accs
         arr = chans.setdefault(c.channel, np.full((n, len(names)), np.nan))
         arr[:, names.index(c.target)] = (raw[c.name] - c.offset) * c.factor
+    derived = {}
+    if mp.derive_velocity and "table_velocity" not in chans:
+        if "table_displacement" not in chans:
+            raise _err(mp.path, "[source] derive_velocity needs a table_displacement column",
+                       "map the table's displacement, or drop derive_velocity")
+        chans["table_velocity"] = np.gradient(chans["table_displacement"], 1.0 / fs, axis=0)
+        derived["table_velocity"] = "central difference of table_displacement (map derive_velocity)"
     acc_meta = []
     for a in accs:
         c = next(c for c in mp.columns if c.channel == "accelerometers" and c.target == a)
@@ -349,7 +364,7 @@ def import_file(path, mp: ImportMap) -> Imported:
             "source": "measured", "description": mp.description or f"imported from {path.name}",
             "payload": mp.payload, "accelerometers": acc_meta,
             "imported_from": str(path), "import_map": mp.path, "time_origin_s": t0,
-            "command_hold": mp.command_hold}
+            "command_hold": mp.command_hold, "derived_channels": derived}
     run = RunFile(t=t, meta=meta, **chans)
     if run.valve_command is None and run.reference is None:
         raise _err(f"{path} (map {mp.path})", "maps neither valve_command nor reference",
@@ -378,6 +393,7 @@ def _report(run, mp: ImportMap, path: Path) -> dict:
     return {"file": str(path), "samples": run.n_samples, "sample_rate_hz": run.sample_rate_hz,
             "rate_from": f"time column '{mp.time_column}'" if mp.time_column else "map sample_rate_hz",
             "duration_s": run.duration_s, "time_origin_s": run.meta["time_origin_s"], "table": run.meta["table"],
+            "derived_channels": run.meta["derived_channels"],
             "ranges_si": ranges, "paths": paths}
 
 
