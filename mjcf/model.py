@@ -87,9 +87,6 @@ class TableModel:
         self.air_exponent = sp.polytropic_exponent if aj else 1.0
         self.step_effects = list(getattr(self.info, "step_effects", []))
         self.effects = list(getattr(self.info, "effects", []))  # bound by the loop (with its hydraulics)
-        for e in self.step_effects:
-            if not any(e is x for x in self.effects):
-                e.bind(m)
         self.payload_dadr = np.array([m.jnt_dofadr[jid(n)] for n in getattr(self.info, "payload_joints", [])], dtype=int)
 
     # ------------------------------------------------------------------ data

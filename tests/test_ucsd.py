@@ -102,11 +102,11 @@ def test_presliding_platen_friction_law():
     """The platen_coulomb effect with presliding_m (Dahl): a spring F_mu/delta for travels
     much smaller than delta, F_mu after a travel of many delta, bounded at any v dt, and
     the MuJoCo stick constraint replaced (no frictionloss on the slide), reset by the loop."""
-    from sim.effects.registry import PreslidingFriction
+    from sim.effects.mechanical import CoulombFriction
     from sim.loop.simulation import Simulation
 
     fc, delta, dt = 26.65e3, 0.4e-3, 1 / 2048
-    e = PreslidingFriction(dof="x", force_n=fc, presliding_m=delta)
+    e = CoulombFriction({"where": "dof:x", "force_n": fc, "presliding_m": delta})
     amp, w, x, err = 5e-6, 2 * math.pi * 2.0, 0.0, 0.0
     for k in range(2048):  # 5 um at 2 Hz (travel 1/40 of delta): a spring of fc / delta
         v = amp * w * math.cos(w * (k + 0.5) * dt)
@@ -122,7 +122,7 @@ def test_presliding_platen_friction_law():
     tm = build_model(U.ucsd_description(13.8, presliding_m=delta))
     j = tm.model.joint("platen_x")
     assert float(j.frictionloss[0]) == 0.0
-    (pf,) = [s for s in tm.step_effects if isinstance(s, PreslidingFriction)]
+    (pf,) = [s for s in tm.step_effects if isinstance(s, CoulombFriction)]
     pf.z = 1e-4
     Simulation(tm)  # reset() on construction
     assert pf.z == 0.0

@@ -103,8 +103,9 @@ def build_parser() -> argparse.ArgumentParser:
     view_cli.add_parsers(sub)  # rerun recordings of run files
     characterize_cli.add_parsers(sub)  # the CGS identification programme (and rice/ucsd dispatch)
     identify_cli.add_parsers(sub)  # uni-axial identification, Rice/UCSD programmes
-    from sim.cli import import_ as import_cli, table as table_cli
+    from sim.cli import effects as effects_cli, import_ as import_cli, table as table_cli
 
+    effects_cli.add_parsers(sub)  # the effect library and a table's parameters
     table_cli.add_parsers(sub)  # a lab's own table description from a few numbers
     import_cli.add_parsers(sub)  # a lab's recorder export to run files
     return p

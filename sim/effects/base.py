@@ -17,6 +17,8 @@ Lifecycle (every method optional but the parameters):
 
 * ``edit_spec(spec, desc)``: what it adds to the MJCF before compiling (joint friction,
   springs, bodies of a payload mode);
+* ``edit_model(model)``: once after compiling, per-DOF numbers MjSpec cannot address
+  (called by :func:`sim.effects.build_model`);
 * ``edit_hydraulics(params)``: hydraulic effects return a changed
   :class:`hydraulics.HydraulicParams` (bulk modulus, leakage, valve delay, ...);
 * ``bind(model, hydraulics)``: indices and compiled parameters, once after compiling;
@@ -80,9 +82,16 @@ def parse_where(where: str, source: str = "effect") -> tuple[str, str]:
         raise ScenarioError(f"{source}: 'where' must name a place ({', '.join(k + ':...' for k in PLACE_KINDS)})")
     kind, _, name = where.partition(":")
     if kind not in PLACE_KINDS:
-        raise ScenarioError(f"{source}: where = '{where}' is not a place; places are "
-                            + ", ".join(PLACE_KINDS))
+        raise ScenarioError(f"{source}: where = '{where}' is not a place{_did_you_mean(kind, PLACE_KINDS)}; "
+                            "places are " + ", ".join(PLACE_KINDS))
     return kind, name
+
+
+def _did_you_mean(word: str, known) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(str(word), sorted(known), n=1)
+    return f" (did you mean '{close[0]}'?)" if close else ""
 
 
 class Effect:
@@ -113,7 +122,7 @@ class Effect:
         kind, _ = parse_where(self.where, source)
         if self.places and kind not in self.places:
             raise ScenarioError(f"{source}: a {self.type} effect acts at {', '.join(self.places)}, "
-                                f"not at '{self.where}'")
+                                f"not at '{self.where}'{_did_you_mean(kind, self.places)}")
         known = set(self.SPEC) | set(self.OPTIONS)
         for k in entry:
             if k not in known:
@@ -164,6 +173,11 @@ class Effect:
     # ---------------------------------------------------------------- lifecycle
     def edit_spec(self, spec, desc) -> None:
         """Add to the MJCF before compiling."""
+
+    def edit_model(self, model) -> None:
+        """Change the compiled ``mujoco.MjModel`` once after the build (per-DOF numbers
+        that MjSpec cannot address, e.g. one DOF of a free joint); called by
+        :func:`sim.effects.build_model`."""
 
     def edit_hydraulics(self, params):
         """Return the hydraulic parameters with this effect applied."""

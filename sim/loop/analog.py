@@ -106,14 +106,19 @@ class RiceSimulation:
                  backend: str = "numba"):
         self.gains = gains or RiceGains.for_table(desc)
         if kt is None:  # the description's parameter set applied (beta, leakage, delay; k_t returned)
-            desc, kt = _apply_parameter_set(desc.raw, self.gains.parameter_set, self.gains.delay, desc.name)
+            desc, kt = _apply_parameter_set(desc.raw, self.gains.parameter_set, self.gains.delay, desc.source)
         self.desc = desc
         self.kt = kt
         self.tm = build_model(desc, payload, BuildOptions(timestep_s=1.0 / self.gains.physics_rate_hz))
         self.m = self.tm.model
         self.dt = float(self.m.opt.timestep)
-        self.hp = HydraulicParams.from_table(desc.raw)
+        hp = HydraulicParams.from_table(desc.raw)
+        for e in self.tm.effects:  # the effect lifecycle as in sim.loop.simulation.Simulation
+            hp = e.edit_hydraulics(hp)
+        self.hp = hp
         self.hs = HydraulicSystem(self.hp, n_sim=1, dt=self.dt, backend=backend)
+        for e in self.tm.effects:
+            e.bind(self.m, self.hs)
         self.q_full = float(self.hs.no_load_flow(1.0))
         self.ctl = RiceController(self.gains.gains, conditioning(desc.raw), kt, self.q_full, self.dt)
         self.steps_per_tick = int(round(self.gains.physics_rate_hz / self.gains.rate_hz))
@@ -122,6 +127,8 @@ class RiceSimulation:
     def reset(self):
         tm = self.tm
         self.d = tm.new_data()
+        for e in tm.effects:
+            e.reset()
         self.hs.reset(tm.actuator_strokes(self.d)[None, :])
         self.d.ctrl[tm.actuator_ids] = self.hs.force[0]
         mujoco.mj_forward(self.m, self.d)
@@ -155,6 +162,8 @@ class RiceSimulation:
         hstep = hs.step
         ctl = self.ctl
         half = tm.desc.actuators[0].cls.half_stroke_m
+        effects = tm.step_effects
+        qfa = d.qfrc_applied
         reason = None
         for k in range(n_tot):
             x = qpos[qs]
@@ -176,6 +185,10 @@ class RiceSimulation:
             v2[0, 0] = v
             f = hstep(c2, x2, v2)
             ctrl[aid] = f[0, 0]
+            if effects:
+                qfa[:] = 0.0
+                for e in effects:
+                    e.apply(m, d)
             step(m, d)
             if 0 <= i < n_rec:
                 rec["a_table"][i] = qacc[df_] + qacc[dp_]
