@@ -244,3 +244,24 @@ def test_identify_warns_on_unphysical_parameters():
     w = bad.warnings()
     assert len(w) == 1 and "C_e" in w[0] and "negative" in w[0] and "\n" not in w[0]
     assert bad.as_dict()["warnings"] == w
+
+
+# ------------------------------------------------------------------ calibrate (branch calib)
+def test_bare_table_calibrates_to_the_same_friction_at_204_8_and_1024_hz(example, tmp_path):
+    """The bare-table test at both record rates: calibrate finds the undeclared bearing
+    friction, the same within 5 % from either record."""
+    mod, folder = example["mod"], example["folder"]
+    bare, _ = mod.simulate(folder, 15.0, bare=True)  # 6 s is too short to tell friction from viscous damping
+    bare_map = EX / "lab_map_bare.toml"
+    found = {}
+    for r in (204.8, 1024.0):
+        csv_path = export_csv(mod.lab_record(bare, rate_hz=r, bare=True), bare_map, tmp_path / f"bare_{int(r * 10)}.csv")
+        assert main(["import", str(csv_path), "--map", str(bare_map), "--out", str(tmp_path / "runs")]) == 0
+        out = tmp_path / f"cal_{int(r * 10)}"
+        assert main(["calibrate", str(tmp_path / "runs" / f"bare_{int(r * 10)}.run.npz"), "--out", str(out)]) == 0
+        added = json.loads((out / "calibration.json").read_text())["effects_added"]
+        fr = [e for e in added if e["name"] == "coulomb_friction"]
+        assert fr, added
+        found[r] = fr[0]["parameters"]["force_n"]
+    assert found[204.8] == pytest.approx(found[1024.0], rel=0.05)
+    assert found[1024.0] == pytest.approx(mod.FRICTION_N, rel=0.15)  # 436-438 N for 400 N on 20 s (lab-example.md)
