@@ -265,3 +265,34 @@ def test_bare_table_calibrates_to_the_same_friction_at_204_8_and_1024_hz(example
         found[r] = fr[0]["parameters"]["force_n"]
     assert found[204.8] == pytest.approx(found[1024.0], rel=0.05)
     assert found[1024.0] == pytest.approx(mod.FRICTION_N, rel=0.15)  # 436-438 N for 400 N on 20 s (lab-example.md)
+
+
+def test_valve_null_drift_is_estimated(example):
+    """A null that drifts linearly over the record (oil warming up): offset and drift."""
+    import copy
+
+    from sim.calibrate.valve_null import estimate
+
+    run = copy.deepcopy(example["runs"][1024.0])
+    t = run.t
+    run.valve_command = run.valve_command - 0.002 * (t - t.mean())[:, None]  # +0.2 %/s more null over time
+    est = estimate(run, mjcf.load_table("lab"), drift=True)
+    assert est.drift_per_s[0] == pytest.approx(0.002, rel=0.10)
+    assert est.offset[0] == pytest.approx(example["mod"].BIAS, rel=0.10)
+
+
+def test_a_renamed_six_dof_description_builds_and_runs_with_no_code_of_its_own(tmp_path):
+    """Generic code dispatches on declared fields: a 6-DOF description under a lab's name
+    builds and runs open loop (the closed valves hold it)."""
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+
+    text = (ROOT / "scenarios" / "tables" / "cgs.toml").read_text().replace('name = "cgs"', 'name = "mylab6"', 1)
+    p = tmp_path / "mylab6.toml"
+    p.write_text(text)
+    desc = mjcf.load_table(p)
+    assert desc.name == "mylab6" and len(desc.dofs) == 6
+    sim = Simulation(build_model(desc, None))
+    res = sim.run(valve_command=np.zeros((64, len(desc.actuators))))
+    assert res.incomplete_reason is None
+    assert np.abs(res.channels["table_displacement"]).max() < 1e-3
