@@ -145,7 +145,7 @@ def _bad_csv(tmp_path, example, edit):
     ("ragged", "line 6 has 7 fields"),
     ("text", "line 9 column 'disp' holds 'n/a'"),
     ("table_lacks_actuator", "actuator 'B' is not one of table 'lab'"),
-    ("table_unknown", "table"),
+    ("table_unknown", "no table named 'no_such_lab_table'"),
 ])
 def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, example, capsys, case, needle):
     csv_path = Path(example["csvs"][204.8])
