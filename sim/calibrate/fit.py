@@ -18,7 +18,6 @@ columns only, those with a reference RMS above zero).
 from __future__ import annotations
 
 import copy
-import json
 from dataclasses import dataclass
 from typing import Callable
 
@@ -113,14 +112,17 @@ def score(measured, replayed) -> tuple[float, dict]:
 
 
 def _replay(raw: dict, payload, measured, src: str):
-    from sim.loop.simulation import Simulation
+    from sim.calibrate.replay import run_at_record
 
     desc = parse_table(raw, src=src)
     tm = build_model(desc, payload)
-    sim = Simulation(tm)
-    res = sim.run(valve_command=measured.valve_command)
-    out = dict(res.channels)
-    out["t"] = res.t
+    # at the record's own rate: commands held (or interpolated, meta.command_hold) onto the
+    # model's ticks, channels sampled back at the record's instants in its DOF columns
+    t_rec = np.asarray(measured.t, float) - float(measured.t[0])
+    res, ch, _, n = run_at_record(tm, t_rec, measured.valve_command, measured.dofs,
+                                  hold=measured.meta.get("command_hold", "zoh"))
+    out = dict(ch)
+    out["t"] = t_rec[:n]
     out["_incomplete"] = res.incomplete_reason
     return out
 
@@ -178,44 +180,21 @@ def fit(measured, raw_table: dict, payload=None, *, candidates=CANDIDATES, round
     }
 
 
-def write_table_toml(raw: dict, path, note: str) -> None:
-    """Write a calibrated description as TOML (plain writer for the subset the schema uses)."""
-    def fmt(v):
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, (int, float)):
-            return repr(float(v)) if isinstance(v, float) else str(v)
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, list):
-            return "[" + ", ".join(fmt(x) for x in v) + "]"
-        raise TypeError(type(v))
-
-    lines = [f"# {note}", ""]
-
-    def table(prefix, d):
-        scalars = {k: v for k, v in d.items() if not isinstance(v, dict) and not (
-            isinstance(v, list) and v and isinstance(v[0], dict))}
-        if prefix:
-            lines.append(f"[{prefix}]")
-        for k, v in scalars.items():
-            lines.append(f"{k} = {fmt(v)}")
-        lines.append("")
-        for k, v in d.items():
-            if isinstance(v, dict):
-                table(f"{prefix}.{k}" if prefix else k, v)
-        for k, v in d.items():
-            if isinstance(v, list) and v and isinstance(v[0], dict):
-                for item in v:
-                    lines.append(f"[[{prefix + '.' if prefix else ''}{k}]]")
-                    for kk, vv in item.items():
-                        lines.append(f"{kk} = {fmt(vv)}")
-                    lines.append("")
-
-    table("", raw)
+def write_table_toml(raw: dict, path, note: str, original=None) -> None:
+    """Write a calibrated description: the ``original`` file (a path) with every value
+    that ``raw`` changes rewritten in place, tagged ``note``, its comments kept (the one
+    writer, :mod:`sim.calibrate.description`). Without ``original``, ``raw['_source']``
+    or a bare error."""
+    import tomllib
     from pathlib import Path
 
-    p = Path(path)
-    tmp = p.with_name(f".{p.name}.tmp")
-    tmp.write_text("\n".join(lines))
-    tmp.replace(p)
+    from sim.calibrate.description import DescriptionWriteError, TomlText, changed_values
+
+    if original is None:
+        raise DescriptionWriteError(f"{path}: the calibrated description is written into a copy of the original "
+                                    "file; give original=")
+    doc = TomlText.read(original)
+    old = tomllib.loads(doc.text)
+    for section, key, value in changed_values(old, raw):
+        doc.set_value(section, key, value, note, keep_comment=True, create=True)
+    doc.save(Path(path))

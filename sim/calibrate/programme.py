@@ -134,36 +134,64 @@ def calibrate(table: str, *, quick: bool = False, workers: int | None = None, pr
 
 
 def write_calibration(path: str | Path, cal: dict) -> None:
-    """Rewrite the calibrated hydraulic values in place, line by line (comments kept)."""
-    text = Path(path).read_text()
-    lines = text.split("\n")
+    """Rewrite the calibrated hydraulic values (and masses) in place, comments kept
+    (:class:`sim.calibrate.description.TomlText`, the one writer)."""
+    from sim.calibrate.description import DescriptionWriteError, TomlText
+
+    doc = TomlText.read(path)
     tag_oil = "calibrated: matches Table 1 (shaketable characterize --calibrate)"
     tag_fr = "calibrated: matches the friction tests, 1.25 % of capability (shaketable characterize --calibrate)"
 
     def set_key(section, key, value_text, tag):
-        from mjcf.description import toml_key_index
-
-        i = toml_key_index(lines, section, key)
+        i = doc.key_index(section, key)
         if i is None:
             raise CharacterizeError(f"{path}: cannot find {section}.{key} to rewrite")
-        m = re.match(r"^[^#]*#\s*(.*)$", lines[i])
-        old = m.group(1).strip() if m else ""
+        old = doc.old_comment(i)
         old = re.sub(r"^calibrated:\s*(matches\s+)?", "", old)
         old = re.sub(r"^(Table 1|the friction tests[^;(]*)\s*(\(shaketable characterize --calibrate\))?[;,]?\s*",
                      "", old).strip()
         old = re.sub(r"^friction ~1\.25 % of capability \(friction tests\)$", "", old).strip()
-        comment = tag + (f"; {old}" if old else "")
-        lines[i] = f"{key} = {value_text}".ljust(36) + f"# {comment}"
+        doc.set_value(section, key, None, tag + (f"; {old}" if old else ""), value_text=value_text)
 
     for c, v in cal["dead_volume_m3"].items():
         for side in ("a", "b"):
             set_key(f"actuator_class.{c}", f"dead_volume_{side}_m3", f"{v:.4e}", tag_oil)
     for c, v in cal["seal_friction_n"].items():
         set_key(f"actuator_class.{c}", "seal_friction_n", f"{v:.1f}", tag_fr)
-    tmp = Path(str(path) + ".tmp")
-    tmp.write_text("\n".join(lines))
-    tmp.replace(path)
     if cal.get("masses"):
-        from mjcf.calibrate import NOTE_TESTS, write_calibrated
+        from mjcf.calibrate import NOTE_TESTS
 
-        write_calibrated(Path(path), cal["masses"], note=NOTE_TESTS, offset=cal["effective_mass_offset"])
+        try:
+            write_masses(doc, cal["masses"], note=NOTE_TESTS, offset=cal["effective_mass_offset"])
+        except DescriptionWriteError as e:
+            raise CharacterizeError(str(e))
+    doc.save(path)
+
+
+OFFSET_COMMENTS = [
+    "# What the virtual effective-mass tests (characterize, R1/R2) read below the rigid-body",
+    "# effective mass diag(T^T M T): the parallel stiffness (pre-sliding friction, supports) as",
+    "# -K/w^2 over the test band. `shaketable calibrate` aims the rigid-body masses at Table 2",
+    "# plus this, so that the virtual tests reproduce Table 2; `characterize --calibrate` measures it."]
+
+
+def write_masses(doc, result: dict, note: str, offset: dict | None = None) -> None:
+    """The effective-mass calibration's values into ``doc`` (a
+    :class:`~sim.calibrate.description.TomlText`), each line tagged ``note``; with
+    ``offset``, also (re)write ``[calibration] effective_mass_offset``. (Moved up from
+    ``mjcf.calibrate.write_calibrated``, which ``mjcf`` keeps for its own callers: the
+    writing is ``sim``'s one writer now.)"""
+    vals = result["values"]
+    c = note.lstrip("# ").strip()
+    doc.set_value("platen", "mass_kg", None, c, value_text=f"{vals['platen.mass_kg']:.1f}")
+    inertia = [vals[f"platen.inertia_kg_m2[{i}]"] for i in range(3)]
+    doc.set_value("platen", "inertia_kg_m2", None, c, value_text="[" + ", ".join(f"{v:.1f}" for v in inertia) + "]")
+    doc.set_value("actuator_class.lateral", "rod_mass_kg", None, c,
+                  value_text=f"{vals['actuator_class.lateral.rod_mass_kg']:.2f}")
+    doc.set_value("supports", "piston_mass_kg", None, c, value_text=f"{vals['supports.piston_mass_kg']:.2f}")
+    if offset is not None:
+        vt = "[" + ", ".join(f"{offset[d]:.1f}" for d in DOFS) + "]"
+        cm = "measured: rigid-body minus virtual-test effective mass (mean of R1, R2), x y z kg, rx ry rz kg m^2"
+        if doc.key_index("calibration", "effective_mass_offset") is None and doc.key_index("calibration", "x") is None:
+            doc.lines = doc._rstrip() + [""] + OFFSET_COMMENTS
+        doc.set_value("calibration", "effective_mass_offset", None, cm, value_text=vt, create=True)

@@ -1,59 +1,276 @@
 """Open-loop replay of a run file's recorded valve commands through the model: the
 first step of closing the loop with measured data (the residual is what the model
-lacks)."""
+lacks).
+
+The record keeps its own time. The model keeps its physics step (1/2048 s) and ticks at
+a rate that divides it; the recorded command is held onto those ticks (zero-order hold,
+as the lab's DAC held it; ``hold="linear"`` interpolates instead) and the model's
+channels are sampled back at the record's instants, where the comparison is made. A
+record at 1024 Hz (or any rate dividing 2048 Hz) is replayed on its own samples.
+
+Before anything is compared the valve null bias (and its drift) is estimated from the
+recorded motion (:mod:`sim.calibrate.valve_null`) and added to the command, so that an
+offset the closed loop hid does not walk the open-loop model to its end stop. Open loop,
+the displacement is the integral of the flow: any small flow error accumulates, so the
+residual is also given for velocity, acceleration and the band-passed displacement.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from sim.errors import RunFileError
+
+PHYSICS_HZ = 2048.0  #: the model's physics rate (mjcf.builder default step 1/2048 s)
+TICK_HZ = 1024.0  #: replay tick for records whose rate does not divide the physics rate
+INPUTS = ("valve_command", "reference")  #: what drives the replay: not compared
+DISPLACEMENT_BAND_HZ = (0.2, 50.0)  #: band of the displacement comparison (open-loop drift removed)
 
 
 @dataclass
 class ReplayOutcome:
-    """The replayed run (a run file), the loop's result, and the residual NRMSE per
-    channel and column against the source run."""
+    """The replayed run (a run file at the record's instants, the record's DOF
+    columns), the loop's result (at the model's tick), the residual NRMSE per channel and
+    column against the source run, the valve null estimate and notes for the summary."""
 
     run: object
     result: object
     residual_nrmse: dict
     source: str
+    valve_null: dict | None = None
+    tick_hz: float = TICK_HZ
+    notes: list = field(default_factory=list)
+    stroke_fraction: dict = field(default_factory=dict)
+    not_compared: dict = field(default_factory=dict)
+    hold: str = "zoh"
 
     @property
     def complete(self) -> bool:
         return self.result.incomplete_reason is None
 
+    def summary(self) -> dict:
+        return {"replay_of": self.source, "record_rate_hz": self.run.sample_rate_hz, "model_tick_hz": self.tick_hz,
+                "complete": self.complete, "incomplete_reason": self.result.incomplete_reason,
+                "realtime_factor": float(self.result.realtime_factor), "valve_null": self.valve_null,
+                "peak_stroke_fraction": self.stroke_fraction, "residual_nrmse": self.residual_nrmse,
+                "not_compared": self.not_compared,
+                "command_hold": self.hold, "notes": self.notes}
 
-def replay(source, *, table: str | None = None, payload: str | None = None, progress: bool = False) -> ReplayOutcome:
+
+def tick_rate(record_hz: float, hold: str = "zoh") -> float:
+    """The model's tick for a record at ``record_hz``: the record's own rate when it
+    divides the physics rate (a held command changes only there), else :data:`TICK_HZ`;
+    an interpolated command (``hold="linear"``) ticks at least at :data:`TICK_HZ`."""
+    if hold == "linear" and record_hz < TICK_HZ:
+        return TICK_HZ
+    r = PHYSICS_HZ / record_hz
+    return float(record_hz) if abs(r - round(r)) < 1e-9 and round(r) >= 1 else TICK_HZ
+
+
+def _columns(src, ch: str, run) -> np.ndarray | None:
+    """``run``'s channel ``ch`` with the columns of ``src`` (by name); None if a name is missing."""
+    a, b = getattr(src, ch), getattr(run, ch)
+    if a is None or b is None:
+        return None
+    names_a, names_b = src.column_names(ch), run.column_names(ch)
+    if not all(n in names_b for n in names_a):
+        return None
+    return b[:, [names_b.index(n) for n in names_a]]
+
+
+def not_compared(src, run) -> dict:
+    """Every channel (and column) of the record that :func:`residuals` does not compare,
+    with the reason."""
+    from sim.runs.runfile import CHANNELS
+
+    out = {}
+    for ch in CHANNELS:
+        a = getattr(src, ch)
+        if a is None:
+            continue
+        if ch in INPUTS:
+            out[ch] = ("the replay's input" if ch == "valve_command"
+                       else "kept in the replay file; the open-loop replay does not use it")
+            continue
+        if getattr(run, ch) is None:
+            out[ch] = "the model does not record it"
+            continue
+        names_b = run.column_names(ch)
+        miss = [nm for nm in src.column_names(ch) if nm not in names_b]
+        if miss:
+            out[ch] = (f"column(s) {', '.join(miss)} are not sensors of the table description "
+                       f"(it has {', '.join(names_b) or 'none'}); declare them as [[accelerometer]] to compare")
+    return out
+
+
+def residuals(src, run) -> dict:
+    """NRMSE of every channel the record and the replay share (by column name), plus the
+    band-passed displacements and, for a record without velocity, the velocity from its
+    displacement. Keys: channel names; ``<channel>_bandpassed`` and
+    ``table_velocity_from_displacement`` for the derived comparisons."""
+    from sim.assess.metrics import nrmse
+    from sim.runs.runfile import CHANNELS
+    from sim.signals.resample import bandpass
+
+    n = min(src.n_samples, run.n_samples)
+    fs = src.sample_rate_hz
+    out = {}
+    for ch in CHANNELS:
+        if ch in INPUTS:
+            continue
+        b = _columns(src, ch, run)
+        if b is None:
+            continue
+        a = getattr(src, ch)[:n]
+        b = b[:n]
+        out[ch] = {nm: nrmse(b[:, j], a[:, j]) for j, nm in enumerate(src.column_names(ch))}
+        if ch in ("table_displacement", "actuator_displacement") and n > 30 and np.all(np.isfinite(a)) \
+                and np.all(np.isfinite(b)):
+            ab, bb = bandpass(a, fs, DISPLACEMENT_BAND_HZ), bandpass(b, fs, DISPLACEMENT_BAND_HZ)
+            out[ch + "_bandpassed"] = {nm: nrmse(bb[:, j], ab[:, j]) for j, nm in enumerate(src.column_names(ch))}
+    if src.table_velocity is None and src.table_displacement is not None and run.table_velocity is not None:
+        b = _columns(src, "table_displacement", run)
+        if b is not None and n > 2:
+            va = np.gradient(src.table_displacement[:n], 1.0 / fs, axis=0)
+            vb = np.gradient(b[:n], 1.0 / fs, axis=0)
+            out["table_velocity_from_displacement"] = {nm: nrmse(vb[:, j], va[:, j])
+                                                       for j, nm in enumerate(src.dofs)}
+    return out
+
+
+def replay(source, *, table: str | None = None, payload: str | None = None, progress: bool = False,
+           bias: str | float | None = None, drift: bool = False, hold: str | None = None) -> ReplayOutcome:
     """Replay ``source`` (a run-file path or :class:`~sim.runs.runfile.RunFile`) open loop.
 
     ``table``/``payload``: override the descriptions the run carries
     (``meta.table_description``/``meta.payload_description``, else the stock files named
     by ``meta.table``/``meta.payload``).
+    ``bias``: ``"estimate"`` (the valve null offset, and with ``drift`` its linear drift,
+    from the recorded motion), ``"none"``, or a number (the same offset, fraction of rated
+    opening, on every valve); default ``"estimate"`` for a measured run, ``"none"`` for a
+    simulated one (its valves had no hidden null: it replays to round-off). ``hold``:
+    ``"zoh"`` or ``"linear"`` (command onto the model's ticks).
     """
-    from sim.assess.metrics import channel_residuals
-    from sim.control.tvc import ControllerGains
+    from sim.calibrate.valve_null import estimate
     from sim.effects import build_model
-    from sim.loop.simulation import Simulation
     from sim.runs.build import build_runfile
-    from sim.runs.runfile import payload_of, read_run, table_of
+    from sim.runs.runfile import RunFile, payload_of, read_run, table_of
 
-    name = str(source) if isinstance(source, (str, Path)) else "<run>"
+    name = str(source) if isinstance(source, (str, Path)) else (source.path or "<run>")
     src = read_run(source, require=("valve_command",)) if isinstance(source, (str, Path)) else source
+    if not isinstance(source, (str, Path)):
+        src.validate(require=("valve_command",))
+    hold = hold or src.meta.get("command_hold", "zoh")
+    if hold not in ("zoh", "linear"):
+        raise RunFileError(f"{name}: command hold must be 'zoh' or 'linear' (got {hold!r}); fix meta.command_hold "
+                           "or --hold")
     desc = table_of(src, table)  # --table, else the description the run carries, else the stock file
     if list(src.actuators) != list(desc.actuator_names):
         raise RunFileError(f"{name}: actuators {src.actuators} do not match table '{desc.name}' "
-                           f"({list(desc.actuator_names)}); give --table")
+                           f"({list(desc.actuator_names)}); give --table or rename the actuator columns")
+    from mjcf.description import DOFS6
+
+    missing = [d for d in src.dofs if d not in DOFS6]
+    if missing:
+        raise RunFileError(f"{name}: DOF column(s) {missing} are not DOF names ({', '.join(DOFS6)}); "
+                           "fix meta.dofs")
     pl = payload_of(src, payload)
     tm = build_model(desc, pl)
-    sim = Simulation(tm, gains=ControllerGains(rate_hz=src.sample_rate_hz))
-    res = sim.run(valve_command=src.valve_command, progress=progress)
-    run = build_runfile(res, tm, description=f"open-loop replay of {Path(name).name}",
-                        payload_name=pl.name if pl else None, extra_meta={"replay_of": name})
+
+    notes = []
+    if bias is None:
+        bias = "estimate" if src.source == "measured" else "none"
+    t_rec = np.asarray(src.t, float) - float(src.t[0])
+    u = np.asarray(src.valve_command, float)
+    vn = None
+    if bias == "estimate":
+        est = estimate(src, desc, drift=drift)
+        vn = est.as_dict(src.actuators)
+        u = u + est.at(np.asarray(src.t, float))
+        notes.append("valve null offset estimated from the recorded motion and added to the command "
+                     f"(mean {100 * float(np.mean(est.offset)):+.3f} % of rated opening"
+                     + (f", drift {100 * float(np.mean(est.drift_per_s)):+.4f} %/s)" if drift else ")"))
+    elif bias != "none":
+        try:
+            b = float(bias)
+        except (TypeError, ValueError):
+            raise RunFileError(f"replay bias must be 'estimate', 'none' or a number (got {bias!r})") from None
+        vn = {"offset": {a: b for a in src.actuators}, "method": "given"}
+        u = u + b
+    rate = tick_rate(src.sample_rate_hz, hold)
+    if rate != src.sample_rate_hz:
+        notes.append(f"record at {src.sample_rate_hz:g} Hz: command "
+                     + ("held (zero-order hold)" if hold == "zoh" else "interpolated")
+                     + f" onto the model's {rate:g} Hz ticks, model sampled at the record's instants")
+    res, chans, extras, n = run_at_record(tm, t_rec, u, src.dofs, hold=hold, progress=progress)
+    tick_run = build_runfile(res, tm, description=f"open-loop replay of {Path(name).name}",
+                             payload_name=pl.name if pl else None)
+    meta = dict(tick_run.meta)
+    meta.update({"sample_rate_hz": src.sample_rate_hz, "dofs": list(src.dofs), "replay_of": name,
+                 "model_tick_hz": rate})
+    if vn is not None:
+        meta["valve_null"] = vn
     if src.reference is not None:
-        run.reference = src.reference[:len(res.t)].copy()
-    return ReplayOutcome(run=run, result=res, residual_nrmse=channel_residuals(src, run), source=name)
+        chans["reference"] = np.asarray(src.reference[:n], float).copy()
+    run = RunFile(t=np.asarray(src.t[:n], float).copy(), meta=meta, extras=extras, **chans)
+    if res.incomplete_reason:
+        run.mark_incomplete(res.incomplete_reason)
+    half = np.array([a.cls.half_stroke_m for a in desc.actuators])
+    peak = np.nanmax(np.abs(res.channels["actuator_displacement"]), axis=0) / half
+    frac = {a: float(p) for a, p in zip(desc.actuator_names, peak)}
+    cush = np.array([1.0 - float(desc.raw["actuator_class"][a.cls.name].get("cushion_length_m", 0.0))
+                     / a.cls.half_stroke_m for a in desc.actuators])
+    hit = [a for a, p, c in zip(desc.actuator_names, peak, cush) if p >= c]
+    if hit:
+        notes.append(f"actuator(s) {', '.join(hit)} reached the end cushions: the replay drifted to the stroke end "
+                     "(a valve null bias not removed, or a flow-gain error); the comparison after that is meaningless")
+    notes.append(f"open loop the displacement is the integral of the flow (a small flow error drifts): "
+                 f"displacements are also compared band-passed {DISPLACEMENT_BAND_HZ[0]:g}-"
+                 f"{min(DISPLACEMENT_BAND_HZ[1], 0.45 * src.sample_rate_hz):g} Hz; velocity and acceleration "
+                 "are the meaningful comparisons")
+    return ReplayOutcome(run=run, result=res, residual_nrmse=residuals(src, run), source=name, valve_null=vn,
+                         tick_hz=rate, notes=notes, stroke_fraction=frac, not_compared=not_compared(src, run), hold=hold)
 
 
-__all__ = ["ReplayOutcome", "replay"]
+def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress: bool = False):
+    """Run the model ``tm`` open loop on ``valve_command`` (N, n_act) sampled at ``t_rec``
+    (from 0, uniform, any rate): the command is held (``"zoh"``) or interpolated
+    (``"linear"``) onto the model's ticks (:func:`tick_rate`), and the recorder's channels
+    (sensor effects applied) are sampled back at the record's instants, DOF channels in
+    the columns ``dofs``. Returns ``(result, channels, extras, n)``: ``n`` record samples
+    were reached (all of them unless the run stopped early)."""
+    from sim.control.tvc import ControllerGains
+    from sim.loop.simulation import Simulation
+    from sim.runs.build import build_runfile
+    from sim.runs.runfile import ACTUATOR_CHANNELS, DOF_CHANNELS
+    from sim.signals.resample import hold as zoh
+    from sim.signals.resample import interpolate
+
+    t_rec = np.asarray(t_rec, float)
+    fs = 1.0 / float(t_rec[1] - t_rec[0])
+    rate = tick_rate(fs, hold)
+    n_tick = int(np.floor(t_rec[-1] * rate + 1e-6)) + 1
+    t_tick = np.arange(n_tick) / rate
+    cmd = zoh(t_rec, valve_command, t_tick) if hold == "zoh" else interpolate(t_rec, valve_command, t_tick)
+    sim = Simulation(tm, gains=ControllerGains(rate_hz=rate))
+    res = sim.run(valve_command=cmd, progress=progress)
+    tick_run = build_runfile(res, tm)
+    n = int(np.searchsorted(t_rec, res.t[-1] + 1e-6 / rate, side="right"))
+    chans = {}
+    for ch in ACTUATOR_CHANNELS + DOF_CHANNELS + ("accelerometers",):
+        arr = getattr(tick_run, ch)
+        if arr is None:
+            continue
+        if ch in DOF_CHANNELS:
+            arr = arr[:, [list(tick_run.dofs).index(d) for d in dofs]]
+        chans[ch] = arr[:n].copy() if rate == fs else interpolate(res.t, arr, t_rec[:n])
+    extras = {k: (np.asarray(v, float)[:n].copy() if rate == fs else interpolate(res.t, np.asarray(v, float),
+                                                                                   t_rec[:n]))
+              for k, v in tick_run.extras.items()}
+    return res, chans, extras, n
+
+
+__all__ = ["ReplayOutcome", "replay", "residuals", "tick_rate"]

@@ -81,28 +81,6 @@ def cmd_model(args) -> int:
     return 0
 
 
-# ------------------------------------------------------------------ calibrate
-def cmd_calibrate(args) -> int:
-    import mjcf
-    from mjcf.calibrate import calibrate_masses, write_calibrated
-
-    desc = mjcf.load_table(args.table)
-    res = calibrate_masses(desc)
-    if args.write:
-        write_calibrated(desc.source, res)
-    if args.json:
-        print(json.dumps({k: res[k] for k in ("values", "before", "after", "target")}, indent=2))
-        return 0
-    print(f"effective-mass calibration of {desc.name} against its published effective masses")
-    print(f"  {'dof':4s} {'target':>10s} {'before':>10s} {'after':>10s}")
-    for k in res["target"]:
-        print(f"  {k:4s} {res['target'][k] / 1e3:10.2f} {res['before'][k] / 1e3:10.2f} {res['after'][k] / 1e3:10.2f}")
-    for k, v in res["values"].items():
-        print(f"  {k} = {v:.2f}")
-    print("  written to " + desc.source if args.write else "  (dry run: --write rewrites the table file)")
-    return 0
-
-
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="shaketable", description="Digital twin of servo-hydraulic shaking tables")
     sub = p.add_subparsers(dest="command", required=True)
@@ -114,29 +92,27 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--json", action="store_true", help="print JSON")
     m.set_defaults(func=cmd_model)
 
-    c = sub.add_parser("calibrate", help="calibrate the unpublished masses against the measured effective masses")
-    c.add_argument("table")
-    c.add_argument("--write", action="store_true", help="rewrite the calibrated values in the table file")
-    c.add_argument("--json", action="store_true")
-    c.set_defaults(func=cmd_calibrate)
-
+    from sim.cli import calibrate as calibrate_cli
     from sim.cli import characterize as characterize_cli
+    from sim.cli import effects as effects_cli
     from sim.cli import feasibility as feasibility_cli
+    from sim.cli import geometry as geometry_cli
     from sim.cli import identify as identify_cli
+    from sim.cli import import_ as import_cli
     from sim.cli import run as run_cli
+    from sim.cli import table as table_cli
     from sim.cli import view as view_cli
 
     run_cli.add_parsers(sub)  # run, replay, fit
-    from sim.cli import geometry as geometry_cli
-
+    calibrate_cli.add_parsers(sub)  # calibrate RUN... (effects) or calibrate TABLE (masses)
+    feasibility_cli.add_parsers(sub)  # will it work on this table, and the largest scale
     geometry_cli.add_parsers(sub)  # geometric nonlinearity
     view_cli.add_parsers(sub)  # rerun recordings of run files
     characterize_cli.add_parsers(sub)  # the identification programme each table declares
     identify_cli.add_parsers(sub)  # least squares on run files
-    from sim.cli import effects as effects_cli
-
     effects_cli.add_parsers(sub)  # the effect library and a table's parameters
-    feasibility_cli.add_parsers(sub)  # will it work on this table, and the largest scale
+    table_cli.add_parsers(sub)  # a lab's own table description from a few numbers
+    import_cli.add_parsers(sub)  # a lab's recorder export to run files
     return p
 
 

@@ -5,6 +5,7 @@ files (the LHPOST paper's method). The papers' whole programmes run under
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 from sim.errors import UserError
@@ -50,6 +51,8 @@ def cmd_identify(args) -> int:
         raise UserError(f"the least squares has no unique solution for these runs ({e}); give tests with "
                         "motion in both directions") from None
     scan = I.scan_alpha(recs, weights=args.weights, ce_fixed=args.ce) if args.scan_alpha else []
+    for w in res.warnings():
+        print(f"warning: {w}", file=sys.stderr)
     if args.json:
         out = {k: v for k, v in res.as_dict().items()}
         if scan:

@@ -106,24 +106,32 @@ def cmd_replay(args) -> int:
     prog = _progress(args)
     out = out_dir(args.out)
     prog.stage(f"replaying {args.run} open loop")
-    rep = replay(args.run, table=args.table, payload=args.payload, progress=prog.enabled and prog.tty)
+    bias = "none" if args.no_bias else args.bias  # None: estimated for a measured run
+    rep = replay(args.run, table=args.table, payload=args.payload, progress=prog.enabled and prog.tty,
+                 bias=bias, drift=args.drift, hold=args.hold)
     res = rep.result
     stem = Path(args.run).name[: -len(".run.npz")] if args.run.endswith(".run.npz") else Path(args.run).stem
     path = out / f"{stem}.replay.run.npz"
     write_run(path, rep.run)
-    summary = {"schema": SCHEMA, "replay_of": str(args.run), "run_file": str(path),
-               "realtime_factor": float(res.realtime_factor), "complete": rep.complete,
-               "residual_nrmse": rep.residual_nrmse}
+    summary = {"schema": SCHEMA, "run_file": str(path), **rep.summary()}
     write_json_atomic(out / "replay_summary.json", summary)
     if args.json:
         print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
     else:
-        print(f"replayed {args.run} open loop ({res.sim_s:.2f} s, {res.realtime_factor:.2f}x real time; "
+        print(f"replayed {args.run} open loop ({res.sim_s:.2f} s at the record's {rep.run.sample_rate_hz:g} Hz, "
+              f"model ticks {rep.tick_hz:g} Hz, {res.realtime_factor:.2f}x real time; "
               f"whole command {prog.elapsed_s:.1f} s) -> {path}")
+        for note in rep.notes:
+            print(f"  note: {note}")
+        sf = ", ".join(f"{k} {100 * v:.0f}%" for k, v in rep.stroke_fraction.items())
+        print(f"  peak stroke (fraction of half-stroke): {sf}")
         for ch, cols in rep.residual_nrmse.items():
-            vals = ", ".join(f"{k} {100 * v:.2f}%" for k, v in cols.items() if np.isfinite(v))
-            if vals:
-                print(f"  {ch} NRMSE: {vals}")
+            vals = ", ".join(f"{k} {100 * v:.2f}%" if np.isfinite(v) else f"{k} -" for k, v in cols.items())
+            print(f"  {ch} NRMSE: {vals}")
+        for ch, why in rep.not_compared.items():
+            print(f"  {ch}: not compared ({why})")
+        if res.incomplete_reason:
+            print(f"error: {res.incomplete_reason}", file=sys.stderr)
     return 0 if rep.complete else 3
 
 
@@ -152,7 +160,7 @@ def cmd_fit(args) -> int:
     toml_path = out / f"{desc.name}_calibrated.toml"
     note = ("calibrated: shaketable fit of " + Path(args.run).name + "; effects added: "
             + (", ".join(f"{e['effect']} = {e['value']:.6g} {e['unit']}" for e in rep["effects_added"]) or "none"))
-    F.write_table_toml(rep.pop("calibrated_table"), toml_path, note)
+    F.write_table_toml(rep.pop("calibrated_table"), toml_path, note, original=desc.source)
     rep["calibrated_table_file"] = str(toml_path)
     write_json_atomic(out / "fit.json", rep)
     if args.json:
@@ -198,6 +206,16 @@ def add_parsers(sub) -> None:
     p.add_argument("--table", help="table (default: the description the run carries, else its meta.table)")
     p.add_argument("--payload", help="payload (default: the description the run carries; 'none' for a bare table)")
     p.add_argument("--out", default="out", help="output folder")
+    p.add_argument("--bias", type=float, default=None, metavar="FRACTION",
+                   help="valve null offset to add to every command (default: estimated from the recorded motion "
+                        "for a measured run, none for a simulated one)")
+    p.add_argument("--no-bias", action="store_true", help="replay the commands as recorded (no valve null offset)")
+    p.add_argument("--drift", action="store_true",
+                   help="also estimate and apply a linear drift of the valve null over the record")
+    p.add_argument("--hold", choices=["zoh", "linear"], default=None,
+                   help="command onto the model's ticks: zero-order hold (the record is the controller's DAC "
+                        "rate) or linear (a slower recorder sampled the drive); default the run's "
+                        "meta.command_hold, else zoh")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_replay)
 

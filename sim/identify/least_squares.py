@@ -88,10 +88,35 @@ class Identified:
     weights: str = "force"
     per_test_error: dict = field(default_factory=dict)
 
+    def warnings(self) -> list[str]:
+        """One line per unphysical fitted parameter (negative mass, stiffness, damping
+        or friction), saying what it means: the model does not describe these records
+        and the other parameters absorb what it misses."""
+        out = []
+        what = {"M_e_kg": ("M_e", "mass", "kg", "the acceleration term is fitting something else (a force "
+                           "channel's sign or scale, a time shift between force and motion, a filter)"),
+                "K_e_N_per_m": ("K_e", "stiffness", "N/m", "no restoring force is seen: the displacement drifts "
+                                "or the friction (or a flexible specimen's reaction) is taken for a spring; give tests that "
+                                "return to mid-stroke, on the bare table"),
+                "C_e": ("C_e", "damping", "N (s/m)^alpha", "the force does less than no dissipation: friction "
+                        "F_mu is over-fitted against it, or the force lags the motion (sensor filter); "
+                        "constrain it with --ce, or try another alpha"),
+                "F_mu_N": ("F_mu", "friction", "N", "the force does negative dry-friction work: the damping "
+                           "term takes more than all of it, or velocity and force are misaligned")}
+        for key, (sym, kind, unit, why) in what.items():
+            v = getattr(self, key)
+            if key == "C_e" and self.constrained:
+                continue
+            if v < 0:
+                out.append(f"{sym} = {v:.4g} {unit} is negative: an unphysical {kind}. It means {why}; the other "
+                           "parameters are then not the table's either (a flexible specimen's own dynamics are in the force: "
+                           "identify the bare table)")
+        return out
+
     def as_dict(self) -> dict:
         return {"M_e_kg": self.M_e_kg, "K_e_N_per_m": self.K_e_N_per_m, "C_e": self.C_e, "F_mu_N": self.F_mu_N,
                 "alpha": self.alpha, "error": self.error, "constrained": self.constrained, "weights": self.weights,
-                "per_test_error": self.per_test_error}
+                "per_test_error": self.per_test_error, "warnings": self.warnings()}
 
 
 def prepare(rec: Record, *, trim: float | None = 0.01, accel_lowpass_hz: float | None = None,
@@ -244,13 +269,16 @@ def record_from_run(path) -> Record:
     project's uni-axial descriptions), table displacement/velocity/acceleration x."""
     from sim.runs.runfile import read_run
 
-    run = read_run(path, require=("actuator_force", "table_displacement", "table_velocity", "table_acceleration"))
+    run = read_run(path, require=("actuator_force", "table_displacement", "table_acceleration"))
     name = run.name
     if "x" not in run.dofs:
         raise RunFileError(f"{name}: has no 'x' DOF column; the ucsd-ls model identifies the x motion of a uni-axial table")
     F = np.asarray(run.actuator_force, float).sum(axis=1)
     d = np.asarray(run.column("table_displacement", "x"), float)
-    v = np.asarray(run.column("table_velocity", "x"), float)
+    if run.table_velocity is not None:
+        v = np.asarray(run.column("table_velocity", "x"), float)
+    else:  # a lab's record often has none: the displacement's central difference
+        v = np.gradient(d, run.dt)
     a = np.asarray(run.column("table_acceleration", "x"), float)
     for ch, arr in (("actuator_force", F), ("table_displacement", d), ("table_velocity", v),
                     ("table_acceleration", a)):

@@ -1,0 +1,107 @@
+"""Force laws of the mechanical effects, as regressors for the mechanical residual path.
+
+An effect that adds a generalised force ``theta * basis(motion)`` at a place (a DOF, an
+actuator, an actuator class) is *linear in its parameter* ``theta``: the mechanical
+residual (recorded force minus the force the declared model needs for the recorded
+motion) is then explained by linear least squares on the column ``basis``. This module
+is the hook the effect contract (:mod:`sim.effects.base`) does not have yet: a registry
+of :class:`Law` objects keyed by effect type (``coulomb_friction``, ``viscous_damping``,
+``power_damping``, ``spring``, ``added_mass``, the names of branch ``effects``), plus the
+older platen effects of :mod:`sim.effects.registry` (``platen_spring``,
+``platen_coulomb``, ``platen_power_damping``) so that a description's *declared*
+effects enter the model's force. A law with a nonlinear shape parameter (the exponent
+of power-law damping) is fitted on a grid of it, each point a linear least squares.
+
+When an effect type is registered in :data:`sim.effects.base.EFFECTS`, its ``SPEC``
+keys must match the law's parameter names for the law to be used as a candidate; when
+it is not registered yet, the law still serves (the written entry then needs the effect
+library to load).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Law:
+    """``force = value[linear] * basis(u, v, a, shape)`` at one coordinate.
+
+    ``params``: name -> (unit, lower, upper) (SI, the ``[[effect]]`` keys); ``linear``:
+    the name of the coefficient; ``shape``: name -> grid of values scanned (nonlinear
+    parameters); ``inertial``: the basis is the acceleration (not passed through the
+    sensor prefilter, which the recorded acceleration already went through);
+    ``places``: the place kinds it can act at.
+    """
+
+    type: str
+    params: dict
+    linear: str
+    basis: Callable
+    places: tuple = ("dof", "actuator", "class")
+    shape: dict = field(default_factory=dict)
+    inertial: bool = False
+    what: str = ""
+
+
+DEADBAND = 1e-3  #: m/s (rad/s): below it the sign of a velocity is the sensor noise's
+
+
+def _sign(v):
+    return np.sign(v)
+
+
+LAWS: dict[str, Law] = {}
+
+
+def add_law(law: Law) -> Law:
+    LAWS[law.type] = law
+    return law
+
+
+add_law(Law("coulomb_friction", {"force_n": ("N", 0.0, np.inf)}, "force_n",
+            lambda u, v, a, s: _sign(v), what="dry friction F sign(v)"))
+add_law(Law("viscous_damping", {"damping_n_s_m": ("N s/m", 0.0, np.inf)}, "damping_n_s_m",
+            lambda u, v, a, s: v, what="linear damping c v"))
+add_law(Law("power_damping", {"coefficient": ("N (s/m)^exponent", 0.0, np.inf), "exponent": ("1", 0.05, 2.0)},
+            "coefficient", lambda u, v, a, s: np.abs(v) ** s["exponent"] * _sign(v),
+            shape={"exponent": tuple(np.round(np.arange(0.2, 1.51, 0.1), 3))},
+            what="power-law damping C |v|^alpha sign(v)"))
+add_law(Law("spring", {"stiffness_n_m": ("N/m", -np.inf, np.inf)}, "stiffness_n_m",
+            lambda u, v, a, s: u, what="linear spring k u"))
+add_law(Law("added_mass", {"mass_kg": ("kg", -np.inf, np.inf)}, "mass_kg",
+            lambda u, v, a, s: a, inertial=True, what="mass moving with the place m a"))
+
+
+def declared_forces(entry: dict):
+    """``(law, where, values)`` of a declared ``[[effect]]`` entry whose force the
+    mechanical path can compute (new-style and the older platen effects), else None."""
+    kind = entry.get("type")
+    if kind in ("platen_spring", "platen_coulomb", "platen_power_damping"):
+        where = "dof:" + str(entry.get("dof", "x"))
+        if kind == "platen_spring":
+            return LAWS["spring"], where, {"stiffness_n_m": float(entry["stiffness_n_m"])}
+        if kind == "platen_coulomb":
+            return LAWS["coulomb_friction"], where, {"force_n": float(entry["force_n"])}
+        return LAWS["power_damping"], where, {"coefficient": float(entry["coefficient"]),
+                                              "exponent": float(entry.get("exponent", 0.5))}
+    if kind in LAWS and "where" in entry:
+        law = LAWS[kind]
+        vals = {k: float(entry[k]) for k in law.params if k in entry}
+        if len(vals) == len(law.params):
+            return law, str(entry["where"]), vals
+    return None
+
+
+def usable(law: Law) -> bool:
+    """A law is a candidate when its type is not registered, or registered with the same keys."""
+    from sim.effects.base import EFFECTS
+
+    cls = EFFECTS.get(law.type)
+    return cls is None or set(law.params) <= set(getattr(cls, "SPEC", {}))
+
+
+__all__ = ["DEADBAND", "LAWS", "Law", "add_law", "declared_forces", "usable"]

@@ -1,0 +1,332 @@
+"""What the declared model does not explain in measured runs: the residuals.
+
+Three paths, chosen by the channels every run has (:func:`choose_path`):
+
+* ``mechanical``: table motion (displacement, velocity, acceleration) and actuator
+  forces. The force the declared model needs for the recorded motion, against the
+  recorded force, per table DOF (the NEES-UCSD paper's approach, and the only path for
+  runs without valve commands). The recorded force in DOF space is ``J^T f`` (``J`` the
+  stroke-per-DOF Jacobian of the exact kinematics, :func:`sim.control.tvc.dof_jacobian`);
+  the model's is ``M_e a`` (``M_e`` MuJoCo's effective mass matrix of the declared
+  table, loops closed, at home: a small-motion linearisation of ``mj_inverse``) plus
+  the force of every declared effect whose law :mod:`sim.calibrate.laws` knows. The
+  static part is removed per run and DOF (the paper's pressures were high-passed). An
+  accelerometer conditioner (``accel_lowpass_hz``) delays the recorded acceleration
+  alone; every other term is passed through the same analog filter
+  (:func:`sim.identify.least_squares.analog_lowpass`) so the balance stays exact.
+  Samples where the table is still (|v| below :data:`sim.calibrate.laws.DEADBAND`, and
+  the filter's memory after them) are left out: there the friction force is anything
+  within its bounds.
+* ``replay``: recorded valve commands, replayed open loop (after removing a valve null
+  offset, the command's mean, or a real record drifts to the end stop); residual of
+  force, acceleration and displacement (:func:`replay_residual`).
+* ``closed_loop``: only a reference: the run through the controller model.
+
+Residuals are per channel, per DOF, in time and frequency (:func:`spectra`, with the
+coherence with the states).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sim.errors import RunFileError, UserError
+
+MECH_CHANNELS = ("actuator_force", "table_displacement", "table_velocity", "table_acceleration")
+PATHS = ("mechanical", "replay", "closed_loop")
+
+
+class CalibrationError(UserError):
+    """Runs that cannot be calibrated together (one line: file, field, fix)."""
+
+
+@dataclass
+class MechRun:
+    """One run on the mechanical path (DOF space of the table's own DOFs)."""
+
+    name: str
+    dt: float
+    dofs: list
+    u: np.ndarray  # (n, k) displacement
+    v: np.ndarray
+    a: np.ndarray
+    force: np.ndarray  # (n, k) recorded generalised force J^T f, prefiltered
+    model: np.ndarray  # (n, k) declared model's force for the recorded motion, prefiltered
+    J: np.ndarray  # (n_act, k)
+    actuators: list
+    classes: dict  # class name -> actuator indices
+    rows: np.ndarray  # bool (n,): samples in the fit
+    prefilter: tuple | None = None
+    t0: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self.demean(self.force - self.model)
+
+    def demean(self, x: np.ndarray) -> np.ndarray:
+        """Static part removed per DOF (mean over the fit rows)."""
+        return x - x[self.rows].mean(axis=0)
+
+    def filt(self, x: np.ndarray) -> np.ndarray:
+        if self.prefilter is None:
+            return x
+        import scipy.signal as sig
+
+        return sig.lfilter(*self.prefilter, x, axis=0)
+
+    def place_motion(self, where: str):
+        """(u, v, a, map) of a place: its coordinate's motion (n,) and ``map`` (k,) or
+        (m, k) that takes its force into DOF space."""
+        kind, _, name = where.partition(":")
+        if kind == "dof":
+            j = self.dofs.index(name)
+            e = np.zeros(len(self.dofs))
+            e[j] = 1.0
+            return self.u[:, j], self.v[:, j], self.a[:, j], e
+        if kind == "actuator":
+            i = self.actuators.index(name)
+            Ji = self.J[i]
+            return self.u @ Ji, self.v @ Ji, self.a @ Ji, Ji
+        if kind == "class":
+            idx = self.classes[name]
+            Jc = self.J[idx]
+            return self.u @ Jc.T, self.v @ Jc.T, self.a @ Jc.T, Jc
+        raise CalibrationError(f"where = '{where}': the mechanical path acts at dof:, actuator: or class: places")
+
+    def column(self, law, where: str, shape: dict) -> np.ndarray:
+        """(n, k) generalised force of ``law`` with unit coefficient at ``where``."""
+        u, v, a, m = self.place_motion(where)
+        b = np.asarray(law.basis(u, v, a, shape), float)
+        Q = b[:, None] * m[None, :] if b.ndim == 1 else b @ m
+        return Q if law.inertial else self.filt(Q)
+
+
+def places(desc, kinds) -> list[str]:
+    """Every place of ``kinds`` on this table."""
+    out = []
+    if "dof" in kinds:
+        out += [f"dof:{d}" for d in desc.dofs]
+    if "actuator" in kinds and len(desc.actuators) > 1:
+        out += [f"actuator:{a}" for a in desc.actuator_names]
+    if "class" in kinds:
+        cl = sorted({a.cls.name for a in desc.actuators})
+        if len(cl) > 1:
+            out += [f"class:{c}" for c in cl]
+    return out
+
+
+def choose_path(runs) -> str:
+    """The residual path every run supports (mechanical first, then replay, then closed
+    loop; the last two need a recorded output to compare: force, acceleration or
+    displacement)."""
+    have = [{c for c in MECH_CHANNELS + ("valve_command", "reference") if getattr(r, c) is not None} for r in runs]
+    outputs = [bool(h & set(FIT_CHANNELS)) for h in have]
+    if all(set(MECH_CHANNELS) <= h for h in have):
+        return "mechanical"
+    if all("valve_command" in h and o for h, o in zip(have, outputs)):
+        return "replay"
+    if all("reference" in h and o for h, o in zip(have, outputs)):
+        return "closed_loop"
+    for r, h, o in zip(runs, have, outputs):
+        if not (set(MECH_CHANNELS) <= h or (o and {"valve_command", "reference"} & h)):
+            miss = [c for c in MECH_CHANNELS if c not in h]
+            raise CalibrationError(f"{r.name}: lacks {', '.join(miss)} (mechanical path)"
+                                   + ("" if o else " and any output to compare a replay with")
+                                   + "; record table motion with actuator forces, or valve commands or the "
+                                   "reference with the force/acceleration/displacement they produced")
+    raise CalibrationError(f"{runs[0].name}: the runs support different residual paths; calibrate runs that "
+                           "record the same channels together")
+
+
+def check_finite(run, channels) -> None:
+    for ch in channels:
+        arr = getattr(run, ch)
+        if arr is None:
+            continue
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            k = int(np.argmax(bad.any(axis=1) if arr.ndim > 1 else bad))
+            raise CalibrationError(f"{run.name}: channel {ch} has NaN/inf (first at sample {k}, t = {run.t[k]:.4f} s); "
+                                   "cut the run or fill the gap before calibrating")
+
+
+def _still_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.ndarray:
+    speed = np.max(np.abs(v), axis=1)
+    n = len(speed)
+    keep = np.ones(n, bool)
+    on = np.flatnonzero(speed > trim * speed.max()) if speed.max() > 0 else np.array([], int)
+    if len(on) >= 16:
+        keep[:on[0]] = False
+        keep[on[-1] + 1:] = False
+    from sim.calibrate.laws import DEADBAND
+
+    still = speed < DEADBAND
+    if prefilter is not None:
+        from sim.identify.least_squares import filter_memory_s
+
+        m = int(math.ceil(filter_memory_s(prefilter, dt) / dt))
+        still = np.convolve(still.astype(float), np.ones(m + 1))[:n] > 0
+    if np.count_nonzero(keep & ~still) >= 16:
+        keep &= ~still
+    return keep
+
+
+def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None = None) -> list[MechRun]:
+    """The mechanical-path records of ``runs`` against the declared ``desc`` (+ ``payload``)."""
+    from sim.calibrate.laws import declared_forces
+    from sim.control.tvc import dof_jacobian
+    from sim.effects import build_model
+
+    DOF6 = ("x", "y", "z", "rx", "ry", "rz")
+    tm = build_model(desc, payload)
+    Me_all = tm.effective_mass_matrix()
+    idx6 = [DOF6[j] for j in tm.platen_dof_index]
+    k_of = [idx6.index(d) for d in desc.dofs]
+    Me = Me_all[np.ix_(k_of, k_of)]
+    J6 = dof_jacobian(desc)
+    J = J6[:, [DOF6.index(d) for d in desc.dofs]]
+    classes: dict = {}
+    for i, a in enumerate(desc.actuators):
+        classes.setdefault(a.cls.name, []).append(i)
+    declared = [d for d in (declared_forces(e) for e in desc.effects) if d is not None]
+    out = []
+    for r in runs:
+        check_finite(r, MECH_CHANNELS)
+        cols = [r.dofs.index(d) for d in desc.dofs]
+        u = r.table_displacement[:, cols]
+        v = r.table_velocity[:, cols]
+        a = r.table_acceleration[:, cols]
+        f = r.actuator_force
+        pre = None
+        if accel_lowpass_hz:
+            from sim.identify.least_squares import analog_lowpass
+
+            if accel_lowpass_hz >= 0.5 / r.dt:
+                raise CalibrationError(f"{r.name}: the accelerometer low-pass {accel_lowpass_hz:g} Hz is above the "
+                                       f"Nyquist frequency {0.5 / r.dt:g} Hz; give --accel-lowpass none")
+            pre = analog_lowpass(accel_lowpass_hz, 1.0 / r.dt)
+        mr = MechRun(name=r.name, dt=r.dt, dofs=list(desc.dofs), u=u, v=v, a=a, force=np.zeros_like(u),
+                     model=np.zeros_like(u), J=J, actuators=list(desc.actuator_names), classes=classes,
+                     rows=np.ones(len(u), bool), prefilter=pre)
+        mr.force = mr.filt(f @ J)
+        model = a @ Me.T
+        for law, where, vals in declared:
+            model = model + vals[law.linear] * mr.column(law, where, vals)
+        mr.model = model
+        mr.rows = _still_rows(v, pre, r.dt)
+        out.append(mr)
+    return out
+
+
+def nrmse_runs(mruns, residuals) -> float:
+    """Pooled NRMSE of ``residuals`` (list of (n, k)) against the recorded force, each run
+    and DOF weighted alike (the paper's force weighting)."""
+    vals = []
+    for mr, e in zip(mruns, residuals):
+        for j in range(len(mr.dofs)):
+            F = mr.demean(mr.force)[mr.rows, j]
+            den = float(np.sum(F ** 2))
+            if den > 0:
+                vals.append(float(np.sum(e[mr.rows, j] ** 2)) / den)
+    return float(math.sqrt(np.mean(vals))) if vals else float("nan")
+
+
+# ------------------------------------------------------------------ frequency domain
+def spectra(x: np.ndarray, fs: float, states: dict | None = None, nperseg: int | None = None) -> dict:
+    """Welch spectrum of a residual (n,) and its coherence with each state (n,)."""
+    import scipy.signal as sig
+
+    n = len(x)
+    # segments of up to 4 s, at least 8 of them (a coherence from few segments is biased to 1)
+    nper = nperseg or 2 ** int(math.log2(max(min(fs * 4, n / 8), 64)))
+    nper = max(16, min(nper, n))
+    f, P = sig.welch(x, fs=fs, nperseg=nper)
+    out = {"f": f, "psd": P, "coherence": {}}
+    for k, s in (states or {}).items():
+        _, C = sig.coherence(x, s, fs=fs, nperseg=nper)
+        out["coherence"][k] = C
+    return out
+
+
+def spectral_flatness(x: np.ndarray, fs: float) -> float:
+    """Geometric over arithmetic mean of the Welch spectrum: 1 for white noise, ~0 for a line."""
+    s = spectra(x, fs)
+    P = s["psd"][1:]
+    P = P[P > 0]
+    return float(np.exp(np.mean(np.log(P))) / np.mean(P)) if len(P) else 0.0
+
+
+# ------------------------------------------------------------------ replay / closed loop
+def null_offset(valve_command: np.ndarray) -> np.ndarray:
+    """Estimated valve null offset per actuator: the mean command of a run that starts
+    and ends at rest (a real valve's null bias integrates to drift otherwise)."""
+    return np.mean(valve_command, axis=0)
+
+
+def simulate_path(run, desc, payload, path: str, effects: list | None = None, seconds: float | None = None):
+    """The model's channels for ``run`` on the replay or closed-loop path (with extra
+    ``[[effect]]`` entries ``effects``); returns ``(channels dict, n samples)``."""
+    import copy
+
+    from mjcf.description import parse_table
+    from sim.control.tvc import ControllerGains
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+
+    raw = copy.deepcopy(desc.raw)
+    if effects:
+        raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in effects]
+        desc = parse_table(raw, src=desc.source)
+    tm = build_model(desc, payload)
+    n = run.n_samples if seconds is None else min(run.n_samples, int(round(seconds / run.dt)) + 1)
+    sim = Simulation(tm, gains=ControllerGains(rate_hz=run.sample_rate_hz))
+    if path == "replay":
+        vc = run.valve_command[:n] - null_offset(run.valve_command[:n])
+        res = sim.run(valve_command=vc)
+    elif path == "closed_loop":
+        from sim.scenario.reference import Reference
+
+        d = run.reference[:n]
+        t = run.t[:n] - run.t[0]
+        v = np.gradient(d, t, axis=0)
+        a = np.gradient(v, t, axis=0)
+        res = sim.run(reference=Reference(t=t, d=d, v=v, a=a))
+    else:
+        raise RunFileError(f"unknown residual path {path!r}")
+    ch = dict(res.channels)
+    ch["_incomplete"] = res.incomplete_reason
+    return ch, min(n, len(res.t))
+
+
+FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_displacement")
+
+
+def path_residuals(run, channels: dict, n: int) -> dict:
+    """Residual arrays per channel (recorded minus model) over the first ``n`` samples."""
+    out = {}
+    for ch in FIT_CHANNELS:
+        m = getattr(run, ch)
+        s = channels.get(ch)
+        if m is None or s is None:
+            continue
+        out[ch] = m[:n] - s[:n]
+    return out
+
+
+def path_nrmse(run, res: dict, n: int) -> float:
+    vals = []
+    for ch, e in res.items():
+        m = getattr(run, ch)[:n]
+        for j in range(m.shape[1]):
+            den = float(np.sum(m[:, j] ** 2))
+            if den > 1e-12 * max(1.0, float(np.sum(m ** 2))):
+                vals.append(float(np.sum(e[:, j] ** 2)) / den)
+    return float(math.sqrt(np.mean(vals))) if vals else float("nan")
+
+
+__all__ = ["CalibrationError", "MechRun", "PATHS", "choose_path", "mechanical_runs", "nrmse_runs", "null_offset",
+           "path_nrmse", "path_residuals", "places", "simulate_path", "spectra", "spectral_flatness"]

@@ -1,0 +1,167 @@
+"""Trace the residual to effects: fit a set of terms, score each candidate by the
+residual it explains, and the statistics the acceptance needs.
+
+A *term* is one effect at one place: a :class:`sim.calibrate.laws.Law`, a ``where``
+and its shape parameters (the exponent of power-law damping). On the mechanical path
+every term is linear in its coefficient, so a set of terms is fitted by one weighted
+linear least squares over the fit runs (each run and DOF weighted by its recorded
+force, the NEES-UCSD paper's Eq. 14); a shape parameter is scanned on its grid and
+refined by a bounded scalar search, each point a linear least squares.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Term:
+    law: object
+    where: str
+    shape: dict = field(default_factory=dict)
+
+    @property
+    def key(self) -> tuple:
+        return (self.law.type, self.where)
+
+
+@dataclass
+class Fit:
+    """Terms fitted together: parameters, their standard deviations, the residual."""
+
+    terms: list
+    theta: np.ndarray  # linear coefficients, one per term
+    values: list  # per term: {param: value}
+    sigma: list  # per term: {param: standard deviation}
+    rss: float  # weighted residual sum of squares over the fit rows
+    n: int  # rows x DOFs
+    p: int  # parameters (coefficients + shape parameters)
+    residuals: list  # per run (n, k): recorded - model - terms
+
+    @property
+    def bic(self) -> float:
+        return self.n * math.log(max(self.rss, 1e-300) / self.n) + self.p * math.log(self.n)
+
+    @property
+    def aic(self) -> float:
+        return self.n * math.log(max(self.rss, 1e-300) / self.n) + 2 * self.p
+
+
+def _weights(mr) -> np.ndarray:
+    F = mr.demean(mr.force)[mr.rows]
+    den = np.sqrt(np.sum(F ** 2, axis=0))
+    return np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
+
+
+def _stack(mruns, terms):
+    ys, Xs = [], []
+    for mr in mruns:
+        w = _weights(mr)
+        y = mr.residual[mr.rows] * w
+        cols = [mr.demean(mr.column(t.law, t.where, t.shape))[mr.rows] * w for t in terms]
+        ys.append(y.reshape(-1))
+        Xs.append(np.stack([c.reshape(-1) for c in cols], axis=1) if cols else np.zeros((y.size, 0)))
+    return np.concatenate(ys), np.concatenate(Xs, axis=0)
+
+
+def _solve(y, X):
+    if X.shape[1] == 0:
+        return np.zeros(0), float(y @ y)
+    theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ theta
+    return theta, float(r @ r)
+
+
+def _shape_jacobian(mruns, term, coef, h=1e-3):
+    """Column d(model)/d(shape parameter) (stacked, weighted), central differences."""
+    (name, val), = term.shape.items()
+    up = Term(term.law, term.where, {name: val + h})
+    dn = Term(term.law, term.where, {name: val - h})
+    _, Xu = _stack(mruns, [up])
+    _, Xd = _stack(mruns, [dn])
+    return coef * (Xu[:, 0] - Xd[:, 0]) / (2 * h)
+
+
+def fit_terms(mruns, terms: list, *, refine_shapes: bool = True) -> Fit:
+    """Fit ``terms`` jointly on ``mruns`` (shape parameters of each term chosen in turn
+    on their grid, then refined); returns the :class:`Fit`."""
+    terms = [Term(t.law, t.where, {**{k: float(np.median(g)) for k, g in t.law.shape.items()}, **t.shape})
+             for t in terms]
+    for i, t in enumerate(terms):
+        for name, grid in t.law.shape.items():
+            if name in t.shape and not refine_shapes:
+                continue
+
+            def rss_at(val, i=i, name=name):
+                trial = list(terms)
+                trial[i] = Term(t.law, t.where, {**t.shape, name: float(val)})
+                return _solve(*_stack(mruns, trial))[1]
+
+            grid = list(grid)
+            vals = [rss_at(g) for g in grid]
+            k = int(np.argmin(vals))
+            lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+            best = grid[k]
+            if hi > lo:
+                from scipy.optimize import minimize_scalar
+
+                r = minimize_scalar(rss_at, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3})
+                if r.fun <= vals[k]:
+                    best = float(r.x)
+            terms[i] = Term(t.law, t.where, {**t.shape, name: float(best)})
+    y, X = _stack(mruns, terms)
+    theta, rss = _solve(y, X)
+    # the Jacobian of the fit: coefficient columns and each shape parameter's column
+    Jcols = [X]
+    for i, t in enumerate(terms):
+        if t.shape:
+            Jcols.append(_shape_jacobian(mruns, t, theta[i])[:, None])
+    Jm = np.concatenate(Jcols, axis=1) if Jcols else X
+    n, p = len(y), Jm.shape[1]
+    s2 = rss / max(n - p, 1)
+    try:
+        cov = s2 * np.linalg.inv(Jm.T @ Jm) if p else np.zeros((0, 0))
+        sd = np.sqrt(np.where(np.diag(cov) >= 0, np.diag(cov), np.inf))
+    except np.linalg.LinAlgError:
+        sd = np.full(p, np.inf)
+    values, sigma = [], []
+    js = len(terms)
+    for i, t in enumerate(terms):
+        v = {t.law.linear: float(theta[i])}
+        s = {t.law.linear: float(sd[i])}
+        for name, val in t.shape.items():
+            v[name] = float(val)
+            s[name] = float(sd[js])
+            js += 1
+        values.append(v)
+        sigma.append(s)
+    residuals = [mr.residual - sum((th * mr.demean(mr.column(t.law, t.where, t.shape))
+                                    for th, t in zip(theta, terms)), np.zeros_like(mr.force))
+                 for mr in mruns]
+    return Fit(terms=terms, theta=theta, values=values, sigma=sigma, rss=rss, n=n, p=p, residuals=residuals)
+
+
+def predict(mruns, fit: Fit) -> list:
+    """Residuals of other runs (held out) with the fitted terms' values."""
+    return [mr.residual - sum((th * mr.demean(mr.column(t.law, t.where, t.shape))
+                               for th, t in zip(fit.theta, fit.terms)), np.zeros_like(mr.force))
+            for mr in mruns]
+
+
+def flatness(mruns, residuals) -> float:
+    """Mean spectral flatness of the residual over runs and DOFs (1: white)."""
+    from sim.calibrate.residuals import spectral_flatness
+
+    vals = []
+    for mr, e in zip(mruns, residuals):
+        for j in range(e.shape[1]):
+            x = e[:, j][mr.rows]
+            if np.any(x):
+                vals.append(spectral_flatness(x, 1.0 / mr.dt))
+    return float(np.mean(vals)) if vals else 0.0
+
+
+__all__ = ["Fit", "Term", "fit_terms", "flatness", "predict"]

@@ -1,0 +1,96 @@
+"""A servovalve's null bias (and its drift), estimated from a record before anything
+else is compared.
+
+A real valve passes flow at zero command when its spool's null is off by a fraction
+``delta`` of its rated opening (a torque-motor offset, a null that drifts with oil
+temperature). In closed loop the controller hides it: the recorded command settles at
+``-delta`` to keep the table still. Replayed open loop through a model whose valve has no
+such offset, that command drives the piston at a steady ``K delta`` and the model runs to
+its end stop. The estimate: each actuator's stroke velocity ``v`` against its recorded
+command ``u`` by least squares, ``v = K (u + delta0 + delta1 (t - t_mid))``, i.e. the mean
+command that keeps the actuator still, and its linear drift over the record.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.errors import RunFileError
+
+
+@dataclass
+class ValveNull:
+    """Per actuator: ``offset`` (fraction of rated opening, at the record's middle),
+    ``drift_per_s`` (fraction per second), ``gain`` (stroke velocity per unit command,
+    m/s), the stroke-velocity source and the record's mid time."""
+
+    offset: np.ndarray
+    drift_per_s: np.ndarray
+    gain: np.ndarray
+    velocity_from: str
+    t_mid: float
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        """The offset (len(t), n_act) to add to the recorded command."""
+        return self.offset[None, :] + np.outer(np.asarray(t) - self.t_mid, self.drift_per_s)
+
+    def as_dict(self, actuators) -> dict:
+        return {"offset": {a: float(v) for a, v in zip(actuators, self.offset)},
+                "drift_per_s": {a: float(v) for a, v in zip(actuators, self.drift_per_s)},
+                "velocity_gain_m_s": {a: float(v) for a, v in zip(actuators, self.gain)},
+                "velocity_from": self.velocity_from,
+                "method": "least squares of stroke velocity on valve command: v = K (u + offset + drift (t - t_mid))"}
+
+
+def stroke_velocity(run, desc) -> tuple[np.ndarray, str]:
+    """Each actuator's stroke velocity (N, n_act), m/s, from what the record has:
+    ``actuator_displacement`` (differentiated), else the table's velocity or displacement
+    through the actuators' kinematic Jacobian at home."""
+    from mjcf.description import DOFS6, actuator_strokes
+
+    fs = run.sample_rate_hz
+    if run.actuator_displacement is not None and np.all(np.isfinite(run.actuator_displacement)):
+        return np.gradient(run.actuator_displacement, 1.0 / fs, axis=0), "actuator_displacement (differentiated)"
+    if run.table_velocity is not None and np.all(np.isfinite(run.table_velocity)):
+        q, what = run.table_velocity, "table_velocity"
+    elif run.table_displacement is not None and np.all(np.isfinite(run.table_displacement)):
+        q, what = np.gradient(run.table_displacement, 1.0 / fs, axis=0), "table_displacement (differentiated)"
+    else:
+        raise RunFileError(f"run file {run.name} has no complete actuator_displacement, table_velocity or "
+                           "table_displacement; the valve null bias needs the recorded motion: import one of them "
+                           "(or replay with --no-bias)")
+    q6 = np.zeros((len(q), 6))
+    for j, d in enumerate(run.dofs):
+        q6[:, DOFS6.index(d)] = q[:, j]
+    eps = 1e-6
+    J = np.stack([actuator_strokes(desc, eps * np.eye(6)[k]) - actuator_strokes(desc, np.zeros(6))
+                  for k in range(6)], axis=1) / eps  # (n_act, 6)
+    return q6 @ J.T, what + " through the kinematic Jacobian"
+
+
+def estimate(run, desc, *, drift: bool = True) -> ValveNull:
+    """Least-squares valve null offset (and drift) per actuator of ``run`` (a RunFile
+    with ``valve_command`` and a motion channel) on table ``desc``."""
+    u = np.asarray(run.valve_command, float)
+    v, what = stroke_velocity(run, desc)
+    t = np.asarray(run.t, float)
+    tm = 0.5 * (t[0] + t[-1])
+    n_act = u.shape[1]
+    off, dr, gain = np.zeros(n_act), np.zeros(n_act), np.zeros(n_act)
+    for i in range(n_act):
+        cols = [u[:, i], np.ones_like(t)] + ([t - tm] if drift else [])
+        A = np.stack(cols, axis=1)
+        coef, *_ = np.linalg.lstsq(A, v[:, i], rcond=None)
+        K = coef[0]
+        if not np.isfinite(K) or abs(K) < 1e-12:
+            raise RunFileError(f"run file {run.name}: actuator {run.actuators[i]}'s motion does not follow its "
+                               "valve command (no flow gain); check the valve_command column and its sign in the map")
+        gain[i] = K
+        off[i] = coef[1] / K
+        dr[i] = coef[2] / K if drift else 0.0
+    return ValveNull(offset=off, drift_per_s=dr, gain=gain, velocity_from=what, t_mid=tm)
+
+
+__all__ = ["ValveNull", "estimate", "stroke_velocity"]

@@ -1,0 +1,115 @@
+"""``shaketable calibrate``: runs -> what the model lacks (``sim.calibrate.search``);
+a table name (or ``--masses``) -> the effective-mass calibration of the table's
+unpublished masses (``mjcf.calibrate``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from sim.errors import UserError
+
+
+def _is_masses(args) -> bool:
+    if args.masses:
+        return True
+    first = args.inputs[0]
+    return len(args.inputs) == 1 and not first.endswith(".npz")
+
+
+def cmd_masses(args) -> int:
+    import mjcf
+    from mjcf.calibrate import NOTE_FORMULA, calibrate_masses
+    from sim.calibrate.description import TomlText
+    from sim.calibrate.programme import write_masses
+
+    if len(args.inputs) != 1:
+        raise UserError("calibrate --masses takes one table (a name in scenarios/tables or a .toml path)")
+    desc = mjcf.load_table(args.inputs[0])
+    res = calibrate_masses(desc)
+    if args.write:
+        doc = TomlText.read(desc.source)
+        write_masses(doc, res, note=NOTE_FORMULA)
+        doc.save(desc.source)
+    if args.json:
+        print(json.dumps({k: res[k] for k in ("values", "before", "after", "target")}, indent=2))
+        return 0
+    print(f"effective-mass calibration of {desc.name} against seed 000 Table 2")
+    print(f"  {'dof':4s} {'target':>10s} {'before':>10s} {'after':>10s}")
+    for k in res["target"]:
+        print(f"  {k:4s} {res['target'][k] / 1e3:10.2f} {res['before'][k] / 1e3:10.2f} {res['after'][k] / 1e3:10.2f}")
+    for k, v in res["values"].items():
+        print(f"  {k} = {v:.2f}")
+    print("  written to " + desc.source if args.write else "  (dry run: --write rewrites the table file)")
+    return 0
+
+
+def _lowpass(text):
+    if text in (None, "table"):
+        return "table"
+    if text == "none":
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        raise UserError(f"--accel-lowpass {text!r}: give a frequency in Hz, 'table' or 'none'") from None
+    if not v > 0:
+        raise UserError(f"--accel-lowpass {text!r}: the frequency must be > 0 Hz (or 'none')")
+    return v
+
+
+def cmd_calibrate(args) -> int:
+    if _is_masses(args):
+        return cmd_masses(args)
+    from sim.calibrate.search import calibrate, write_outputs
+    from sim.report.calibration import write_report
+    from sim.runs.files import out_dir
+
+    if not args.out:
+        raise UserError("calibrate RUN...: give --out DIR for calibration.json, report.md and the calibrated table")
+    effects = [x.strip() for x in args.effects.split(",") if x.strip()] if args.effects else None
+    log = None if args.json else (lambda m: print(m, flush=True))
+    res = calibrate(args.inputs, table=args.table, payload=args.payload, holdout=args.holdout or None,
+                    effects=effects, effect_file=args.effect_file, accel_lowpass_hz=_lowpass(args.accel_lowpass),
+                    log=log)
+    out = out_dir(args.out)
+    js = write_outputs(res, out, args.inputs)
+    write_report(res, out, Path(js["calibrated_table_file"]).name)
+    if args.json:
+        from sim.runs.files import jsonable
+
+        print(json.dumps(jsonable(js), indent=2))
+        return 0
+    print(f"held-out NRMSE {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} % ({res.holdout_note})")
+    for e in res.effects_added:
+        vals = ", ".join(f"{k} = {v:.6g} +/- {e['uncertainty'][k]:.2g} {e['units'][k]}" for k, v in e["parameters"].items())
+        print(f"  added {e['name']} at {e['where']}: {vals}")
+    if res.unexplained:
+        u = res.unexplained
+        print(f"  unexplained: {u['peak_hz']:.2f} Hz in {u['channel']} ({u['where']}), "
+              f"{100 * u['fraction_of_residual']:.1f} % of the residual")
+    print(f"  wrote {out / 'calibration.json'}, {out / 'report.md'}, {js['calibrated_table_file']}")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    c = sub.add_parser("calibrate", help="find what the model lacks in measured runs, add it, prove it on held-out "
+                                         "runs (or, given a table: calibrate its unpublished masses)")
+    c.add_argument("inputs", nargs="+", metavar="RUN", help="run files (.run.npz); or one table name for --masses")
+    c.add_argument("--table", help="the table description to calibrate (default: the runs' table)")
+    c.add_argument("--payload", help="payload on the table (default: the runs' payload)")
+    c.add_argument("--holdout", nargs="+", metavar="RUN", help="runs held out to prove the effects "
+                   "(default: every third run)")
+    c.add_argument("--out", help="output folder: calibration.json, report.md, <table>_calibrated.toml")
+    c.add_argument("--effects", help="comma-separated effect types to try (default: every one with a force law)")
+    c.add_argument("--effect-file", help="a Python file that registers the user's own effects")
+    c.add_argument("--accel-lowpass", help="the accelerometer conditioner's low-pass in Hz, 'table' (the "
+                   "description's [sensors] accelerometer_bandwidth_hz, default) or 'none'")
+    c.add_argument("--masses", action="store_true", help="calibrate the table's unpublished masses against its "
+                   "published effective masses (the first argument is a table)")
+    c.add_argument("--write", action="store_true", help="--masses: rewrite the calibrated values in the table file")
+    c.add_argument("--json", action="store_true")
+    c.set_defaults(func=cmd_calibrate)
+
+
+__all__ = ["add_parsers", "cmd_calibrate"]

@@ -1,0 +1,155 @@
+"""``shaketable calibrate`` presented: figures and ``report.md`` from a
+:class:`sim.calibrate.search.CalibrationResult`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from sim.runs.files import write_text_atomic
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def figures(res, out: Path) -> list[str]:
+    """Draw the calibration's figures into ``out``; returns their file names."""
+    from sim.calibrate.residuals import spectra
+
+    plt = _plt()
+    names = []
+    ho, before, after = res.series["holdout"], res.series["before"], res.series["after"]
+    # 1. held-out error per run and DOF
+    keys = list(res.per_channel)
+    fig, ax = plt.subplots(figsize=(max(5, 1.2 * len(keys) + 2), 3.6))
+    x = np.arange(len(keys))
+    ax.bar(x - 0.2, [100 * res.per_channel[k]["before"] for k in keys], 0.4, label="declared model")
+    ax.bar(x + 0.2, [100 * res.per_channel[k]["after"] for k in keys], 0.4, label="calibrated")
+    ax.set_xticks(x, keys, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("held-out force NRMSE (%)")
+    ax.set_title(f"held-out error {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} %")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "holdout_error.png", dpi=110)
+    plt.close(fig)
+    names.append("holdout_error.png")
+    # 2. residual time series and 3. spectra, before/after (each held-out run, each DOF)
+    k = len(ho[0].dofs)
+    fig, ax = plt.subplots(len(ho), k, figsize=(9 * k, 2.6 * len(ho)), squeeze=False)
+    fig2, ax2 = plt.subplots(1, k, figsize=(7 * k, 4), squeeze=False)
+    for i, (mr, e0, e1) in enumerate(zip(ho, before, after)):
+        t = np.arange(len(e0)) * mr.dt
+        for j, d in enumerate(mr.dofs):
+            a = ax[i, j]
+            a.plot(t, e0[:, j] / 1e3, lw=0.6, label="declared model")
+            a.plot(t, e1[:, j] / 1e3, lw=0.6, label="calibrated")
+            a.set_title(f"{Path(mr.name).name} {d}: residual force", fontsize=9)
+            a.set_ylabel("kN (kN m)")
+            if i == 0:
+                s0 = spectra(e0[:, j], 1.0 / mr.dt)
+                s1 = spectra(e1[:, j], 1.0 / mr.dt)
+                ax2[0, j].semilogy(s0["f"][1:], s0["psd"][1:], lw=0.8, label="declared model")
+                ax2[0, j].semilogy(s1["f"][1:], s1["psd"][1:], lw=0.8, label="calibrated")
+                ax2[0, j].set_xlabel("Hz")
+                ax2[0, j].set_ylabel("residual PSD (N^2/Hz)")
+                ax2[0, j].set_title(f"{Path(mr.name).name} {d}")
+                if res.unexplained and res.unexplained["where"].endswith(d):
+                    ax2[0, j].axvline(res.unexplained["peak_hz"], color="k", ls=":", label="unexplained")
+                ax2[0, j].legend(fontsize=8)
+        ax[i, 0].legend(fontsize=7)
+    ax[-1, 0].set_xlabel("s")
+    for f_, nm in ((fig, "residual_time.png"), (fig2, "residual_spectra.png")):
+        f_.tight_layout()
+        f_.savefig(out / nm, dpi=110)
+        plt.close(f_)
+        names.append(nm)
+    # 4. residual force vs displacement and velocity (fit runs, before/after)
+    fit = res.series["fit"]
+    fig, ax = plt.subplots(2, 2 * k, figsize=(8 * k, 6.5), squeeze=False)
+    for row, (lab, E) in enumerate((("declared model", res.series["fit_before"]),
+                                    ("calibrated", res.series["fit_after"]))):
+        for j in range(k):
+            for mr, e in zip(fit, E):
+                ax[row, 2 * j].plot(mr.u[mr.rows, j] * 1e3, e[mr.rows, j] / 1e3, ",", alpha=0.5)
+                ax[row, 2 * j + 1].plot(mr.v[mr.rows, j], e[mr.rows, j] / 1e3, ",", alpha=0.5)
+            ax[row, 2 * j].set_title(f"{lab}: residual vs displacement ({fit[0].dofs[j]})", fontsize=9)
+            ax[row, 2 * j + 1].set_title(f"{lab}: residual vs velocity ({fit[0].dofs[j]})", fontsize=9)
+            ax[row, 2 * j].set_xlabel("mm (mrad)")
+            ax[row, 2 * j + 1].set_xlabel("m/s (rad/s)")
+            ax[row, 2 * j].set_ylabel("kN (kN m)")
+    fig.tight_layout()
+    fig.savefig(out / "residual_vs_state.png", dpi=110)
+    plt.close(fig)
+    names.append("residual_vs_state.png")
+    # 5. accepted effects: value and 95 % interval, relative
+    if res.effects_added:
+        labels, rel, err = [], [], []
+        for e in res.effects_added:
+            for p, v in e["parameters"].items():
+                labels.append(f"{e['name']} {e['where']}\n{p}")
+                rel.append(1.0)
+                err.append(abs(e["uncertainty"][p] / v) if v else np.inf)
+        fig, ax = plt.subplots(figsize=(max(5, 1.6 * len(labels)), 3.6))
+        ax.errorbar(np.arange(len(labels)), rel, yerr=err, fmt="o", capsize=4)
+        ax.set_xticks(np.arange(len(labels)), labels, fontsize=8)
+        ax.set_ylabel("value / fitted value (95 % interval)")
+        ax.set_title("accepted effects")
+        fig.tight_layout()
+        fig.savefig(out / "effects.png", dpi=110)
+        plt.close(fig)
+        names.append("effects.png")
+    return names
+
+
+def report_md(res, figs: list[str], toml_name: str) -> str:
+    L = [f"# Calibration of `{res.table}`", ""]
+    L.append(f"Residual path: **{res.residual_path}**. Fit runs: "
+             + ", ".join(f"`{Path(r).name}`" for r in res.runs if r not in res.holdout) + ". "
+             + f"Held-out: {res.holdout_note}.")
+    L += ["", f"Held-out force NRMSE: **{100 * res.error_before:.2f} %** (declared model) -> "
+          f"**{100 * res.error_after:.2f} %** (calibrated).", ""]
+    L += ["## Effects added", ""]
+    if res.effects_added:
+        L += ["| effect | where | parameter | value | 95 % interval |", "|---|---|---|---|---|"]
+        for e in res.effects_added:
+            for p, v in e["parameters"].items():
+                L.append(f"| {e['name']} | {e['where']} | {p} | {v:.6g} {e['units'][p]} | "
+                         f"+/-{e['uncertainty'][p]:.3g} |")
+    else:
+        L.append("None: no candidate passed the acceptance tests.")
+    L += ["", f"Written to `{toml_name}` (the original description, comments kept).", "", "## Candidates", "",
+          "| round | effect | where | explains | held-out NRMSE | accepted | why not |", "|---|---|---|---|---|---|---|"]
+    for c in res.candidates:
+        L.append(f"| {c['round']} | {c['name']} | {c['where']} | {100 * c['explained_fraction']:.2f} % | "
+                 f"{100 * c['holdout_error']:.2f} % | {'yes' if c['accepted'] else 'no'} | {c['reason']} |")
+    L += ["", "## Unexplained", ""]
+    u = res.unexplained
+    if u:
+        L.append(f"A spectral line at **{u['peak_hz']:.2f} Hz** in `{u['channel']}` ({u['where']}) holds "
+                 f"{100 * u['fraction_of_residual']:.1f} % of the residual left (coherence with the motion "
+                 f"{u['coherence_with_motion']:.2f}); no effect of the library explains it.")
+    else:
+        L.append("No spectral line holds a notable share of the residual left.")
+    L += ["", "## Figures", ""] + [f"![{f}]({f})" for f in figs]
+    tm = res.timing
+    L += ["", f"Time: {tm['total_s']:.1f} s (reading {tm['read_s']:.1f} s, residuals {tm['residuals_s']:.1f} s, "
+          f"search {tm['search_s']:.1f} s, {tm['least_squares_fits']} candidate fits).", ""]
+    return "\n".join(L)
+
+
+def write_report(res, out, toml_name: str) -> list[str]:
+    """Figures and ``report.md`` into ``out``; returns the files written."""
+    out = Path(out)
+    figs = figures(res, out)
+    write_text_atomic(out / "report.md", report_md(res, figs, toml_name))
+    return figs + ["report.md"]
+
+
+__all__ = ["figures", "report_md", "write_report"]

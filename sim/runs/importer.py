@@ -1,0 +1,459 @@
+"""A lab's recorder export (CSV, MAT-file) to run files, through a column map.
+
+The map (a TOML file, documented in ``docs/import.md``) names, for every column the
+lab exports, the run-file channel and its actuator / DOF / accelerometer, the unit and
+its scale, an offset and a sign, and the time base (a time column or a sample rate).
+Values become SI: ``SI = sign * scale * (raw - offset) * unit``, and a differential
+pressure becomes a force through a piston area. Timestamps are checked to be a uniform
+grid (a recorder's timestamps rounded to 1e-5 s still are) and replaced by that grid.
+
+Everything is read and checked before anything is written: a bad map, file or table
+raises one line naming the file, the row or column and the fix.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sim.errors import UserError
+
+G = 9.80665  #: standard gravity, m/s^2 (unit "g")
+IN = 0.0254
+#: unit -> SI factor, per dimension
+UNITS = {
+    "length": {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6, "in": IN},
+    "rotation": {"rad": 1.0, "mrad": 1e-3, "deg": math.pi / 180},
+    "velocity": {"m/s": 1.0, "mm/s": 1e-3, "cm/s": 1e-2, "in/s": IN},
+    "acceleration": {"m/s^2": 1.0, "mm/s^2": 1e-3, "cm/s^2": 1e-2, "in/s^2": IN, "g": G},
+    "force": {"N": 1.0, "kN": 1e3, "MN": 1e6, "lbf": 4.4482216152605, "kip": 4448.2216152605},
+    "pressure": {"Pa": 1.0, "kPa": 1e3, "MPa": 1e6, "bar": 1e5, "psi": 6894.757293168, "ksi": 6894757.293168},
+    "valve": {"fraction": 1.0, "%": 1e-2, "V": None, "mA": None},  # V, mA: over the column's full_scale
+}
+ACTUATOR = ("valve_command", "spool_position", "actuator_displacement", "actuator_force", "pressure_a", "pressure_b")
+DOF = ("reference", "table_displacement", "table_velocity", "table_acceleration")
+DIMENSION = {"valve_command": ("valve",), "spool_position": ("valve",), "actuator_displacement": ("length",),
+             "actuator_force": ("force", "pressure"), "pressure_a": ("pressure",), "pressure_b": ("pressure",),
+             "reference": ("length", "rotation"), "table_displacement": ("length", "rotation"),
+             "table_velocity": ("velocity",), "table_acceleration": ("acceleration",),
+             "accelerometers": ("acceleration",)}
+COLUMN_KEYS = {"name", "channel", "actuator", "dof", "accelerometer", "unit", "scale", "offset", "sign",
+               "full_scale", "area_m2", "position_m", "direction", "note"}
+SOURCE_KEYS = {"table", "time_column", "time_unit", "sample_rate_hz", "delimiter", "skip_rows", "payload",
+               "description", "command_hold", "derive_velocity"}
+#: calibration paths and the channels each needs (any one of a tuple)
+PATHS = {
+    "replay (open loop)": (("valve_command",), ("table_displacement", "table_velocity", "table_acceleration",
+                                                "actuator_displacement", "accelerometers")),
+    "mechanical (least squares)": (("actuator_force",), ("table_displacement", "table_acceleration",
+                                                         "accelerometers")),
+    "closed loop": (("reference",),),
+}
+
+
+@dataclass
+class ColumnMap:
+    name: str
+    channel: str
+    target: str  #: actuator, DOF or accelerometer name
+    factor: float  #: SI per raw unit (sign, scale, unit, area folded in)
+    offset: float
+    unit: str
+    position: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    direction: list = field(default_factory=lambda: [1.0, 0.0, 0.0])
+
+
+@dataclass
+class ImportMap:
+    path: str
+    table: str | None
+    columns: list
+    time_column: str | None
+    time_factor: float
+    sample_rate_hz: float | None
+    delimiter: str | None
+    skip_rows: int
+    payload: str | None
+    description: str
+    command_hold: str = "zoh"
+    derive_velocity: bool = False
+
+
+def _err(where: str, problem: str, fix: str) -> UserError:
+    return UserError(" ".join(f"{where}: {problem}; {fix}".split()))
+
+
+def load_map(path, table: str | None = None) -> ImportMap:
+    """Read and check a column map (TOML); ``table`` overrides its ``[source] table``."""
+    import mjcf
+
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text())
+    except OSError as e:
+        raise _err(str(p), f"cannot read the map ({e.strerror})", "give an existing map file (--map)") from None
+    except tomllib.TOMLDecodeError as e:
+        raise _err(str(p), f"is not valid TOML ({e})", "fix the syntax (docs/import.md)") from None
+    src = data.get("source", {})
+    if not isinstance(src, dict):
+        raise _err(str(p), "[source] must be a table", "see docs/import.md")
+    bad = sorted(set(src) - SOURCE_KEYS) or sorted(set(data) - {"source", "column"})
+    if bad:
+        raise _err(str(p), f"unknown key '{bad[0]}'", f"[source] keys are {', '.join(sorted(SOURCE_KEYS))}; "
+                                                      "columns go in [[column]]")
+    table = table or src.get("table")
+    if not isinstance(table, str) or not table:
+        raise _err(str(p), "names no table", "add [source] table = \"NAME\" (a file in scenarios/tables) or give --table")
+    desc = mjcf.load_table(table)
+    tcol, fs = src.get("time_column"), src.get("sample_rate_hz")
+    if (tcol is None) == (fs is None):
+        raise _err(str(p), "needs exactly one of [source] time_column and sample_rate_hz",
+                   "name the time column, or give the recorder's rate in Hz")
+    if fs is not None and (isinstance(fs, bool) or not isinstance(fs, (int, float)) or not fs > 0):
+        raise _err(str(p), f"[source] sample_rate_hz must be a positive number (got {fs!r})", "give the rate in Hz")
+    tunit = src.get("time_unit", "s")
+    tfac = {"s": 1.0, "ms": 1e-3}.get(tunit)
+    if tfac is None:
+        raise _err(str(p), f"[source] time_unit {tunit!r} is not known", "use \"s\" or \"ms\"")
+    cols_raw = data.get("column")
+    if not isinstance(cols_raw, list) or not cols_raw:
+        raise _err(str(p), "has no [[column]] entries", "add one [[column]] per exported column (docs/import.md)")
+    cols, seen = [], {}
+    for i, c in enumerate(cols_raw, start=1):
+        where = f"{p} [[column]] #{i}" + (f" ('{c.get('name')}')" if isinstance(c, dict) and "name" in c else "")
+        if not isinstance(c, dict):
+            raise _err(where, "is not a table", "write it as [[column]] with keys")
+        extra = sorted(set(c) - COLUMN_KEYS)
+        if extra:
+            raise _err(where, f"unknown key '{extra[0]}'", f"keys are {', '.join(sorted(COLUMN_KEYS))}")
+        name, ch, unit = c.get("name"), c.get("channel"), c.get("unit")
+        if not isinstance(name, str) or not name:
+            raise _err(where, "has no name", "set name = the column's header in the export")
+        if ch not in DIMENSION:
+            raise _err(where, f"channel {ch!r} is not a run-file channel", f"use one of {', '.join(DIMENSION)}")
+        if ch in ACTUATOR:
+            target, kind, known = c.get("actuator"), "actuator", list(desc.actuator_names)
+        elif ch in DOF:
+            target, kind, known = c.get("dof"), "dof", list(desc.dofs)
+        else:
+            target, kind, known = c.get("accelerometer"), "accelerometer", None
+        if not isinstance(target, str) or (known is not None and target not in known):
+            raise _err(where, f"{kind} {target!r} is not one of table '{desc.name}' ({desc.source}): "
+                              f"{', '.join(known) if known else 'any name'}",
+                       f"set {kind} = one of them, or describe the table's {kind}s in its description")
+        if (ch, target) in seen:
+            raise _err(where, f"maps {ch} {target} again (also column '{seen[(ch, target)]}')",
+                       "keep one column per channel and target")
+        seen[(ch, target)] = name
+        dims = DIMENSION[ch]
+        dim = next((d for d in dims if unit in UNITS[d]), None)
+        if dim is None:
+            known_u = ", ".join(u for d in dims for u in UNITS[d])
+            raise _err(where, f"unit {unit!r} is not known for {ch}", f"use one of {known_u}")
+        factor = UNITS[dim][unit]
+        if factor is None:  # volts or mA over full scale
+            fsv = c.get("full_scale")
+            if isinstance(fsv, bool) or not isinstance(fsv, (int, float)) or fsv == 0:
+                raise _err(where, f"unit {unit} needs full_scale (the {unit} at full rated opening)",
+                           f"add full_scale = 10.0 (e.g. +/-10 {unit} = +/-100 %)")
+            factor = 1.0 / float(fsv)
+        if ch == "actuator_force" and dim == "pressure":
+            area = c.get("area_m2")
+            if area == "table":
+                a = desc.actuators[list(desc.actuator_names).index(target)]
+                if a.cls.area_a_m2 != a.cls.area_b_m2:
+                    raise _err(where, f"table '{desc.name}' actuator {target} has unequal areas "
+                                      f"({a.cls.area_a_m2:g}, {a.cls.area_b_m2:g} m^2): one differential pressure "
+                                      "is not its force", "export both chamber pressures (pressure_a, pressure_b)")
+                area = a.cls.area_a_m2
+            if isinstance(area, bool) or not isinstance(area, (int, float)) or not area > 0:
+                raise _err(where, f"a differential pressure ({unit}) as actuator_force needs the piston area",
+                           "add area_m2 = the piston area in m^2, or area_m2 = \"table\" (from the description)")
+            factor *= float(area)
+        nums = {}
+        for key, default in (("scale", 1.0), ("offset", 0.0), ("sign", 1.0)):
+            v = c.get(key, default)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise _err(where, f"{key} must be a number (got {v!r})", f"set {key} = a number")
+            nums[key] = float(v)
+        if nums["sign"] not in (1.0, -1.0):
+            raise _err(where, f"sign must be 1 or -1 (got {nums['sign']:g})", "set sign = 1 or -1")
+        cm = ColumnMap(name=name, channel=ch, target=target, factor=nums["sign"] * nums["scale"] * factor,
+                       offset=nums["offset"], unit=unit)
+        if ch == "accelerometers":
+            for key in ("position_m", "direction"):
+                v = c.get(key, getattr(cm, key.split("_")[0] if key == "position_m" else key))
+                if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) for x in v)):
+                    raise _err(where, f"{key} must be 3 numbers (got {v!r})", f"set {key} = [x, y, z] in the table frame")
+                setattr(cm, "position" if key == "position_m" else "direction", [float(x) for x in v])
+        cols.append(cm)
+    delim = src.get("delimiter")
+    hold = src.get("command_hold", "zoh")
+    if hold not in ("zoh", "linear"):
+        raise _err(str(p), f"[source] command_hold {hold!r} is not known",
+                   "use \"zoh\" (the record is the controller's own rate) or \"linear\" (a slower recorder "
+                   "sampled the drive)")
+    skip = src.get("skip_rows", 0)
+    if not isinstance(skip, int) or skip < 0:
+        raise _err(str(p), f"[source] skip_rows must be a whole number >= 0 (got {skip!r})", "count the lines above the header")
+    return ImportMap(path=str(p), table=table, columns=cols, time_column=tcol, time_factor=tfac,
+                     sample_rate_hz=None if fs is None else float(fs), delimiter=delim, skip_rows=skip,
+                     payload=src.get("payload"), description=str(src.get("description", "")),
+                     command_hold=hold, derive_velocity=_bool(src, "derive_velocity", str(p)))
+
+
+def _bool(src: dict, key: str, where: str) -> bool:
+    v = src.get(key, False)
+    if not isinstance(v, bool):
+        raise _err(where, f"[source] {key} must be true or false (got {v!r})", f"set {key} = true or false")
+    return v
+
+
+# ------------------------------------------------------------------ reading exports
+def _read_csv(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
+    try:
+        text = path.read_text(errors="strict")
+    except OSError as e:
+        raise _err(str(path), f"cannot be read ({e.strerror})", "give an existing export file") from None
+    except UnicodeDecodeError:
+        raise _err(str(path), "is not a text file", "export as CSV text (or give a .mat file)") from None
+    lines = text.splitlines()[mp.skip_rows:]
+    if not lines:
+        raise _err(str(path), "is empty", "export with a header line and the samples")
+    delim = mp.delimiter
+    if delim is None:
+        delim = max((",", ";", "\t"), key=lines[0].count)
+    rows = csv.reader(lines, delimiter=delim)
+    header = [h.strip() for h in next(rows)]
+    missing = [w for w in wanted if w not in header]
+    if missing:
+        raise _err(f"{path} (map {mp.path})", f"has no column '{missing[0]}' (header: {', '.join(header)})",
+                   "fix the column's name in the map or export that column")
+    idx = {w: header.index(w) for w in wanted}
+    out = {w: [] for w in wanted}
+    for ln, row in enumerate(rows, start=mp.skip_rows + 2):
+        if not row or all(not x.strip() for x in row):
+            continue
+        if len(row) != len(header):
+            raise _err(str(path), f"line {ln} has {len(row)} fields but the header has {len(header)}",
+                       "fix or cut the ragged line (a truncated export?)")
+        for w, j in idx.items():
+            cell = row[j].strip()
+            if cell == "":
+                out[w].append(math.nan)  # missing sample (the format's NaN)
+                continue
+            try:
+                out[w].append(float(cell))
+            except ValueError:
+                raise _err(str(path), f"line {ln} column '{w}' holds {cell!r}, not a number",
+                           "fix the cell, or skip_rows the lines above the header in the map") from None
+    if not out[wanted[0]]:
+        raise _err(str(path), "has a header but no samples", "export the samples too")
+    return {w: np.asarray(v, float) for w, v in out.items()}
+
+
+def _read_mat(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
+    from scipy.io import loadmat
+
+    try:
+        data = loadmat(str(path), squeeze_me=True)
+    except (OSError, ValueError, NotImplementedError) as e:
+        raise _err(str(path), f"cannot be read as a MAT-file ({' '.join(str(e).split())})",
+                   "save it with MATLAB's save -v7 (or export CSV)") from None
+    out = {}
+    for w in wanted:
+        if w not in data:
+            have = ", ".join(k for k in data if not k.startswith("__"))
+            raise _err(f"{path} (map {mp.path})", f"has no variable '{w}' (variables: {have})",
+                       "fix the column's name in the map or save that variable")
+        a = np.asarray(data[w])
+        if a.ndim != 1 or not np.issubdtype(a.dtype, np.number):
+            raise _err(str(path), f"variable '{w}' has shape {a.shape} and type {a.dtype}",
+                       "save each channel as a numeric vector")
+        out[w] = a.astype(float)
+    n = {len(v) for v in out.values()}
+    if len(n) != 1:
+        raise _err(str(path), "variables of different lengths", "save every channel over the same samples")
+    return out
+
+
+def uniform_time(t: np.ndarray, where: str) -> tuple[float, float]:
+    """(t0, sample rate) of a time column that is a uniform grid up to its rounding;
+    one-line error naming the first bad sample otherwise."""
+    if len(t) < 2:
+        raise _err(where, "has fewer than 2 samples", "export a longer record")
+    if not np.all(np.isfinite(t)):
+        i = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise _err(where, f"time column is empty or not finite at sample {i}", "export every sample's time")
+    d = np.diff(t)
+    if np.any(d <= 0):
+        i = int(np.flatnonzero(d <= 0)[0]) + 1
+        raise _err(where, f"time is not increasing at sample {i} (t = {t[i]:.6g} s after {t[i - 1]:.6g} s)",
+                   "export one continuous record per file, sorted in time")
+    n = len(t)
+    k = np.arange(n)
+    slope, t0 = np.polyfit(k, t, 1)
+    dev = np.abs(t - (t0 + slope * k))
+    tol = 0.02 * slope + 1e-5
+    if dev.max() > tol:
+        i = int(np.argmax(dev))
+        raise _err(where, f"time step is not uniform (sample {i} is {dev[i] * 1e3:.3g} ms off the "
+                          f"{slope * 1e3:.6g} ms grid)", "export at a fixed sample rate, without gaps")
+    fs = 1.0 / slope
+    nice = round(fs, 3)
+    if abs(nice - fs) <= 1e-6 * fs + 2e-5 / (slope * n) * fs:
+        fs = nice
+    return float(t[0]), float(fs)
+
+
+@dataclass
+class Imported:
+    """One export converted: the run file (not yet written), where it goes, and what
+    the importer inferred."""
+
+    run: object
+    source: str
+    report: dict
+
+
+def import_file(path, mp: ImportMap) -> Imported:
+    """Convert one export (``.csv``/``.txt`` or ``.mat``) through the map ``mp``."""
+    import mjcf
+    from sim.runs.runfile import FORMAT, RunFile
+
+    path = Path(path)
+    wanted = [c.name for c in mp.columns] + ([mp.time_column] if mp.time_column else [])
+    wanted = list(dict.fromkeys(wanted))
+    raw = _read_mat(path, mp, wanted) if path.suffix.lower() == ".mat" else _read_csv(path, mp, wanted)
+    n = len(next(iter(raw.values())))
+    if mp.time_column:
+        t0, fs = uniform_time(raw[mp.time_column] * mp.time_factor, f"{path} column '{mp.time_column}'")
+    else:
+        t0, fs = 0.0, mp.sample_rate_hz
+    t = np.arange(n) / fs
+    desc = mjcf.load_table(mp.table)
+    acts, dofs = list(desc.actuator_names), list(desc.dofs)
+    accs = list(dict.fromkeys(c.target for c in mp.columns if c.channel == "accelerometers"))
+    chans = {}
+    for c in mp.columns:
+        if c.channel in ACTUATOR:
+            names = acts
+        elif c.channel in DOF:
+            names = dofs
+        else:
+            names = accs
+        arr = chans.setdefault(c.channel, np.full((n, len(names)), np.nan))
+        arr[:, names.index(c.target)] = (raw[c.name] - c.offset) * c.factor
+    derived = {}
+    if mp.derive_velocity and "table_velocity" not in chans:
+        if "table_displacement" not in chans:
+            raise _err(mp.path, "[source] derive_velocity needs a table_displacement column",
+                       "map the table's displacement, or drop derive_velocity")
+        chans["table_velocity"] = np.gradient(chans["table_displacement"], 1.0 / fs, axis=0)
+        derived["table_velocity"] = "central difference of table_displacement (map derive_velocity)"
+    acc_meta = []
+    for a in accs:
+        c = next(c for c in mp.columns if c.channel == "accelerometers" and c.target == a)
+        acc_meta.append({"name": a, "position": c.position, "direction": c.direction})
+    meta = {"format": FORMAT, "table": desc.name, "sample_rate_hz": fs, "actuators": acts, "dofs": dofs,
+            "source": "measured", "description": mp.description or f"imported from {path.name}",
+            "payload": mp.payload, "accelerometers": acc_meta,
+            "imported_from": str(path), "import_map": mp.path, "time_origin_s": t0,
+            "command_hold": mp.command_hold, "derived_channels": derived}
+    run = RunFile(t=t, meta=meta, **chans)
+    if run.valve_command is None and run.reference is None:
+        raise _err(f"{path} (map {mp.path})", "maps neither valve_command nor reference",
+                   "map the valve drive (replay) or the displacement command (closed loop)")
+    run.validate()
+    return Imported(run=run, source=str(path), report=_report(run, mp, path))
+
+
+def _report(run, mp: ImportMap, path: Path) -> dict:
+    ranges = {}
+    for ch in run.present_channels():
+        arr = getattr(run, ch)
+        names = run.column_names(ch)
+        ranges[ch] = {}
+        for j, nm in enumerate(names):
+            col = arr[:, j]
+            ok = np.isfinite(col)
+            if ok.any():
+                ranges[ch][nm] = {"min": float(col[ok].min()), "max": float(col[ok].max()),
+                                  "missing_samples": int((~ok).sum())}
+    paths = {}
+    for pth, needs in PATHS.items():
+        lacking = [" or ".join(alt) for alt in needs if not any(
+            getattr(run, a) is not None and np.isfinite(getattr(run, a)).all(axis=0).any() for a in alt)]
+        paths[pth] = {"ready": not lacking, "missing": lacking}
+    return {"file": str(path), "samples": run.n_samples, "sample_rate_hz": run.sample_rate_hz,
+            "rate_from": f"time column '{mp.time_column}'" if mp.time_column else "map sample_rate_hz",
+            "duration_s": run.duration_s, "time_origin_s": run.meta["time_origin_s"], "table": run.meta["table"],
+            "derived_channels": run.meta["derived_channels"],
+            "ranges_si": ranges, "paths": paths}
+
+
+def import_files(files, map_path, *, table: str | None = None, out=None) -> list[Imported]:
+    """Convert every export in ``files`` through the map; with ``out`` write
+    ``out/<stem>.run.npz`` for each, only once all of them converted."""
+    from sim.runs.files import out_dir
+    from sim.runs.runfile import write_run
+
+    mp = load_map(map_path, table)
+    done = [import_file(f, mp) for f in files]
+    stems = [Path(d.source).stem for d in done]
+    if len(set(stems)) != len(stems):
+        raise _err(", ".join(d.source for d in done), "two exports share a file name",
+                   "rename them (each becomes <name>.run.npz)")
+    if out is not None:
+        folder = out_dir(out)
+        for d, stem in zip(done, stems):
+            p = write_run(folder / f"{stem}.run.npz", d.run)
+            d.report["run_file"] = str(p)
+    return done
+
+
+def export_csv(run, map_path, path) -> Path:
+    """The inverse of :func:`import_file` for a run file and a map: write ``path`` as a
+    lab's recorder would (the map's columns, in its units, offsets and signs; a time
+    column rounded to 1e-5 s). Used for the worked example and the round-trip test."""
+    from sim.runs.files import write_text_atomic
+
+    mp = load_map(map_path, run.meta["table"])
+    if mp.time_column is None:
+        raise _err(mp.path, "has no time_column", "export_csv writes one: add [source] time_column")
+    cols = [mp.time_column] + [c.name for c in mp.columns]
+    data = [np.round((np.asarray(run.t) - run.t[0]) / mp.time_factor, 5 if mp.time_factor == 1.0 else 2)]
+    for c in mp.columns:
+        arr = getattr(run, c.channel)
+        if arr is None:
+            raise _err(mp.path, f"column '{c.name}' maps {c.channel}, which run {run.name} lacks",
+                       "drop that column from the map")
+        names = run.column_names(c.channel)
+        if c.target not in names:
+            raise _err(mp.path, f"column '{c.name}' maps {c.channel} {c.target}, not in run {run.name} "
+                                f"({', '.join(names)})", "fix the map's target")
+        data.append(arr[:, names.index(c.target)] / c.factor + c.offset)
+    delim = mp.delimiter or ","
+    lines = [delim.join(cols)]
+    for row in zip(*data):
+        lines.append(delim.join(f"{v:.7g}" for v in row))
+    path = Path(path)
+    write_text_atomic(path, "\n".join(lines) + "\n")
+    return path
+
+
+__all__ = [
+    "UNITS",
+    "ImportMap",
+    "Imported",
+    "export_csv",
+    "import_file",
+    "import_files",
+    "load_map",
+    "uniform_time",
+]
