@@ -85,3 +85,20 @@ def test_crosstalk_exact_map_removes_most_of_it(cgs_desc):
     z = c.table["x_250mm_sine"]["z"]
     assert z["linearised_peak"] > 0.010
     assert z["exact_peak"] < 0.2 * z["linearised_peak"]
+
+
+def test_vertical_tilt_leaks_into_horizontal_force(cgs_desc):
+    """At home a vertical linkage pushes only vertically; moved by x = d its axis tilts by
+    asin(d / L) and the same fraction of its force acts along x (row of J(q))."""
+    from sim.assess.geometry import force_coupling
+    from sim.control.tvc import dof_jacobian
+
+    i = list(cgs_desc.actuator_names).index("Z1")
+    assert abs(dof_jacobian(cgs_desc)[i, 0]) < 1e-6
+    d = 0.1
+    L = cgs_desc.actuator("Z1").length0_m
+    jx = dof_jacobian(cgs_desc, np.array([d, 0, 0, 0, 0, 0.0]))[i, 0]
+    assert abs(jx) == pytest.approx(d / math.hypot(L, d), rel=1e-3)
+    fc = force_coupling(cgs_desc)
+    assert 0.05 < fc["vertical_tilt_into_horizontal"] < 0.3
+    assert fc["overturning_to_actuator_n_per_n_m"]["envelope_max"] >= fc["overturning_to_actuator_n_per_n_m"]["home"]

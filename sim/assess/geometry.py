@@ -192,6 +192,7 @@ def envelope_study(desc: TableDescription, *, n: int = 4000, seed: int = 0) -> d
 def offset_plane_maps(desc: TableDescription, tm=None, hydraulics=None, *, n: int = 11) -> dict:
     """Over the x-y offset plane (the platen held at each offset, other DOFs at home): the
     largest linearised-map length error of any actuator (m) and, with the compiled model
+    (also the x effective mass, kg, which moves as the linkages tilt)
     ``tm`` and ``hydraulics``, the lowest and the x oil-column frequency (Hz) from the
     stiffness and mass matrices in DOF space at that pose (mass matrix from MuJoCo with
     the loops closed at the offset)."""
@@ -203,6 +204,7 @@ def offset_plane_maps(desc: TableDescription, tm=None, hydraulics=None, *, n: in
     err = np.zeros((n, n))
     f_low = np.full((n, n), np.nan)
     f_x = np.full((n, n), np.nan)
+    m_x = np.full((n, n), np.nan)
     dofs = [i for i, d in enumerate(DOFS6) if d in desc.dofs]
     d = tm.new_data() if tm is not None else None
     for i, y in enumerate(ys):
@@ -214,6 +216,7 @@ def offset_plane_maps(desc: TableDescription, tm=None, hydraulics=None, *, n: in
                 hp = hydraulics
                 tm.set_platen_pose(d, p)
                 M = analysis.effective_mass_matrix(tm.model, d)
+                m_x[i, j] = float(M[0, 0])
                 s = actuator_strokes(desc, p)
                 va = hp.dead_volume_a_m3 + hp.area_a_m2 * (hp.half_stroke_m + s)
                 vb = hp.dead_volume_b_m3 + hp.area_b_m2 * (hp.half_stroke_m - s)
@@ -225,7 +228,38 @@ def offset_plane_maps(desc: TableDescription, tm=None, hydraulics=None, *, n: in
                 f_low[i, j] = float(f.min())
                 f_x[i, j] = float(f[int(np.argmax(np.abs(vec[0].real)))])  # the mode most in x
     return {"x_m": xs.tolist(), "y_m": ys.tolist(), "max_length_error_m": err.tolist(),
-            "lowest_oil_column_hz": f_low.tolist(), "x_oil_column_hz": f_x.tolist()}
+            "lowest_oil_column_hz": f_low.tolist(), "x_oil_column_hz": f_x.tolist(),
+            "x_effective_mass_kg": m_x.tolist()}
+
+
+def force_coupling(desc: TableDescription) -> dict:
+    """How the tilting linkages couple forces between DOFs over the rated envelope.
+
+    ``vertical_tilt_into_horizontal``: the largest horizontal force at the reference point
+    per newton of one vertical actuator (the horizontal entries of its row of J(q): zero at
+    home, the sine of its tilt at an offset). ``overturning_to_actuator_n_per_n_m``: the
+    largest actuator force per N m of overturning moment (rx or ry) a payload puts on the
+    platen, ``pinv(J^T)``, at home and the worst over the envelope corners."""
+    J0 = dof_jacobian(desc)
+    vert = [i for i, a in enumerate(desc.actuators) if abs(actuator_axes(desc, np.zeros(6))[i][2]) > 0.7]
+    corners = envelope_corners(desc)
+    tilt_h, ot = 0.0, {}
+    dofs = [DOFS6.index(d) for d in ("rx", "ry") if d in desc.dofs]
+
+    def ot_per_moment(J):
+        G = np.linalg.pinv(J.T)  # actuator forces (n_act) for a wrench (6)
+        return float(np.abs(G[:, dofs]).max()) if dofs else 0.0
+
+    ot["home"] = ot_per_moment(J0)
+    worst = ot["home"]
+    for p in corners:
+        J = dof_jacobian(desc, p)
+        if vert:
+            tilt_h = max(tilt_h, float(np.abs(J[vert][:, :2]).max()))
+        worst = max(worst, ot_per_moment(J))
+    ot["envelope_max"] = worst
+    return {"vertical_tilt_into_horizontal": tilt_h, "vertical_actuators": [desc.actuators[i].name for i in vert],
+            "overturning_to_actuator_n_per_n_m": ot}
 
 
 def stroke_for_error(desc: TableDescription, dof: str, error_m: float) -> float | None:
@@ -263,6 +297,9 @@ def geometry(desc: TableDescription, payload=None, *, quick: bool = False, cross
     out["stroke_for_length_error_m"] = {
         d: {f"{e * 1e3:g}mm": stroke_for_error(desc, d, e) for e in (1e-4, 1e-3, 1e-2)}
         for d in ("x", "y", "z") if d in desc.dofs}
+    out["force_coupling"] = force_coupling(desc)
+    if payload is not None:
+        out["maps"]["effective_mass_note"] = "with the payload"
     if crosstalk_motions is None:
         crosstalk_motions = ("x_250mm_sine", "y_150mm_sine") if quick else (
             "x_250mm_sine", "y_150mm_sine", "elcentro_3c")

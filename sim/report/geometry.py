@@ -76,6 +76,13 @@ def when_it_matters(r: dict) -> str:
         txt = ", ".join(f"{k} at {1e3 * s:.0f} mm" for k, s in v.items() if s is not None)
         if txt:
             parts.append(f"A pure {d} offset reaches a length miss of {txt}.")
+    fc = r.get("force_coupling")
+    if fc:
+        o = fc["overturning_to_actuator_n_per_n_m"]
+        parts.append(f"At the envelope's corners a vertical actuator's force leaks into the horizontal DOFs by up to "
+                     f"{100 * fc['vertical_tilt_into_horizontal']:.1f} % (its tilt); one N m of payload overturning "
+                     f"asks up to {o['home']:.3f} N of an actuator at home and {o['envelope_max']:.3f} N at the "
+                     "worst corner.")
     ct = r.get("crosstalk", {})
     for name, row in ct.items():
         big = [(d, v) for d, v in row.items() if v["ratio"] is not None]
