@@ -77,18 +77,25 @@ add_law(Law("added_mass", {"mass_kg": ("kg", -np.inf, np.inf)}, "mass_kg",
 
 
 def declared_forces(entry: dict):
-    """``(law, where, values)`` of a declared ``[[effect]]`` entry whose force the
-    mechanical path can compute (new-style and the older platen effects), else None."""
+    """``(law, where, values)`` of a declared ``[[effect]]`` entry whose force is not in
+    the MuJoCo model's joints (those the mechanical path reads from the compiled model:
+    ``platen_spring`` is a joint stiffness, ``platen_coulomb`` a ``frictionloss``), else
+    None: ``platen_power_damping``, a ``platen_coulomb`` with pre-sliding (a per-step
+    force, taken here as its sliding limit), and effects of the library that act every
+    physics step (``per_step``) or are not registered."""
+    from sim.effects.base import EFFECTS
+
     kind = entry.get("type")
-    if kind in ("platen_spring", "platen_coulomb", "platen_power_damping"):
-        where = "dof:" + str(entry.get("dof", "x"))
-        if kind == "platen_spring":
-            return LAWS["spring"], where, {"stiffness_n_m": float(entry["stiffness_n_m"])}
-        if kind == "platen_coulomb":
-            return LAWS["coulomb_friction"], where, {"force_n": float(entry["force_n"])}
+    where = "dof:" + str(entry.get("dof", "x"))
+    if kind == "platen_coulomb" and entry.get("presliding_m"):
+        return LAWS["coulomb_friction"], where, {"force_n": float(entry["force_n"])}
+    if kind == "platen_power_damping":
         return LAWS["power_damping"], where, {"coefficient": float(entry["coefficient"]),
                                               "exponent": float(entry.get("exponent", 0.5))}
     if kind in LAWS and "where" in entry:
+        cls = EFFECTS.get(kind)
+        if cls is not None and not getattr(cls, "per_step", False):
+            return None  # built into the MJCF (edit_spec): read from the compiled joints
         law = LAWS[kind]
         vals = {k: float(entry[k]) for k in law.params if k in entry}
         if len(vals) == len(law.params):
