@@ -62,8 +62,31 @@ def add_law(law: Law) -> Law:
     return law
 
 
-add_law(Law("coulomb_friction", {"force_n": ("N", 0.0, np.inf)}, "force_n",
-            lambda u, v, a, s: _sign(v), what="dry friction F sign(v)"))
+def dahl_series(v: np.ndarray, zss: float, dt: float) -> np.ndarray:
+    """The pre-sliding state z(t) along a velocity record (n,) or (n, m), from z = 0
+    (:func:`sim.effects.registry.dahl_step`, the loop's law)."""
+    from sim.effects.registry import dahl_step
+
+    v = np.asarray(v, float)
+    z = np.zeros(v.shape[1:])
+    out = np.empty_like(v)
+    for i in range(len(v)):
+        z = dahl_step(z, v[i], zss, dt)
+        out[i] = z
+    return out
+
+
+def _coulomb(u, v, a, s):
+    """sign(v); on a table whose dry friction has pre-sliding (``[friction] model =
+    "presliding"``), the same Dahl law: z / delta along the motion."""
+    zss = s.get("_presliding_m")
+    if not zss:
+        return _sign(v)
+    return dahl_series(v, zss, s["_dt"]) / zss
+
+
+add_law(Law("coulomb_friction", {"force_n": ("N", 0.0, np.inf)}, "force_n", _coulomb,
+            what="dry friction F sign(v) (with the table's pre-sliding law, if it has one)"))
 add_law(Law("viscous_damping", {"damping_n_s_m": ("N s/m", 0.0, np.inf)}, "damping_n_s_m",
             lambda u, v, a, s: v, what="linear damping c v"))
 add_law(Law("power_damping", {"coefficient": ("N (s/m)^exponent", 0.0, np.inf), "exponent": ("1", 0.05, 2.0)},

@@ -61,6 +61,7 @@ class MechRun:
     rows: np.ndarray  # bool (n,): samples in the fit
     prefilter: tuple | None = None
     t0: float = 0.0
+    presliding_m: float | None = None  #: the table's pre-sliding travel, if its dry friction has one
     extra: dict = field(default_factory=dict)
 
     @property
@@ -100,7 +101,7 @@ class MechRun:
     def column(self, law, where: str, shape: dict) -> np.ndarray:
         """(n, k) generalised force of ``law`` with unit coefficient at ``where``."""
         u, v, a, m = self.place_motion(where)
-        b = np.asarray(law.basis(u, v, a, shape), float)
+        b = np.asarray(law.basis(u, v, a, {**shape, "_presliding_m": self.presliding_m, "_dt": self.dt}), float)
         Q = b[:, None] * m[None, :] if b.ndim == 1 else b @ m
         return Q if law.inertial else self.filt(Q)
 
@@ -212,7 +213,8 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             pre = analog_lowpass(accel_lowpass_hz, 1.0 / r.dt)
         mr = MechRun(name=r.name, dt=r.dt, dofs=list(desc.dofs), u=u, v=v, a=a, force=np.zeros_like(u),
                      model=np.zeros_like(u), J=J, actuators=list(desc.actuator_names), classes=classes,
-                     rows=np.ones(len(u), bool), prefilter=pre)
+                     rows=np.ones(len(u), bool), prefilter=pre,
+                     presliding_m=desc.friction_presliding_m if desc.friction_model == "presliding" else None)
         mr.force = mr.filt(f @ J)
         other = joints.force(u, v, r.dt)
         for law, where, vals in declared:
@@ -225,7 +227,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
 
 def _raw_column(mr, law, where, shape):
     u, v, a, m = mr.place_motion(where)
-    b = np.asarray(law.basis(u, v, a, shape), float)
+    b = np.asarray(law.basis(u, v, a, {**shape, "_presliding_m": mr.presliding_m, "_dt": mr.dt}), float)
     return b[:, None] * m[None, :] if b.ndim == 1 else b @ m
 
 
