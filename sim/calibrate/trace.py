@@ -114,7 +114,7 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
             continue
         for name, grid in t.law.shape.items():
 
-            def rss_at(val, i=i, name=name):
+            def rss_at(val, i=i, name=name, t=t):
                 trial = list(terms)
                 trial[i] = Term(t.law, t.where, {**t.shape, name: float(val)})
                 return _solve(*_stack(mruns, trial))[1]
