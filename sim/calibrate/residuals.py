@@ -100,10 +100,19 @@ class MechRun:
 
     def column(self, law, where: str, shape: dict) -> np.ndarray:
         """(n, k) generalised force of ``law`` with unit coefficient at ``where``."""
+        key = (law.type, where, tuple(sorted(shape.items())))
+        cache = self.extra.setdefault("raw_columns", {})
+        if key in cache:
+            return cache[key]
         u, v, a, m = self.place_motion(where)
         b = np.asarray(law.basis(u, v, a, {**shape, "_presliding_m": self.presliding_m, "_dt": self.dt}), float)
         Q = b[:, None] * m[None, :] if b.ndim == 1 else b @ m
-        return Q if law.inertial else self.filt(Q)
+        Q = Q if law.inertial else self.filt(Q)
+        if len(cache) > 128:  # shape scans make many; the accepted terms' come back
+            for k in [k for k in cache if k[2]][:64]:
+                del cache[k]
+        cache[key] = Q
+        return Q
 
 
 def places(desc, kinds) -> list[str]:
