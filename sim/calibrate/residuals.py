@@ -258,8 +258,22 @@ class JointTerms:
     fr_dofs: np.ndarray
     fr_force: np.ndarray
     fr_zss: float
+    #: tendons (springs, dampers, frictionloss on a combination of joints, e.g. a free
+    #: platen's DOF): (ntendon, k) length per platen DOF, and their coefficients
+    TT: np.ndarray | None = None
+    tK: np.ndarray | None = None
+    tD: np.ndarray | None = None
+    tFL: np.ndarray | None = None
 
     def force(self, u, v, dt) -> np.ndarray:
+        out = self._joint_force(u, v, dt)
+        if self.TT is not None and len(self.TT):
+            ql, qld = u @ self.TT.T, v @ self.TT.T
+            ft = ql * self.tK + qld * self.tD + self.tFL * np.sign(qld)
+            out = out + ft @ self.TT
+        return out
+
+    def _joint_force(self, u, v, dt) -> np.ndarray:
         from sim.calibrate.laws import DEADBAND
         from sim.effects.registry import dahl_step
 
@@ -298,8 +312,15 @@ def joint_terms(tm, k_of) -> JointTerms:
             K[m.jnt_dofadr[j]] = m.jnt_stiffness[j]
     fr_dofs = np.asarray(getattr(tm, "friction_dofs", []), dtype=int)
     fr_force = np.asarray(getattr(tm, "friction_force", []), dtype=float)
+    TT = tK = tD = tFL = None
+    if m.ntendon:
+        TT = np.array(d.ten_J, float).reshape(m.ntendon, m.nv) @ T
+        tK = np.array(m.tendon_stiffness, float).reshape(m.ntendon, -1)[:, 0]
+        tD = np.array(m.tendon_damping, float).reshape(m.ntendon, -1)[:, 0]
+        tFL = np.array(m.tendon_frictionloss, float)
     return JointTerms(T=T, K=K, D=np.array(m.dof_damping, float), FL=np.array(m.dof_frictionloss, float),
-                      fr_dofs=fr_dofs, fr_force=fr_force, fr_zss=float(getattr(tm, "friction_presliding_m", 1e-4)))
+                      fr_dofs=fr_dofs, fr_force=fr_force, fr_zss=float(getattr(tm, "friction_presliding_m", 1e-4)),
+                      TT=TT, tK=tK, tD=tD, tFL=tFL)
 
 
 def nrmse_runs(mruns, residuals) -> float:
