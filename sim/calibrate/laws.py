@@ -62,8 +62,31 @@ def add_law(law: Law) -> Law:
     return law
 
 
-add_law(Law("coulomb_friction", {"force_n": ("N", 0.0, np.inf)}, "force_n",
-            lambda u, v, a, s: _sign(v), what="dry friction F sign(v)"))
+def dahl_series(v: np.ndarray, zss: float, dt: float) -> np.ndarray:
+    """The pre-sliding state z(t) along a velocity record (n,) or (n, m), from z = 0
+    (:func:`sim.effects.registry.dahl_step`, the loop's law)."""
+    from sim.effects.registry import dahl_step
+
+    v = np.asarray(v, float)
+    z = np.zeros(v.shape[1:])
+    out = np.empty_like(v)
+    for i in range(len(v)):
+        z = dahl_step(z, v[i], zss, dt)
+        out[i] = z
+    return out
+
+
+def _coulomb(u, v, a, s):
+    """sign(v); on a table whose dry friction has pre-sliding (``[friction] model =
+    "presliding"``), the same Dahl law: z / delta along the motion."""
+    zss = s.get("_presliding_m")
+    if not zss:
+        return _sign(v)
+    return dahl_series(v, zss, s["_dt"]) / zss
+
+
+add_law(Law("coulomb_friction", {"force_n": ("N", 0.0, np.inf)}, "force_n", _coulomb,
+            what="dry friction F sign(v) (with the table's pre-sliding law, if it has one)"))
 add_law(Law("viscous_damping", {"damping_n_s_m": ("N s/m", 0.0, np.inf)}, "damping_n_s_m",
             lambda u, v, a, s: v, what="linear damping c v"))
 add_law(Law("power_damping", {"coefficient": ("N (s/m)^exponent", 0.0, np.inf), "exponent": ("1", 0.05, 2.0)},
@@ -77,18 +100,25 @@ add_law(Law("added_mass", {"mass_kg": ("kg", -np.inf, np.inf)}, "mass_kg",
 
 
 def declared_forces(entry: dict):
-    """``(law, where, values)`` of a declared ``[[effect]]`` entry whose force the
-    mechanical path can compute (new-style and the older platen effects), else None."""
+    """``(law, where, values)`` of a declared ``[[effect]]`` entry whose force is not in
+    the MuJoCo model's joints (those the mechanical path reads from the compiled model:
+    ``platen_spring`` is a joint stiffness, ``platen_coulomb`` a ``frictionloss``), else
+    None: ``platen_power_damping``, a ``platen_coulomb`` with pre-sliding (a per-step
+    force, taken here as its sliding limit), and effects of the library that act every
+    physics step (``per_step``) or are not registered."""
+    from sim.effects.base import EFFECTS
+
     kind = entry.get("type")
-    if kind in ("platen_spring", "platen_coulomb", "platen_power_damping"):
-        where = "dof:" + str(entry.get("dof", "x"))
-        if kind == "platen_spring":
-            return LAWS["spring"], where, {"stiffness_n_m": float(entry["stiffness_n_m"])}
-        if kind == "platen_coulomb":
-            return LAWS["coulomb_friction"], where, {"force_n": float(entry["force_n"])}
+    where = "dof:" + str(entry.get("dof", "x"))
+    if kind == "platen_coulomb" and entry.get("presliding_m"):
+        return LAWS["coulomb_friction"], where, {"force_n": float(entry["force_n"])}
+    if kind == "platen_power_damping":
         return LAWS["power_damping"], where, {"coefficient": float(entry["coefficient"]),
                                               "exponent": float(entry.get("exponent", 0.5))}
     if kind in LAWS and "where" in entry:
+        cls = EFFECTS.get(kind)
+        if cls is not None and not getattr(cls, "per_step", False):
+            return None  # built into the MJCF (edit_spec): read from the compiled joints
         law = LAWS[kind]
         vals = {k: float(entry[k]) for k in law.params if k in entry}
         if len(vals) == len(law.params):

@@ -61,6 +61,7 @@ class MechRun:
     rows: np.ndarray  # bool (n,): samples in the fit
     prefilter: tuple | None = None
     t0: float = 0.0
+    presliding_m: float | None = None  #: the table's pre-sliding travel, if its dry friction has one
     extra: dict = field(default_factory=dict)
 
     @property
@@ -99,10 +100,19 @@ class MechRun:
 
     def column(self, law, where: str, shape: dict) -> np.ndarray:
         """(n, k) generalised force of ``law`` with unit coefficient at ``where``."""
+        key = (law.type, where, tuple(sorted(shape.items())))
+        cache = self.extra.setdefault("raw_columns", {})
+        if key in cache:
+            return cache[key]
         u, v, a, m = self.place_motion(where)
-        b = np.asarray(law.basis(u, v, a, shape), float)
+        b = np.asarray(law.basis(u, v, a, {**shape, "_presliding_m": self.presliding_m, "_dt": self.dt}), float)
         Q = b[:, None] * m[None, :] if b.ndim == 1 else b @ m
-        return Q if law.inertial else self.filt(Q)
+        Q = Q if law.inertial else self.filt(Q)
+        if len(cache) > 128:  # shape scans make many; the accepted terms' come back
+            for k in [k for k in cache if k[2]][:64]:
+                del cache[k]
+        cache[key] = Q
+        return Q
 
 
 def places(desc, kinds) -> list[str]:
@@ -192,6 +202,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
     classes: dict = {}
     for i, a in enumerate(desc.actuators):
         classes.setdefault(a.cls.name, []).append(i)
+    joints = joint_terms(tm, k_of)
     declared = [d for d in (declared_forces(e) for e in desc.effects) if d is not None]
     out = []
     for r in runs:
@@ -211,15 +222,105 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             pre = analog_lowpass(accel_lowpass_hz, 1.0 / r.dt)
         mr = MechRun(name=r.name, dt=r.dt, dofs=list(desc.dofs), u=u, v=v, a=a, force=np.zeros_like(u),
                      model=np.zeros_like(u), J=J, actuators=list(desc.actuator_names), classes=classes,
-                     rows=np.ones(len(u), bool), prefilter=pre)
+                     rows=np.ones(len(u), bool), prefilter=pre,
+                     presliding_m=desc.friction_presliding_m if desc.friction_model == "presliding" else None)
         mr.force = mr.filt(f @ J)
-        model = a @ Me.T
+        other = joints.force(u, v, r.dt)
         for law, where, vals in declared:
-            model = model + vals[law.linear] * mr.column(law, where, vals)
-        mr.model = model
+            other = other + vals[law.linear] * _raw_column(mr, law, where, vals)
+        mr.model = a @ Me.T + mr.filt(other)
         mr.rows = _still_rows(v, pre, r.dt)
         out.append(mr)
     return out
+
+
+def _raw_column(mr, law, where, shape):
+    u, v, a, m = mr.place_motion(where)
+    b = np.asarray(law.basis(u, v, a, {**shape, "_presliding_m": mr.presliding_m, "_dt": mr.dt}), float)
+    return b[:, None] * m[None, :] if b.ndim == 1 else b @ m
+
+
+@dataclass
+class JointTerms:
+    """The declared model's joint-level forces on the recorded motion, in DOF space:
+    every joint's velocity and displacement from the platen's through ``T`` (MuJoCo's
+    loop-closed projection at home, the one behind the effective mass), joint springs
+    and dampers (``jnt_stiffness``, ``dof_damping``: seal drag, support air springs,
+    platen springs), dry friction as MuJoCo's ``frictionloss`` (sign of the joint
+    velocity) or the loop's pre-sliding law (Dahl, :func:`sim.effects.registry.dahl_step`,
+    integrated along the record). The polytropic air law's departure from its linear
+    spring is left out (second order in the support stroke)."""
+
+    T: np.ndarray  # (nv, k)
+    K: np.ndarray  # (nv,)
+    D: np.ndarray
+    FL: np.ndarray  # frictionloss (coulomb model)
+    fr_dofs: np.ndarray
+    fr_force: np.ndarray
+    fr_zss: float
+    #: tendons (springs, dampers, frictionloss on a combination of joints, e.g. a free
+    #: platen's DOF): (ntendon, k) length per platen DOF, and their coefficients
+    TT: np.ndarray | None = None
+    tK: np.ndarray | None = None
+    tD: np.ndarray | None = None
+    tFL: np.ndarray | None = None
+
+    def force(self, u, v, dt) -> np.ndarray:
+        out = self._joint_force(u, v, dt)
+        if self.TT is not None and len(self.TT):
+            ql, qld = u @ self.TT.T, v @ self.TT.T
+            ft = ql * self.tK + qld * self.tD + self.tFL * np.sign(qld)
+            out = out + ft @ self.TT
+        return out
+
+    def _joint_force(self, u, v, dt) -> np.ndarray:
+        from sim.calibrate.laws import DEADBAND
+        from sim.effects.registry import dahl_step
+
+        T = self.T
+        q = u @ T.T
+        qd = v @ T.T
+        gen = q * self.K + qd * self.D
+        if np.any(self.FL):
+            gen = gen + self.FL * np.where(np.abs(qd) > DEADBAND * 1e-3, np.sign(qd), 0.0)
+        if len(self.fr_dofs):
+            z = np.zeros(len(self.fr_dofs))
+            Z = np.zeros((len(u), len(self.fr_dofs)))
+            vv = qd[:, self.fr_dofs]
+            for i in range(len(u)):
+                z = dahl_step(z, vv[i], self.fr_zss, dt)
+                Z[i] = z
+            gen[:, self.fr_dofs] += Z * (self.fr_force / self.fr_zss)
+        return gen @ T
+
+
+def joint_terms(tm, k_of) -> JointTerms:
+    import mujoco
+
+    from mjcf import analysis
+
+    m = tm.model
+    d = mujoco.MjData(m)
+    key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home")
+    if key >= 0:
+        mujoco.mj_resetDataKeyframe(m, d, key)
+    mujoco.mj_forward(m, d)
+    T = analysis.projection(m, d)[:, k_of]
+    K = np.zeros(m.nv)
+    for j in range(m.njnt):
+        if int(m.jnt_type[j]) in (int(mujoco.mjtJoint.mjJNT_SLIDE), int(mujoco.mjtJoint.mjJNT_HINGE)):
+            K[m.jnt_dofadr[j]] = m.jnt_stiffness[j]
+    fr_dofs = np.asarray(getattr(tm, "friction_dofs", []), dtype=int)
+    fr_force = np.asarray(getattr(tm, "friction_force", []), dtype=float)
+    TT = tK = tD = tFL = None
+    if m.ntendon:
+        TT = np.array(d.ten_J, float).reshape(m.ntendon, m.nv) @ T
+        tK = np.array(m.tendon_stiffness, float).reshape(m.ntendon, -1)[:, 0]
+        tD = np.array(m.tendon_damping, float).reshape(m.ntendon, -1)[:, 0]
+        tFL = np.array(m.tendon_frictionloss, float)
+    return JointTerms(T=T, K=K, D=np.array(m.dof_damping, float), FL=np.array(m.dof_frictionloss, float),
+                      fr_dofs=fr_dofs, fr_force=fr_force, fr_zss=float(getattr(tm, "friction_presliding_m", 1e-4)),
+                      TT=TT, tK=tK, tD=tD, tFL=tFL)
 
 
 def nrmse_runs(mruns, residuals) -> float:

@@ -269,7 +269,7 @@ def calibrate(run_paths, *, table=None, payload=None, holdout=None, effects=None
         for law, w in cands:
             if (law.type, w) in have:
                 continue
-            new = fit_terms(mfit, cur.terms + [Term(law, w)])
+            new = fit_terms(mfit, cur.terms + [Term(law, w)], refine="last")
             n_fits += 1
             scored.append((1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0, law, w, new))
         rank = {"dof": 0, "class": 1, "actuator": 2}
@@ -291,7 +291,8 @@ def calibrate(run_paths, *, table=None, payload=None, holdout=None, effects=None
                 break
         if accepted is None:
             break
-        cur, e_ho, flat = accepted
+        cur = fit_terms(mfit, accepted[0].terms)  # every shape parameter again, with the new term in
+        e_ho, flat = nrmse_runs(mho, predict(mho, cur)), flatness(mfit, cur.residuals)
     for i, t in enumerate(cur.terms):
         _, _, unc = param_report(t, cur.values[i], cur.sigma[i])
         added.append({"name": t.law.type, "where": t.where, "parameters": cur.values[i],

@@ -56,14 +56,31 @@ def _weights(mr) -> np.ndarray:
     return np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
 
 
+def _key(t) -> tuple:
+    return (t.law.type, t.where, tuple(sorted(t.shape.items())))
+
+
 def _stack(mruns, terms):
+    """Weighted, demeaned target and columns over the fit rows, stacked over runs and
+    DOFs (each run's pieces cached: candidates share them)."""
     ys, Xs = [], []
     for mr in mruns:
-        w = _weights(mr)
-        y = mr.residual[mr.rows] * w
-        cols = [mr.demean(mr.column(t.law, t.where, t.shape))[mr.rows] * w for t in terms]
-        ys.append(y.reshape(-1))
-        Xs.append(np.stack([c.reshape(-1) for c in cols], axis=1) if cols else np.zeros((y.size, 0)))
+        cache = mr.extra.setdefault("columns", {})
+        if "y" not in mr.extra:
+            w = _weights(mr)
+            mr.extra["w"] = w
+            mr.extra["y"] = (mr.residual[mr.rows] * w).reshape(-1)
+        w = mr.extra["w"]
+        cols = []
+        for t in terms:
+            k = _key(t)
+            if k not in cache:
+                if len(cache) > 256:
+                    cache.clear()
+                cache[k] = (mr.demean(mr.column(t.law, t.where, t.shape))[mr.rows] * w).reshape(-1)
+            cols.append(cache[k])
+        ys.append(mr.extra["y"])
+        Xs.append(np.stack(cols, axis=1) if cols else np.zeros((mr.extra["y"].size, 0)))
     return np.concatenate(ys), np.concatenate(Xs, axis=0)
 
 
@@ -85,17 +102,19 @@ def _shape_jacobian(mruns, term, coef, h=1e-3):
     return coef * (Xu[:, 0] - Xd[:, 0]) / (2 * h)
 
 
-def fit_terms(mruns, terms: list, *, refine_shapes: bool = True) -> Fit:
-    """Fit ``terms`` jointly on ``mruns`` (shape parameters of each term chosen in turn
-    on their grid, then refined); returns the :class:`Fit`."""
+def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
+    """Fit ``terms`` jointly on ``mruns`` (shape parameters chosen in turn on their grid,
+    then refined: ``refine`` "all" terms, the "last" one only (a candidate added to an
+    accepted set), or "none"); returns the :class:`Fit`."""
     terms = [Term(t.law, t.where, {**{k: float(np.median(g)) for k, g in t.law.shape.items()}, **t.shape})
              for t in terms]
+    todo = {"all": range(len(terms)), "last": range(len(terms) - 1, len(terms)), "none": ()}[refine]
     for i, t in enumerate(terms):
+        if i not in todo:
+            continue
         for name, grid in t.law.shape.items():
-            if name in t.shape and not refine_shapes:
-                continue
 
-            def rss_at(val, i=i, name=name):
+            def rss_at(val, i=i, name=name, t=t):
                 trial = list(terms)
                 trial[i] = Term(t.law, t.where, {**t.shape, name: float(val)})
                 return _solve(*_stack(mruns, trial))[1]

@@ -42,12 +42,15 @@ def figures(res, out: Path) -> list[str]:
     names.append("holdout_error.png")
     # 2. residual time series and 3. spectra, before/after (each held-out run, each DOF)
     k = len(ho[0].dofs)
-    fig, ax = plt.subplots(len(ho), k, figsize=(9 * k, 2.6 * len(ho)), squeeze=False)
-    fig2, ax2 = plt.subplots(1, k, figsize=(7 * k, 4), squeeze=False)
+    fig, ax = plt.subplots(len(ho) * k, 1, figsize=(10, 2.2 * len(ho) * k), squeeze=False)
+    nc = min(k, 3)
+    nr = -(-k // nc)
+    fig2, ax2s = plt.subplots(nr, nc, figsize=(6 * nc, 3.8 * nr), squeeze=False)
+    ax2 = ax2s.reshape(1, -1)
     for i, (mr, e0, e1) in enumerate(zip(ho, before, after)):
         t = np.arange(len(e0)) * mr.dt
         for j, d in enumerate(mr.dofs):
-            a = ax[i, j]
+            a = ax[i * k + j, 0]
             a.plot(t, e0[:, j] / 1e3, lw=0.6, label="declared model")
             a.plot(t, e1[:, j] / 1e3, lw=0.6, label="calibrated")
             a.set_title(f"{Path(mr.name).name} {d}: residual force", fontsize=9)
@@ -63,7 +66,7 @@ def figures(res, out: Path) -> list[str]:
                 if res.unexplained and res.unexplained["where"].endswith(d):
                     ax2[0, j].axvline(res.unexplained["peak_hz"], color="k", ls=":", label="unexplained")
                 ax2[0, j].legend(fontsize=8)
-        ax[i, 0].legend(fontsize=7)
+        ax[i * k, 0].legend(fontsize=7)
     ax[-1, 0].set_xlabel("s")
     for f_, nm in ((fig, "residual_time.png"), (fig2, "residual_spectra.png")):
         f_.tight_layout()
@@ -72,18 +75,19 @@ def figures(res, out: Path) -> list[str]:
         names.append(nm)
     # 4. residual force vs displacement and velocity (fit runs, before/after)
     fit = res.series["fit"]
-    fig, ax = plt.subplots(2, 2 * k, figsize=(8 * k, 6.5), squeeze=False)
-    for row, (lab, E) in enumerate((("declared model", res.series["fit_before"]),
-                                    ("calibrated", res.series["fit_after"]))):
+    fig, ax = plt.subplots(k, 4, figsize=(16, 3.2 * k), squeeze=False)
+    for c0, (lab, E) in enumerate((("declared model", res.series["fit_before"]),
+                                   ("calibrated", res.series["fit_after"]))):
         for j in range(k):
+            a_d, a_v = ax[j, 2 * c0], ax[j, 2 * c0 + 1]
             for mr, e in zip(fit, E):
-                ax[row, 2 * j].plot(mr.u[mr.rows, j] * 1e3, e[mr.rows, j] / 1e3, ",", alpha=0.5)
-                ax[row, 2 * j + 1].plot(mr.v[mr.rows, j], e[mr.rows, j] / 1e3, ",", alpha=0.5)
-            ax[row, 2 * j].set_title(f"{lab}: residual vs displacement ({fit[0].dofs[j]})", fontsize=9)
-            ax[row, 2 * j + 1].set_title(f"{lab}: residual vs velocity ({fit[0].dofs[j]})", fontsize=9)
-            ax[row, 2 * j].set_xlabel("mm (mrad)")
-            ax[row, 2 * j + 1].set_xlabel("m/s (rad/s)")
-            ax[row, 2 * j].set_ylabel("kN (kN m)")
+                a_d.plot(mr.u[mr.rows, j] * 1e3, e[mr.rows, j] / 1e3, ",", alpha=0.5)
+                a_v.plot(mr.v[mr.rows, j], e[mr.rows, j] / 1e3, ",", alpha=0.5)
+            a_d.set_title(f"{lab}: residual vs displacement ({fit[0].dofs[j]})", fontsize=9)
+            a_v.set_title(f"{lab}: residual vs velocity ({fit[0].dofs[j]})", fontsize=9)
+            a_d.set_xlabel("mm (mrad)")
+            a_v.set_xlabel("m/s (rad/s)")
+            a_d.set_ylabel("kN (kN m)")
     fig.tight_layout()
     fig.savefig(out / "residual_vs_state.png", dpi=110)
     plt.close(fig)
