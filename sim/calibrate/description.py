@@ -141,7 +141,7 @@ class TomlText:
             try:
                 entry = tomllib.loads(body)
             except tomllib.TOMLDecodeError as e:
-                raise DescriptionWriteError(f"{self.source}: the [[effect]] entry at line {i + 1} is not TOML ({e})")
+                raise DescriptionWriteError(f"{self.source}: the [[effect]] entry at line {i + 1} is not TOML ({e})") from None
             out.append((i, end, entry))
         return out
 
@@ -182,7 +182,7 @@ class TomlText:
         try:
             return tomllib.loads(self.text)
         except tomllib.TOMLDecodeError as e:
-            raise DescriptionWriteError(f"{self.source}: the rewritten description is not TOML ({e}); nothing written")
+            raise DescriptionWriteError(f"{self.source}: the rewritten description is not TOML ({e}); nothing written") from None
 
     def save(self, path) -> Path:
         """Write atomically (after checking that the text parses)."""

@@ -164,7 +164,7 @@ def write_calibration(path: str | Path, cal: dict) -> None:
         try:
             write_masses(doc, cal["masses"], note=NOTE_TESTS, offset=cal["effective_mass_offset"])
         except DescriptionWriteError as e:
-            raise CharacterizeError(str(e))
+            raise CharacterizeError(str(e)) from None
     doc.save(path)
 
 

@@ -114,7 +114,7 @@ def load_effect_file(path) -> None:
         spec.loader.exec_module(mod)
     except Exception as e:  # a user's file: any failure is theirs to fix
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise CalibrationError(f"{path}: effect file does not load ({type(e).__name__}: {msg}); fix it or leave it out")
+        raise CalibrationError(f"{path}: effect file does not load ({type(e).__name__}: {msg}); fix it or leave it out") from None
 
 
 def split_holdout(runs, holdout_runs):
