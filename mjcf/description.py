@@ -12,6 +12,7 @@ was expected.
 
 from __future__ import annotations
 
+import difflib
 import itertools
 import math
 import re
@@ -31,6 +32,13 @@ DOFS6 = ("x", "y", "z", "rx", "ry", "rz")
 
 
 # --------------------------------------------------------------------------- helpers
+def suggest(key, known) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``known``, or ``""`` (the same hint as
+    ``sim.validate.suggest``; mjcf imports nothing from sim)."""
+    close = difflib.get_close_matches(str(key), sorted(str(k) for k in known), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
 class _Section:
     """Reads keys from one TOML table, remembering which were used.
 
@@ -45,14 +53,17 @@ class _Section:
         self.path = path
         self.src = src
         self.used: set[str] = set()
+        self.asked: set[str] = set()  # every key read, present or not (for the closest-key hint)
 
     def _name(self, key):
         return f"{self.path}.{key}" if self.path else key
 
     def has(self, key):
+        self.asked.add(key)
         return key in self.data
 
     def raw(self, key, default=...):
+        self.asked.add(key)
         if key not in self.data:
             if default is ...:
                 raise DescriptionError(f"{self.src}: missing field '{self._name(key)}'")
@@ -105,8 +116,10 @@ class _Section:
         extra = sorted(set(self.data) - self.used)
         if extra:
             where = f"[{self.path}]" if self.path else "the top level"
+            known = sorted(self.asked | self.used)
             raise DescriptionError(
-                f"{self.src}: unknown key '{extra[0]}' in {where}; known keys: {', '.join(sorted(self.used))}"
+                f"{self.src}: unknown key '{extra[0]}' in {where}{suggest(extra[0], known)}; "
+                f"known keys: {', '.join(known)}"
             )
 
 

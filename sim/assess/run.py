@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.errors import ScenarioError, UserError
+from sim.errors import RunInterrupted, ScenarioError, UserError
 
 SCHEMA = "shaketable-summary/1"
 
@@ -97,13 +97,23 @@ class ScenarioPlan:
     warnings: list
 
     def run(self, *, progress=None) -> RunOutcome:
-        """Run the plan; ``progress(text)`` is called once per stage (None: silent)."""
-        from sim.assess.feasibility import diagnostics
-        from sim.runs.build import build_runfile
+        """Run the plan; ``progress(text)`` is called once per stage (None: silent).
 
+        Ctrl-C during a simulation keeps what it computed: the outcome holds that run,
+        marked incomplete (``result.interrupted``), for the caller to write."""
         say = progress or (lambda text: None)
-        sc, sim, ref = self.scenario, self.sim, self.reference
         history = []
+        try:
+            res, plain, best, wall_total, settings = self._simulate(say, progress, history)
+        except RunInterrupted as stop:
+            res = plain = stop.result
+            best, wall_total, history, settings = 0, res.wall_s, [], None
+            if len(res.t) < 2:
+                raise
+        return self._finish(res, plain, best, wall_total, settings, history)
+
+    def _simulate(self, say, progress, history):
+        sim, ref = self.sim, self.reference
         settings = None
         if self.iteration.get("count", 0) > 0:
             from sim.control.iteration import IterationSettings, iterate
@@ -124,6 +134,13 @@ class ScenarioPlan:
             say("simulating")
             res = sim.run(reference=ref, progress=progress is not None and sys.stderr.isatty())
             plain, best, wall_total = res, 0, res.wall_s
+        return res, plain, best, wall_total, settings
+
+    def _finish(self, res, plain, best, wall_total, settings, history) -> RunOutcome:
+        sc, sim, ref = self.scenario, self.sim, self.reference
+        from sim.assess.feasibility import diagnostics
+        from sim.runs.build import build_runfile
+
         if len(res.t) < 2:
             raise DivergenceAtStart(res.incomplete_reason or "the simulation stopped before its second sample")
         run = build_runfile(res, self.tm, description=sc.description or sc.name,
@@ -139,6 +156,7 @@ class ScenarioPlan:
             "realtime_factor": float(res.realtime_factor),
             "complete": res.incomplete_reason is None,
             "incomplete_reason": res.incomplete_reason,
+            "interrupted": bool(getattr(res, "interrupted", False)),
             "tracking": _tracking(res, ref),
             "drive_iterations": {"count": len(history) - 1 if history else 0, "chosen": best,
                                  "frf": settings.frf if history else None,

@@ -107,6 +107,8 @@ def cmd_calibrate(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="shaketable", description="Digital twin of servo-hydraulic shaking tables")
+    p.add_argument("--debug", action="store_true",
+                   help="show the full traceback of an error instead of its one-line message")
     sub = p.add_subparsers(dest="command", required=True)
 
     m = sub.add_parser("model", help="build a table (+ payload) and show its model")
@@ -131,16 +133,46 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null: the reader of a pipe has gone (``... | head -1``), and
+    Python's own flush at exit would otherwise print a BrokenPipeError."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # stdout without a descriptor (captured in tests)
+        pass
+
+
 def main(argv=None) -> int:
+    """Run one command; returns the exit code: 0 done, 2 a user error (one line on stderr),
+    3 a simulation that diverged (what was computed is kept, marked incomplete), 130
+    interrupted (Ctrl-C). ``--debug`` re-raises instead, with the traceback."""
+    from sim.errors import DivergenceError
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    debug = getattr(args, "debug", False)
     try:
         return int(args.func(args) or 0)
     except user_errors() as e:
-        print(f"error: {e}", file=sys.stderr)
+        if debug:
+            raise
+        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
+    except DivergenceError as e:
+        if debug:
+            raise
+        print(f"error: {e}", file=sys.stderr)
+        return 3
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 141  # 128 + SIGPIPE, as a shell reports a pipeline cut short
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        if debug:
+            raise
+        print("interrupted: files already written are complete; nothing half-written was kept", file=sys.stderr)
         return 130
 
 

@@ -33,6 +33,12 @@ def cmd_run(args) -> int:
 
         target = rerun.RrdTarget.open(args.rrd)  # fails early (exit 2) if unwritable; rerun loads beside the run
     outcome = plan.run(progress=_progress(args))
+    res = outcome.result
+    if res.interrupted:  # Ctrl-C: keep what was computed (no recording: the user asked to stop)
+        summary = outcome.write(out)
+        print(f"interrupted: kept {res.sim_s:.3f} s in {summary['run_file']} (marked incomplete) "
+              f"and {out / 'summary.json'}", file=sys.stderr)
+        return 130
     if target is not None:
         target.write_run(outcome.run, outcome.tm)
         outcome.summary["recording"] = str(target.path)
@@ -41,7 +47,6 @@ def cmd_run(args) -> int:
         print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
     else:
         _print_summary(summary)
-    res = outcome.result
     if res.incomplete_reason:
         print(f"error: {res.incomplete_reason}; kept {res.sim_s:.3f} s in {summary['run_file']} (marked incomplete)",
               file=sys.stderr)

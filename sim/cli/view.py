@@ -35,7 +35,8 @@ def cmd_view(args) -> int:
         raise UserError("view needs a target: give --rrd FILE.rrd, --spawn or --connect [URL]")
     # check the target before reading anything large
     target = recording.RrdTarget.open(args.rrd, spawn=args.spawn, connect=args.connect, rate_hz=args.rate,
-                                      series_rate_hz=None if args.full_rate else recording.DEFAULT_SERIES_RATE_HZ)
+                                      series_rate_hz=None if args.full_rate else recording.DEFAULT_SERIES_RATE_HZ,
+                                      timeout_s=args.timeout)
     run = read_run(args.run)
     compare = read_run(args.compare) if args.compare else None
     table = args.table or run.meta["table"]
@@ -64,6 +65,7 @@ def cmd_view(args) -> int:
 
 
 def _rate(text: str) -> float:
+    """A positive finite number (a rate in Hz, a time in s)."""
     import argparse
     import math
 
@@ -72,7 +74,7 @@ def _rate(text: str) -> float:
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive rate in Hz")
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
     return v
 
 
@@ -93,6 +95,9 @@ def add_parsers(sub) -> None:
     v.add_argument("--spawn", action="store_true", help="also stream to a viewer started now (needs a screen)")
     v.add_argument("--connect", nargs="?", const="", default=None, metavar="URL",
                    help="also stream to a running viewer (default rerun+http://127.0.0.1:9876/proxy)")
+    v.add_argument("--timeout", type=_rate, default=None, metavar="S",
+                   help="with --spawn/--connect: give up when the viewer has not taken the recording after S "
+                        "seconds (default 30)")
     v.add_argument("--json", action="store_true", help="print a JSON summary")
     v.set_defaults(func=cmd_view)
 

@@ -607,8 +607,9 @@ def rice_programme_report(out, *, workers: int = 2, quick: bool = False) -> list
     import pickle
 
     res = run_rice_programme(workers=workers, n_segments=3 if quick else RICE_SEGMENTS)
-    with open(out / "rice_frf.pkl", "wb") as fh:
-        pickle.dump([{k: v for k, v in r.items()} for r in res], fh)
+    from sim.runs.files import write_bytes_atomic
+
+    write_bytes_atomic(out / "rice_frf.pkl", pickle.dumps([{k: v for k, v in r.items()} for r in res]))
     return rice_report(res)
 
 
