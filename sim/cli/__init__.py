@@ -7,7 +7,8 @@ Every user error (bad file, bad parameter, unwritable output) is printed as one 
 from __future__ import annotations
 
 import argparse
-import json
+
+from sim.runs.files import json_text
 import sys
 
 from sim.errors import user_errors
@@ -59,7 +60,7 @@ def cmd_model(args) -> int:
         t, s = mjcf.write_xml(tm, args.xml)
         out["xml"] = {"table": str(t), "scene": str(s)}
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(json_text(out, indent=2))
         return 0
     print(f"{desc.title}  [{desc.name}]" + (f" + payload {payload.name} ({tm.info.payload_kind})" if payload else ""))
     print(f"  bodies {out['n_bodies']}, joints {out['n_joints']} (nq {m.nq}, nv {m.nv}), "
@@ -93,7 +94,7 @@ def cmd_calibrate(args) -> int:
     if args.write:
         write_calibrated(desc.source, res)
     if args.json:
-        print(json.dumps({k: res[k] for k in ("values", "before", "after", "target")}, indent=2))
+        print(json_text({k: res[k] for k in ("values", "before", "after", "target")}, indent=2))
         return 0
     print(f"effective-mass calibration of {desc.name} against seed 000 Table 2")
     print(f"  {'dof':4s} {'target':>10s} {'before':>10s} {'after':>10s}")
@@ -139,9 +140,11 @@ def _quiet_stdout() -> None:
     import os
 
     try:
+        if sys.stdout.fileno() != 1:  # a replaced stdout (a test's capture): leave descriptors alone
+            return
         devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError, AttributeError):  # stdout without a descriptor (captured in tests)
+        os.dup2(devnull, 1)
+    except (OSError, ValueError, AttributeError):  # stdout without a descriptor
         pass
 
 

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 
-from sim.runs.files import jsonable, out_dir
+from sim.runs.files import json_text, out_dir
 
 
 def _progress(show: bool):
@@ -48,7 +47,7 @@ def cmd_characterize(args) -> int:
     write_characterization(args.out, s)
     s.pop("_results", None)
     if args.json:
-        print(json.dumps(jsonable(s), indent=2, allow_nan=False))
+        print(json_text(s, indent=2))
         return 0
     print(f"characterisation of {s['table']}" + (f" + {s['payload']}" if s["payload"] else "")
           + f" ({s['mode']}): {s['wall_s']:.0f} s wall, {s['sim_s']:.0f} s simulated")
@@ -81,7 +80,7 @@ def _calibrate(args, show) -> int:
            "effective_mass_offset": cal.get("effective_mass_offset"),
            "masses": cal["masses"]["values"] if cal.get("masses") else None}
     if args.json:
-        print(json.dumps(jsonable(out), indent=2, allow_nan=False))
+        print(json_text(out, indent=2))
         return 0
     pub = C.published(desc)
     print(f"calibrated {desc.name} against its published oil columns and friction ({pub.source}):")

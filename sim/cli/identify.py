@@ -3,11 +3,11 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 from sim.errors import UserError
+from sim.runs.files import json_text
 
 
 def add_parsers(sub) -> None:
@@ -60,11 +60,13 @@ def cmd_identify(args) -> int:
         raise UserError(f"the least squares has no unique solution for these runs ({e}); give tests with "
                         "motion in both directions") from None
     scan = I.scan_alpha(recs, weights=args.weights, ce_fixed=args.ce) if args.scan_alpha else []
+    for w in I.unphysical(res):
+        print(f"warning: {w}", file=sys.stderr)
     if args.json:
         out = {k: v for k, v in res.as_dict().items()}
         if scan:
             out["alpha_scan"] = [{"alpha": s.alpha, "error": s.error} for s in scan]
-        print(json.dumps(out, indent=1))
+        print(json_text(out, indent=1))
         return 0
     print(f"ucsd-ls on {len(recs)} run(s), alpha = {res.alpha:g}, weights {res.weights}"
           f"{', C_e constrained' if res.constrained else ''}")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -10,7 +9,7 @@ import numpy as np
 
 from sim.assess.run import SCHEMA
 from sim.errors import RunFileError, UserError
-from sim.runs.files import jsonable, out_dir, write_json_atomic
+from sim.runs.files import json_text, out_dir, write_json_atomic
 from sim.effects import build_model
 
 def _progress(args):
@@ -44,7 +43,7 @@ def cmd_run(args) -> int:
         outcome.summary["recording"] = str(target.path)
     summary = outcome.write(out)
     if args.json:
-        print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
+        print(json_text(summary, indent=2))
     else:
         _print_summary(summary)
     if res.incomplete_reason:
@@ -92,7 +91,7 @@ def cmd_replay(args) -> int:
                "residual_nrmse": rep.residual_nrmse}
     write_json_atomic(out / "replay_summary.json", summary)
     if args.json:
-        print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
+        print(json_text(summary, indent=2))
     else:
         print(f"replayed {args.run} open loop ({res.sim_s:.2f} s, {res.realtime_factor:.2f}x real time) -> {path}")
         for ch, cols in rep.residual_nrmse.items():
@@ -132,7 +131,7 @@ def cmd_fit(args) -> int:
     rep["calibrated_table_file"] = str(toml_path)
     write_json_atomic(out / "fit.json", rep)
     if args.json:
-        print(json.dumps(rep, indent=2))
+        print(json_text(rep, indent=2))
     else:
         print(f"residual (mean NRMSE of force/acceleration/displacement): "
               f"{100 * rep['baseline_residual']:.2f} % -> {100 * rep['final_residual']:.2f} %")
@@ -151,7 +150,7 @@ def cmd_geometry(args) -> int:
     tm = build_model(desc, payload)
     r = geometry.study(desc, tm.effective_mass_matrix(), HydraulicParams.from_table(desc.raw))
     if args.json:
-        print(json.dumps(r, indent=2))
+        print(json_text(r, indent=2))
     else:
         geometry.print_report(r)
     return 0

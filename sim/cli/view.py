@@ -20,7 +20,8 @@ fed together. ``--spawn`` and ``--connect`` map onto ``rr.spawn`` and ``rr.GrpcS
 
 from __future__ import annotations
 
-import json
+
+from sim.runs.files import json_text
 
 from sim.errors import UserError
 from sim.effects import build_model
@@ -52,7 +53,7 @@ def cmd_view(args) -> int:
            "samples": run.n_samples, "display_rate_hz": args.rate,
            "series_rate_hz": run.sample_rate_hz / recording.series_stride(run.sample_rate_hz, target.series_rate_hz)}
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(json_text(out, indent=2))
     else:
         what = f"{args.run}" + (f" beside {args.compare}" if args.compare else "")
         dest = [str(path)] if path else []

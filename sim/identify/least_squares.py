@@ -91,7 +91,7 @@ class Identified:
     def as_dict(self) -> dict:
         return {"M_e_kg": self.M_e_kg, "K_e_N_per_m": self.K_e_N_per_m, "C_e": self.C_e, "F_mu_N": self.F_mu_N,
                 "alpha": self.alpha, "error": self.error, "constrained": self.constrained, "weights": self.weights,
-                "per_test_error": self.per_test_error}
+                "per_test_error": self.per_test_error, "warnings": unphysical(self)}
 
 
 def prepare(rec: Record, *, trim: float | None = 0.01, accel_lowpass_hz: float | None = None,
@@ -248,6 +248,7 @@ def record_from_run(path) -> Record:
     name = run.name
     if "x" not in run.dofs:
         raise RunFileError(f"{name}: has no 'x' DOF column; the ucsd-ls model identifies the x motion of a uni-axial table")
+    _check_uniaxial(run)
     F = np.asarray(run.actuator_force, float).sum(axis=1)
     d = np.asarray(run.column("table_displacement", "x"), float)
     v = np.asarray(run.column("table_velocity", "x"), float)
@@ -261,6 +262,44 @@ def record_from_run(path) -> Record:
     if len(F) < 16:
         raise RunFileError(f"{name}: only {len(F)} samples; the identification needs a test record")
     return Record(name=name, dt=run.dt, force=F, acc=a, vel=v, disp=d)
+
+
+def _check_uniaxial(run) -> None:
+    """Refuse a run that is not from a uni-axial table: its table description (when it
+    can be loaded) has more than one DOF, or its table moved in a DOF other than x (a
+    uni-axial table's run files carry those columns as exact zeros). The model sums the
+    actuator forces as one force along x: for a multi-axis table that sum is meaningless
+    and the fit returns negative masses or stiffnesses."""
+    import mjcf
+    from mjcf.errors import MjcfError
+
+    table = run.meta.get("table")
+    try:
+        desc = mjcf.load_table(table)
+    except MjcfError:  # a measured run of a table without a description here: judge by its data
+        desc = None
+    if desc is not None and list(desc.dofs) != ["x"]:
+        raise RunFileError(f"{run.name}: is a run of table '{desc.name}' with DOFs {', '.join(desc.dofs)}; "
+                           "ucsd-ls identifies a uni-axial table (one DOF, x): give runs of such a table")
+    td = np.asarray(run.table_displacement, float)
+    moving = [d for j, d in enumerate(run.dofs) if d != "x" and np.any(td[:, j] != 0)]
+    if moving:
+        raise RunFileError(f"{run.name}: the table moves in {', '.join(moving)} as well as x; ucsd-ls identifies "
+                           "a uni-axial table (one DOF, x): give runs of such a table")
+
+
+def unphysical(res) -> list[str]:
+    """Warnings for fitted parameters no table can have (negative mass, stiffness,
+    damping or friction), each saying what it means."""
+    out = []
+    why = ("the runs do not fit the model M u'' + K u + C |u'|^a sign u' + F sign u' = F_act: too little motion, "
+           "too few reversals, a wrong sign of the force, or a table that is not uni-axial")
+    for name, v, unit, what in (("M_e", res.M_e_kg, "kg", "mass"), ("K_e", res.K_e_N_per_m, "N/m", "stiffness"),
+                                ("C_e", res.C_e, "N (s/m)^a", "damping"), ("F_mu", res.F_mu_N, "N", "friction")):
+        if not np.isfinite(v) or v < 0 or (what == "mass" and v == 0):
+            out.append(f"fitted {name} = {v:.4g} {unit} is not a physical {what} (must be "
+                       f"{'> 0' if what == 'mass' else '>= 0'}); {why}")
+    return out
 
 
 # ------------------------------------------------------------------ Table 8 (Eqs. 18-26)

@@ -89,6 +89,12 @@ def save_figure_atomic(fig, path: Path, **kwargs) -> None:
     _atomic(path, lambda fh: fig.savefig(fh, format=fmt, **kwargs))
 
 
+def json_text(obj, indent: int = 2) -> str:
+    """Strict JSON text of ``obj`` (NaN and infinities as null, numpy as plain Python):
+    what every JSON writer and every ``--json`` print uses."""
+    return json.dumps(jsonable(obj), indent=indent, allow_nan=False)
+
+
 def write_json_atomic(path: Path, obj) -> None:
     """Strict JSON (NaN -> null), written atomically."""
     write_text_atomic(path, json.dumps(jsonable(obj), indent=2, allow_nan=False))
