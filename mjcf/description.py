@@ -66,7 +66,9 @@ class _Section:
         self.asked.add(key)
         if key not in self.data:
             if default is ...:
-                raise DescriptionError(f"{self.src}: missing field '{self._name(key)}'")
+                typo = difflib.get_close_matches(str(key), [str(k) for k in self.data if k not in self.used], 1, 0.6)
+                hint = f" (found '{typo[0]}': a misspelling of '{key}'?)" if typo else ""
+                raise DescriptionError(f"{self.src}: missing field '{self._name(key)}'{hint}")
             return default
         self.used.add(key)
         return self.data[key]
@@ -283,7 +285,22 @@ def resolve(name_or_path: str | Path, folder: Path, kind: str) -> Path:
 def load_table(name_or_path: str | Path) -> TableDescription:
     """Load and validate a table description by name (``"cgs"``) or path."""
     path = resolve(name_or_path, TABLES_DIR, "table")
-    return parse_table(_load_toml(path), src=str(path))
+    data = _load_toml(path)
+    desc = parse_table(data, src=str(path))
+    check_hydraulics(data, str(path))
+    return desc
+
+
+def check_hydraulics(data: dict, src: str) -> None:
+    """The hydraulic sections ([fluid], [supply], [servovalve], actuator classes), checked
+    when the file is read (hydraulics.HydraulicParams reads them), so that a mistake there
+    is reported with the file's name before any model is built."""
+    from hydraulics import HydraulicParams, HydraulicsParamError
+
+    try:
+        HydraulicParams.from_table(data)
+    except HydraulicsParamError as e:
+        raise DescriptionError(f"{src}: {e}") from None
 
 
 def parse_table(data: dict, src: str = "<table>") -> TableDescription:

@@ -200,7 +200,7 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
     else:
         gains = ControllerGains.for_table(desc, sc.controller)
     if abs(gains.rate_hz - sc.sample_rate_hz) > 1e-9:
-        raise ScenarioError(f"output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
+        raise ScenarioError(f"{sc.path}: output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
                             f"({gains.rate_hz:g}): the recorder samples at the controller ticks")
     motions = build_motions(sc)
     ref = build_reference(sc, motions, duration_s)

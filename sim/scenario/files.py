@@ -284,7 +284,7 @@ def build_reference(s: Scenario, motions: dict[str, M.Motion], duration_s: float
     V.check_samples(dur * rate + 1, f"a run of {dur:g} s at {rate:g} Hz", s.path, ScenarioError)
     if dur > length + 1.5 / rate and not s.pad_to_duration:
         raise ScenarioError(
-            f"duration {dur:g} s is longer than the motion ({length:.2f} s); shorten --duration or set "
+            f"{s.path}: duration {dur:g} s is longer than the motion ({length:.2f} s); shorten --duration or set "
             "'scenario.pad_to_duration = true' to pad with rest")
     return reference_from_motions(motions, rate, dur)
 
