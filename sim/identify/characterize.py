@@ -396,24 +396,11 @@ def programme_jobs(desc, payload_name, dur: Durations, *, parts=("valve", "oil",
 
 
 def run_jobs(jobs: list[dict], workers: int | None = None, progress=None) -> list[dict]:
-    workers = workers or min(len(jobs), os.cpu_count() or 1)
-    if workers <= 1:
-        out = []
-        for j in jobs:
-            out.append(run_test(j))
-            if progress:
-                progress(len(out), len(jobs))
-        return out
-    import multiprocessing as mp
+    """Run the tests on ``workers`` processes (Ctrl-C terminates them at once)."""
+    from sim.workers import parallel_map
 
-    ctx = mp.get_context("fork")
-    out = []
-    with ctx.Pool(workers) as pool:
-        for r in pool.imap_unordered(run_test, jobs):
-            out.append(r)
-            if progress:
-                progress(len(out), len(jobs))
-    return out
+    workers = workers or min(len(jobs), os.cpu_count() or 1)
+    return parallel_map(run_test, jobs, workers, ordered=False, progress=progress)
 
 
 def summarize(results: list[dict], desc, payload) -> dict:

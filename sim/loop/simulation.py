@@ -55,6 +55,18 @@ MJ_WARNINGS = {
     mujoco.mjtWarning.mjWARN_BADCTRL: "a control input (actuator force) was not finite",
     mujoco.mjtWarning.mjWARN_INERTIA: "a body has an inertia that is not physical",
 }
+#: MuJoCo's last warning texts (MuJoCo would print them on stdout, mixing them into
+#: ``--json`` output, and append them to MUJOCO_LOG.TXT in the working folder; the loop
+#: reports them itself, in its divergence message).
+MJ_WARNING_TEXTS: list[str] = []
+
+
+def _keep_warning(text: str) -> None:
+    MJ_WARNING_TEXTS[:] = (MJ_WARNING_TEXTS + [str(text)])[-8:]
+
+
+mujoco.set_mju_user_warning(_keep_warning)
+
 #: The likely causes, said with every divergence message.
 CAUSE_STEP = ("likely cause: a physics step too large for the stiffest part of the model "
               "(halve the time step) or a stiffness, bulk modulus or gain set too high")
@@ -485,17 +497,17 @@ class Simulation:
                 return None
         at = f"simulation diverged at t = {tk:.4f} s"
         step = f"physics step {self.dt * 1e3:.3g} ms"
-        if warned:
-            w = warned[0]
-            return f"{at}: {MJ_WARNINGS[w]} (MuJoCo warning {w.name}); {CAUSE_STEP} ({step})"
-        for what, arr in (("platen/linkage positions (qpos)", d.qpos), ("velocities (qvel)", d.qvel)):
-            if not np.all(np.isfinite(arr)):
-                return f"{at}: the mechanical state is not finite: NaN/Inf in the {what}; {CAUSE_STEP} ({step})"
         for what, arr in (("chamber a pressures", st.p_a), ("chamber b pressures", st.p_b),
                           ("supply pressure", st.p_supply)):
             if not np.all(np.isfinite(arr)):
                 return (f"{at}: the hydraulic state is not finite: NaN/Inf in the {what}; {CAUSE_STEP} "
                         f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})")
+        for what, arr in (("platen/linkage positions (qpos)", d.qpos), ("velocities (qvel)", d.qvel)):
+            if not np.all(np.isfinite(arr)):
+                return f"{at}: the mechanical state is not finite: NaN/Inf in the {what}; {CAUSE_STEP} ({step})"
+        if warned:
+            w = warned[0]
+            return f"{at}: {MJ_WARNINGS[w]} (MuJoCo warning {w.name}); {CAUSE_STEP} ({step})"
         if gap > GAP_LIMIT_M:
             return (f"{at}: a swivel opened by {gap * 1e3:.3g} mm (limit {GAP_LIMIT_M * 1e3:.3g} mm): the "
                     f"loop closure failed; {CAUSE_STEP} ({step}), or a motion beyond the linkages' reach")

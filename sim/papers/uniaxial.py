@@ -204,13 +204,11 @@ def run_rice_case(case: RiceCase, n_segments: int = RICE_SEGMENTS, rms_m_s2: flo
 
 def run_rice_programme(cases=None, workers: int = 2, **kw) -> list[dict]:
     cases = cases or rice_cases()
-    if workers <= 1:
-        return [run_rice_case(c, **kw) for c in cases]
-    from concurrent.futures import ProcessPoolExecutor
     from functools import partial
 
-    with ProcessPoolExecutor(workers) as ex:
-        return list(ex.map(partial(run_rice_case, **kw), cases))
+    from sim.workers import parallel_map
+
+    return parallel_map(partial(run_rice_case, **kw), cases, workers)
 
 
 # ------------------------------------------------------------------ UCSD (seed 002)
@@ -478,12 +476,9 @@ def ucsd_programme(names=None, pressure_mpa: float = 13.8, *, workers: int = 2, 
 
     fn = partial(ucsd_run_test, pressure_mpa=pressure_mpa, seed=seed, out_dir=out_dir, cycles=cycles,
                  presliding_m=presliding_m)
-    if workers <= 1:
-        return [fn(n) for n in names]
-    from concurrent.futures import ProcessPoolExecutor
+    from sim.workers import parallel_map
 
-    with ProcessPoolExecutor(workers) as ex:
-        return list(ex.map(fn, names))
+    return parallel_map(fn, names, workers)
 
 
 def ucsd_records(results) -> list:

@@ -254,6 +254,8 @@ def triangle(*, peak_displacement: float, peak_velocity: float, sample_rate_hz: 
             f"triangle with D = {D:g} m cannot reach V = {V:g} m/s with rounding {Tr:.3g} s "
             f"(acceleration <= {a_max:g} m/s^2 needs V^2 <= a D = {a_max * D:.3g} m^2/s^2; "
             f"rounding_fraction must be <= 1/3); lower peak_velocity or rounding_fraction, or raise max_acceleration")
+    check_samples(n_peaks / 2 * (4 * D / V + Tr) * fs + 1, f"a triangle of {cycles:g} cycles of "
+                  f"{4 * D / V + Tr:.3g} s at {fs:g} Hz", None, MotionError)  # before building its knots
     # knots of the trapezoidal velocity
     kt, kv = [0.0, Tr / 2], [0.0, V]
     t_now, sign = Tr / 2, 1.0
