@@ -179,21 +179,26 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
-def _sigint_after(argv, cwd, wait_for: str, delay_s: float, tmp_path):
-    """Start ``python -m sim ARGV``, send SIGINT ``delay_s`` after ``wait_for`` appears on
-    its stderr; returns (exit code, stderr, seconds from SIGINT to exit, children)."""
+def _sigint_after(argv, cwd, wait_for: str | None, delay_s: float, workers: int = 0):
+    """Start ``python -m sim ARGV``; once ``wait_for`` appears on its stderr (or, with
+    ``workers``, once it has that many child processes) wait ``delay_s`` and send SIGINT.
+    Returns (exit code, stderr, seconds from SIGINT to exit, child pids at SIGINT)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     p = subprocess.Popen([sys.executable, "-m", "sim", *argv], cwd=cwd, env=env, stderr=subprocess.PIPE,
                          stdout=subprocess.DEVNULL, text=True,
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     seen = ""
     deadline = time.time() + 240
-    while wait_for not in seen and time.time() < deadline:
-        line = p.stderr.readline()
-        if not line:
-            break
-        seen += line
-    assert wait_for in seen, seen
+    if wait_for is not None:
+        while wait_for not in seen and time.time() < deadline:
+            line = p.stderr.readline()
+            if not line:
+                break
+            seen += line
+        assert wait_for in seen, seen
+    while len(_children(p.pid)) < workers and time.time() < deadline and p.poll() is None:
+        time.sleep(0.1)
+    assert len(_children(p.pid)) >= workers, "the workers never started"
     time.sleep(delay_s)
     kids = _children(p.pid)
     t0 = time.time()
@@ -208,7 +213,7 @@ def test_sigint_during_run(tmp_path):
     scen = tmp_path / "sine.toml"
     scen.write_text(SINE.format(dur=60.0))
     out = tmp_path / "out"
-    rc, err, took, _ = _sigint_after(["run", str(scen), "--out", str(out)], tmp_path, "simulating", 1.5, tmp_path)
+    rc, err, took, _ = _sigint_after(["run", str(scen), "--out", str(out)], tmp_path, "simulating", 1.5)
     assert rc == 130, err
     assert "Traceback" not in err and "interrupted: kept" in err
     assert sorted(p.name for p in out.iterdir()) == ["sine.run.npz", "summary.json"]  # no temporary file left
@@ -221,8 +226,9 @@ def test_sigint_during_run(tmp_path):
 def test_sigint_during_characterization(tmp_path):
     out = tmp_path / "char"
     rc, err, took, kids = _sigint_after(["characterize", "ucsd", "--quick", "--workers", "2", "--out", str(out)],
-                                        tmp_path, "", 6.0, tmp_path)
+                                        tmp_path, None, 1.0, workers=2)
     assert rc == 130, err
+    assert len(kids) >= 2
     assert "Traceback" not in err and "KeyboardInterrupt" not in err and "interrupted" in err
     assert took < 10
     assert not any(p.name.endswith(".tmp") or p.name.startswith(".") for p in tmp_path.rglob("*"))
@@ -317,3 +323,38 @@ def test_same_scenario_and_seed_give_identical_run_files(tmp_path, capsys):
     for k in a.extras:
         assert np.array_equal(a.extras[k], b.extras[k], equal_nan=True), k
     assert np.std(a.table_acceleration[:, 0]) > 0  # the noise moved the table
+
+
+# ---------------------------------------------------------------- strict JSON everywhere
+def test_replay_summary_is_strict_json(tmp_path, capsys):
+    """A replay of a run whose channels are constant has NaN residuals: null in the file."""
+    run = _tiny_run(tmp_path / "t.run.npz")
+    assert main(["replay", str(run), "--out", str(tmp_path / "out"), "--json"]) == 0
+    printed = capsys.readouterr().out
+
+    def refuse(name):
+        raise AssertionError(f"bare {name} in JSON")
+
+    for text in (printed, (tmp_path / "out" / "replay_summary.json").read_text()):
+        doc = json.loads(text, parse_constant=refuse)
+        assert doc["residual_nrmse"]["table_displacement"]["x"] is None  # 0/0: no motion to compare
+
+
+def test_atomic_writers_leave_old_file_on_failure(tmp_path):
+    from sim.runs.files import save_figure_atomic, write_json_atomic, write_text_atomic
+
+    target = tmp_path / "a.json"
+    write_json_atomic(target, {"x": float("nan"), "y": [1.0, float("inf")]})
+    assert json.loads(target.read_text()) == {"x": None, "y": [1.0, None]}
+
+    class Boom:
+        def savefig(self, fh, **kw):
+            fh.write(b"half a png")
+            raise KeyboardInterrupt
+
+    (tmp_path / "f.png").write_bytes(b"the good figure")
+    with pytest.raises(KeyboardInterrupt):
+        save_figure_atomic(Boom(), tmp_path / "f.png", dpi=90)
+    assert (tmp_path / "f.png").read_bytes() == b"the good figure"
+    write_text_atomic(tmp_path / "r.md", "report\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "f.png", "r.md"]  # no temporary left
