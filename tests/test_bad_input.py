@@ -98,6 +98,8 @@ SCENARIOS = {
                            'amplitude_facter = 0.5\n', ["'amplitude_facter'", "did you mean 'amplitude_factor'"]),
     "longer than motion": ('[scenario]\nname = "t"\ntable = "cgs"\nduration_s = 600.0\n[motion.x]\ntype = "triangle"\n'
                            'peak_displacement = 0.05\npeak_velocity = 0.2\n', ["duration 600", "pad_to_duration"]),
+    "controller key typo": (SINE + "[controller]\nkp_per_sec = 30.0\n", ["'kp_per_sec'", "did you mean 'kp_per_s'"]),
+    "controller gain text": (SINE + "[controller]\nkdp = 'high'\n", ["controller.kdp", "number"]),
     "payload missing": (SINE.replace('table = "cgs"', 'table = "cgs"\npayload = "no_such_payload"'),
                         ["no payload named 'no_such_payload'"]),
 }

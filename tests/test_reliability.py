@@ -210,10 +210,41 @@ def _sigint_after(argv, cwd, wait_for: str | None, delay_s: float, workers: int 
 
 @pytest.mark.slow
 def test_sigint_during_run(tmp_path):
+    """Ctrl-C at a terminal once the loop runs (its progress bar is on the screen)."""
+    import pty
+
     scen = tmp_path / "sine.toml"
     scen.write_text(SINE.format(dur=60.0))
     out = tmp_path / "out"
-    rc, err, took, _ = _sigint_after(["run", str(scen), "--out", str(out)], tmp_path, "simulating", 1.5)
+    master, slave = pty.openpty()  # stderr a terminal: the loop draws its progress bar
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.Popen([sys.executable, "-m", "sim", "run", str(scen), "--out", str(out)], cwd=tmp_path,
+                         env=env, stdout=subprocess.DEVNULL, stderr=slave,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    os.close(slave)
+    seen = b""
+    deadline = time.time() + 240
+    while b"%  t =" not in seen and time.time() < deadline:
+        try:
+            seen += os.read(master, 4096)
+        except OSError:
+            break
+    assert b"%  t =" in seen, seen
+    time.sleep(0.5)
+    t0 = time.time()
+    p.send_signal(signal.SIGINT)
+    rc = p.wait(timeout=120)
+    took = time.time() - t0
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:
+            break
+        if not chunk:
+            break
+        seen += chunk
+    os.close(master)
+    err = seen.decode("utf-8", "replace")
     assert rc == 130, err
     assert "Traceback" not in err and "interrupted: kept" in err
     assert sorted(p.name for p in out.iterdir()) == ["sine.run.npz", "summary.json"]  # no temporary file left

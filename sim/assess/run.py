@@ -192,13 +192,17 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
             raise ScenarioError(f"--iterations must be 0..10 (got {iterations})")
         it["count"] = iterations
     rice = None
-    if is_rice(desc):  # an analog controller acting at every physics step
-        if it.get("count", 0):
-            raise ScenarioError("drive iterations are not available with the rice controller")
-        gains = RiceGains.for_table(desc, sc.controller)
+    try:  # the [controller] overrides: errors name the scenario file
+        if is_rice(desc):  # an analog controller acting at every physics step
+            if it.get("count", 0):
+                raise ScenarioError("drive iterations are not available with the rice controller")
+            gains = RiceGains.for_table(desc, sc.controller)
+        else:
+            gains = ControllerGains.for_table(desc, sc.controller)
+    except ScenarioError as e:
+        raise ScenarioError(f"{sc.path}: {e}") from None
+    if rice is None and is_rice(desc):
         rice = RiceSimulation(desc, payload, gains)
-    else:
-        gains = ControllerGains.for_table(desc, sc.controller)
     if abs(gains.rate_hz - sc.sample_rate_hz) > 1e-9:
         raise ScenarioError(f"{sc.path}: output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
                             f"({gains.rate_hz:g}): the recorder samples at the controller ticks")

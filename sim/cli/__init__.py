@@ -152,7 +152,7 @@ def main(argv=None) -> int:
     """Run one command; returns the exit code: 0 done, 2 a user error (one line on stderr),
     3 a simulation that diverged (what was computed is kept, marked incomplete), 130
     interrupted (Ctrl-C). ``--debug`` re-raises instead, with the traceback."""
-    from sim.errors import DivergenceError
+    from sim.errors import DivergenceError, is_interrupt
 
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -174,6 +174,11 @@ def main(argv=None) -> int:
         return 141  # 128 + SIGPIPE, as a shell reports a pipeline cut short
     except KeyboardInterrupt:
         if debug:
+            raise
+        print("interrupted: files already written are complete; nothing half-written was kept", file=sys.stderr)
+        return 130
+    except Exception as e:  # a library that wrapped the Ctrl-C (numba compiling, a pool) is still Ctrl-C
+        if debug or not is_interrupt(e):
             raise
         print("interrupted: files already written are complete; nothing half-written was kept", file=sys.stderr)
         return 130

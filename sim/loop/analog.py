@@ -189,7 +189,11 @@ class RiceSimulation:
                     reason = (f"simulation diverged at t = {k * self.dt:.4f} s: the Rice actuator left its stroke "
                               f"(x = {x:.4g} m); unstable loop?")
                     break
-        except KeyboardInterrupt:  # Ctrl-C: keep the samples recorded so far (run() raises RunInterrupted)
+        except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C: keep the samples so far (run() raises RunInterrupted)
+            from sim.errors import is_interrupt
+
+            if not is_interrupt(e):
+                raise
             reason = f"interrupted (Ctrl-C) at t = {k * self.dt:.4f} s"
             self._interrupted = True
         return rec, reason

@@ -40,7 +40,7 @@ from mjcf.description import actuator_strokes
 from mjcf.model import TableModel
 from sim.control.tvc import ControllerGains, TableController
 from sim.effects.registry import dahl_step
-from sim.errors import RunInterrupted, ScenarioError
+from sim.errors import RunInterrupted, ScenarioError, is_interrupt
 from sim.validate import check_samples
 from sim.scenario.reference import Reference, reference_from_motions
 
@@ -389,7 +389,9 @@ class Simulation:
                     bar = "#" * int(30 * frac)
                     sys.stderr.write(f"\r  [{bar:<30s}] {100 * frac:5.1f} %  t = {k / rate:7.2f} s")
                     sys.stderr.flush()
-        except KeyboardInterrupt:  # Ctrl-C: keep the ticks done so far, marked incomplete
+        except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C: keep the ticks done so far, marked incomplete
+            if not is_interrupt(e):  # (SystemError: the Ctrl-C landed in a numba call)
+                raise
             reason = (f"interrupted (Ctrl-C) at t = {done / rate:.4f} s of {n / rate:.4f} s")
             interrupted = True
         else:
