@@ -389,3 +389,16 @@ def test_atomic_writers_leave_old_file_on_failure(tmp_path):
     assert (tmp_path / "f.png").read_bytes() == b"the good figure"
     write_text_atomic(tmp_path / "r.md", "report\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "f.png", "r.md"]  # no temporary left
+
+
+def test_unphysical_fit_is_warned():
+    from types import SimpleNamespace
+
+    from sim.identify.least_squares import unphysical
+
+    ok = SimpleNamespace(M_e_kg=144e3, K_e_N_per_m=1.2e6, C_e=4.6e4, F_mu_N=1e4)
+    assert unphysical(ok) == []
+    bad = SimpleNamespace(M_e_kg=-5e3, K_e_N_per_m=-2e6, C_e=4.6e4, F_mu_N=-10.0)
+    w = unphysical(bad)
+    assert [x.split(" = ")[0] for x in w] == ["fitted M_e", "fitted K_e", "fitted F_mu"]
+    assert "not a physical mass" in w[0] and "not a physical stiffness" in w[1] and "runs do not fit" in w[1]
