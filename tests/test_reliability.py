@@ -402,3 +402,15 @@ def test_unphysical_fit_is_warned():
     w = unphysical(bad)
     assert [x.split(" = ")[0] for x in w] == ["fitted M_e", "fitted K_e", "fitted F_mu"]
     assert "not a physical mass" in w[0] and "not a physical stiffness" in w[1] and "runs do not fit" in w[1]
+
+
+def test_ctrl_c_in_drive_iteration_identification_keeps_nothing(tmp_path, capsys, monkeypatch):
+    """Ctrl-C in the white-noise run that identifies the FRF: that run is not the
+    scenario's, so nothing is written (and no traceback)."""
+    scen = tmp_path / "sine.toml"
+    scen.write_text(SINE.format(dur=0.5) + "\n[iteration]\ncount = 1\n")
+    _fail_after(monkeypatch, 3, "interrupt")
+    rc = main(["run", str(scen), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert rc == 130 and "interrupted" in err and "Traceback" not in err
+    assert list((tmp_path / "out").iterdir()) == []
