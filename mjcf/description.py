@@ -279,7 +279,8 @@ def resolve(name_or_path: str | Path, folder: Path, kind: str) -> Path:
     if cand.exists():
         return cand
     known = sorted(x.stem for x in folder.glob("*.toml"))
-    raise DescriptionError(f"no {kind} named '{name_or_path}'; known {kind}s: {', '.join(known)} (or give a path to a .toml file)")
+    raise DescriptionError(f"no {kind} named '{name_or_path}'{suggest(name_or_path, known)}; known {kind}s: "
+                           f"{', '.join(known)} (or give a path to a .toml file)")
 
 
 def load_table(name_or_path: str | Path) -> TableDescription:

@@ -293,6 +293,13 @@ ARGS = {
     "unknown scenario": (["run", "harmonic_bar"], ["no scenario named 'harmonic_bar'"]),
     "identify alpha": (["identify", "x.run.npz", "--model", "ucsd-ls", "--alpha", "3"], ["--alpha"]),
     "view without target": (["view", "x.run.npz"], ["view needs a target"]),
+    "characterize unknown table": (["characterize", "cgz"], ["no table named 'cgz'", "did you mean 'cgs'"]),
+    "characterize unknown payload": (["characterize", "cgs", "--payload", "rigid_20"],
+                                     ["no payload named 'rigid_20'", "did you mean 'rigid_20t'"]),
+    "characterize paper table with payload": (["characterize", "ucsd", "--payload", "rigid_20t"], ["--payload"]),
+    "geometry unknown table": (["geometry", "nosuch"], ["no table named 'nosuch'"]),
+    "calibrate missing file": (["calibrate", "nofile.toml"], ["nofile.toml", "no such file"]),
+    "model payload is a scenario": (["model", "ucsd", "--payload", "SCEN"], ["missing field 'payload'"]),
     "fit unknown effect": (["fit", "x.run.npz", "--effects", "nope"], ["x.run.npz", "does not exist"]),
 }
 
@@ -302,9 +309,14 @@ def test_bad_arguments(case, tmp_path, capsys, monkeypatch):
     argv, fragments = ARGS[case]
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "out"
-    if argv[0] in ("run", "fit"):
+    if argv[0] in ("run", "fit", "characterize"):
         argv = argv + ["--out", str(out)]
+    if "SCEN" in argv:
+        (tmp_path / "s.toml").write_text(SINE)
+        argv = [str(tmp_path / "s.toml") if a == "SCEN" else a for a in argv]
     _expect_user_error(argv, capsys, out, fragments)
+    if argv[0] in ("run", "characterize"):
+        assert not out.exists()  # the inputs are checked before the output folder is made
 
 
 def test_debug_reraises(tmp_path):

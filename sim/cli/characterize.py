@@ -42,6 +42,7 @@ def cmd_characterize(args) -> int:
         return _calibrate(args, show)
     from sim.report.characterization import write_characterization
 
+    C.load_inputs(args.table, args.payload)  # the inputs first: a mistake there creates no folder
     out_dir(args.out)  # checked before the work starts
     s = C.characterize(args.table, args.payload, quick=args.quick, workers=args.workers, progress=_progress(show))
     write_characterization(args.out, s)
