@@ -126,6 +126,7 @@ class Simulation:
         e.g. :meth:`static_forces` for a table whose actuators carry dead weight.
         """
         self.d = self.tm.new_data()
+        self._warn0 = [0] * len(MJ_WARNINGS)  # MuJoCo warning counts at the start of a run (new data: none)
         self._zfr = np.zeros(len(self.tm.friction_dofs))  # pre-sliding friction states
         objs = {id(e): e for e in self.tm.step_effects + self.tm.effects}.values()
         for e in objs:  # effects with a state of their own
