@@ -65,6 +65,8 @@ def _get(d: dict, section: str, key: str, where: str | None = None):
     val = d[key]
     if isinstance(val, bool) or not isinstance(val, (int, float)):
         raise HydraulicsParamError(f"{where}.{key} must be a number (got {val!r})")
+    if val != val or val in (float("inf"), float("-inf")):
+        raise HydraulicsParamError(f"{where}.{key} must be finite (got {val!r})")
     return float(val)
 
 

@@ -489,15 +489,15 @@ def write_xml(tm, out_dir: str | Path) -> tuple[Path, Path]:
 
     Both open in MuJoCo's own viewer (``python -m mujoco.viewer --mjcf scene.xml``).
     """
+    from mjcf.errors import write_text_replacing
+
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
         table_xml = out / "table.xml"
         scene_xml = out / "scene.xml"
         xml = tm.spec.to_xml()
-        tmp = table_xml.with_suffix(".xml.tmp")
-        tmp.write_text(xml)
-        tmp.replace(table_xml)
+        write_text_replacing(table_xml, xml)
         root = ET.Element("mujoco", model=f"{tm.desc.name} scene")
         ET.SubElement(root, "include", file="table.xml")
         vis = ET.SubElement(root, "visual")
@@ -508,9 +508,7 @@ def write_xml(tm, out_dir: str | Path) -> tuple[Path, Path]:
                       rgba="0.3 0.32 0.35 1", contype="0", conaffinity="0")
         ET.SubElement(wb, "camera", name="overview", pos="14 -14 9", xyaxes="0.707 0.707 0 -0.3 0.3 0.9")
         ET.indent(root)
-        tmp = scene_xml.with_suffix(".xml.tmp")
-        ET.ElementTree(root).write(tmp, encoding="unicode")
-        tmp.replace(scene_xml)
+        write_text_replacing(scene_xml, ET.tostring(root, encoding="unicode"))
     except OSError as e:
         raise DescriptionError(f"cannot write the scene to {out}: {e.strerror}; choose a writable --xml folder") from None
     return table_xml, scene_xml

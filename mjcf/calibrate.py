@@ -213,6 +213,6 @@ def write_calibrated(path: Path, result: dict, note: str = NOTE_FORMULA, offset:
                 "# -K/w^2 over the test band. `shaketable calibrate` aims the rigid-body masses at Table 2",
                 "# plus this, so that the virtual tests reproduce Table 2; `characterize --calibrate` measures it.",
                 "[calibration]", line]) + "\n"
-    tmp = Path(str(path) + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+    from mjcf.errors import write_text_replacing
+
+    write_text_replacing(path, text)

@@ -13,6 +13,7 @@ was expected.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import itertools
 import math
 import re
@@ -32,6 +33,13 @@ DOFS6 = ("x", "y", "z", "rx", "ry", "rz")
 
 
 # --------------------------------------------------------------------------- helpers
+def suggest(key, known) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``known``, or ``""`` (the same hint as
+    ``sim.validate.suggest``; mjcf imports nothing from sim)."""
+    close = difflib.get_close_matches(str(key), sorted(str(k) for k in known), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
 class _Section:
     """Reads keys from one TOML table, remembering which were used.
 
@@ -46,17 +54,22 @@ class _Section:
         self.path = path
         self.src = src
         self.used: set[str] = set()
+        self.asked: set[str] = set()  # every key read, present or not (for the closest-key hint)
 
     def _name(self, key):
         return f"{self.path}.{key}" if self.path else key
 
     def has(self, key):
+        self.asked.add(key)
         return key in self.data
 
     def raw(self, key, default=...):
+        self.asked.add(key)
         if key not in self.data:
             if default is ...:
-                raise DescriptionError(f"{self.src}: missing field '{self._name(key)}'")
+                typo = difflib.get_close_matches(str(key), [str(k) for k in self.data if k not in self.used], 1, 0.6)
+                hint = f" (found '{typo[0]}': a misspelling of '{key}'?)" if typo else ""
+                raise DescriptionError(f"{self.src}: missing field '{self._name(key)}'{hint}")
             return default
         self.used.add(key)
         return self.data[key]
@@ -106,8 +119,10 @@ class _Section:
         extra = sorted(set(self.data) - self.used)
         if extra:
             where = f"[{self.path}]" if self.path else "the top level"
+            known = sorted(self.asked | self.used)
             raise DescriptionError(
-                f"{self.src}: unknown key '{extra[0]}' in {where}; known keys: {', '.join(sorted(self.used))}"
+                f"{self.src}: unknown key '{extra[0]}' in {where}{suggest(extra[0], known)}; "
+                f"known keys: {', '.join(known)}"
             )
 
 
@@ -265,13 +280,29 @@ def resolve(name_or_path: str | Path, folder: Path, kind: str) -> Path:
     if cand.exists():
         return cand
     known = sorted(x.stem for x in folder.glob("*.toml"))
-    raise DescriptionError(f"no {kind} named '{name_or_path}'; known {kind}s: {', '.join(known)} (or give a path to a .toml file)")
+    raise DescriptionError(f"no {kind} named '{name_or_path}'{suggest(name_or_path, known)}; known {kind}s: "
+                           f"{', '.join(known)} (or give a path to a .toml file)")
 
 
 def load_table(name_or_path: str | Path) -> TableDescription:
     """Load and validate a table description by name (``"cgs"``) or path."""
     path = resolve(name_or_path, TABLES_DIR, "table")
-    return parse_table(_load_toml(path), src=str(path))
+    data = _load_toml(path)
+    desc = parse_table(data, src=str(path))
+    check_hydraulics(data, str(path))
+    return desc
+
+
+def check_hydraulics(data: dict, src: str) -> None:
+    """The hydraulic sections ([fluid], [supply], [servovalve], actuator classes), checked
+    when the file is read (hydraulics.HydraulicParams reads them), so that a mistake there
+    is reported with the file's name before any model is built."""
+    from hydraulics import HydraulicParams, HydraulicsParamError
+
+    try:
+        HydraulicParams.from_table(data)
+    except HydraulicsParamError as e:
+        raise DescriptionError(f"{src}: {e}") from None
 
 
 def parse_table(data: dict, src: str = "<table>") -> TableDescription:

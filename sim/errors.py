@@ -32,6 +32,31 @@ class DivergenceError(Exception):
         self.reason = reason
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C inside a simulation loop: a :class:`KeyboardInterrupt` (so whoever does not
+    catch it stops as before) that carries what was computed up to then in ``result``
+    (a :class:`sim.loop.simulation.RunResult` marked incomplete), for a caller that can
+    keep it in a run file."""
+
+    def __init__(self, result):
+        super().__init__(result.incomplete_reason or "interrupted")
+        self.result = result
+
+
+def is_interrupt(e: BaseException | None) -> bool:
+    """Whether ``e`` is a Ctrl-C: a KeyboardInterrupt, or an exception raised from one
+    (a signal that lands while a compiled numba function is called comes back as
+    ``SystemError: ... returned a result with an exception set``, caused by the
+    KeyboardInterrupt)."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
 def user_errors() -> tuple[type[BaseException], ...]:
     """Every exception class a user can fix: ``sim``'s own, the model layer's
     (:class:`mjcf.errors.MjcfError`) and the hydraulic parameters'. The layers below

@@ -15,12 +15,28 @@ that calls it needs the ``if __name__ == "__main__":`` guard) or ``forkserver``.
 ``context`` picks one (default: the platform's). Results come back in the jobs' order,
 whatever order the workers finish in; ``workers=1`` runs serially in this process (no
 pickling, exceptions with their full traceback).
+
+Ctrl-C: a plain pool handles it badly (every worker is in the terminal's process group,
+gets the SIGINT too and prints its own traceback, and ``ProcessPoolExecutor.__exit__``
+waits for the jobs already running). The workers here ignore SIGINT, so only the parent
+sees it; the parent then terminates the workers at once and re-raises, and the command
+stops within a second.
 """
 
 from __future__ import annotations
 
 import os
+import signal
 from collections.abc import Callable, Iterable
+
+
+def _ignore_sigint() -> None:  # pragma: no cover - runs in the worker processes
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _call(task):  # pragma: no cover - runs in the worker processes
+    fn, i, job = task
+    return i, fn(job)
 
 
 def default_workers(n_jobs: int) -> int:
@@ -53,15 +69,20 @@ def map_jobs(fn: Callable, jobs: Iterable, *, workers: int | None = None,
                 progress(len(out), total)
         return out
     import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
 
     out: list = [None] * total
-    with ProcessPoolExecutor(workers, mp_context=mp.get_context(context)) as ex:
-        futures = {ex.submit(fn, j): i for i, j in enumerate(jobs)}
-        for done, fut in enumerate(as_completed(futures), start=1):
-            out[futures[fut]] = fut.result()
+    pool = mp.get_context(context).Pool(workers, initializer=_ignore_sigint)
+    try:
+        for done, (i, r) in enumerate(pool.imap_unordered(_call, [(fn, i, j) for i, j in enumerate(jobs)]), start=1):
+            out[i] = r
             if progress:
                 progress(done, total)
+        pool.close()
+        pool.join()
+    except BaseException:  # Ctrl-C or a failed job: stop the workers now, then raise
+        pool.terminate()
+        pool.join()
+        raise
     return out
 
 

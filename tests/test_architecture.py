@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: rank of each layer: a module may import its own layer or lower ones, never higher.
 LAYERS = {
-    "sim.errors": 0, "sim.signals": 0, "sim.parallel": 0,
+    "sim.errors": 0, "sim.validate": 0, "sim.parallel": 0, "sim.signals": 0,
     "sim.scenario": 1,
     "sim.effects": 2, "sim.control": 2,
     "sim.loop": 3,

@@ -241,15 +241,24 @@ def test_fast_loop_closure_matches_set_platen_pose():
 
 
 @pytest.mark.parametrize("target, why", [
-    ("missing/x.rrd", "does not exist"),
+    ("afile/x.rrd", "is a file, not a folder"),
     ("x.txt", "does not end with '.rrd'"),
 ])
 def test_bad_recording_path(made, tmp_path, capsys, target, why):
     _, run_path, _ = made
+    if target.startswith("afile/"):
+        (tmp_path / "afile").write_text("")
     rc = cli.main(["view", str(run_path), "--rrd", str(tmp_path / target)])
     err = capsys.readouterr().err
     assert rc == 2 and why in err and err.count("\n") == 1 and err.startswith("error: ")
-    assert list(tmp_path.rglob("*")) == []
+    assert [p.name for p in tmp_path.rglob("*")] == (["afile"] if target.startswith("afile/") else [])
+
+
+def test_recording_folder_is_created(made, tmp_path, capsys):
+    """``view --rrd DIR/FILE`` creates DIR, as ``run --out DIR`` does."""
+    _, run_path, _ = made
+    rc = cli.main(["view", str(run_path), "--rrd", str(tmp_path / "new" / "sub" / "x.rrd")])
+    assert rc == 0 and (tmp_path / "new" / "sub" / "x.rrd").stat().st_size > 0
 
 
 @pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="root can write anywhere")
@@ -275,10 +284,11 @@ def test_not_a_run_file(tmp_path, capsys):
 
 
 def test_run_rrd_fails_early(tmp_path, capsys):
+    (tmp_path / "nope").write_text("a file where the folder should be")
     rc = cli.main(["run", "harmonic_bare", "--out", str(tmp_path / "o"), "--duration", "0.5",
                    "--rrd", str(tmp_path / "nope" / "x.rrd")])
     err = capsys.readouterr().err
-    assert rc == 2 and "does not exist" in err and err.count("\n") == 1
+    assert rc == 2 and "is a file, not a folder" in err and err.count("\n") == 1
     assert not (tmp_path / "o" / "harmonic_bare.run.npz").exists()  # failed before simulating
 
 
@@ -329,11 +339,12 @@ def test_writer_process(made, tmp_path):
     target = recording.RrdTarget.open(tmp_path / "w.rrd")
     assert target._worker is not None and target._worker.poll() is None
     assert target.write_run(run, tm) == tmp_path / "w.rrd" and target._worker is None
-    # the folder goes away between open and write_run
+    # the folder is replaced by a file between open and write_run
     sub = tmp_path / "gone"
     sub.mkdir()
     target = recording.RrdTarget.open(sub / "x.rrd")
     sub.rmdir()
+    sub.write_text("")
     with pytest.raises(recording.RecordingError, match="cannot be written"):
         target.write_run(run, tm)
     # a target never written stops its writer
@@ -341,4 +352,4 @@ def test_writer_process(made, tmp_path):
     proc = target._worker
     target.close()
     assert proc.poll() is not None
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["w.rrd"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gone", "w.rrd"] and sub.is_file()

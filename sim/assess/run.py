@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.errors import ScenarioError, UserError
+from sim.errors import RunInterrupted, ScenarioError, UserError
 
 SCHEMA = "shaketable-summary/1"
 
@@ -99,13 +99,23 @@ class ScenarioPlan:
     window: dict = field(default_factory=dict)  #: which part of the motion runs (start_s, end_s, of_record_s, why)
 
     def run(self, *, progress=None) -> RunOutcome:
-        """Run the plan; ``progress(text)`` is called once per stage (None: silent)."""
-        from sim.assess.feasibility import diagnostics
-        from sim.runs.build import build_runfile
+        """Run the plan; ``progress(text)`` is called once per stage (None: silent).
 
+        Ctrl-C during a simulation keeps what it computed: the outcome holds that run,
+        marked incomplete (``result.interrupted``), for the caller to write."""
         say = progress or (lambda text: None)
-        sc, sim, ref = self.scenario, self.sim, self.reference
         history = []
+        try:
+            res, plain, best, wall_total, settings = self._simulate(say, progress, history)
+        except RunInterrupted as stop:
+            res = plain = stop.result
+            best, wall_total, history, settings = 0, res.wall_s, [], None
+            if len(res.t) < 2:
+                raise
+        return self._finish(res, plain, best, wall_total, settings, history)
+
+    def _simulate(self, say, progress, history):
+        sim, ref = self.sim, self.reference
         settings = None
         if self.iteration.get("count", 0) > 0:
             from sim.control.iteration import IterationSettings, iterate
@@ -128,6 +138,13 @@ class ScenarioPlan:
             say("simulating")
             res = sim.run(reference=ref, progress=progress is not None and sys.stderr.isatty())
             plain, best, wall_total = res, 0, res.wall_s
+        return res, plain, best, wall_total, settings
+
+    def _finish(self, res, plain, best, wall_total, settings, history) -> RunOutcome:
+        sc, sim, ref = self.scenario, self.sim, self.reference
+        from sim.assess.feasibility import diagnostics
+        from sim.runs.build import build_runfile
+
         if len(res.t) < 2:
             raise DivergenceAtStart(res.incomplete_reason or "the simulation stopped before its second sample")
         run = build_runfile(res, self.tm, description=sc.description or sc.name,
@@ -144,6 +161,7 @@ class ScenarioPlan:
             "realtime_factor": float(res.realtime_factor),
             "complete": res.incomplete_reason is None,
             "incomplete_reason": res.incomplete_reason,
+            "interrupted": bool(getattr(res, "interrupted", False)),
             "tracking": _tracking(res, ref),
             "drive_iterations": {"count": len(history) - 1 if history else 0, "chosen": best,
                                  "frf": settings.frf if history else None,
@@ -186,15 +204,19 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
             raise ScenarioError(f"--iterations must be 0..10 (got {iterations})")
         it["count"] = iterations
     rice = None
-    if is_rice(desc):  # an analog controller acting at every physics step
-        if it.get("count", 0):
-            raise ScenarioError("drive iterations are not available with the rice controller")
-        gains = RiceGains.for_table(desc, sc.controller)
+    try:  # the [controller] overrides: errors name the scenario file
+        if is_rice(desc):  # an analog controller acting at every physics step
+            if it.get("count", 0):
+                raise ScenarioError("drive iterations are not available with the rice controller")
+            gains = RiceGains.for_table(desc, sc.controller)
+        else:
+            gains = ControllerGains.for_table(desc, sc.controller)
+    except ScenarioError as e:
+        raise ScenarioError(f"{sc.path}: {e}") from None
+    if rice is None and is_rice(desc):
         rice = RiceSimulation(desc, payload, gains)
-    else:
-        gains = ControllerGains.for_table(desc, sc.controller)
     if abs(gains.rate_hz - sc.sample_rate_hz) > 1e-9:
-        raise ScenarioError(f"output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
+        raise ScenarioError(f"{sc.path}: output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
                             f"({gains.rate_hz:g}): the recorder samples at the controller ticks")
     if motions is None:
         motions = build_motions(sc)

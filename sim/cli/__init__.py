@@ -7,11 +7,11 @@ Every user error (bad file, bad parameter, unwritable output) is printed as one 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 from sim.effects import build_model
 from sim.errors import user_errors
+from sim.runs.files import json_text
 
 
 # ------------------------------------------------------------------ model
@@ -57,7 +57,7 @@ def cmd_model(args) -> int:
         t, s = mjcf.write_xml(tm, args.xml)
         out["xml"] = {"table": str(t), "scene": str(s)}
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(json_text(out, indent=2))
         return 0
     print(f"{desc.title}  [{desc.name}]" + (f" + payload {payload.name} ({tm.info.payload_kind})" if payload else ""))
     print(f"  bodies {out['n_bodies']}, joints {out['n_joints']} (nq {m.nq}, nv {m.nv}), "
@@ -83,6 +83,8 @@ def cmd_model(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="shaketable", description="Digital twin of servo-hydraulic shaking tables")
+    p.add_argument("--debug", action="store_true",
+                   help="show the full traceback of an error instead of its one-line message")
     sub = p.add_subparsers(dest="command", required=True)
 
     m = sub.add_parser("model", help="build a table (+ payload) and show its model")
@@ -116,16 +118,53 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null: the reader of a pipe has gone (``... | head -1``), and
+    Python's own flush at exit would otherwise print a BrokenPipeError."""
+    import os
+
+    try:
+        if sys.stdout.fileno() != 1:  # a replaced stdout (a test's capture): leave descriptors alone
+            return
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+    except (OSError, ValueError, AttributeError):  # stdout without a descriptor
+        pass
+
+
 def main(argv=None) -> int:
+    """Run one command; returns the exit code: 0 done, 2 a user error (one line on stderr),
+    3 a simulation that diverged (what was computed is kept, marked incomplete), 130
+    interrupted (Ctrl-C). ``--debug`` re-raises instead, with the traceback."""
+    from sim.errors import DivergenceError, is_interrupt
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    debug = getattr(args, "debug", False)
     try:
         return int(args.func(args) or 0)
     except user_errors() as e:
-        print(f"error: {e}", file=sys.stderr)
+        if debug:
+            raise
+        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
+    except DivergenceError as e:
+        if debug:
+            raise
+        print(f"error: {e}", file=sys.stderr)
+        return 3
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 141  # 128 + SIGPIPE, as a shell reports a pipeline cut short
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        if debug:
+            raise
+        print("interrupted: files already written are complete; nothing half-written was kept", file=sys.stderr)
+        return 130
+    except Exception as e:  # a library that wrapped the Ctrl-C (numba compiling, a pool) is still Ctrl-C
+        if debug or not is_interrupt(e):
+            raise
+        print("interrupted: files already written are complete; nothing half-written was kept", file=sys.stderr)
         return 130
 
 

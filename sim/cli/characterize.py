@@ -5,9 +5,7 @@ paper's, sim/papers/programmes.py), run on the model; writes ``characterization.
 
 from __future__ import annotations
 
-import json
-
-from sim.runs.files import jsonable
+from sim.runs.files import json_text
 
 
 def cmd_characterize(args) -> int:
@@ -21,7 +19,7 @@ def cmd_characterize(args) -> int:
                            progress=prog.count_callback(), stage=prog.text_callback())
     prog.close()
     if args.json:
-        print(json.dumps(jsonable(s), indent=2, allow_nan=False))
+        print(json_text(s, indent=2))
         return 0
     print(f"characterisation of {s['table']}" + (f" + {s['payload']}" if s.get("payload") else "")
           + f" ({s['mode']}, programme {s['programme']}): {s['wall_s']:.0f} s wall"
@@ -72,7 +70,7 @@ def _calibrate(args, prog) -> int:
            "effective_mass_offset": cal.get("effective_mass_offset"),
            "masses": cal["masses"]["values"] if cal.get("masses") else None}
     if args.json:
-        print(json.dumps(jsonable(out), indent=2, allow_nan=False))
+        print(json_text(out, indent=2))
         return 0
     pub = C.published(desc)
     print(f"calibrated {desc.name} against its published oil columns and friction:")

@@ -4,11 +4,11 @@ files (the LHPOST paper's method). The papers' whole programmes run under
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 from sim.errors import UserError
+from sim.runs.files import json_text
 
 
 def add_parsers(sub) -> None:
@@ -57,7 +57,7 @@ def cmd_identify(args) -> int:
         out = {k: v for k, v in res.as_dict().items()}
         if scan:
             out["alpha_scan"] = [{"alpha": s.alpha, "error": s.error} for s in scan]
-        print(json.dumps(out, indent=1))
+        print(json_text(out, indent=1))
         return 0
     print(f"ucsd-ls on {len(recs)} run(s), alpha = {res.alpha:g}, weights {res.weights}"
           f"{', C_e constrained' if res.constrained else ''}")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -10,7 +9,7 @@ import numpy as np
 
 from sim.assess.run import SCHEMA
 from sim.errors import RunFileError, UserError
-from sim.runs.files import jsonable, out_dir, write_json_atomic
+from sim.runs.files import json_text, out_dir, write_json_atomic
 
 
 def _progress(args):
@@ -40,6 +39,12 @@ def cmd_run(args) -> int:
         target = rerun.RrdTarget.open(args.rrd)  # fails early (exit 2) if unwritable; rerun loads beside the run
     outcome = plan.run(progress=prog.text_callback())
     prog.close()
+    res = outcome.result
+    if res.interrupted:  # Ctrl-C: keep what was computed (no recording: the user asked to stop)
+        summary = outcome.write(out)
+        print(f"interrupted: kept {res.sim_s:.3f} s in {summary['run_file']} (marked incomplete) "
+              f"and {out / 'summary.json'}", file=sys.stderr)
+        return 130
     if target is not None:
         target.write_run(outcome.run, outcome.tm)
         outcome.summary["recording"] = str(target.path)
@@ -51,10 +56,9 @@ def cmd_run(args) -> int:
             model_file=None if args.measure is True else args.measure))
     summary = outcome.write(out)
     if args.json:
-        print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
+        print(json_text(summary, indent=2))
     else:
         _print_summary(summary, prog.elapsed_s)
-    res = outcome.result
     if res.incomplete_reason:
         print(f"error: {res.incomplete_reason}; kept {res.sim_s:.3f} s in {summary['run_file']} (marked incomplete)",
               file=sys.stderr)
@@ -116,7 +120,7 @@ def cmd_replay(args) -> int:
     summary = {"schema": SCHEMA, "run_file": str(path), **rep.summary()}
     write_json_atomic(out / "replay_summary.json", summary)
     if args.json:
-        print(json.dumps(jsonable(summary), indent=2, allow_nan=False))
+        print(json_text(summary, indent=2))
     else:
         print(f"replayed {args.run} open loop ({res.sim_s:.2f} s at the record's {rep.run.sample_rate_hz:g} Hz, "
               f"model ticks {rep.tick_hz:g} Hz, {res.realtime_factor:.2f}x real time; "
@@ -164,7 +168,7 @@ def cmd_fit(args) -> int:
     rep["calibrated_table_file"] = str(toml_path)
     write_json_atomic(out / "fit.json", rep)
     if args.json:
-        print(json.dumps(rep, indent=2))
+        print(json_text(rep, indent=2))
     else:
         print(f"residual (mean NRMSE of force/acceleration/displacement): "
               f"{100 * rep['baseline_residual']:.2f} % -> {100 * rep['final_residual']:.2f} %")

@@ -21,10 +21,9 @@ fed together. ``--spawn`` and ``--connect`` map onto ``rr.spawn`` and ``rr.GrpcS
 
 from __future__ import annotations
 
-import json
-
 from sim.effects import build_model
 from sim.errors import UserError
+from sim.runs.files import json_text
 
 
 def cmd_view(args) -> int:
@@ -35,7 +34,8 @@ def cmd_view(args) -> int:
         raise UserError("view needs a target: give --rrd FILE.rrd, --spawn or --connect [URL]")
     # check the target before reading anything large
     target = recording.RrdTarget.open(args.rrd, spawn=args.spawn, connect=args.connect, rate_hz=args.rate,
-                                      series_rate_hz=None if args.full_rate else recording.DEFAULT_SERIES_RATE_HZ)
+                                      series_rate_hz=None if args.full_rate else recording.DEFAULT_SERIES_RATE_HZ,
+                                      timeout_s=args.timeout)
     run = read_run(args.run)
     compare = read_run(args.compare) if args.compare else None
     desc = table_of(run, args.table)  # --table, else the description the run carries, else the stock file
@@ -47,7 +47,7 @@ def cmd_view(args) -> int:
            "samples": run.n_samples, "display_rate_hz": args.rate,
            "series_rate_hz": run.sample_rate_hz / recording.series_stride(run.sample_rate_hz, target.series_rate_hz)}
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(json_text(out, indent=2))
     else:
         what = f"{args.run}" + (f" beside {args.compare}" if args.compare else "")
         dest = [str(path)] if path else []
@@ -60,6 +60,7 @@ def cmd_view(args) -> int:
 
 
 def _rate(text: str) -> float:
+    """A positive finite number (a rate in Hz, a time in s)."""
     import argparse
     import math
 
@@ -68,7 +69,7 @@ def _rate(text: str) -> float:
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive rate in Hz")
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
     return v
 
 
@@ -89,6 +90,9 @@ def add_parsers(sub) -> None:
     v.add_argument("--spawn", action="store_true", help="also stream to a viewer started now (needs a screen)")
     v.add_argument("--connect", nargs="?", const="", default=None, metavar="URL",
                    help="also stream to a running viewer (default rerun+http://127.0.0.1:9876/proxy)")
+    v.add_argument("--timeout", type=_rate, default=None, metavar="S",
+                   help="with --spawn/--connect: give up when the viewer has not taken the recording after S "
+                        "seconds (default 30)")
     v.add_argument("--json", action="store_true", help="print a JSON summary")
     v.set_defaults(func=cmd_view)
 

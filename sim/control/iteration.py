@@ -98,7 +98,12 @@ def identify_frf(sim, target: Reference, dofs: list[int], s: IterationSettings) 
     noise = reference_from_motions(motions, rate, s.noise_duration_s)
     d, n = noise.d, len(noise.t)
     sim.reset()
-    res = sim.run(reference=noise)
+    from sim.errors import RunInterrupted
+
+    try:
+        res = sim.run(reference=noise)
+    except RunInterrupted:  # Ctrl-C in the identification run: nothing of the scenario to keep yet
+        raise KeyboardInterrupt from None
     if res.incomplete_reason:
         from sim.errors import ScenarioError
 

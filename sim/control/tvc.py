@@ -106,9 +106,12 @@ class ControllerGains:
                 raise ScenarioError(f"controller.flow_linearisation must be true or false (got {v!r})")
             kw["flow_linearisation"] = v
         if d:
-            raise ScenarioError(
-                f"unknown controller key '{sorted(d)[0]}'; known: kp_per_s, kff_velocity, kff_acceleration_s, kff_jerk_s2, "
-                "kv_feedback, kdp, dp_highpass_hz, kfb, flow_linearisation, command_limit, rate_hz")
+            known = ("kp_per_s", "kff_velocity", "kff_acceleration_s", "kff_jerk_s2", "kv_feedback", "kdp",
+                     "dp_highpass_hz", "kfb", "flow_linearisation", "command_limit", "rate_hz")
+            from sim.validate import suggest
+
+            key = sorted(d)[0]
+            raise ScenarioError(f"unknown controller key '{key}'{suggest(key, known)}; known: {', '.join(known)}")
         g = cls(**kw)
         if not 0 < g.command_limit <= 1:
             raise ScenarioError(f"controller.command_limit must be in (0, 1] (got {g.command_limit})")

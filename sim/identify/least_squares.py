@@ -273,6 +273,7 @@ def record_from_run(path) -> Record:
     name = run.name
     if "x" not in run.dofs:
         raise RunFileError(f"{name}: has no 'x' DOF column; the ucsd-ls model identifies the x motion of a uni-axial table")
+    _check_uniaxial(run)
     F = np.asarray(run.actuator_force, float).sum(axis=1)
     d = np.asarray(run.column("table_displacement", "x"), float)
     if run.table_velocity is not None:
@@ -289,6 +290,30 @@ def record_from_run(path) -> Record:
     if len(F) < 16:
         raise RunFileError(f"{name}: only {len(F)} samples; the identification needs a test record")
     return Record(name=name, dt=run.dt, force=F, acc=a, vel=v, disp=d)
+
+
+def _check_uniaxial(run) -> None:
+    """Refuse a run that is not from a uni-axial table: its table description (when it
+    can be loaded) has more than one DOF, or its table moved in a DOF other than x (a
+    uni-axial table's run files carry those columns as exact zeros). The model sums the
+    actuator forces as one force along x: for a multi-axis table that sum is meaningless
+    and the fit returns negative masses or stiffnesses."""
+    import mjcf
+    from mjcf.errors import MjcfError
+
+    table = run.meta.get("table")
+    try:
+        desc = mjcf.load_table(table)
+    except MjcfError:  # a measured run of a table without a description here: judge by its data
+        desc = None
+    if desc is not None and list(desc.dofs) != ["x"]:
+        raise RunFileError(f"{run.name}: is a run of table '{desc.name}' with DOFs {', '.join(desc.dofs)}; "
+                           "ucsd-ls identifies a uni-axial table (one DOF, x): give runs of such a table")
+    td = np.asarray(run.table_displacement, float)
+    moving = [d for j, d in enumerate(run.dofs) if d != "x" and np.any(td[:, j] != 0)]
+    if moving:
+        raise RunFileError(f"{run.name}: the table moves in {', '.join(moving)} as well as x; ucsd-ls identifies "
+                           "a uni-axial table (one DOF, x): give runs of such a table")
 
 
 # ------------------------------------------------------------------ Table 8 (Eqs. 18-26)

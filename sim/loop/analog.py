@@ -165,42 +165,50 @@ class RiceSimulation:
         effects = tm.step_effects
         qfa = d.qfrc_applied
         reason = None
-        for k in range(n_tot):
-            x = qpos[qs]
-            v = qvel[ds]
-            dpk = pa[0, 0] - pb[0, 0]
-            j = k - record_from
-            i = j // every if (j >= 0 and j % every == 0) else -1
-            if 0 <= i < n_rec:
-                rec["x_table"][i] = qpos[qf] + qpos[qp]
-                rec["v_table"][i] = qvel[df_] + qvel[dp_]
-                rec["p_a"][i] = pa[0, 0]
-                rec["p_b"][i] = pb[0, 0]
-                rec["spool"][i] = spool[0, 0]
-                rec["p_supply"][i] = st.p_supply[0]
-                rec["gas_volume"][i] = st.gas_volume[0]
-            u = ctl.opening(XD[k], VD[k], x, v, dpk)
-            c2[0, 0] = u
-            x2[0, 0] = x
-            v2[0, 0] = v
-            f = hstep(c2, x2, v2)
-            ctrl[aid] = f[0, 0]
-            if effects:
-                qfa[:] = 0.0
-                for e in effects:
-                    e.apply(m, d)
-            step(m, d)
-            if 0 <= i < n_rec:
-                rec["a_table"][i] = qacc[df_] + qacc[dp_]
-                rec["stroke"][i] = x
-                rec["stroke_rate"][i] = v
-                rec["dp"][i] = dpk
-                rec["opening"][i] = u
-                rec["force"][i] = f[0, 0]
-            if not math.isfinite(x) or abs(x) > half:
-                reason = (f"simulation diverged at t = {k * self.dt:.4f} s: the Rice actuator left its stroke "
-                          f"(x = {x:.4g} m); unstable loop?")
-                break
+        try:
+            for k in range(n_tot):
+                x = qpos[qs]
+                v = qvel[ds]
+                dpk = pa[0, 0] - pb[0, 0]
+                j = k - record_from
+                i = j // every if (j >= 0 and j % every == 0) else -1
+                if 0 <= i < n_rec:
+                    rec["x_table"][i] = qpos[qf] + qpos[qp]
+                    rec["v_table"][i] = qvel[df_] + qvel[dp_]
+                    rec["p_a"][i] = pa[0, 0]
+                    rec["p_b"][i] = pb[0, 0]
+                    rec["spool"][i] = spool[0, 0]
+                    rec["p_supply"][i] = st.p_supply[0]
+                    rec["gas_volume"][i] = st.gas_volume[0]
+                u = ctl.opening(XD[k], VD[k], x, v, dpk)
+                c2[0, 0] = u
+                x2[0, 0] = x
+                v2[0, 0] = v
+                f = hstep(c2, x2, v2)
+                ctrl[aid] = f[0, 0]
+                if effects:
+                    qfa[:] = 0.0
+                    for e in effects:
+                        e.apply(m, d)
+                step(m, d)
+                if 0 <= i < n_rec:
+                    rec["a_table"][i] = qacc[df_] + qacc[dp_]
+                    rec["stroke"][i] = x
+                    rec["stroke_rate"][i] = v
+                    rec["dp"][i] = dpk
+                    rec["opening"][i] = u
+                    rec["force"][i] = f[0, 0]
+                if not math.isfinite(x) or abs(x) > half:
+                    reason = (f"simulation diverged at t = {k * self.dt:.4f} s: the Rice actuator left its stroke "
+                              f"(x = {x:.4g} m); unstable loop?")
+                    break
+        except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C: keep the samples so far (run() raises RunInterrupted)
+            from sim.errors import is_interrupt
+
+            if not is_interrupt(e):
+                raise
+            reason = f"interrupted (Ctrl-C) at t = {k * self.dt:.4f} s"
+            self._interrupted = True
         return rec, reason
 
     def run(self, *, reference=None, duration_s: float | None = None, progress: bool = False, **_):
@@ -221,6 +229,7 @@ class RiceSimulation:
         XD = np.interp(ts, tk, reference.d[:n, 0])
         VD = np.interp(ts, tk, reference.v[:n, 0])
         wall0 = time.perf_counter()
+        self._interrupted = False
         rec, reason = self.steps(XD, VD, record_from=0, every=sub, n_rec=n)
         wall = time.perf_counter() - wall0
         done = int(np.argmax(~np.isfinite(rec["a_table"]))) if not np.all(np.isfinite(rec["a_table"])) else n
@@ -239,8 +248,13 @@ class RiceSimulation:
               "pressure_a": col("p_a"), "pressure_b": col("p_b")}
         ex = {"supply_pressure": rec["p_supply"][:done].copy(), "accumulator_gas_volume": rec["gas_volume"][:done].copy(),
               "loop_gap": np.full(done, loop_gap(self.m, self.d))}
-        return RunResult(t=np.arange(done) / rate, channels=ch, extras=ex, wall_s=wall, sim_s=done / rate,
-                         timing={"physics_s": wall, "hydraulics_s": 0.0, "controller_s": 0.0, "output_s": 0.0,
-                                 "steps": done * sub}, incomplete_reason=reason)
+        res = RunResult(t=np.arange(done) / rate, channels=ch, extras=ex, wall_s=wall, sim_s=done / rate,
+                        timing={"physics_s": wall, "hydraulics_s": 0.0, "controller_s": 0.0, "output_s": 0.0,
+                                "steps": done * sub}, incomplete_reason=reason, interrupted=self._interrupted)
+        if self._interrupted:
+            from sim.errors import RunInterrupted
+
+            raise RunInterrupted(res)
+        return res
 
 

@@ -27,6 +27,7 @@ of the recorded commands reproduces the run to round-off.
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -39,10 +40,36 @@ from mjcf.description import actuator_strokes
 from mjcf.model import TableModel
 from sim.control.tvc import ControllerGains, TableController
 from sim.effects.registry import dahl_step
-from sim.errors import ScenarioError
+from sim.errors import RunInterrupted, ScenarioError, is_interrupt
 from sim.scenario.reference import Reference, reference_from_motions
+from sim.validate import check_samples
 
 GAP_LIMIT_M = 1e-3  #: a swivel opening by more than 1 mm means the solve has failed
+#: MuJoCo's warnings that mean the mechanics failed (MuJoCo resets the state after a bad
+#: qacc, so the run would go on from the home pose as if nothing had happened), with
+#: what each means.
+MJ_WARNINGS = {
+    mujoco.mjtWarning.mjWARN_BADQACC: "MuJoCo's accelerations were not finite (it reset the state)",
+    mujoco.mjtWarning.mjWARN_BADQPOS: "MuJoCo's positions were not finite (it reset the state)",
+    mujoco.mjtWarning.mjWARN_BADQVEL: "MuJoCo's velocities were not finite (it reset the state)",
+    mujoco.mjtWarning.mjWARN_BADCTRL: "a control input (actuator force) was not finite",
+    mujoco.mjtWarning.mjWARN_INERTIA: "a body has an inertia that is not physical",
+}
+#: MuJoCo's last warning texts (MuJoCo would print them on stdout, mixing them into
+#: ``--json`` output, and append them to MUJOCO_LOG.TXT in the working folder; the loop
+#: reports them itself, in its divergence message).
+MJ_WARNING_TEXTS: list[str] = []
+
+
+def _keep_warning(text: str) -> None:
+    MJ_WARNING_TEXTS[:] = (MJ_WARNING_TEXTS + [str(text)])[-8:]
+
+
+mujoco.set_mju_user_warning(_keep_warning)
+
+#: The likely causes, said with every divergence message.
+CAUSE_STEP = ("likely cause: a physics step too large for the stiffest part of the model "
+              "(halve the time step) or a stiffness, bulk modulus or gain set too high")
 
 
 @dataclass
@@ -56,6 +83,7 @@ class RunResult:
     sim_s: float
     timing: dict = field(default_factory=dict)
     incomplete_reason: str | None = None
+    interrupted: bool = False  #: stopped by Ctrl-C (``incomplete_reason`` says when)
 
     @property
     def realtime_factor(self) -> float:
@@ -98,6 +126,7 @@ class Simulation:
         e.g. :meth:`static_forces` for a table whose actuators carry dead weight.
         """
         self.d = self.tm.new_data()
+        self._warn0 = [0] * len(MJ_WARNINGS)  # MuJoCo warning counts at the start of a run (new data: none)
         self._zfr = np.zeros(len(self.tm.friction_dofs))  # pre-sliding friction states
         objs = {id(e): e for e in self.tm.step_effects + self.tm.effects}.values()
         for e in objs:  # effects with a state of their own
@@ -189,7 +218,9 @@ class Simulation:
         rate = self.gains.rate_hz
         n_in = len(reference.t) if reference is not None else len(valve_command)
         n = n_in if duration_s is None else min(n_in, int(round(duration_s * rate)) + 1)
+        check_samples(n, f"a run of {n / rate:g} s at {rate:g} Hz", None, ScenarioError)  # before allocating
         na = tm.n_act
+        self._warn0 = [int(self.d.warning[w].number) for w in MJ_WARNINGS]
         if reference is not None:
             if kinematics == "exact":
                 s_ref_all = actuator_strokes(tm.desc, reference.d[:n])
@@ -253,124 +284,134 @@ class Simulation:
         wall0 = clock()
         last_print = wall0
         k = -1
-        for k in range(n):
-            if fuse_tick:
-                # ---- recorder, controller tick, hydraulics: one compiled call per physics step
-                t0 = clock()
-                first(k, *first_args)
-                t1 = clock()
-                step(m, d)
-                t2 = clock()
-                later(k, *later_args)  # also records the first step's platen acceleration
-                t3 = clock()
-                step(m, d)
-                t4 = clock()
-                t_fused += (t1 - t0) + (t3 - t2)
-                t_phys += (t2 - t1) + (t4 - t3)
-                for _ in range(spt - 2):
-                    later(-1, *later_args)
-                    t6 = clock()
+        done = 0
+        try:
+            for k in range(n):
+                if fuse_tick:
+                    # ---- recorder, controller tick, hydraulics: one compiled call per physics step
+                    t0 = clock()
+                    first(k, *first_args)
+                    t1 = clock()
                     step(m, d)
-                    t7 = clock()
-                    t_fused += t6 - t4
-                    t_phys += t7 - t6
-                    t4 = t7
-            else:
-                # ---- recorder: raw state at t_k
-                t0 = clock()
-                if fast:
-                    FL.record(k, qpos, qvel, Q, V, hs._X, hs._Y, HL.SPOOL, HL.FORCE, HL.PA, HL.PB, Hsp, Hf, Hpa, Hpb,
-                              HL.PS, HL.GASV, Eps, Egas)
-                else:
-                    Q[k] = qpos
-                    V[k] = qvel
-                    Hsp[k] = spool
-                    Hf[k] = force
-                    Hpa[k] = pa
-                    Hpb[k] = pb
-                    Eps[k] = psup[0]
-                    Egas[k] = gasv[0]
-                t1 = clock()
-                t_out += t1 - t0
-                # ---- controller tick (valve commands held until the next tick)
-                if reference is not None:
-                    if not free:
-                        xk[:] = qpos[qa]
-                        vel6[:] = 0.0
-                        vel6[pdi] = qvel[slide_d]
-                        ctrl.command_fast(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0], cmd)
-                    elif fast:
-                        ctrl.command_from_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa64, pd, pb_,
-                                                force, psup[0], cmd)
-                    else:
-                        xk[:] = qpos[qa]
-                        vel6[:3] = qvel[pd:pd + 3]
-                        vel6[3:] = xmat[pb_].reshape(3, 3) @ qvel[pd + 3:pd + 6]
-                        cmd[:] = ctrl.command(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0])
-                else:
-                    cmd[:] = vc_all[k]
-                H["valve_command"][k] = cmd
-                t2 = clock()
-                t_ctrl += t2 - t1
-                # ---- physics steps of this tick: hydraulics, then mj_step
-                for j in range(spt):
+                    t2 = clock()
+                    later(k, *later_args)  # also records the first step's platen acceleration
                     t3 = clock()
-                    if fused and nq:
-                        FL.pre_step_friction(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y,
-                                             hs._IC, hs._ICS, hs._buf, 0, hs._P, hs._G, qfa, fr_dofs, fr_fc, zfr,
-                                             fr_zss, self.dt, *air)
-                    elif fused:
-                        FL.pre_step(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS,
-                                    hs._buf, 0, hs._P, hs._G)
-                    else:
-                        x2[0] = qpos[qa]
-                        v2[0] = qvel[da]
-                        f = hs.step(cmd2, x2, v2)
-                        dctrl[ids] = f[0]
-                    if not (fused and nq) and (effects or nq):
-                        qfa[:] = 0.0
-                        if nfr:
-                            if fast:
-                                FL.presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
-                            else:
-                                self._presliding_numpy(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss)
-                        if nair:
-                            if fast:
-                                FL.air_springs(qpos, qfa, *air)
-                            else:
-                                self._air_numpy(qpos, qfa, *air)
-                    for e in effects:
-                        e.apply(m, d)
-                    t4 = clock()
                     step(m, d)
-                    t5 = clock()
-                    t_hyd += t4 - t3
-                    t_phys += t5 - t4
-                    if j == 0:
-                        if free:
-                            ACC[k] = qacc[pd:pd + 6]
+                    t4 = clock()
+                    t_fused += (t1 - t0) + (t3 - t2)
+                    t_phys += (t2 - t1) + (t4 - t3)
+                    for _ in range(spt - 2):
+                        later(-1, *later_args)
+                        t6 = clock()
+                        step(m, d)
+                        t7 = clock()
+                        t_fused += t6 - t4
+                        t_phys += t7 - t6
+                        t4 = t7
+                else:
+                    # ---- recorder: raw state at t_k
+                    t0 = clock()
+                    if fast:
+                        FL.record(k, qpos, qvel, Q, V, hs._X, hs._Y, HL.SPOOL, HL.FORCE, HL.PA, HL.PB, Hsp, Hf, Hpa, Hpb,
+                                  HL.PS, HL.GASV, Eps, Egas)
+                    else:
+                        Q[k] = qpos
+                        V[k] = qvel
+                        Hsp[k] = spool
+                        Hf[k] = force
+                        Hpa[k] = pa
+                        Hpb[k] = pb
+                        Eps[k] = psup[0]
+                        Egas[k] = gasv[0]
+                    t1 = clock()
+                    t_out += t1 - t0
+                    # ---- controller tick (valve commands held until the next tick)
+                    if reference is not None:
+                        if not free:
+                            xk[:] = qpos[qa]
+                            vel6[:] = 0.0
+                            vel6[pdi] = qvel[slide_d]
+                            ctrl.command_fast(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0], cmd)
+                        elif fast:
+                            ctrl.command_from_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa64, pd, pb_,
+                                                    force, psup[0], cmd)
                         else:
-                            ACC[k, :n_pd] = qacc[slide_d]
-            # ---- divergence checks
-            if k % gap_every == 0:
-                t6 = clock()
-                gap = self.loop_gap()
-                ex["loop_gap"][k] = gap
-                reason = self._check(k / rate, gap)
-                t_out += clock() - t6
-                if reason:
-                    break
-            if progress and clock() - last_print > 0.25:
-                last_print = clock()
-                frac = (k + 1) / n
-                bar = "#" * int(30 * frac)
-                sys.stderr.write(f"\r  [{bar:<30s}] {100 * frac:5.1f} %  t = {k / rate:7.2f} s")
-                sys.stderr.flush()
+                            xk[:] = qpos[qa]
+                            vel6[:3] = qvel[pd:pd + 3]
+                            vel6[3:] = xmat[pb_].reshape(3, 3) @ qvel[pd + 3:pd + 6]
+                            cmd[:] = ctrl.command(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0])
+                    else:
+                        cmd[:] = vc_all[k]
+                    H["valve_command"][k] = cmd
+                    t2 = clock()
+                    t_ctrl += t2 - t1
+                    # ---- physics steps of this tick: hydraulics, then mj_step
+                    for j in range(spt):
+                        t3 = clock()
+                        if fused and nq:
+                            FL.pre_step_friction(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y,
+                                                 hs._IC, hs._ICS, hs._buf, 0, hs._P, hs._G, qfa, fr_dofs, fr_fc, zfr,
+                                                 fr_zss, self.dt, *air)
+                        elif fused:
+                            FL.pre_step(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS,
+                                        hs._buf, 0, hs._P, hs._G)
+                        else:
+                            x2[0] = qpos[qa]
+                            v2[0] = qvel[da]
+                            f = hs.step(cmd2, x2, v2)
+                            dctrl[ids] = f[0]
+                        if not (fused and nq) and (effects or nq):
+                            qfa[:] = 0.0
+                            if nfr:
+                                if fast:
+                                    FL.presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
+                                else:
+                                    self._presliding_numpy(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss)
+                            if nair:
+                                if fast:
+                                    FL.air_springs(qpos, qfa, *air)
+                                else:
+                                    self._air_numpy(qpos, qfa, *air)
+                        for e in effects:
+                            e.apply(m, d)
+                        t4 = clock()
+                        step(m, d)
+                        t5 = clock()
+                        t_hyd += t4 - t3
+                        t_phys += t5 - t4
+                        if j == 0:
+                            if free:
+                                ACC[k] = qacc[pd:pd + 6]
+                            else:
+                                ACC[k, :n_pd] = qacc[slide_d]
+                done = k + 1  # tick k is complete (kept even if the check below stops the run)
+                # ---- divergence checks
+                if k % gap_every == 0 or k == n - 1:
+                    t6 = clock()
+                    gap = self.loop_gap()
+                    ex["loop_gap"][k] = gap
+                    reason = self._check(k / rate, gap)
+                    t_out += clock() - t6
+                    if reason:
+                        break
+                if progress and clock() - last_print > 0.25:
+                    last_print = clock()
+                    frac = (k + 1) / n
+                    bar = "#" * int(30 * frac)
+                    sys.stderr.write(f"\r  [{bar:<30s}] {100 * frac:5.1f} %  t = {k / rate:7.2f} s")
+                    sys.stderr.flush()
+        except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C: keep the ticks done so far, marked incomplete
+            if not is_interrupt(e):  # (SystemError: the Ctrl-C landed in a numba call)
+                raise
+            reason = (f"interrupted (Ctrl-C) at t = {done / rate:.4f} s of {n / rate:.4f} s")
+            interrupted = True
+        else:
+            interrupted = False
         wall = clock() - wall0
         if progress:
             sys.stderr.write("\r" + " " * 70 + "\r")
             sys.stderr.flush()
-        n_done = k + 1
+        n_done = done
         t7 = clock()
         ch = self._derive(Q[:n_done], V[:n_done], ACC[:n_done])
         for key, arr in H.items():
@@ -380,11 +421,14 @@ class Simulation:
         if "_payload_qpos" in ch:
             ex["payload_qpos"] = ch.pop("_payload_qpos")
         t_post = clock() - t7
-        return RunResult(t=np.arange(n_done) / rate, channels=ch, extras=ex, wall_s=wall + t_post,
-                         sim_s=n_done / rate,
-                         timing={"physics_s": t_phys, "hydraulics_s": t_hyd, "controller_s": t_ctrl,
-                                 "output_s": t_out + t_post, "fused_s": t_fused, "steps": n_done * spt},
-                         incomplete_reason=reason)
+        result = RunResult(t=np.arange(n_done) / rate, channels=ch, extras=ex, wall_s=wall + t_post,
+                           sim_s=n_done / rate,
+                           timing={"physics_s": t_phys, "hydraulics_s": t_hyd, "controller_s": t_ctrl,
+                                   "output_s": t_out + t_post, "fused_s": t_fused, "steps": n_done * spt},
+                           incomplete_reason=reason, interrupted=interrupted)
+        if interrupted:
+            raise RunInterrupted(result)
+        return result
 
     def _derive(self, Q, V, ACC) -> dict:
         """Recorder channels from raw qpos/qvel/platen-qacc samples (vectorised)."""
@@ -448,23 +492,46 @@ class Simulation:
         return out
 
     def _check(self, tk: float, gap: float) -> str | None:
+        """Why the run must stop at ``tk``, or None: a NaN/Inf in the mechanical or the
+        hydraulic state, a swivel gap beyond :data:`GAP_LIMIT_M`, a pressure outside
+        [vapour, relief] (the hydraulics clip to that range, so outside it means the step
+        failed), or a MuJoCo warning of :data:`MJ_WARNINGS` raised during the run. The
+        message names the time, the quantity and the likely cause."""
         d = self.d
         st = self.hs.state
-        if self._fl is not None and self._fl.all_finite(d.qpos, d.qvel, st.p_a, st.p_b) and gap <= GAP_LIMIT_M:
-            pmax = max(st.p_a.max(), st.p_b.max())
-            if pmax <= self.hp.relief_pressure_pa * (1 + 1e-9):
-                return None
-        if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
-            return f"simulation diverged at t = {tk:.4f} s: the mechanical state is not finite (NaN/inf)"
-        if not (np.all(np.isfinite(st.p_a)) and np.all(np.isfinite(st.p_b))):
-            return f"simulation diverged at t = {tk:.4f} s: chamber pressures are not finite"
-        if gap > GAP_LIMIT_M:
-            return (f"simulation diverged at t = {tk:.4f} s: a swivel opened by {gap * 1e3:.3g} mm "
-                    f"(limit {GAP_LIMIT_M * 1e3:.3g} mm); the loop closure failed")
         hp = self.hp
-        pmax = max(float(st.p_a.max()), float(st.p_b.max()))
-        if pmax > hp.relief_pressure_pa * (1 + 1e-9):
-            return f"simulation diverged at t = {tk:.4f} s: chamber pressure {pmax / 1e6:.1f} MPa above relief"
+        lo = hp.vapour_pressure_pa * (1 - 1e-9) - 1e-3
+        hi = hp.relief_pressure_pa * (1 + 1e-9)
+        warned = [w for w, n0 in zip(MJ_WARNINGS, self._warn0) if d.warning[w].number > n0]
+        if (not warned and self._fl is not None and self._fl.all_finite(d.qpos, d.qvel, st.p_a, st.p_b)
+                and gap <= GAP_LIMIT_M):
+            if (st.p_a.max() <= hi and st.p_b.max() <= hi and st.p_a.min() >= lo and st.p_b.min() >= lo
+                    and math.isfinite(st.p_supply[0]) and lo <= st.p_supply[0] <= hi):
+                return None
+        at = f"simulation diverged at t = {tk:.4f} s"
+        step = f"physics step {self.dt * 1e3:.3g} ms"
+        for what, arr in (("chamber a pressures", st.p_a), ("chamber b pressures", st.p_b),
+                          ("supply pressure", st.p_supply)):
+            if not np.all(np.isfinite(arr)):
+                return (f"{at}: the hydraulic state is not finite: NaN/Inf in the {what}; {CAUSE_STEP} "
+                        f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})")
+        for what, arr in (("platen/linkage positions (qpos)", d.qpos), ("velocities (qvel)", d.qvel)):
+            if not np.all(np.isfinite(arr)):
+                return f"{at}: the mechanical state is not finite: NaN/Inf in the {what}; {CAUSE_STEP} ({step})"
+        if warned:
+            w = warned[0]
+            return f"{at}: {MJ_WARNINGS[w]} (MuJoCo warning {w.name}); {CAUSE_STEP} ({step})"
+        if gap > GAP_LIMIT_M:
+            return (f"{at}: a swivel opened by {gap * 1e3:.3g} mm (limit {GAP_LIMIT_M * 1e3:.3g} mm): the "
+                    f"loop closure failed; {CAUSE_STEP} ({step}), or a motion beyond the linkages' reach")
+        for what, arr in (("chamber a", st.p_a), ("chamber b", st.p_b), ("supply", st.p_supply)):
+            pmax, pmin = float(np.max(arr)), float(np.min(arr))
+            if pmax > hi:
+                return (f"{at}: {what} pressure {pmax / 1e6:.4g} MPa above the relief pressure "
+                        f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})")
+            if pmin < lo:
+                return (f"{at}: {what} pressure {pmin / 1e6:.4g} MPa below the vapour pressure "
+                        f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})")
         return None
 
 

@@ -320,6 +320,6 @@ def summary() -> dict:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    import json
+    from sim.runs.files import json_text
 
-    print(json.dumps(summary(), indent=1, default=float))
+    print(json_text(summary(), indent=1))

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.identify.characterize import DEG, DOFS, MASS_BAND_HZ, MASS_LEVELS
-from sim.runs.files import write_json_atomic, write_text_atomic
+from sim.runs.files import save_figure_atomic, write_json_atomic, write_text_atomic
 from sim.signals import estimation as E
 
 
@@ -49,7 +49,7 @@ def figures(results: list[dict], summary: dict, out: Path) -> list[str]:
     ax[0, 0].legend(fontsize=7)
     fig.suptitle("Spool position -> force feedback FRF (DOF space), random acceleration control")
     fig.tight_layout()
-    fig.savefig(out / "oil_column_frf.png", dpi=90)
+    save_figure_atomic(fig, out / "oil_column_frf.png", dpi=90)
     plt.close(fig)
     names.append("oil_column_frf.png")
     # effective mass
@@ -74,7 +74,7 @@ def figures(results: list[dict], summary: dict, out: Path) -> list[str]:
         ax[k].grid(True, alpha=0.3)
     fig.suptitle("Acceleration -> force FRF (effective mass; grey: averaging band)")
     fig.tight_layout()
-    fig.savefig(out / "effective_mass.png", dpi=90)
+    save_figure_atomic(fig, out / "effective_mass.png", dpi=90)
     plt.close(fig)
     names.append("effective_mass.png")
     # friction loops
@@ -95,7 +95,7 @@ def figures(results: list[dict], summary: dict, out: Path) -> list[str]:
             ax[k].grid(True, alpha=0.3)
         fig.suptitle("Friction tests, 0.05 Hz tapered sine: actuator wrench (mean removed) vs displacement")
         fig.tight_layout()
-        fig.savefig(out / "friction_loops.png", dpi=90)
+        save_figure_atomic(fig, out / "friction_loops.png", dpi=90)
         plt.close(fig)
         names.append("friction_loops.png")
     # servovalve
@@ -124,7 +124,7 @@ def figures(results: list[dict], summary: dict, out: Path) -> list[str]:
             a.grid(True, which="both", alpha=0.3)
         fig.suptitle("Servovalve FRF (random displacement control, 0.01 m RMS, 0.5-125 Hz)")
         fig.tight_layout()
-        fig.savefig(out / "servovalve.png", dpi=90)
+        save_figure_atomic(fig, out / "servovalve.png", dpi=90)
         plt.close(fig)
         names.append("servovalve.png")
     hr = [r for r in results if r["kind"] == "harmonic" and not r.get("incomplete")]
@@ -142,7 +142,7 @@ def figures(results: list[dict], summary: dict, out: Path) -> list[str]:
         ax[-1].set_xlabel("time (s)")
         fig.suptitle("Harmonic validation test, 0.25 Hz, 100/100/50 mm, 90 deg lags")
         fig.tight_layout()
-        fig.savefig(out / "harmonic.png", dpi=90)
+        save_figure_atomic(fig, out / "harmonic.png", dpi=90)
         plt.close(fig)
         names.append("harmonic.png")
     return names

@@ -142,6 +142,11 @@ def _rerun():
     return rerun
 
 
+#: How long a live viewer (``--spawn``, ``--connect``) may take to take a recording, s
+#: (assumed: a local viewer takes a run of minutes in a few seconds; 30 s is patient).
+DEFAULT_VIEWER_TIMEOUT_S = 30.0
+
+
 class RecordingError(UserError):
     """A recording that cannot be written (bad name, missing or unwritable folder)."""
 
@@ -168,8 +173,10 @@ def force_colors(fraction: np.ndarray) -> np.ndarray:
 def check_path(path) -> Path:
     """Check that a recording can be written at ``path``; RecordingError (one line) if not.
 
-    The name must end ``.rrd``, the folder must exist and be writable (tried by creating
-    and removing a temporary file there), and the path must not be a folder.
+    The name must end ``.rrd`` and must not be a folder. Its folder is created when the
+    recording is written (as ``run --out`` creates its own), so here the nearest existing
+    ancestor must be a writable folder (tried by creating and removing a temporary file
+    there): nothing is created by a check that a later error would leave behind.
     """
     p = Path(path)
     name = str(path)
@@ -178,11 +185,14 @@ def check_path(path) -> Path:
     if p.is_dir():
         raise RecordingError(f"recording {name} is a folder; give a file name ending {SUFFIX!r}")
     folder = p.parent if str(p.parent) else Path(".")
-    if not folder.is_dir():
-        raise RecordingError(f"recording {name} cannot be written: folder {folder} does not exist; "
-                             "create the folder first")
+    probe_dir = folder
+    while not probe_dir.exists() and probe_dir != probe_dir.parent:
+        probe_dir = probe_dir.parent
+    if not probe_dir.is_dir():
+        raise RecordingError(f"recording {name} cannot be written: {probe_dir} is a file, not a folder; "
+                             "choose another path")
     try:
-        fd, probe = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".probe", dir=folder)
+        fd, probe = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".probe", dir=probe_dir)
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:
@@ -371,6 +381,14 @@ def _start_worker():
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=root, env=env)
 
 
+class ViewerTimeout(Exception):
+    """No live viewer took the recording within the time allowed."""
+
+    def __init__(self, timeout_s):
+        super().__init__(f"no viewer answered within {timeout_s:g} s")
+        self.timeout_s = timeout_s
+
+
 def _stop_worker(proc) -> None:
     if proc.poll() is None:
         proc.kill()
@@ -380,12 +398,20 @@ def _stop_worker(proc) -> None:
         pass
 
 
-def _run_in_worker(proc, job: dict) -> None:
+def _run_in_worker(proc, job: dict, timeout_s: float | None = None) -> None:
     """Hand ``job`` to the writer process and wait for it; its failure is raised here
-    (OSError for a file that cannot be written, RuntimeError otherwise)."""
+    (OSError for a file that cannot be written, RuntimeError otherwise). With
+    ``timeout_s`` (a live viewer), a worker still busy after that long is stopped and
+    :class:`ViewerTimeout` raised: rerun waits for a viewer forever and, inside its own
+    code, does not see Ctrl-C."""
     import pickle
+    import subprocess
 
-    _, err = proc.communicate(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
+    try:
+        _, err = proc.communicate(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL), timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        _stop_worker(proc)
+        raise ViewerTimeout(timeout_s) from None
     if proc.returncode == 0:
         return
     lines = [ln for ln in err.decode("utf-8", "replace").splitlines() if ln.startswith(("OSError\t", "Error\t"))]
@@ -450,11 +476,12 @@ class RrdTarget:
         self.application_id = application_id
         self.recording_id: str | None = None
         self._worker = None  # writer process (subprocess.Popen) started by open()
+        self.timeout_s = DEFAULT_VIEWER_TIMEOUT_S  #: how long a live viewer may take to answer
 
     @classmethod
     def open(cls, path=None, *, spawn: bool = False, connect: str | None = None,
              rate_hz: float = DEFAULT_RATE_HZ, series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ,
-             application_id: str = APPLICATION_ID) -> "RrdTarget":
+             application_id: str = APPLICATION_ID, timeout_s: float = None) -> "RrdTarget":
         """Check the target now; nothing is written until :meth:`write_run`.
 
         Args:
@@ -465,7 +492,14 @@ class RrdTarget:
             series_rate_hz: time series keep every n-th sample, n the largest that keeps at
                 least this rate (default 250 Hz: every 4th sample of a 1024 Hz run); None keeps
                 the run's full rate.
+            timeout_s: with ``spawn`` or ``connect``, give up (RecordingError, nothing
+                kept) when the viewer has not taken the recording after this long
+                (default :data:`DEFAULT_VIEWER_TIMEOUT_S`).
         """
+        if timeout_s is None:
+            timeout_s = DEFAULT_VIEWER_TIMEOUT_S
+        if not (np.isfinite(timeout_s) and timeout_s > 0):
+            raise RecordingError(f"viewer timeout {timeout_s!r} s is not a positive number; give e.g. 30")
         if path is None and not spawn and connect is None:
             raise RecordingError("no recording target; give a .rrd file, spawn a viewer or connect to one")
         if not (np.isfinite(rate_hz) and rate_hz > 0):
@@ -476,6 +510,7 @@ class RrdTarget:
         p = check_path(path) if path is not None else None
         target = cls(p, spawn=spawn, connect=connect, rate_hz=rate_hz, series_rate_hz=series_rate_hz,
                      application_id=application_id)
+        target.timeout_s = float(timeout_s)
         if p is not None and not spawn and connect is None and os.environ.get("SHAKETABLE_RRD_PRELOAD", "1") != "0":
             # a file only: rerun is imported (~1 s) and used in a writer process of its own,
             # started now, so the import runs beside the simulation instead of after it
@@ -535,12 +570,25 @@ class RrdTarget:
                                  run.accelerometers is not None, compare is not None),
                    "ops": ops.calls}
             if self.path is not None:
+                if str(self.path.parent):
+                    self.path.parent.mkdir(parents=True, exist_ok=True)  # as run --out creates its folder
                 fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp",
                                            dir=self.path.parent if str(self.path.parent) else ".")
                 os.close(fd)
             job["file"] = tmp
+            live = self.spawn or self.connect is not None
+            if live and (worker is None or worker.poll() is not None):
+                worker = _start_worker()  # a live viewer is fed from a process that can be stopped
             if worker is not None and worker.poll() is None:
-                _run_in_worker(worker, job)
+                try:
+                    _run_in_worker(worker, job, timeout_s=self.timeout_s if live else None)
+                except ViewerTimeout:
+                    worker = None
+                    where = "the spawned viewer" if self.spawn else f"the viewer at {job['connect']}"
+                    how = ("--spawn needs a screen; write a file with --rrd and open it where there is one"
+                           if self.spawn else "start one (`rerun`) or write a file with --rrd")
+                    raise RecordingError(f"{where} did not take the recording within {self.timeout_s:g} s "
+                                         f"(nothing kept); {how}") from None
                 worker = None
             else:
                 _execute(job)

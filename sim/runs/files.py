@@ -42,19 +42,57 @@ def jsonable(obj):
     return obj
 
 
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename."""
+def _atomic(path: Path, write) -> None:
+    """Call ``write(fh)`` on a temporary file beside ``path``, then rename it onto ``path``.
+
+    A failure or an interruption (Ctrl-C included) at any point removes the temporary
+    file and leaves ``path`` as it was: the complete old file, the complete new one, or
+    none. Never a half-written file under the final name."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
+    folder = path.parent if str(path.parent) else Path(".")
+    tmp = None
     try:
-        tmp.write_text(text)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
+        tmp = None
     except OSError as e:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
-        raise UserError(f"cannot write {path}: {e.strerror}") from None
+        raise UserError(f"cannot write {path}: {e.strerror or e}; choose a writable folder with free space") from None
+    finally:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+
+
+def write_bytes_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file and a rename."""
+    _atomic(path, lambda fh: fh.write(data))
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename."""
+    write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def save_figure_atomic(fig, path: Path, **kwargs) -> None:
+    """``fig.savefig(path, **kwargs)`` through a temporary file and a rename (the format
+    is taken from ``path``'s suffix, not from the temporary name)."""
+    fmt = kwargs.pop("format", None) or Path(path).suffix.lstrip(".") or "png"
+    _atomic(path, lambda fh: fig.savefig(fh, format=fmt, **kwargs))
+
+
+def json_text(obj, indent: int = 2) -> str:
+    """Strict JSON text of ``obj`` (NaN and infinities as null, numpy as plain Python):
+    what every JSON writer and every ``--json`` print uses."""
+    return json.dumps(jsonable(obj), indent=indent, allow_nan=False)
 
 
 def write_json_atomic(path: Path, obj) -> None:

@@ -467,7 +467,11 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
 
     t = data.pop("t")
     channels: dict[str, np.ndarray] = {}
-    extras = {k[len(EXTRA_PREFIX):]: data.pop(k).astype(np.float64) for k in list(data) if k.startswith(EXTRA_PREFIX)}
+    extras = {}
+    for k in [k for k in data if k.startswith(EXTRA_PREFIX)]:
+        if data[k].dtype.kind not in "fiu":
+            raise _error(name, f"extension channel {k!r} has type {data[k].dtype}", "store it as float64")
+        extras[k[len(EXTRA_PREFIX):]] = data.pop(k).astype(np.float64)
     for key, arr in data.items():
         if arr.dtype.kind not in "fiu":
             raise _error(name, f"channel {key!r} has type {arr.dtype}", "store it as float64")

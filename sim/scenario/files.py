@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcf.description import DOFS6, REPO_ROOT, load_toml, resolve
+from sim import validate as V
 from sim.errors import MotionError, ScenarioError
 from sim.scenario import motions as M
 from sim.scenario import records as R
@@ -47,18 +48,51 @@ SCENARIOS_DIR = REPO_ROOT / "scenarios"
 DOFS = DOFS6
 
 _SCEN_KEYS = {"name", "table", "payload", "duration_s", "pad_to_duration", "description"}
-_MOTION_KEYS = {
-    "sine": {"type", "amplitude", "frequency_hz", "phase_rad", "delay_s"},
-    "tapered_sine": {"type", "amplitude", "frequency_hz", "phase_rad", "taper_cycles", "delay_s"},
-    "triangle": {"type", "peak_displacement", "peak_velocity", "n_cycles", "rounding_fraction",
-                 "max_acceleration", "delay_s"},
-    "white_noise": {"type", "band_hz", "seed", "rms_acceleration", "rms_displacement", "taper_s"},
-    "at2": {"type", "file", "amplitude_factor", "target_pga", "time_factor", "highpass_hz", "filter_order",
-            "baseline"},
+#: Every motion type's keys and what each must be: "num" any finite number, "pos" > 0,
+#: "nonneg" >= 0, "int" a whole number >= 0, "band" [f_lo, f_hi] in Hz, "text", "table".
+_MOTION_SPEC = {
+    "sine": {"type": "text", "amplitude": "num", "frequency_hz": "pos", "phase_rad": "num", "delay_s": "nonneg"},
+    "tapered_sine": {"type": "text", "amplitude": "num", "frequency_hz": "pos", "phase_rad": "num",
+                     "taper_cycles": "nonneg", "delay_s": "nonneg"},
+    "triangle": {"type": "text", "peak_displacement": "pos", "peak_velocity": "pos", "n_cycles": "pos",
+                 "rounding_fraction": "nonneg", "max_acceleration": "pos", "delay_s": "nonneg"},
+    "white_noise": {"type": "text", "band_hz": "band", "seed": "int", "rms_acceleration": "pos",
+                    "rms_displacement": "pos", "taper_s": "nonneg"},
+    "at2": {"type": "text", "file": "text", "amplitude_factor": "num", "target_pga": "pos", "time_factor": "pos",
+            "highpass_hz": "pos", "filter_order": "int", "baseline": "text"},
 }
-_EQ_KEYS = {"type", "amplitude_factor", "time_factor", "highpass_hz", "filter_order", "baseline", "mapping"}
 _ITERATION_KEYS = {"count", "gain", "band_hz", "h_min", "frf", "noise_level", "seed"}
 _OUTPUT_KEYS = {"sample_rate_hz"}
+_MOTION_KEYS = {k: set(v) for k, v in _MOTION_SPEC.items()}
+_EQ_SPEC = {"type": "text", "amplitude_factor": "num", "time_factor": "pos", "highpass_hz": "pos",
+            "filter_order": "int", "baseline": "text", "mapping": "table"}
+_EQ_KEYS = set(_EQ_SPEC)
+#: The keys a motion cannot do without.
+_MOTION_REQUIRED = {"sine": ("amplitude", "frequency_hz"), "tapered_sine": ("amplitude", "frequency_hz"),
+                    "triangle": ("peak_displacement", "peak_velocity"), "white_noise": ("band_hz",),
+                    "at2": ("file",)}
+
+
+def _check_values(m: dict, spec: dict, where: str, src: str) -> None:
+    """Each value of motion table ``m`` against its kind in ``spec`` (one line on error)."""
+    for key, kind in spec.items():
+        if key not in m:
+            continue
+        v, field = m[key], f"{where}.{key}"
+        if kind == "num":
+            V.number(v, field, src, ScenarioError)
+        elif kind == "pos":
+            V.number(v, field, src, ScenarioError, positive=True)
+        elif kind == "nonneg":
+            V.number(v, field, src, ScenarioError, nonneg=True)
+        elif kind == "int":
+            V.number(v, field, src, ScenarioError, integer=True, nonneg=True)
+        elif kind == "band":
+            V.numbers(v, field, src, ScenarioError, n=2, positive=True, increasing=True)
+        elif kind == "text":
+            V.text(v, field, src, ScenarioError)
+        elif kind == "table" and not isinstance(v, dict):
+            raise ScenarioError(f"{src}: '{field}' must be a table such as {{ x = \"180\" }} (got {v!r})")
 
 
 @dataclass
@@ -82,9 +116,7 @@ def _load(path: Path) -> dict:
 
 
 def _unknown(keys, known, where, src):
-    extra = sorted(set(keys) - set(known))
-    if extra:
-        raise ScenarioError(f"{src}: unknown key '{extra[0]}' in [{where}]; known keys: {', '.join(sorted(known))}")
+    V.check_keys(keys, known, where, src, ScenarioError)
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:
@@ -96,24 +128,28 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     data = _load(path)
     src = str(path)
     _unknown(data, {"scenario", "motion", "controller", "output", "iteration"}, "top level", src)
-    sc = data.get("scenario")
-    if not isinstance(sc, dict):
-        raise ScenarioError(f"{src}: missing the [scenario] table (name, table, ...)")
+    sc = V.require_table(data, "scenario", "scenario", src, ScenarioError, what="name, table, ...")
     _unknown(sc, _SCEN_KEYS, "scenario", src)
     for k in ("name", "table"):
-        if not isinstance(sc.get(k), str):
-            raise ScenarioError(f"{src}: [scenario] needs '{k}' as text")
+        if k not in sc:
+            raise ScenarioError(f"{src}: [scenario] lacks '{k}'; give it as text")
+        V.text(sc[k], f"scenario.{k}", src, ScenarioError)
+    if not all(c.isalnum() or c in "-_." for c in sc["name"]):
+        raise ScenarioError(f"{src}: 'scenario.name' {sc['name']!r} names the output files; "
+                            "use letters, digits, '-', '_' and '.' only")
     dur = sc.get("duration_s")
-    if dur is not None and (isinstance(dur, bool) or not isinstance(dur, (int, float)) or not dur > 0):
-        raise ScenarioError(f"{src}: 'scenario.duration_s' must be a positive number of seconds (got {dur!r})")
-    mo = data.get("motion")
-    if not isinstance(mo, dict) or not mo:
-        raise ScenarioError(f"{src}: missing the [motion] table")
+    if dur is not None:
+        V.number(dur, "scenario.duration_s", src, ScenarioError, unit="s", positive=True)
+    mo = V.require_table(data, "motion", "motion", src, ScenarioError, what="type = ... or one [motion.<dof>] per DOF")
+    if not mo:
+        raise ScenarioError(f"{src}: [motion] is empty; give type = \"el_centro_1940\" or one [motion.<dof>] table")
     out = data.get("output", {})
+    if not isinstance(out, dict):
+        raise ScenarioError(f"{src}: [output] must be a table (sample_rate_hz)")
     _unknown(out, _OUTPUT_KEYS, "output", src)
-    rate = out.get("sample_rate_hz", 1024.0)
-    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or rate <= 0:
-        raise ScenarioError(f"{src}: 'output.sample_rate_hz' must be positive (got {rate!r})")
+    rate = V.sample_rate(out.get("sample_rate_hz", 1024.0), "output.sample_rate_hz", src, ScenarioError)
+    if dur is not None:
+        V.check_samples(float(dur) * rate + 1, f"'scenario.duration_s' = {dur:g} s at {rate:g} Hz", src, ScenarioError)
     it = data.get("iteration", {"count": 0})
     if not isinstance(it, dict):
         raise ScenarioError(f"{src}: [iteration] must be a table (count, gain, band_hz)")
@@ -123,6 +159,8 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         raise ScenarioError(f"{src}: 'iteration.count' must be an integer 0..10 (got {cnt!r})")
     if it.get("frf", "noise") not in ("noise", "record"):
         raise ScenarioError(f"{src}: 'iteration.frf' must be \"noise\" or \"record\" (got {it['frf']!r})")
+    if "band_hz" in it:
+        V.numbers(it["band_hz"], "iteration.band_hz", src, ScenarioError, n=2, positive=True, increasing=True)
     for key in ("gain", "noise_level", "h_min"):
         v = it.get(key)
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 1e3):
@@ -164,19 +202,30 @@ def _check_motion(s: Scenario):
     mo = s.motion
     if "type" in mo:
         if mo["type"] != "el_centro_1940":
-            raise ScenarioError(f"{src}: [motion] type '{mo['type']}' is not a multi-DOF motion; "
+            raise ScenarioError(f"{src}: [motion] type {mo['type']!r} is not a multi-DOF motion; "
                                 "use type = \"el_centro_1940\" or one [motion.<dof>] table per DOF")
         _unknown(mo, _EQ_KEYS, "motion", src)
+        _check_values(mo, _EQ_SPEC, "motion", src)
+        for dof, comp in mo.get("mapping", {}).items():
+            if dof not in DOFS or not isinstance(comp, str):
+                raise ScenarioError(f"{src}: 'motion.mapping' maps DOF names ({', '.join(DOFS)}) to components "
+                                    f"such as \"180\" (got {dof} = {comp!r})")
         _check_factor(mo, "motion", src)
         return
     for dof, m in mo.items():
         if dof not in DOFS:
-            raise ScenarioError(f"{src}: [motion.{dof}]: '{dof}' is not a DOF; DOFs are {', '.join(DOFS)}")
+            raise ScenarioError(f"{src}: [motion.{dof}]: '{dof}' is not a DOF{V.suggest(dof, DOFS)}; "
+                                f"DOFs are {', '.join(DOFS)} (or type = \"el_centro_1940\" in [motion])")
         if not isinstance(m, dict) or "type" not in m:
             raise ScenarioError(f"{src}: [motion.{dof}] needs a 'type' ({', '.join(_MOTION_KEYS)})")
         if m["type"] not in _MOTION_KEYS:
-            raise ScenarioError(f"{src}: [motion.{dof}] type '{m['type']}' is unknown; types: {', '.join(_MOTION_KEYS)}")
+            raise ScenarioError(f"{src}: [motion.{dof}] type {m['type']!r} is unknown"
+                                f"{V.suggest(m['type'], _MOTION_KEYS)}; types: {', '.join(_MOTION_KEYS)}")
         _unknown(m, _MOTION_KEYS[m["type"]], f"motion.{dof}", src)
+        _check_values(m, _MOTION_SPEC[m["type"]], f"motion.{dof}", src)
+        for key in _MOTION_REQUIRED[m["type"]]:
+            if key not in m:
+                raise ScenarioError(f"{src}: [motion.{dof}] ({m['type']}) lacks '{key}'")
         if m["type"] == "at2":
             _check_factor(m, f"motion.{dof}", src)
 
@@ -200,33 +249,43 @@ def build_motions(s: Scenario) -> dict[str, M.Motion]:
         return R.el_centro_motions(sample_rate_hz=rate, amplitude_factor=float(mo.get("amplitude_factor", 1.0)),
                                    mapping=mo.get("mapping"), **kw)
     out = {}
-    default_dur = s.duration_s
     for i, (dof, m) in enumerate(mo.items()):
-        m = dict(m)
-        kind = m.pop("type")
-        delay = float(m.pop("delay_s", 0.0))
-        if kind in ("sine", "tapered_sine", "white_noise"):
-            if default_dur is None:
-                raise ScenarioError(f"{s.path}: a {kind} motion needs 'scenario.duration_s'")
-            dur = default_dur - delay
-        if kind == "sine":
-            x = M.sine(duration_s=dur, sample_rate_hz=rate, **m)
-        elif kind == "tapered_sine":
-            x = M.tapered_sine(duration_s=dur, sample_rate_hz=rate, **m)
-        elif kind == "triangle":
-            x = M.triangle(sample_rate_hz=rate, **m)
-        elif kind == "white_noise":
-            seed = m.pop("seed", 0)
-            band = tuple(m.pop("band_hz"))
-            x = M.white_noise(duration_s=dur, sample_rate_hz=rate, band_hz=band, seed=(int(seed), i), **m)
-        else:  # at2
-            f = Path(m.pop("file"))
-            if not f.is_absolute():
-                f = s.path.parent / f
-            rec = R.read_at2(f)
-            x = R.process_record(rec.acceleration, rec.dt, sample_rate_hz=rate, name=f.name, **m)
-        out[dof] = _shift(x, delay, rate)
+        try:
+            out[dof] = _build_one(s, i, dof, dict(m), rate)
+        except MotionError as e:  # name the file and the table the motion came from
+            raise MotionError(f"{s.path}: [motion.{dof}]: {e}") from None
     return out
+
+
+def _build_one(s: Scenario, i: int, dof: str, m: dict, rate: float) -> M.Motion:
+    default_dur = s.duration_s
+    kind = m.pop("type")
+    delay = float(m.pop("delay_s", 0.0))
+    if kind in ("sine", "tapered_sine", "white_noise"):
+        if default_dur is None:
+            raise ScenarioError(f"{s.path}: a {kind} motion needs 'scenario.duration_s'")
+        dur = default_dur - delay
+        if not dur > 0:
+            raise ScenarioError(f"{s.path}: 'motion.{dof}.delay_s' ({delay:g} s) leaves nothing of "
+                                f"'scenario.duration_s' ({default_dur:g} s); shorten the delay")
+    if kind == "sine":
+        x = M.sine(duration_s=dur, sample_rate_hz=rate, **m)
+    elif kind == "tapered_sine":
+        x = M.tapered_sine(duration_s=dur, sample_rate_hz=rate, **m)
+    elif kind == "triangle":
+        x = M.triangle(sample_rate_hz=rate, **m)
+    elif kind == "white_noise":
+        seed = m.pop("seed", 0)
+        band = tuple(m.pop("band_hz"))
+        x = M.white_noise(duration_s=dur, sample_rate_hz=rate, band_hz=band, seed=(int(seed), i), **m)
+    else:  # at2
+        f = Path(m.pop("file"))
+        if not f.is_absolute():
+            f = s.path.parent / f
+        rec = R.read_at2(f)
+        x = R.process_record(rec.acceleration, rec.dt, sample_rate_hz=rate, name=f.name, **m)
+    V.check_samples(len(x.t) + delay * rate, f"'motion.{dof}' with its delay", s.path, ScenarioError)
+    return _shift(x, delay, rate)
 
 
 def build_reference(s: Scenario, motions: dict[str, M.Motion], duration_s: float | None = None) -> Reference:
@@ -255,9 +314,10 @@ def build_window(s: Scenario, motions: dict[str, M.Motion], duration_s: float | 
     rate = s.sample_rate_hz
     length = max(m.duration_s for m in motions.values())
     dur = duration_s if duration_s is not None else (s.duration_s if s.duration_s is not None else length)
+    V.check_samples(dur * rate + 1, f"a run of {dur:g} s at {rate:g} Hz", s.path, ScenarioError)
     if dur > length + 1.5 / rate and not s.pad_to_duration:
         raise ScenarioError(
-            f"duration {dur:g} s is longer than the motion ({length:.2f} s); shorten --duration or set "
+            f"{s.path}: duration {dur:g} s is longer than the motion ({length:.2f} s); shorten --duration or set "
             "'scenario.pad_to_duration = true' to pad with rest")
     record = any(m.info.get("kind") == "record" for m in motions.values())
     n_win = int(round(dur * rate)) + 1

@@ -34,6 +34,7 @@ import scipy.linalg
 import scipy.signal
 
 from sim.errors import MotionError
+from sim.validate import check_samples
 
 G = 9.80665  # m/s^2, standard gravity (CODATA conventional value)
 
@@ -130,7 +131,7 @@ def time_vector(duration_s: float, sample_rate_hz: float) -> np.ndarray:
     """Sample times 0, dt, ..., up to and including ``duration_s`` (rounded to a sample)."""
     duration_s = _positive("duration_s", duration_s)
     fs = _positive("sample_rate_hz", sample_rate_hz)
-    n = int(round(duration_s * fs)) + 1
+    n = check_samples(round(duration_s * fs) + 1, f"a motion of {duration_s:g} s at {fs:g} Hz", None, MotionError)
     return np.arange(n) / fs
 
 
@@ -253,6 +254,8 @@ def triangle(*, peak_displacement: float, peak_velocity: float, sample_rate_hz: 
             f"triangle with D = {D:g} m cannot reach V = {V:g} m/s with rounding {Tr:.3g} s "
             f"(acceleration <= {a_max:g} m/s^2 needs V^2 <= a D = {a_max * D:.3g} m^2/s^2; "
             f"rounding_fraction must be <= 1/3); lower peak_velocity or rounding_fraction, or raise max_acceleration")
+    check_samples(n_peaks / 2 * (4 * D / V + Tr) * fs + 1, f"a triangle of {cycles:g} cycles of "
+                  f"{4 * D / V + Tr:.3g} s at {fs:g} Hz", None, MotionError)  # before building its knots
     # knots of the trapezoidal velocity
     kt, kv = [0.0, Tr / 2], [0.0, V]
     t_now, sign = Tr / 2, 1.0
@@ -269,7 +272,7 @@ def triangle(*, peak_displacement: float, peak_velocity: float, sample_rate_hz: 
     kt.append(t_now), kv.append(0.0)
     kt.append(t_now + 2.0 / fs), kv.append(0.0)  # at rest through the last sample
     knots_t, knots_v = np.array(kt), np.array(kv)
-    n = int(math.ceil(t_now * fs - 1e-9)) + 1
+    n = check_samples(math.ceil(t_now * fs - 1e-9) + 1, f"a triangle of {t_now:g} s at {fs:g} Hz", None, MotionError)
     t = np.arange(n) / fs
     d, v, a = _piecewise_linear_velocity(knots_t, knots_v, t)
     period = 4 * D / V + Tr

@@ -49,6 +49,7 @@ import scipy.signal
 
 from sim.errors import MotionError
 from sim.scenario.motions import G, Motion
+from sim.validate import MAX_SAMPLES, check_samples
 
 _UNITS = (  # (pattern in the units line, factor to m/s^2)
     (re.compile(r"CM/S(EC)?(/S(EC)?|\^?2|\*\*2)", re.I), 0.01),
@@ -107,7 +108,7 @@ def read_at2(path: str | Path) -> At2Record:
         npts, dt = int(m_old.group(1)), float(m_old.group(2))
     else:
         raise MotionError(f"record {name} has no NPTS/DT on line 4 ({head.strip()[:40]!r}); {fix}")
-    if npts < 2 or not (dt > 0 and math.isfinite(dt)):
+    if npts < 2 or not (dt > 0 and math.isfinite(dt)) or npts > MAX_SAMPLES:
         raise MotionError(f"record {name} header gives NPTS={npts}, DT={dt:g}; fix the header (DT in s, NPTS >= 2)")
     units_line = lines[2]
     factor, units = G, "g"
@@ -382,6 +383,7 @@ def process_record(acc: np.ndarray, dt: float, *, sample_rate_hz: float, amplitu
             raise MotionError(f"record {name} is longer than record_length_s = {record_length_s:g} s; raise it")
         x = np.concatenate([x, np.zeros(n_total - x.size)])
     trim_used = None
+    check_samples(len(x) * dt_t * fs, f"record {name} at time_factor {time_factor:g} and {fs:g} Hz", None, MotionError)
     x = resample(x, dt_t, fs)
     h = 1.0 / fs
     if baseline == "butterworth":
