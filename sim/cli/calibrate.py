@@ -4,10 +4,10 @@ unpublished masses (``mjcf.calibrate``)."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from sim.errors import UserError
+from sim.runs.files import json_text
 
 
 def _is_masses(args) -> bool:
@@ -32,9 +32,9 @@ def cmd_masses(args) -> int:
         write_masses(doc, res, note=NOTE_FORMULA)
         doc.save(desc.source)
     if args.json:
-        print(json.dumps({k: res[k] for k in ("values", "before", "after", "target")}, indent=2))
+        print(json_text({k: res[k] for k in ("values", "before", "after", "target")}, indent=2))
         return 0
-    print(f"effective-mass calibration of {desc.name} against seed 000 Table 2")
+    print(f"effective-mass calibration of {desc.name} against its published effective masses")
     print(f"  {'dof':4s} {'target':>10s} {'before':>10s} {'after':>10s}")
     for k in res["target"]:
         print(f"  {k:4s} {res['target'][k] / 1e3:10.2f} {res['before'][k] / 1e3:10.2f} {res['after'][k] / 1e3:10.2f}")
@@ -76,9 +76,8 @@ def cmd_calibrate(args) -> int:
     js = write_outputs(res, out, args.inputs)
     write_report(res, out, Path(js["calibrated_table_file"]).name)
     if args.json:
-        from sim.runs.files import jsonable
 
-        print(json.dumps(jsonable(js), indent=2))
+        print(json_text(js, indent=2))
         return 0
     print(f"held-out NRMSE {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} % ({res.holdout_note})")
     for e in res.effects_added:

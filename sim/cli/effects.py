@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import json
+from sim.runs.files import json_text
 
 
 def cmd_effects(args) -> int:
@@ -11,7 +11,7 @@ def cmd_effects(args) -> int:
     if args.table is None:
         cat = catalogue()
         if args.json:
-            print(json.dumps(cat, indent=1, default=str))
+            print(json_text(cat, indent=1))
             return 0
         for e in cat:
             print(f"{e['type']}  [{', '.join(e['places']) or 'any place'}]{'  (every step)' if e['per_step'] else ''}")
@@ -27,8 +27,8 @@ def cmd_effects(args) -> int:
     desc = mjcf.load_table(args.table)
     ps = table_parameters(desc)
     if args.json:
-        print(json.dumps([{"name": p.name, "value": p.value, "unit": p.unit, "lower": p.lower, "upper": p.upper,
-                           "where": p.where} for p in ps], indent=1, default=str))
+        print(json_text([{"name": p.name, "value": p.value, "unit": p.unit, "lower": p.lower, "upper": p.upper,
+                          "where": p.where} for p in ps], indent=1))
         return 0
     print(f"{desc.title}: {len(ps)} parameters (name = value unit [bounds] where)")
     for p in ps:

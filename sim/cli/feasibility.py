@@ -3,10 +3,10 @@ how far can we go? Exit code 0 feasible, 1 not feasible, 2 a user error."""
 
 from __future__ import annotations
 
-import json
 import sys
 
 from sim.errors import UserError
+from sim.runs.files import json_text
 
 DEFAULT_WINDOW_S = 8.0  # run choice: a record is simulated on its strongest 8 s (+1 s lead-in); --window 0: whole
 
@@ -89,7 +89,7 @@ def _payload(args, desc_size):
 def cmd_feasibility(args) -> int:
     import mjcf
     from sim.assess import study
-    from sim.runs.files import jsonable, out_dir, write_json_atomic
+    from sim.runs.files import out_dir, write_json_atomic
 
     sc = None
     if args.scenario:
@@ -125,7 +125,7 @@ def cmd_feasibility(args) -> int:
 
     write_report(out, res, outcome)
     if args.json:
-        print(json.dumps(jsonable({k: v for k, v in res.items() if not k.startswith("_")}), indent=2, allow_nan=False))
+        print(json_text({k: v for k, v in res.items() if not k.startswith("_")}, indent=2))
     else:
         for line in verdict_lines(res):
             print(line)
@@ -161,7 +161,7 @@ def _suite(args, table, payload, window, out, say) -> int:
     w.writerows(rows)
     write_text_atomic(out / "suite.csv", buf.getvalue())
     if args.json:
-        print(json.dumps(rows, indent=2))
+        print(json_text(rows, indent=2))
     else:
         for r in rows:
             print(f"{r['record']:30s} x{r['scale']:<6g} {r['payload']:24s} "

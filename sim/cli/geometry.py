@@ -3,14 +3,15 @@ does to a test (sim/assess/geometry.py, sim/assess/crosstalk.py)."""
 
 from __future__ import annotations
 
-import json
 import sys
+
+from sim.runs.files import json_text
 
 
 def cmd_geometry(args) -> int:
     import mjcf
     from sim.assess import geometry
-    from sim.runs.files import jsonable, out_dir
+    from sim.runs.files import out_dir
 
     desc = mjcf.load_table(args.table)
     payload = mjcf.load_payload(args.payload) if args.payload else None
@@ -25,7 +26,7 @@ def cmd_geometry(args) -> int:
 
         write_geometry(args.out, r)
     if args.json:
-        print(json.dumps(jsonable({k: v for k, v in r.items() if not k.startswith("_")}), indent=2, allow_nan=False))
+        print(json_text({k: v for k, v in r.items() if not k.startswith("_")}, indent=2))
         return 0
     geometry.print_report(r)
     if args.out:

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import json
+from sim.runs.files import json_text
 
 
 def cmd_import(args) -> int:
-    from sim.runs.files import jsonable, write_json_atomic
+    from sim.runs.files import write_json_atomic
     from sim.runs.importer import import_files
 
     done = import_files(args.files, args.map, table=args.table, out=args.out)
@@ -15,7 +15,7 @@ def cmd_import(args) -> int:
 
     write_json_atomic(Path(args.out) / "import_report.json", {"map": args.map, "runs": reports})
     if args.json:
-        print(json.dumps(jsonable(reports), indent=2, allow_nan=False))
+        print(json_text(reports, indent=2))
         return 0
     for r in reports:
         print(f"{r['file']} -> {r['run_file']}")
