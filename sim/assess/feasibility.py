@@ -39,7 +39,28 @@ def feasibility(res, tm, hp, force_frac, stroke_frac) -> dict:
         "completed": {"ok": res.incomplete_reason is None},
     }
     failed = [k for k, v in checks.items() if not v["ok"]]
-    return {"feasible": not failed, "failed": failed, "checks": checks}
+    util = utilisation(checks)
+    limiting = max(util, key=util.get)
+    return {"feasible": not failed, "failed": failed, "checks": checks, "utilisation": util,
+            "limiting": limiting, "limiting_utilisation": util[limiting]}
+
+
+def utilisation(checks: dict) -> dict:
+    """Each check's use of its limit as one number (1 = at the limit, above 1 = failed):
+    peak / limit for stroke, force, valve saturation, overturning moment and loop gap;
+    the supply-pressure drop over the allowed drop; an incomplete run counts as infinite."""
+    c = checks
+    sp = c["supply_pressure"]
+    ot = c["overturning_moment"]
+    return {
+        "stroke": c["stroke"]["peak_fraction"] / c["stroke"]["limit"],
+        "force": c["force"]["peak_fraction"] / c["force"]["limit"],
+        "valve_saturation": c["valve_saturation"]["fraction_of_time"] / c["valve_saturation"]["limit"],
+        "supply_pressure": (1.0 - sp["min_fraction"]) / (1.0 - sp["limit"]),
+        "overturning_moment": ot["peak_n_m"] / ot["limit_n_m"] if ot["limit_n_m"] > 0 else 0.0,
+        "loop_closure": c["loop_closure"]["max_gap_m"] / c["loop_closure"]["limit"],
+        "completed": 0.0 if c["completed"]["ok"] else float("inf"),
+    }
 
 
 def diagnostics(res, tm, hp) -> dict:

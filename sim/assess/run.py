@@ -98,11 +98,8 @@ class ScenarioPlan:
 
     def run(self, *, progress=None) -> RunOutcome:
         """Run the plan; ``progress(text)`` is called once per stage (None: silent)."""
-        from sim.assess.feasibility import diagnostics
-        from sim.runs.build import build_runfile
-
         say = progress or (lambda text: None)
-        sc, sim, ref = self.scenario, self.sim, self.reference
+        sim, ref = self.sim, self.reference
         history = []
         settings = None
         if self.iteration.get("count", 0) > 0:
@@ -124,6 +121,17 @@ class ScenarioPlan:
             say("simulating")
             res = sim.run(reference=ref, progress=progress is not None and sys.stderr.isatty())
             plain, best, wall_total = res, 0, res.wall_s
+        return self.outcome(res, plain=plain, best=best, wall_total=wall_total, history=history, settings=settings)
+
+    def outcome(self, res, *, plain=None, best=0, wall_total=None, history=(), settings=None) -> RunOutcome:
+        """The :class:`RunOutcome` of a finished loop result ``res`` of this plan (also
+        for a result computed elsewhere, e.g. one simulation of a batch)."""
+        from sim.assess.feasibility import diagnostics
+        from sim.runs.build import build_runfile
+
+        sc, sim, ref = self.scenario, self.sim, self.reference
+        plain = res if plain is None else plain
+        wall_total = res.wall_s if wall_total is None else wall_total
         if len(res.t) < 2:
             raise DivergenceAtStart(res.incomplete_reason or "the simulation stopped before its second sample")
         run = build_runfile(res, self.tm, description=sc.description or sc.name,
@@ -153,9 +161,36 @@ class ScenarioPlan:
         return RunOutcome(run=run, result=res, summary=summary, tm=self.tm, warnings=self.warnings)
 
 
-def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None) -> ScenarioPlan:
+def _with_overrides(sc, overrides: dict):
+    """The table description, the payload and the scenario of ``sc`` with ``overrides``
+    (:mod:`sim.scenario.overrides`) applied to their TOML data, parsed again (so every
+    value is checked as in a file)."""
+    import dataclasses
+
+    from mjcf.description import PAYLOADS_DIR, TABLES_DIR, load_toml, parse_payload, parse_table, resolve
+    from sim.scenario.overrides import apply_all
+
+    tpath = resolve(sc.table, TABLES_DIR, "table")
+    data = {"table": load_toml(tpath), "motion": sc.motion, "controller": sc.controller,
+            "iteration": sc.iteration}
+    ppath = resolve(sc.payload, PAYLOADS_DIR, "payload") if sc.payload else None
+    if ppath is not None:
+        data["payload"] = load_toml(ppath)["payload"]
+    where = str(sc.path or sc.name)
+    data = apply_all(data, overrides, where=where)
+    desc = parse_table(data["table"], src=f"{tpath} (with overrides)")
+    payload = parse_payload({"payload": data["payload"]}, src=f"{ppath} (with overrides)") if ppath else None
+    sc = dataclasses.replace(sc, motion=data["motion"], controller=data["controller"], iteration=data["iteration"])
+    return desc, payload, sc
+
+
+def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
+                  overrides: dict | None = None) -> ScenarioPlan:
     """Build everything a run of ``scenario`` (a :class:`~sim.scenario.files.Scenario` or
-    its name/path) needs; raises :class:`~sim.errors.UserError` for bad inputs."""
+    its name/path) needs; raises :class:`~sim.errors.UserError` for bad inputs.
+
+    ``overrides``: ``{dotted key: value}`` (or ``{key: {"scale": f}}``) changes of the
+    table, payload and scenario data (:mod:`sim.scenario.overrides`), e.g. a sweep case."""
     import mjcf
     from sim.control.tvc import ControllerGains
     from sim.effects import build_model
@@ -166,8 +201,11 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
     sc = scenario if not isinstance(scenario, (str, Path)) else load_scenario(scenario)
     if duration_s is not None and not duration_s > 0:
         raise ScenarioError(f"--duration must be positive (got {duration_s})")
-    desc = mjcf.load_table(sc.table)
-    payload = mjcf.load_payload(sc.payload) if sc.payload else None
+    if overrides:
+        desc, payload, sc = _with_overrides(sc, overrides)
+    else:
+        desc = mjcf.load_table(sc.table)
+        payload = mjcf.load_payload(sc.payload) if sc.payload else None
     it = dict(sc.iteration)
     if iterations is not None:
         if iterations < 0 or iterations > 10:
@@ -194,15 +232,17 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
 
 
 def run_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
-                 progress=None) -> RunOutcome:
+                 progress=None, overrides: dict | None = None) -> RunOutcome:
     """Simulate ``scenario`` (a :class:`~sim.scenario.files.Scenario` or its name/path).
 
     ``duration_s``: simulate only this long; ``iterations``: off-line drive iterations
     (default: the scenario's ``[iteration] count``); ``progress``: ``progress(text)``
-    called once per stage (``None``: silent). Returns a :class:`RunOutcome`; raises
+    called once per stage (``None``: silent); ``overrides``: changed inputs (see
+    :func:`plan_scenario`). Returns a :class:`RunOutcome`; raises
     :class:`~sim.errors.UserError` for anything wrong with the inputs.
     """
-    return plan_scenario(scenario, duration_s=duration_s, iterations=iterations).run(progress=progress)
+    return plan_scenario(scenario, duration_s=duration_s, iterations=iterations,
+                         overrides=overrides).run(progress=progress)
 
 
 __all__ = ["DivergenceAtStart", "RunOutcome", "SCHEMA", "ScenarioPlan", "gains_json", "plan_scenario", "run_scenario"]

@@ -126,6 +126,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     run_cli.add_parsers(sub)  # run, replay, fit, geometry
     view_cli.add_parsers(sub)  # rerun recordings of run files
+    from sim.cli import sweep as sweep_cli
+
+    sweep_cli.add_parsers(sub)  # many runs of one scenario (grid / random, local batch or Dask)
     characterize_cli.add_parsers(sub)  # the CGS identification programme (and rice/ucsd dispatch)
     identify_cli.add_parsers(sub)  # uni-axial identification, Rice/UCSD programmes
     return p
