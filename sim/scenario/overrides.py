@@ -9,7 +9,8 @@ A key names one number (or list of numbers) in the TOML data a run is built from
   (``motion.amplitude_factor``, ``controller.kp_per_s``).
 
 A ``*`` segment matches every sub-table (``table.actuator_class.*.seal_friction_n``: the
-seal friction of every actuator class). An override either sets the value or, with
+seal friction of every actuator class). A controller gain the scenario does not set may be
+set (the controller checks it). An override either sets the value or, with
 ``scale``, multiplies the value in the file (a list elementwise). The data is copied,
 never changed in place; a key that names nothing raises :class:`OverrideError`.
 """
@@ -62,6 +63,9 @@ def apply(data: dict, key: str, value, *, scale: bool = False, where: str = "ove
     if root is None:
         raise OverrideError(f"{where}: override '{key}': the scenario has no {parts[0]}")
     sub = parts[1:]
+    if parts[0] == "controller" and not scale and len(sub) == 1 and sub[0] not in root:
+        root[sub[0]] = value  # a gain the scenario leaves at the table's default (checked by the controller)
+        return out
     for node, last in _targets(root, sub, key, where):
         old = node[last]
         if scale:

@@ -113,12 +113,16 @@ def _local(sweep, todo, out, workers, group, done_cb):
 
 
 def _dask(sweep, todo, out, workers, address, done_cb):
+    import dask
     from dask.distributed import Client, LocalCluster, as_completed
 
     run_dir = out / "runs" if sweep.run_files else None
     cluster = None
     if address is None:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        # a case holds its worker's GIL for seconds; on a loaded machine heartbeats come
+        # late: no time-to-live, so a slow worker is waited for, not restarted
+        with dask.config.set({"distributed.scheduler.worker-ttl": None}):
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
         address = cluster
     client = Client(address)
     try:
