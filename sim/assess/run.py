@@ -95,6 +95,7 @@ class ScenarioPlan:
     reference: object
     iteration: dict
     warnings: list
+    engine: str = "loop"
 
     def run(self, *, progress=None) -> RunOutcome:
         """Run the plan; ``progress(text)`` is called once per stage (None: silent)."""
@@ -117,6 +118,12 @@ class ScenarioPlan:
             best = int(np.argmin(scores))
             res, plain = results[best], results[0]
             wall_total = sum(r.wall_s for r in results)
+        elif self.engine == "callback":
+            from sim.loop.callback import run_callback
+
+            say("simulating (coupled step inside MuJoCo)")
+            res = run_callback(sim, ref)
+            plain, best, wall_total = res, 0, res.wall_s
         else:
             say("simulating")
             res = sim.run(reference=ref, progress=progress is not None and sys.stderr.isatty())
@@ -185,12 +192,15 @@ def _with_overrides(sc, overrides: dict):
 
 
 def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
-                  overrides: dict | None = None) -> ScenarioPlan:
+                  overrides: dict | None = None, engine: str = "loop") -> ScenarioPlan:
     """Build everything a run of ``scenario`` (a :class:`~sim.scenario.files.Scenario` or
     its name/path) needs; raises :class:`~sim.errors.UserError` for bad inputs.
 
     ``overrides``: ``{dotted key: value}`` (or ``{key: {"scale": f}}``) changes of the
-    table, payload and scenario data (:mod:`sim.scenario.overrides`), e.g. a sweep case."""
+    table, payload and scenario data (:mod:`sim.scenario.overrides`), e.g. a sweep case.
+    ``engine``: ``"loop"`` (:meth:`Simulation.run`, the reference) or ``"callback"`` (the
+    same run with the coupled step inside MuJoCo, :mod:`sim.loop.callback`; used where the
+    table allows it: closed loop, no drive iterations)."""
     import mjcf
     from sim.control.tvc import ControllerGains
     from sim.effects import build_model
@@ -227,12 +237,19 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
     warns = limit_warnings(desc, motions)
     tm = rice.tm if rice else build_model(desc, payload)
     sim = rice or Simulation(tm, gains=gains)
+    if engine not in ("loop", "callback"):
+        raise ScenarioError(f"engine must be \"loop\" or \"callback\" (got {engine!r})")
+    if engine == "callback":
+        from sim.loop.callback import accepts
+
+        if rice or it.get("count", 0) or accepts(sim):
+            engine = "loop"  # the callback runs the fused closed loop only
     return ScenarioPlan(scenario=sc, desc=desc, payload=payload, tm=tm, sim=sim, gains=gains, reference=ref,
-                        iteration=it, warnings=warns)
+                        iteration=it, warnings=warns, engine=engine)
 
 
 def run_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
-                 progress=None, overrides: dict | None = None) -> RunOutcome:
+                 progress=None, overrides: dict | None = None, engine: str = "loop") -> RunOutcome:
     """Simulate ``scenario`` (a :class:`~sim.scenario.files.Scenario` or its name/path).
 
     ``duration_s``: simulate only this long; ``iterations``: off-line drive iterations
@@ -241,8 +258,8 @@ def run_scenario(scenario, *, duration_s: float | None = None, iterations: int |
     :func:`plan_scenario`). Returns a :class:`RunOutcome`; raises
     :class:`~sim.errors.UserError` for anything wrong with the inputs.
     """
-    return plan_scenario(scenario, duration_s=duration_s, iterations=iterations,
-                         overrides=overrides).run(progress=progress)
+    return plan_scenario(scenario, duration_s=duration_s, iterations=iterations, overrides=overrides,
+                         engine=engine).run(progress=progress)
 
 
 __all__ = ["DivergenceAtStart", "RunOutcome", "SCHEMA", "ScenarioPlan", "gains_json", "plan_scenario", "run_scenario"]

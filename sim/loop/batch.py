@@ -69,7 +69,6 @@ class BatchRunner:
             raise ValueError(f"{N} simulations but {len(references)} references")
         ns = np.array([len(r.t) if duration_s is None else min(len(r.t), int(round(duration_s * s.gains.rate_hz)) + 1)
                        for s, r in zip(sims, references)])
-        na = sims[0].tm.n_act
         from hydraulics import _layout as HL
 
         # the batch's hydraulic and pre-sliding state, simulations first

@@ -34,7 +34,8 @@ EXECUTORS = ("local", "dask")
 
 
 def run_case(scenario, case, *, duration_s=None, iterations=None, run_dir=None) -> dict:
-    """One case: :func:`sim.assess.run.run_scenario` with ``case.overrides``; returns its
+    """One case: :func:`sim.assess.run.run_scenario` with ``case.overrides`` (on the
+    callback engine where the table allows, the same run as the loop); returns its
     row (varied values, verdict, limiting utilisation, timing). A case the inputs make
     impossible (a user error, e.g. divergence before the second sample) gives a row with
     ``error`` instead of raising, so one bad case does not stop a sweep."""
@@ -42,7 +43,8 @@ def run_case(scenario, case, *, duration_s=None, iterations=None, run_dir=None) 
 
     t0 = time.perf_counter()
     try:
-        out = run_scenario(scenario, duration_s=duration_s, iterations=iterations, overrides=case.overrides)
+        out = run_scenario(scenario, duration_s=duration_s, iterations=iterations, overrides=case.overrides,
+                           engine="callback")
     except UserError as e:
         return error_row(case, str(e), time.perf_counter() - t0)
     return outcome_row(case, out, run_dir, time.perf_counter() - t0)
