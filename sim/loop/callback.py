@@ -16,8 +16,8 @@ Per-simulation data: ``mjData.userdata`` (``nuserdata`` = :data:`NUSERDATA`, par
 MuJoCo's state row, so a batch or a rollout carries it per simulation): ``[0]`` the
 address of the simulation's :class:`Context` (a float64 block of scalars and array
 descriptors: the recorder, the reference, the hydraulic and controller state), ``[1]``
-the physics-step counter. A simulation whose ``userdata[0]`` is 0 (any other MjData,
-a reset) is left alone.
+the physics-step counter. A model with fewer userdata, or a simulation whose
+``userdata[0]`` is 0 (any other MjData, a reset), is left alone.
 
 Same run as the loop, bit for bit (``tests/test_batch.py``): the same compiled kernels in
 the same order on the same MuJoCo state. Two details make it so: the loop's controller
@@ -284,6 +284,18 @@ def _field_offsets() -> dict:
         if len(hits) != 1:
             raise RuntimeError(f"mjData field {f}: not found once in the struct")
         out[f] = int(hits.pop()) * 8
+    # nuserdata in mjModel (an int): where two models differing only in it differ
+    specs = []
+    for nud in (3, 77777):
+        sp = mujoco.MjSpec()
+        sp.worldbody.add_body().add_geom(size=[0.1, 0, 0])
+        sp.nuserdata = nud
+        specs.append(sp.compile())
+    a, b = (np.frombuffer(ctypes.string_at(mm._address, 4096), dtype=np.int32) for mm in specs)
+    hits = np.flatnonzero((a == 3) & (b == 77777))
+    if len(hits) != 1:
+        raise RuntimeError("mjModel field nuserdata: not found once in the struct")
+    out["nuserdata"] = int(hits[0]) * 4
     _offsets = out
     return out
 
@@ -291,7 +303,7 @@ def _field_offsets() -> dict:
 # byte offsets of the mjData array pointers, set by control_callback before compiling
 # _callback (numba freezes them as constants: they depend only on the MuJoCo build, pinned
 # in pyproject.toml, so the compiled callback is cached on disk)
-O_QPOS = O_QVEL = O_QACC = O_CTRL = O_QFA = O_XPOS = O_XMAT = O_UD = 0
+O_QPOS = O_QVEL = O_QACC = O_CTRL = O_QFA = O_XPOS = O_XMAT = O_UD = O_NUD = 0
 
 
 @numba.njit(**_J)
@@ -300,6 +312,8 @@ def _field(base, o, n):
 
 
 def _callback(m, d):
+    if numba.carray(_ptr(_addr(m) + O_NUD), (1,), np.int32)[0] < NUSERDATA:
+        return  # a model without our userdata: not ours
     base = _addr(d)
     ud = _field(base, O_UD, NUSERDATA)
     ctx = np.int64(ud[0])
@@ -316,13 +330,14 @@ def _callback(m, d):
 def control_callback():
     """The compiled ``mjcb_control`` (numba ``cfunc``), built (or loaded from numba's
     cache) on first use."""
-    global _cfunc, O_QPOS, O_QVEL, O_QACC, O_CTRL, O_QFA, O_XPOS, O_XMAT, O_UD
+    global _cfunc, O_QPOS, O_QVEL, O_QACC, O_CTRL, O_QFA, O_XPOS, O_XMAT, O_UD, O_NUD
     with _lock:
         if _cfunc is not None:
             return _cfunc
         off = _field_offsets()
         O_QPOS, O_QVEL, O_QACC, O_CTRL = off["qpos"], off["qvel"], off["qacc"], off["ctrl"]
         O_QFA, O_XPOS, O_XMAT, O_UD = off["qfrc_applied"], off["xpos"], off["xmat"], off["userdata"]
+        O_NUD = off["nuserdata"]
         _cfunc = numba.cfunc(types.void(types.voidptr, types.voidptr), nopython=True, nogil=True,
                              boundscheck=False, cache=True)(_callback)
         return _cfunc
