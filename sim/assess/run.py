@@ -191,6 +191,16 @@ def _with_overrides(sc, overrides: dict):
     return desc, payload, sc
 
 
+def check_overrides(scenario, overrides: dict) -> None:
+    """Raise the :class:`~sim.errors.UserError` ``overrides`` would give ``scenario``
+    (an override naming nothing, a value the table or payload rejects), without
+    building a model."""
+    from sim.scenario.files import load_scenario
+
+    sc = scenario if not isinstance(scenario, (str, Path)) else load_scenario(scenario)
+    _with_overrides(sc, overrides)
+
+
 def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
                   overrides: dict | None = None, engine: str = "loop") -> ScenarioPlan:
     """Build everything a run of ``scenario`` (a :class:`~sim.scenario.files.Scenario` or
@@ -262,4 +272,4 @@ def run_scenario(scenario, *, duration_s: float | None = None, iterations: int |
                          engine=engine).run(progress=progress)
 
 
-__all__ = ["DivergenceAtStart", "RunOutcome", "SCHEMA", "ScenarioPlan", "gains_json", "plan_scenario", "run_scenario"]
+__all__ = ["DivergenceAtStart", "check_overrides", "RunOutcome", "SCHEMA", "ScenarioPlan", "gains_json", "plan_scenario", "run_scenario"]

@@ -124,7 +124,7 @@ def _dask(sweep, todo, out, workers, address, done_cb):
         # a case holds its worker's GIL for seconds; on a loaded machine heartbeats come
         # late: no time-to-live, so a slow worker is waited for, not restarted
         with dask.config.set({"distributed.scheduler.worker-ttl": None}):
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0")
         address = cluster
     client = Client(address)
     try:
@@ -154,8 +154,16 @@ def run_sweep(sweep, out, *, workers: int | None = None, executor: str = "local"
     workers = workers or os.cpu_count() or 1
     if workers < 1:
         raise UserError(f"--workers must be at least 1 (got {workers})")
-    out = out_dir(out)
+    from sim.assess.run import check_overrides
+
     cases = sweep.cases()
+    where = str(sweep.path or sweep.name)
+    for c in cases[:1] + cases[-1:]:  # every case has the same keys: a bad key fails here, before any run
+        try:
+            check_overrides(sweep.scenario, c.overrides)
+        except UserError as e:
+            raise UserError(f"{where}: case {c.id}: {e}") from None
+    out = out_dir(out)
     (out / "cases").mkdir(exist_ok=True)
     todo = [c for c in cases if not _case_path(out, c).exists()]
     skipped = len(cases) - len(todo)
