@@ -46,7 +46,9 @@ class BatchRunner:
                 raise ScenarioError(f"a simulation of this batch cannot run on the callback: {why}")
         self.sims = list(sims)
         self.nthread = nthread or os.cpu_count() or 1
-        self.models = [CB.callback_model(s) for s in self.sims]
+        compiled = {}  # one model per table model (simulations of one TableModel share it)
+        self.models = [compiled.setdefault(id(s.tm), CB.callback_model(s)) if id(s.tm) not in compiled
+                       else compiled[id(s.tm)] for s in self.sims]
         sizes = {(m.nq, m.nv, m.nu, m.nbody, m.neq, m.nuserdata) for m in self.models}
         if len(sizes) != 1:
             raise ScenarioError("the simulations of a batch must share one table layout (same bodies, joints, "
