@@ -116,3 +116,29 @@ def test_batch_rejects_python_callbacks(scenario):
     with installed():
         b.step()
     assert np.isfinite(b.qpos).all()
+
+
+def test_mujoco_rollout_runs_the_twin(scenario):
+    """mujoco.rollout (C threads, no Python per step) with the callback gives the loop's run."""
+    from mujoco import rollout
+
+    from sim.loop import callback as CB
+
+    p = _plan(scenario)
+    sim, ref = p.sim, p.reference
+    sim.reset()
+    loop = sim.run(reference=ref)
+    sim.reset()
+    m2 = CB.callback_model(sim)
+    d2 = mujoco.MjData(m2)
+    CB.copy_state(sim.m, sim.d, m2, d2)
+    st = {"X": sim.hs._X.copy(), "Y": sim.hs._Y.copy(), "IC": sim.hs._IC.copy(), "ICS": sim.hs._ICS.copy(),
+          "ZFR": sim._zfr.copy()}
+    ctx = CB.Context(sim, ref, len(loop.t), state=st)
+    d2.userdata[0], d2.userdata[1] = ctx.address, 0.0  # user state: taken from the MjData by rollout
+    spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    s0 = np.empty(mujoco.mj_stateSize(m2, spec))
+    mujoco.mj_getState(m2, d2, s0, spec)
+    with installed():
+        rollout.rollout(m2, d2, s0[None], nstep=len(loop.t) * sim.steps_per_tick)
+    _same(loop, ctx.result(0.0, (d2.qpos, d2.qvel)))
