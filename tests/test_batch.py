@@ -142,3 +142,25 @@ def test_mujoco_rollout_runs_the_twin(scenario):
     with installed():
         rollout.rollout(m2, d2, s0[None], nstep=len(loop.t) * sim.steps_per_tick)
     _same(loop, ctx.result(0.0, (d2.qpos, d2.qvel)))
+
+
+def test_callback_stops_where_the_loop_stops(scenario):
+    """The divergence check inside the callback: a relief setting below the run's peak
+    chamber pressure stops both routes at the same tick with the same reason."""
+    import dataclasses
+
+    p = _plan(scenario)
+    sim, ref = p.sim, p.reference
+    sim.reset()
+    full = sim.run(reference=ref)
+    peak = max(np.nanmax(full.channels["pressure_a"]), np.nanmax(full.channels["pressure_b"]))
+    sim.hp = dataclasses.replace(sim.hp, relief_pressure_pa=0.97 * peak)  # the check's limit only
+    sim.reset()
+    loop = sim.run(reference=ref)
+    sim.reset()
+    cb = run_callback(sim, ref)
+    assert loop.incomplete_reason and "above relief" in loop.incomplete_reason
+    assert 1 < len(loop.t) < len(full.t)
+    _same(loop, cb)
+    res = BatchRunner([sim], nthread=1).run([ref])[0]
+    _same(loop, res)
