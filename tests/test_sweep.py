@@ -96,6 +96,7 @@ def test_local_sweep_resumes_without_redoing_cases(tmp_path, sweep_file):
     assert len(text) == 5 and text[0].startswith("id,bulk_modulus_pa,mass_factor,feasible")
 
 
+@pytest.mark.slow  # ~35 s: starting a two-process LocalCluster dominates
 def test_dask_local_cluster_runs_a_tiny_sweep(tmp_path, sweep_file):
     pytest.importorskip("dask.distributed")
     sw = load_sweep(sweep_file)
