@@ -9,7 +9,10 @@ For each scene (bare CGS table, 20 t rigid specimen, 3-storey frame, 6 m tower):
   real-time factor and the ratio whole loop / bare ``mj_step`` (target <= 1.3) of the
   default loop, and the same run unfused (``fuse=False``) for the cost per physics step
   split into physics / hydraulics / controller / output;
-* the hydraulic step alone (12 actuators and a 64 x 12 batch, numba and numpy).
+* the hydraulic step alone (12 actuators and a 64 x 12 batch, numba and numpy);
+* the coupled step inside MuJoCo and the batch (``bench/batch_bench.py``), ending with two
+  lines a script can read: ``single loop / bare mj_step: X`` (the callback route, 20 t
+  scene) and ``batch efficiency (N sims, T threads): Y``.
 
 All figures come from this one run on this machine; they are ratios of timings taken
 side by side, not absolute promises.
@@ -126,6 +129,15 @@ def main(argv=None) -> int:
         from bench import recording_bench
 
         recording_bench.main([])
+    print()
+    from bench import batch_bench
+
+    tm = build_model(desc, mjcf.load_payload("rigid_20t"))
+    b = batch_bench.main(tm, ref, batch_seconds=0.25 if args.quick else 0.5,
+                         sizes=(1, 8, 32) if args.quick else (1, 8, 32, 128))
+    n = b["summary_n"]
+    print(f"single loop / bare mj_step: {b['callback_ratio']:.3f}")
+    print(f"batch efficiency ({n} sims, {b['threads']} threads): {b['batches'][n]['efficiency']:.3f}")
     return 0
 
 

@@ -97,6 +97,7 @@ class ScenarioPlan:
     warnings: list
     envelope_reference: object = None  #: the whole demanded motion when ``reference`` is a window of it
     window: dict = field(default_factory=dict)  #: which part of the motion runs (start_s, end_s, of_record_s, why)
+    engine: str = "loop"  #: "loop" (Simulation.run, the reference) or "callback" (the coupled step inside MuJoCo)
 
     def run(self, *, progress=None) -> RunOutcome:
         """Run the plan; ``progress(text)`` is called once per stage (None: silent).
@@ -112,7 +113,7 @@ class ScenarioPlan:
             best, wall_total, history, settings = 0, res.wall_s, [], None
             if len(res.t) < 2:
                 raise
-        return self._finish(res, plain, best, wall_total, settings, history)
+        return self.outcome(res, plain=plain, best=best, wall_total=wall_total, history=history, settings=settings)
 
     def _simulate(self, say, progress, history):
         sim, ref = self.sim, self.reference
@@ -134,16 +135,27 @@ class ScenarioPlan:
             best = int(np.argmin(scores))
             res, plain = results[best], results[0]
             wall_total = sum(r.wall_s for r in results)
+        elif self.engine == "callback":
+            from sim.loop.callback import run_callback
+
+            say("simulating (coupled step inside MuJoCo)")
+            res = run_callback(sim, ref)
+            plain, best, wall_total = res, 0, res.wall_s
         else:
             say("simulating")
             res = sim.run(reference=ref, progress=progress is not None and sys.stderr.isatty())
             plain, best, wall_total = res, 0, res.wall_s
         return res, plain, best, wall_total, settings
 
-    def _finish(self, res, plain, best, wall_total, settings, history) -> RunOutcome:
-        sc, sim, ref = self.scenario, self.sim, self.reference
+    def outcome(self, res, *, plain=None, best=0, wall_total=None, history=(), settings=None) -> RunOutcome:
+        """The :class:`RunOutcome` of a finished loop result ``res`` of this plan (also
+        for a result computed elsewhere, e.g. one simulation of a batch)."""
         from sim.assess.feasibility import diagnostics
         from sim.runs.build import build_runfile
+
+        sc, sim, ref = self.scenario, self.sim, self.reference
+        plain = res if plain is None else plain
+        wall_total = res.wall_s if wall_total is None else wall_total
 
         if len(res.t) < 2:
             raise DivergenceAtStart(res.incomplete_reason or "the simulation stopped before its second sample")
@@ -177,14 +189,53 @@ class ScenarioPlan:
         return RunOutcome(run=run, result=res, summary=summary, tm=self.tm, warnings=self.warnings)
 
 
+def _with_overrides(sc, overrides: dict):
+    """The table description, the payload and the scenario of ``sc`` with ``overrides``
+    (:mod:`sim.scenario.overrides`) applied to their TOML data, parsed again (so every
+    value is checked as in a file)."""
+    import dataclasses
+
+    from mjcf.description import PAYLOADS_DIR, TABLES_DIR, load_toml, parse_payload, parse_table, resolve
+    from sim.scenario.overrides import apply_all
+
+    tpath = resolve(sc.table, TABLES_DIR, "table")
+    data = {"table": load_toml(tpath), "motion": sc.motion, "controller": sc.controller,
+            "iteration": sc.iteration}
+    ppath = resolve(sc.payload, PAYLOADS_DIR, "payload") if sc.payload else None
+    if ppath is not None:
+        data["payload"] = load_toml(ppath)["payload"]
+    where = str(sc.path or sc.name)
+    data = apply_all(data, overrides, where=where)
+    desc = parse_table(data["table"], src=f"{tpath} (with overrides)")
+    payload = parse_payload({"payload": data["payload"]}, src=f"{ppath} (with overrides)") if ppath else None
+    sc = dataclasses.replace(sc, motion=data["motion"], controller=data["controller"], iteration=data["iteration"])
+    return desc, payload, sc
+
+
+def check_overrides(scenario, overrides: dict) -> None:
+    """Raise the :class:`~sim.errors.UserError` ``overrides`` would give ``scenario``
+    (an override naming nothing, a value the table or payload rejects), without
+    building a model."""
+    from sim.scenario.files import load_scenario
+
+    sc = scenario if not isinstance(scenario, (str, Path)) else load_scenario(scenario)
+    _with_overrides(sc, overrides)
+
+
 def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
-                  payload=..., motions: dict | None = None) -> ScenarioPlan:
+                  payload=..., motions: dict | None = None, overrides: dict | None = None,
+                  engine: str = "loop") -> ScenarioPlan:
     """Build everything a run of ``scenario`` (a :class:`~sim.scenario.files.Scenario` or
     its name/path) needs; raises :class:`~sim.errors.UserError` for bad inputs.
 
     ``payload``: a payload description (``mjcf.description`` object, or None for the bare
     table) instead of the scenario's; ``motions``: {dof: Motion} instead of the
-    scenario's ``[motion]`` (both used by ``shaketable feasibility``)."""
+    scenario's ``[motion]`` (both used by ``shaketable feasibility``).
+    ``overrides``: ``{dotted key: value}`` (or ``{key: {"scale": f}}``) changes of the
+    table, payload and scenario data (:mod:`sim.scenario.overrides`), e.g. a sweep case.
+    ``engine``: ``"loop"`` (:meth:`Simulation.run`, the reference) or ``"callback"`` (the
+    same run with the coupled step inside MuJoCo, :mod:`sim.loop.callback`; used where the
+    table allows it: closed loop, no drive iterations)."""
     import mjcf
     from sim.control.tvc import ControllerGains
     from sim.effects import build_model
@@ -195,7 +246,12 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
     sc = scenario if not isinstance(scenario, (str, Path)) else load_scenario(scenario)
     if duration_s is not None and not duration_s > 0:
         raise ScenarioError(f"--duration must be positive (got {duration_s})")
-    desc = mjcf.load_table(sc.table)
+    if overrides:
+        desc, opayload, sc = _with_overrides(sc, overrides)
+        if payload is ...:
+            payload = opayload
+    else:
+        desc = mjcf.load_table(sc.table)
     if payload is ...:
         payload = mjcf.load_payload(sc.payload) if sc.payload else None
     it = dict(sc.iteration)
@@ -228,20 +284,29 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
     warns = limit_warnings(desc, motions)
     tm = rice.tm if rice else build_model(desc, payload)
     sim = rice or Simulation(tm, gains=gains)
+    if engine not in ("loop", "callback"):
+        raise ScenarioError(f"engine must be \"loop\" or \"callback\" (got {engine!r})")
+    if engine == "callback":
+        from sim.loop.callback import accepts
+
+        if rice or it.get("count", 0) or accepts(sim):
+            engine = "loop"  # the callback runs the fused closed loop only
     return ScenarioPlan(scenario=sc, desc=desc, payload=payload, tm=tm, sim=sim, gains=gains, reference=ref,
-                        iteration=it, warnings=warns, window=window)
+                        iteration=it, warnings=warns, window=window, engine=engine)
 
 
 def run_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
-                 progress=None) -> RunOutcome:
+                 progress=None, overrides: dict | None = None, engine: str = "loop") -> RunOutcome:
     """Simulate ``scenario`` (a :class:`~sim.scenario.files.Scenario` or its name/path).
 
     ``duration_s``: simulate only this long; ``iterations``: off-line drive iterations
     (default: the scenario's ``[iteration] count``); ``progress``: ``progress(text)``
-    called once per stage (``None``: silent). Returns a :class:`RunOutcome`; raises
+    called once per stage (``None``: silent); ``overrides``: changed inputs (see
+    :func:`plan_scenario`). Returns a :class:`RunOutcome`; raises
     :class:`~sim.errors.UserError` for anything wrong with the inputs.
     """
-    return plan_scenario(scenario, duration_s=duration_s, iterations=iterations).run(progress=progress)
+    return plan_scenario(scenario, duration_s=duration_s, iterations=iterations, overrides=overrides,
+                         engine=engine).run(progress=progress)
 
 
-__all__ = ["DivergenceAtStart", "RunOutcome", "SCHEMA", "ScenarioPlan", "gains_json", "plan_scenario", "run_scenario"]
+__all__ = ["DivergenceAtStart", "check_overrides", "RunOutcome", "SCHEMA", "ScenarioPlan", "gains_json", "plan_scenario", "run_scenario"]

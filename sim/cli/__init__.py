@@ -115,6 +115,9 @@ def build_parser() -> argparse.ArgumentParser:
     effects_cli.add_parsers(sub)  # the effect library and a table's parameters
     table_cli.add_parsers(sub)  # a lab's own table description from a few numbers
     import_cli.add_parsers(sub)  # a lab's recorder export to run files
+    from sim.cli import sweep as sweep_cli
+
+    sweep_cli.add_parsers(sub)  # many runs of one scenario (grid / random, local batch or Dask)
     return p
 
 

@@ -1,0 +1,100 @@
+"""The coupled step inside MuJoCo and the batch, against the bare ``mj_step``.
+
+* single simulation: the whole twin on the callback route (``sim.loop.callback``) per
+  physics step over the bare ``mj_step`` of the same model (target <= 1.15), beside the
+  Python loop's figure;
+* batches of N on all cores (``sim.loop.batch``): simulated seconds per wall second, and
+  the efficiency = batch physics steps per second / (threads x the single bare
+  ``mj_step`` rate) (target >= 0.85 for N >= 32).
+
+All figures from this one run; on a shared machine they are noisy, the ratios less so
+(taken side by side).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import mujoco
+import numpy as np
+
+from sim.loop.batch import BatchRunner
+from sim.loop.callback import control_callback, run_callback
+from sim.loop.simulation import Simulation
+
+
+def bare_rate(model, seconds: float = 1.0) -> float:
+    """Bare ``mj_step`` calls per second (random actuator forces), one thread."""
+    d = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, d, 0)
+    rng = np.random.default_rng(0)
+    forces = rng.normal(0, 5e4, (64, model.nu))
+    for i in range(200):
+        mujoco.mj_step(model, d)
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        for i in range(256):
+            d.ctrl[:] = forces[i & 63]
+            mujoco.mj_step(model, d)
+        n += 256
+    return n / (time.perf_counter() - t0)
+
+
+def bare_replay_rate(tm, forces, spt: int) -> float:
+    """Bare ``mj_step`` calls per second of the same model on the same motion: the
+    recorded actuator forces (held over each tick) into ``ctrl``, no hydraulics,
+    controller or recorder; one thread."""
+    m = tm.model
+    d = tm.new_data()
+    ids = tm.actuator_ids
+    t0 = time.perf_counter()
+    for f in forces:
+        d.ctrl[ids] = f
+        for _ in range(spt):
+            mujoco.mj_step(m, d)
+    return len(forces) * spt / (time.perf_counter() - t0)
+
+
+def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads: int | None = None) -> dict:
+    threads = threads or os.cpu_count() or 1
+    control_callback()  # compile / load outside the timings
+    sim = Simulation(tm)
+    sim.reset()
+    run_callback(sim, ref, duration_s=0.2)
+    sim.reset()
+    loop = sim.run(reference=ref)
+    F = loop.channels["actuator_force"]
+    rate0 = bare_replay_rate(tm, F, sim.steps_per_tick)
+    sim.reset()
+    cb = run_callback(sim, ref)
+    rate1 = bare_replay_rate(tm, F, sim.steps_per_tick)
+    bare_us = 2e6 / (rate0 + rate1)  # before and after the callback run
+    steps = cb.timing["steps"]
+    out = {"bare_us": bare_us, "loop_us": loop.wall_s / loop.timing["steps"] * 1e6,
+           "callback_us": cb.wall_s / steps * 1e6, "threads": threads, "batches": {}}
+    out["loop_ratio"] = out["loop_us"] / bare_us
+    out["callback_ratio"] = out["callback_us"] / bare_us
+    print(f"single simulation, {cb.sim_s:.1f} s of El Centro: bare mj_step (same model, same forces) {bare_us:.1f} us; "
+          f"Python loop {out['loop_us']:.1f} us/step ({out['loop_ratio']:.2f} x); "
+          f"callback route {out['callback_us']:.1f} us/step ({out['callback_ratio']:.2f} x)")
+    print(f"batches on {threads} threads, {batch_seconds:g} s simulated each "
+          f"(efficiency = physics steps/s over {threads} x the bare mj_step rate):")
+    print(f"  {'N':>5s} {'sim s / wall s':>15s} {'steps/s':>10s} {'efficiency':>10s}")
+    for n in sizes:
+        sims = [Simulation(tm) for _ in range(n)]
+        runner = BatchRunner(sims, nthread=threads)
+        res = runner.run([ref] * n, duration_s=batch_seconds)
+        wall = runner.wall_s
+        nsteps = sum(r.timing["steps"] for r in res)
+        sps = nsteps / wall
+        eff = sps / (threads * 1e6 / bare_us)
+        simps = sum(r.sim_s for r in res) / wall
+        out["batches"][n] = {"sim_s_per_wall_s": simps, "steps_per_s": sps, "efficiency": eff}
+        print(f"  {n:5d} {simps:15.2f} {sps:10.0f} {eff:10.2f}")
+    big = max(n for n in sizes if n >= 32) if any(n >= 32 for n in sizes) else max(sizes)
+    out["summary_n"] = big
+    return out
+
+
+__all__ = ["bare_rate", "main"]

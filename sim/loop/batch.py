@@ -1,0 +1,127 @@
+"""Many simulations of one table at once, on MuJoCo's batch (``mujoco.batch.Batch``).
+
+:class:`BatchRunner` takes N prepared :class:`sim.loop.simulation.Simulation` objects
+(each from its own plan, so each may have its own payload mass, bulk modulus, gains,
+friction, motion and scale) and runs them closed loop together: MuJoCo steps them on
+its thread pool with the coupled step compiled as its control callback
+(:mod:`sim.loop.callback`), so no Python runs between physics steps. Per-simulation
+model fields come from each simulation's own compiled model (``Batch.set_models``:
+models compiled from one spec with other parameters, the MjData layout unchanged); the
+compiled kernels are shared, nothing is recompiled per simulation.
+
+The hydraulic and controller state of the batch sits in arrays with the simulations as
+their first axis (``X`` (N, NX, 1, n_act): ``force`` is the (N, n_act) view of the
+piston forces); each simulation's callback context points at its slice.
+
+Each simulation's result equals its single run (``Simulation.run``), bit for bit: the
+batch runs each simulation's steps on one MjData in order, and the callback does what
+the loop does (``tests/test_batch.py``).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import mujoco
+import numpy as np
+from mujoco import batch as mjbatch
+
+from sim.errors import ScenarioError
+from sim.loop import callback as CB
+
+_INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
+
+
+class BatchRunner:
+    """N closed-loop simulations of one table on one ``mujoco.batch.Batch`` of
+    ``nthread`` threads (0: all cores)."""
+
+    def __init__(self, sims: list, *, nthread: int = 0):
+        if not sims:
+            raise ValueError("BatchRunner needs at least one simulation")
+        for s in sims:
+            why = CB.accepts(s)
+            if why:
+                raise ScenarioError(f"a simulation of this batch cannot run on the callback: {why}")
+        self.sims = list(sims)
+        self.nthread = nthread or os.cpu_count() or 1
+        compiled = {}  # one model per table model (simulations of one TableModel share it)
+        self.models = [compiled.setdefault(id(s.tm), CB.callback_model(s)) if id(s.tm) not in compiled
+                       else compiled[id(s.tm)] for s in self.sims]
+        sizes = {(m.nq, m.nv, m.nu, m.nbody, m.neq, m.nuserdata) for m in self.models}
+        if len(sizes) != 1:
+            raise ScenarioError("the simulations of a batch must share one table layout (same bodies, joints, "
+                                "actuators); run other tables in another batch")
+
+    @staticmethod
+    def accepts(plan) -> bool:
+        """Can the batch run this :class:`sim.assess.run.ScenarioPlan` (closed loop on
+        the callback, no drive iterations)?"""
+        from sim.loop.simulation import Simulation
+
+        return (isinstance(plan.sim, Simulation) and CB.accepts(plan.sim) is None
+                and not plan.iteration.get("count", 0))
+
+    def run(self, references: list, *, duration_s: float | None = None, chunk_ticks: int = 256) -> list:
+        """Run simulation i on ``references[i]`` from its current state (its
+        ``reset``); returns one :class:`sim.loop.simulation.RunResult` per simulation."""
+        sims, N = self.sims, len(self.sims)
+        if len(references) != N:
+            raise ValueError(f"{N} simulations but {len(references)} references")
+        ns = np.array([len(r.t) if duration_s is None else min(len(r.t), int(round(duration_s * s.gains.rate_hz)) + 1)
+                       for s, r in zip(sims, references)])
+        from hydraulics import _layout as HL
+
+        # the batch's hydraulic and pre-sliding state, simulations first
+        self.X = np.stack([s.hs._X for s in sims])  # (N, NX, 1, n_act)
+        self.Y = np.stack([s.hs._Y for s in sims])
+        self.IC = np.stack([s.hs._IC for s in sims])
+        self.ICS = np.stack([s.hs._ICS for s in sims])
+        self.ZFR = np.stack([s._zfr for s in sims])
+        self.force = self.X[:, HL.FORCE, 0, :]  # (N, n_act) view
+        ctxs = [CB.Context(s, r, int(n), state={"X": self.X[i], "Y": self.Y[i], "IC": self.IC[i],
+                                                "ICS": self.ICS[i], "ZFR": self.ZFR[i]})
+                for i, (s, r, n) in enumerate(zip(sims, references, ns))]
+        m0 = self.models[0]
+        b = mjbatch.Batch(m0, N, self.nthread)
+        if N > 1 or self.models[0] is not m0:
+            b.set_models(self.models)
+        rows = np.empty((N, b.nstate))
+        for i, (s, m2, ctx) in enumerate(zip(sims, self.models, ctxs)):
+            d2 = mujoco.MjData(m2)
+            CB.copy_state(s.m, s.d, m2, d2)
+            d2.userdata[0] = ctx.address
+            d2.userdata[1] = 0.0
+            mujoco.mj_getState(m2, d2, rows[i], _INTEGRATION)
+        b.state[:] = rows
+        spt = np.array([s.steps_per_tick for s in sims])
+        if len(set(spt.tolist())) != 1:
+            raise ScenarioError("the simulations of a batch must share one physics step and controller rate")
+        spt = int(spt[0])
+        done = np.zeros(N, dtype=np.int64)
+        with CB.installed():
+            t0 = time.perf_counter()
+            while True:
+                active = np.flatnonzero((done < ns) & np.array([c.C[CB.S_DONE] < 0 for c in ctxs]))
+                if not len(active):
+                    break
+                k = int(min(chunk_ticks, (ns[active] - done[active]).min()))
+                b.step(ids=active, nstep=k * spt)
+                done[active] += k
+            wall = time.perf_counter() - t0
+        self.wall_s = wall
+        self.batch = b
+        qpos, qvel = b.bind("qpos"), b.bind("qvel")
+        out = []
+        for i, ctx in enumerate(ctxs):
+            out.append(ctx.result(wall / N, (qpos[i], qvel[i])))
+        return out
+
+
+def run_batch(sims: list, references: list, *, nthread: int = 0, duration_s: float | None = None) -> list:
+    """:meth:`BatchRunner.run` of a new runner: one result per simulation."""
+    return BatchRunner(sims, nthread=nthread).run(references, duration_s=duration_s)
+
+
+__all__ = ["BatchRunner", "run_batch"]

@@ -1,0 +1,534 @@
+"""The coupled step as MuJoCo's own control callback: the whole twin inside ``mj_step``.
+
+:func:`control_callback` is a compiled C function (numba ``cfunc``) installed as
+``mjcb_control`` through ctypes (:func:`installed`). MuJoCo calls it in every
+``mj_forward`` of ``mj_step``, after positions and velocities and before actuation, so it
+does what the Python loop of :meth:`sim.loop.simulation.Simulation.run` does between
+two ``mj_step`` calls: on a controller tick the recorder sample and the controller
+(:func:`sim.loop._kernels.tick_first_step`), on every step the hydraulic step into
+``ctrl`` and the applied forces (:func:`sim.loop._kernels.later_step`), on the last step
+of every ``gap_every``-th tick the loop-closure gap, and on the next step the divergence
+check of :meth:`Simulation._check <sim.loop.simulation.Simulation._check>`. So
+``mj_step(m, d, nstep)``, ``mujoco.rollout`` and ``mujoco.batch`` run the twin without
+coming back to Python.
+
+Per-simulation data: ``mjData.userdata`` (``nuserdata`` = :data:`NUSERDATA`, part of
+MuJoCo's state row, so a batch or a rollout carries it per simulation): ``[0]`` the
+address of the simulation's :class:`Context` (a float64 block of scalars and array
+descriptors: the recorder, the reference, the hydraulic and controller state), ``[1]``
+the physics-step counter. A model with fewer userdata, or a simulation whose
+``userdata[0]`` is 0 (any other MjData, a reset), is left alone.
+
+Same run as the loop, bit for bit (``tests/test_batch.py``): the same compiled kernels in
+the same order on the same MuJoCo state. Two details make it so: the loop's controller
+reads ``xmat`` as the previous ``mj_step`` left it (the pose one step before ``qpos``),
+so the callback keeps the platen's ``xmat`` of the previous step; and the loop's gap is
+measured on the last step's kinematics, which is what the callback sees on that step.
+
+``mjData`` field addresses are read from the MjData struct (:func:`_field_offsets`,
+found by matching the Python binding's array addresses, so no header layout is assumed);
+the callback is compiled once per process (a few seconds) with those offsets.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import threading
+import time
+
+import mujoco
+import numba
+import numpy as np
+from numba import types
+from numba.extending import intrinsic
+
+from hydraulics import _layout as HL
+from sim.errors import ScenarioError
+from sim.loop import _kernels as FL
+from sim.loop.simulation import GAP_LIMIT_M, RunResult
+
+NUSERDATA = 2  #: userdata[0] = context address, userdata[1] = physics-step counter
+_FIELDS = ("qpos", "qvel", "qacc", "ctrl", "qfrc_applied", "xpos", "xmat", "userdata")
+
+# ---- context scalars
+S_N, S_SPT, S_GAP_EVERY, S_RELIEF, S_PD, S_PB, S_DT, S_ZSS, S_AC, S_AN, S_DONE, S_PENDING, S_CODE, S_VALUE, \
+    S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ = range(22)
+NS = 24
+# ---- context arrays (descriptor rows: address, dim0, dim1, dim2)
+ARRAYS = ("Q", "V", "ACC", "HSP", "HF", "HPA", "HPB", "HCMD", "EPS", "EGAS", "GAP",
+          "SREF", "VREF", "VFF", "QA", "DA", "IDS", "CONSTS", "J", "JP", "NN", "GAINS", "CSTATE", "PLHP", "PLPREV",
+          "CMD2", "X2", "V2", "X", "Y", "IC", "ICS", "BUF", "P", "G", "FRD", "FRFC", "ZFR", "AQ", "AD", "AF0",
+          "XMP", "GB1", "GB2", "GA1", "GA2")
+A = {name: i for i, name in enumerate(ARRAYS)}
+NCTX = NS + 4 * len(ARRAYS)
+
+
+@intrinsic
+def _ptr(typingctx, addr):
+    """int64 address -> void*."""
+    def codegen(context, builder, sig, args):
+        return builder.inttoptr(args[0], context.get_value_type(types.voidptr))
+    return types.voidptr(types.int64), codegen
+
+
+@intrinsic
+def _addr(typingctx, p):
+    """void* -> int64 address."""
+    def codegen(context, builder, sig, args):
+        return builder.ptrtoint(args[0], context.get_value_type(types.int64))
+    return types.int64(types.voidptr), codegen
+
+
+_J = dict(nogil=True, boundscheck=False, cache=True)
+
+
+@numba.njit(**_J)
+def _d(C, name):
+    o = NS + 4 * name
+    return np.int64(C[o]), np.int64(C[o + 1]), np.int64(C[o + 2]), np.int64(C[o + 3])
+
+
+@numba.njit(**_J)
+def _f1(C, i):
+    a, n0, _, _ = _d(C, i)
+    return numba.carray(_ptr(a), (n0,), np.float64)
+
+
+@numba.njit(**_J)
+def _f2(C, i):
+    a, n0, n1, _ = _d(C, i)
+    return numba.carray(_ptr(a), (n0, n1), np.float64)
+
+
+@numba.njit(**_J)
+def _f3(C, i):
+    a, n0, n1, n2 = _d(C, i)
+    return numba.carray(_ptr(a), (n0, n1, n2), np.float64)
+
+
+@numba.njit(**_J)
+def _i1(C, i):
+    a, n0, _, _ = _d(C, i)
+    return numba.carray(_ptr(a), (n0,), np.int64)
+
+
+@numba.njit(**_J)
+def _i2(C, i):
+    a, n0, n1, _ = _d(C, i)
+    return numba.carray(_ptr(a), (n0, n1), np.int64)
+
+
+@numba.njit(**_J)
+def _i3(C, i):
+    a, n0, n1, n2 = _d(C, i)
+    return numba.carray(_ptr(a), (n0, n1, n2), np.int64)
+
+
+@numba.njit(**_J)
+def check_state(qpos, qvel, X, gap, relief):
+    """The divergence check of ``Simulation._check`` as a code: 0 fine, 1 mechanical
+    state not finite, 2 pressures not finite, 3 swivel gap, 4 pressure above relief; and
+    the value the message names (gap or pressure)."""
+    for v in qpos:
+        if not np.isfinite(v):
+            return 1, 0.0
+    for v in qvel:
+        if not np.isfinite(v):
+            return 1, 0.0
+    pmax = -np.inf
+    for r in (HL.PA, HL.PB):
+        for s in range(X.shape[1]):
+            for i in range(X.shape[2]):
+                p = X[r, s, i]
+                if not np.isfinite(p):
+                    return 2, 0.0
+                if p > pmax:
+                    pmax = p
+    if gap > GAP_LIMIT_M:
+        return 3, gap
+    if pmax > relief:
+        return 4, pmax
+    return 0, 0.0
+
+
+@numba.njit(**_J)
+def _tick(k, C, qpos, qvel, XMP, ctrl, qfa, qa, da, ids, pd, pb, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc,
+          zfr, zss, dt, aq, ad, af0, ac, an):
+    Q, V, HSP, HF = _f2(C, A_Q), _f2(C, A_V), _f2(C, A_HSP), _f2(C, A_HF)
+    HPA, HPB, HCMD, EPS, EGAS = _f2(C, A_HPA), _f2(C, A_HPB), _f2(C, A_HCMD), _f1(C, A_EPS), _f1(C, A_EGAS)
+    SREF, VREF, VFF = _f2(C, A_SREF), _f2(C, A_VREF), _f2(C, A_VFF)
+    consts, J, Jp, N, gains = _f2(C, A_CONSTS), _f2(C, A_J), _f2(C, A_JP), _f2(C, A_NN), _f1(C, A_GAINS)
+    cst, plhp, plprev = _f1(C, A_CSTATE), _f1(C, A_PLHP), _f1(C, A_PLPREV)
+    FL.tick_first_step(k, qpos, qvel, XMP, ctrl, qfa, Q, V, HSP, HF, HPA, HPB, HCMD, EPS, EGAS, SREF, VREF, VFF, qa,
+                       da, ids, pd, pb, consts, J, Jp, N, gains, cst, plhp, plprev, cmd2, x2, v2, X, Y, IC, ICS, buf,
+                       P, G, frd, frfc, zfr, zss, dt, aq, ad, af0, ac, an)
+
+
+@numba.njit(**_J)
+def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud):
+    """One call of the control callback on one simulation (``C``: its context)."""
+    s = np.int64(ud[1])
+    ud[1] = s + 1
+    if C[S_DONE] >= 0:  # stopped (diverged): leave the state alone
+        return
+    spt = np.int64(C[S_SPT])
+    k = s // spt
+    j = s - k * spt
+    n = np.int64(C[S_N])
+    if k >= n:
+        return
+    pb = np.int64(C[S_PB])
+    pd = np.int64(C[S_PD])
+    XMP = _f2(C, A_XMP)
+    X = _f3(C, A_X)
+    if s == 0:
+        for r in range(9):
+            XMP[pb, r] = xmat[pb, r]
+    if j == 0 and C[S_PENDING] > 0:  # the check of the previous tick, on the state after its steps
+        C[S_PENDING] = 0.0
+        code, val = check_state(qpos, qvel, X, C[S_VALUE], C[S_RELIEF])
+        if code:
+            C[S_CODE] = code
+            C[S_VALUE] = val
+            C[S_DONE] = k
+            return
+    cmd2 = _f2(C, A_CMD2)
+    x2 = _f2(C, A_X2)
+    v2 = _f2(C, A_V2)
+    Y = _f2(C, A_Y)
+    IC = _i3(C, A_IC)
+    ICS = _i2(C, A_ICS)
+    buf = _f3(C, A_BUF)
+    P = _f2(C, A_P)
+    G = _f1(C, A_G)
+    qa = _i1(C, A_QA)
+    da = _i1(C, A_DA)
+    ids = _i1(C, A_IDS)
+    frd = _i1(C, A_FRD)
+    frfc = _f1(C, A_FRFC)
+    zfr = _f1(C, A_ZFR)
+    aq = _i1(C, A_AQ)
+    ad = _i1(C, A_AD)
+    af0 = _f1(C, A_AF0)
+    zss, dt, ac, an = C[S_ZSS], C[S_DT], C[S_AC], C[S_AN]
+    if j == 0:
+        _tick(k, C, qpos, qvel, XMP, ctrl, qfa, qa, da, ids, pd, pb, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd,
+              frfc, zfr, zss, dt, aq, ad, af0, ac, an)
+    else:
+        kk = k if j == 1 else -1
+        FL.later_step(kk, qpos, qvel, qacc, ctrl, qfa, _f2(C, A_ACC), pd, qa, da, ids, cmd2, x2,
+                      v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr, zss, dt, aq, ad, af0, ac, an)
+    if j == spt - 1 and k % np.int64(C[S_GAP_EVERY]) == 0:
+        gap = FL.loop_gap(xpos, xmat, _i1(C, A_GB1), _i1(C, A_GB2), _f2(C, A_GA1), _f2(C, A_GA2))
+        _f1(C, A_GAP)[k] = gap
+        C[S_PENDING] = 1.0
+        C[S_VALUE] = gap
+        C[S_TICK] = k
+    for r in range(9):
+        XMP[pb, r] = xmat[pb, r]
+
+
+A_Q, A_V, A_ACC, A_HSP, A_HF, A_HPA, A_HPB, A_HCMD, A_EPS, A_EGAS, A_GAP = range(11)
+(A_SREF, A_VREF, A_VFF, A_QA, A_DA, A_IDS, A_CONSTS, A_J, A_JP, A_NN, A_GAINS, A_CSTATE, A_PLHP,
+ A_PLPREV) = range(11, 25)
+A_CMD2, A_X2, A_V2, A_X, A_Y, A_IC, A_ICS, A_BUF, A_P, A_G, A_FRD, A_FRFC, A_ZFR, A_AQ, A_AD, A_AF0 = range(25, 41)
+A_XMP, A_GB1, A_GB2, A_GA1, A_GA2 = range(41, 46)
+assert A_GA2 == A["GA2"] and A_XMP == A["XMP"] and A_CMD2 == A["CMD2"] and A_SREF == A["SREF"]
+
+
+# ------------------------------------------------------------------ MjData layout
+_offsets = None
+_cfunc = None
+_lock = threading.Lock()
+
+
+def _field_offsets() -> dict:
+    """Byte offsets of the array pointers of ``_FIELDS`` in MuJoCo's ``mjData`` struct,
+    found by matching each field's address (from the binding) in the struct's memory."""
+    global _offsets
+    if _offsets is not None:
+        return _offsets
+    spec = mujoco.MjSpec()
+    b = spec.worldbody.add_body()
+    b.add_freejoint()
+    b.add_geom(size=[0.1, 0, 0])
+    spec.nuserdata = 3
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    ptrs = {f: getattr(d, f).ctypes.data for f in _FIELDS if f != "ctrl"}
+    size = 1 << 20
+    for size in (1 << 14, 1 << 16, 1 << 18, 1 << 20):
+        words = np.frombuffer(ctypes.string_at(d._address, size), dtype=np.uint64)
+        found = {f: np.flatnonzero(words == p) for f, p in ptrs.items()}
+        if all(len(v) for v in found.values()):
+            break
+    # a second MjData (a model with an actuator, so ctrl exists) settles fields whose
+    # address also sits in another slot (qpos is also the start of the state buffer)
+    spec2 = mujoco.MjSpec()
+    b2 = spec2.worldbody.add_body()
+    b2.add_joint(name="h")
+    b2.add_geom(size=[0.1, 0, 0])
+    spec2.add_actuator(target="h", trntype=mujoco.mjtTrn.mjTRN_JOINT)
+    spec2.nuserdata = 5
+    m2 = spec2.compile()
+    d2 = mujoco.MjData(m2)
+    words2 = np.frombuffer(ctypes.string_at(d2._address, size), dtype=np.uint64)
+    out = {}
+    for f in _FIELDS:
+        addr2 = getattr(d2, f).ctypes.data
+        hits2 = set(np.flatnonzero(words2 == addr2).tolist())
+        hits = hits2 & set(found[f].tolist()) if f in found else hits2
+        if len(hits) != 1:
+            hits = {h for h in hits if h == max(hits)}  # the field itself comes after buffer/arena starts
+        if len(hits) != 1:
+            raise RuntimeError(f"mjData field {f}: not found once in the struct")
+        out[f] = int(hits.pop()) * 8
+    # nuserdata in mjModel (an int): where two models differing only in it differ
+    specs = []
+    for nud in (3, 77777):
+        sp = mujoco.MjSpec()
+        sp.worldbody.add_body().add_geom(size=[0.1, 0, 0])
+        sp.nuserdata = nud
+        specs.append(sp.compile())
+    a, b = (np.frombuffer(ctypes.string_at(mm._address, 4096), dtype=np.int32) for mm in specs)
+    hits = np.flatnonzero((a == 3) & (b == 77777))
+    if len(hits) != 1:
+        raise RuntimeError("mjModel field nuserdata: not found once in the struct")
+    out["nuserdata"] = int(hits[0]) * 4
+    _offsets = out
+    return out
+
+
+# byte offsets of the mjData array pointers, set by control_callback before compiling
+# _callback (numba freezes them as constants: they depend only on the MuJoCo build, pinned
+# in pyproject.toml, so the compiled callback is cached on disk)
+O_QPOS = O_QVEL = O_QACC = O_CTRL = O_QFA = O_XPOS = O_XMAT = O_UD = O_NUD = 0
+
+
+@numba.njit(**_J)
+def _field(base, o, n):
+    return numba.carray(_ptr(numba.carray(_ptr(base + o), (1,), np.int64)[0]), (n,), np.float64)
+
+
+def _callback(m, d):
+    if numba.carray(_ptr(_addr(m) + O_NUD), (1,), np.int32)[0] < NUSERDATA:
+        return  # a model without our userdata: not ours
+    base = _addr(d)
+    ud = _field(base, O_UD, NUSERDATA)
+    ctx = np.int64(ud[0])
+    if ctx == 0:
+        return
+    C = numba.carray(_ptr(ctx), (NCTX,), np.float64)
+    nq, nv, na, nb = np.int64(C[S_NQ]), np.int64(C[S_NV]), np.int64(C[S_NA]), np.int64(C[S_NBODY])
+    xpos = _field(base, O_XPOS, 3 * nb).reshape((nb, 3))
+    xmat = _field(base, O_XMAT, 9 * nb).reshape((nb, 9))
+    coupled_step(C, _field(base, O_QPOS, nq), _field(base, O_QVEL, nv), _field(base, O_QACC, nv),
+                 _field(base, O_CTRL, na), _field(base, O_QFA, nv), xpos, xmat, ud)
+
+
+def control_callback():
+    """The compiled ``mjcb_control`` (numba ``cfunc``), built (or loaded from numba's
+    cache) on first use."""
+    global _cfunc, O_QPOS, O_QVEL, O_QACC, O_CTRL, O_QFA, O_XPOS, O_XMAT, O_UD, O_NUD
+    with _lock:
+        if _cfunc is not None:
+            return _cfunc
+        off = _field_offsets()
+        O_QPOS, O_QVEL, O_QACC, O_CTRL = off["qpos"], off["qvel"], off["qacc"], off["ctrl"]
+        O_QFA, O_XPOS, O_XMAT, O_UD = off["qfrc_applied"], off["xpos"], off["xmat"], off["userdata"]
+        O_NUD = off["nuserdata"]
+        _cfunc = numba.cfunc(types.void(types.voidptr, types.voidptr), nopython=True, nogil=True,
+                             boundscheck=False, cache=True)(_callback)
+        return _cfunc
+
+
+@contextlib.contextmanager
+def installed():
+    """Install :func:`control_callback` as ``mjcb_control`` for the ``with`` block
+    (process-wide, as MuJoCo's callbacks are), then restore the previous one."""
+    cb = control_callback()
+    fn = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)(cb.address)
+    prev = mujoco.get_mjcb_control()
+    mujoco.set_mjcb_control(fn)
+    try:
+        yield
+    finally:
+        mujoco.set_mjcb_control(prev)
+
+
+# ------------------------------------------------------------------ contexts and runs
+def callback_model(sim) -> mujoco.MjModel:
+    """``sim``'s model compiled again from its spec with ``nuserdata`` =
+    :data:`NUSERDATA` (nothing else changes)."""
+    spec = sim.tm.spec.copy()
+    spec.nuserdata = NUSERDATA
+    return spec.compile()
+
+
+def accepts(sim) -> str | None:
+    """Why ``sim`` cannot run on the callback (None: it can): the callback is the fused
+    closed loop (free platen, no per-step effects, no valve delay, two or more physics
+    steps per controller tick)."""
+    tm, hs = sim.tm, sim.hs
+    if not tm.platen_free:
+        return "the platen is not free (bearing-guided table)"
+    if tm.step_effects:
+        return "the table has per-step effects"
+    if hs.delay_steps != 0 or hs.backend != "numba":
+        return "the hydraulics have a valve delay or the numpy backend"
+    if sim.steps_per_tick < 2:
+        return "one physics step per controller tick"
+    return None
+
+
+class Context:
+    """The float64 block :func:`coupled_step` reads, with the arrays it points to (kept
+    alive here): recorder arrays of ``n`` ticks, the reference, and views of the
+    simulation's hydraulic and controller state (or, with ``state``, arrays given by a
+    batch)."""
+
+    def __init__(self, sim, reference, n: int, *, gap_every: int = 8, state: dict | None = None):
+        tm, hs, ctrl = sim.tm, sim.hs, sim.controller
+        m = sim.m
+        na = tm.n_act
+        ctrl.reset()
+        self.n = n
+        arr = {}
+        arr["Q"] = np.full((n, m.nq), np.nan)
+        arr["V"] = np.full((n, m.nv), np.nan)
+        arr["ACC"] = np.full((n, 6), np.nan)
+        for key in ("HSP", "HF", "HPA", "HPB", "HCMD"):
+            arr[key] = np.full((n, na), np.nan)
+        for key in ("EPS", "EGAS", "GAP"):
+            arr[key] = np.full(n, np.nan)
+        from mjcf.description import actuator_strokes
+
+        rate = sim.gains.rate_hz
+        arr["SREF"] = np.ascontiguousarray(actuator_strokes(tm.desc, reference.d[:n]), dtype=float)
+        arr["VREF"] = np.ascontiguousarray(reference.v[:n], dtype=float)
+        arr["VFF"] = np.ascontiguousarray(ctrl.feedforward(reference.v[:n], reference.a[:n], rate), dtype=float)
+        arr["QA"], arr["DA"], arr["IDS"] = (np.asarray(a, dtype=np.int64) for a in
+                                             (tm.stroke_qadr, tm.stroke_dadr, tm.actuator_ids))
+        consts, J, Jp, N, gains, cstate, plhp, plprev = ctrl.kernel_args()
+        st = state or {}
+        arr.update(CONSTS=consts, J=J, JP=Jp, NN=N, GAINS=gains, CSTATE=st.get("CSTATE", cstate),
+                   PLHP=st.get("PLHP", plhp), PLPREV=st.get("PLPREV", plprev))
+        arr["CMD2"] = st.get("CMD2", np.zeros((1, na)))
+        arr["X2"] = np.zeros((1, na))
+        arr["V2"] = np.zeros((1, na))
+        arr["X"], arr["Y"] = st.get("X", hs._X), st.get("Y", hs._Y)
+        arr["IC"], arr["ICS"], arr["BUF"] = st.get("IC", hs._IC), st.get("ICS", hs._ICS), hs._buf
+        arr["P"], arr["G"] = hs._P, hs._G
+        arr["FRD"] = np.asarray(tm.friction_dofs, dtype=np.int64)
+        arr["FRFC"] = np.asarray(tm.friction_force, dtype=float)
+        arr["ZFR"] = st.get("ZFR", sim._zfr)
+        arr["AQ"], arr["AD"] = np.asarray(tm.air_qadr, np.int64), np.asarray(tm.air_dadr, np.int64)
+        arr["AF0"] = np.asarray(tm.air_preload, dtype=float)
+        arr["XMP"] = np.zeros((m.nbody, 9))
+        arr["GB1"], arr["GB2"] = sim._g_b1.astype(np.int64), sim._g_b2.astype(np.int64)
+        arr["GA1"], arr["GA2"] = np.ascontiguousarray(sim._g_a1), np.ascontiguousarray(sim._g_a2)
+        C = np.zeros(NCTX)
+        C[S_N], C[S_SPT], C[S_GAP_EVERY] = n, sim.steps_per_tick, gap_every
+        C[S_RELIEF] = sim.hp.relief_pressure_pa * (1 + 1e-9)
+        C[S_PD], C[S_PB], C[S_DT] = tm.platen_dadr, tm.platen_body, sim.dt
+        C[S_ZSS], C[S_AC], C[S_AN] = tm.friction_presliding_m, tm.air_area_over_volume, tm.air_exponent
+        C[S_DONE] = -1
+        C[S_NQ], C[S_NV], C[S_NA], C[S_NBODY] = m.nq, m.nv, m.nu, m.nbody
+        for name, a in arr.items():
+            want = np.int64 if name in ("QA", "DA", "IDS", "IC", "ICS", "FRD", "AQ", "AD", "GB1", "GB2") else np.float64
+            if a.dtype != want or not a.flags.c_contiguous:
+                raise ValueError(f"context array {name}: {a.dtype}, contiguous {a.flags.c_contiguous}")
+            o = NS + 4 * A[name]
+            C[o] = a.ctypes.data
+            C[o + 1:o + 1 + a.ndim] = a.shape
+        self.arrays, self.C = arr, C
+        self.sim = sim
+
+    @property
+    def address(self) -> float:
+        return float(self.C.ctypes.data)
+
+    def result(self, wall_s: float, final_state) -> RunResult:
+        """The :class:`RunResult` of the finished run (``final_state``: qpos, qvel after
+        the last step, for the last tick's pending check)."""
+        C, arr, sim = self.C, self.arrays, self.sim
+        rate = sim.gains.rate_hz
+        if C[S_DONE] < 0 and C[S_PENDING] > 0:  # the last tick's check, as the loop does after it
+            code, val = check_state(final_state[0], final_state[1], arr["X"], C[S_VALUE], C[S_RELIEF])
+            if code:
+                C[S_CODE], C[S_VALUE], C[S_DONE] = code, val, self.n
+        n_done = self.n if C[S_DONE] < 0 else int(C[S_DONE])
+        reason = None
+        if C[S_DONE] >= 0:
+            tk = int(C[S_TICK]) / rate
+            code, val = int(C[S_CODE]), float(C[S_VALUE])
+            reason = {1: f"simulation diverged at t = {tk:.4f} s: the mechanical state is not finite (NaN/inf)",
+                      2: f"simulation diverged at t = {tk:.4f} s: chamber pressures are not finite",
+                      3: (f"simulation diverged at t = {tk:.4f} s: a swivel opened by {val * 1e3:.3g} mm "
+                          f"(limit {GAP_LIMIT_M * 1e3:.3g} mm); the loop closure failed"),
+                      4: f"simulation diverged at t = {tk:.4f} s: chamber pressure {val / 1e6:.1f} MPa above relief",
+                      }[code]
+        t0 = time.perf_counter()
+        ch = sim._derive(arr["Q"][:n_done], arr["V"][:n_done], arr["ACC"][:n_done])
+        for key, name in (("valve_command", "HCMD"), ("spool_position", "HSP"), ("actuator_force", "HF"),
+                          ("pressure_a", "HPA"), ("pressure_b", "HPB")):
+            ch[key] = arr[name][:n_done]
+        ex = {"supply_pressure": arr["EPS"][:n_done], "accumulator_gas_volume": arr["EGAS"][:n_done],
+              "loop_gap": arr["GAP"][:n_done]}
+        if "_payload_qpos" in ch:
+            ex["payload_qpos"] = ch.pop("_payload_qpos")
+        post = time.perf_counter() - t0
+        spt = sim.steps_per_tick
+        return RunResult(t=np.arange(n_done) / rate, channels=ch, extras=ex, wall_s=wall_s + post,
+                         sim_s=n_done / rate, timing={"callback_s": wall_s, "output_s": post, "steps": n_done * spt},
+                         incomplete_reason=reason)
+
+
+def run_callback(sim, reference, *, duration_s: float | None = None, gap_every: int = 8,
+                 chunk_ticks: int = 512) -> RunResult:
+    """Closed-loop run of ``sim`` on ``reference`` with the coupled step inside MuJoCo
+    (``mj_step(m, d, nstep)`` in chunks of ``chunk_ticks`` controller ticks, stopping at
+    a divergence). Starts from ``sim``'s current state (its :meth:`reset`), which it
+    leaves unchanged; same result as ``sim.run(reference=...)`` (the fused loop)."""
+    why = accepts(sim)
+    if why:
+        raise ScenarioError(f"the callback route cannot run this table: {why}; use Simulation.run")
+    rate = sim.gains.rate_hz
+    n = len(reference.t) if duration_s is None else min(len(reference.t), int(round(duration_s * rate)) + 1)
+    m2 = callback_model(sim)
+    d2 = mujoco.MjData(m2)
+    copy_state(sim.m, sim.d, m2, d2)
+    st = {"X": sim.hs._X.copy(), "Y": sim.hs._Y.copy(), "IC": sim.hs._IC.copy(), "ICS": sim.hs._ICS.copy(),
+          "ZFR": sim._zfr.copy()}
+    ctx = Context(sim, reference, n, gap_every=gap_every, state=st)
+    d2.userdata[0] = ctx.address
+    d2.userdata[1] = 0.0
+    spt = sim.steps_per_tick
+    with installed():
+        t0 = time.perf_counter()
+        done = 0
+        while done < n and ctx.C[S_DONE] < 0:
+            k = min(chunk_ticks, n - done)
+            mujoco.mj_step(m2, d2, nstep=k * spt)
+            done += k
+        wall = time.perf_counter() - t0
+    d2.userdata[0] = 0.0
+    return ctx.result(wall, (d2.qpos, d2.qvel))
+
+
+STATE_SPEC = int(mujoco.mjtState.mjSTATE_INTEGRATION) & ~int(mujoco.mjtState.mjSTATE_USERDATA)
+
+
+def copy_state(m_from, d_from, m_to, d_to) -> None:
+    """The integration state (without userdata) of ``d_from`` into ``d_to``, then
+    ``mj_forward`` (the derived fields the reference loop starts from)."""
+    spec = int(STATE_SPEC)
+    s = np.empty(mujoco.mj_stateSize(m_from, spec))
+    mujoco.mj_getState(m_from, d_from, s, spec)
+    mujoco.mj_setState(m_to, d_to, s, spec)
+    mujoco.mj_forward(m_to, d_to)
+
+
+__all__ = ["Context", "NUSERDATA", "accepts", "callback_model", "check_state", "control_callback", "copy_state",
+           "coupled_step", "installed", "run_callback"]

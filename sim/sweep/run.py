@@ -1,0 +1,241 @@
+"""Run a sweep: every case of a :class:`sim.sweep.spec.Sweep`, one results table.
+
+The per-case function is a plain library call, :func:`run_case` =
+:func:`sim.assess.run.run_scenario` with the case's overrides, so a feasibility suite or
+a calibration candidate goes through the same path. Executors:
+
+* ``local``: this machine's cores. Cases are planned one by one (the same
+  :func:`sim.assess.run.plan_scenario`) and simulated together on
+  :class:`sim.loop.batch.BatchRunner` (MuJoCo's thread pool, the coupled step compiled as
+  MuJoCo's control callback), ``workers`` threads, in groups of ``group`` cases;
+* ``dask``: the cases are submitted to a Dask cluster (``dask.distributed``), one
+  :func:`run_case` per task: a scheduler address, or a ``LocalCluster`` of ``workers``
+  processes when none is given.
+
+Each finished case is written at once, atomically, to ``OUT/cases/<id>.json`` (plus its
+run file with ``run_files``); a case whose file exists is not run again, so an
+interrupted sweep resumes where it stopped. At the end every case file goes into
+``OUT/results.csv`` (and ``results.parquet`` when pyarrow is installed).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+from sim.errors import UserError
+
+EXECUTORS = ("local", "dask")
+
+
+def run_case(scenario, case, *, duration_s=None, iterations=None, run_dir=None) -> dict:
+    """One case: :func:`sim.assess.run.run_scenario` with ``case.overrides`` (on the
+    callback engine where the table allows, the same run as the loop); returns its
+    row (varied values, verdict, limiting utilisation, timing). A case the inputs make
+    impossible (a user error, e.g. divergence before the second sample) gives a row with
+    ``error`` instead of raising, so one bad case does not stop a sweep."""
+    from sim.assess.run import run_scenario
+
+    t0 = time.perf_counter()
+    try:
+        out = run_scenario(scenario, duration_s=duration_s, iterations=iterations, overrides=case.overrides,
+                           engine="callback")
+    except UserError as e:
+        return error_row(case, str(e), time.perf_counter() - t0)
+    return outcome_row(case, out, run_dir, time.perf_counter() - t0)
+
+
+def error_row(case, message, wall) -> dict:
+    return {"id": case.id, **case.values, "feasible": False, "limiting": "error", "limiting_utilisation": math.inf,
+            "complete": False, "error": message, "case_wall_s": wall}
+
+
+def outcome_row(case, out, run_dir, wall) -> dict:
+    """The results-table row of a :class:`sim.assess.run.RunOutcome`."""
+    s = out.summary
+    f = s["feasibility"]
+    row = {"id": case.id, **case.values, "feasible": bool(f["feasible"]), "limiting": f["limiting"],
+           "limiting_utilisation": float(f["limiting_utilisation"]), "failed": ";".join(f["failed"]),
+           "complete": bool(s["complete"]), "incomplete_reason": s["incomplete_reason"] or "",
+           "duration_s": s["duration_s"], "sim_wall_s": s["wall_s"], "case_wall_s": wall, "error": ""}
+    for k, v in f["utilisation"].items():
+        row[f"util_{k}"] = float(v)
+    if run_dir is not None:
+        from sim.runs.files import out_dir
+        from sim.runs.runfile import write_run
+
+        path = out_dir(run_dir) / f"{case.id}.run.npz"
+        write_run(path, out.run)
+        row["run_file"] = str(path)
+    return row
+
+
+def _case_path(out: Path, case) -> Path:
+    return out / "cases" / f"{case.id}.json"
+
+
+def _local(sweep, todo, out, workers, group, done_cb):
+    from sim.assess.run import plan_scenario
+    from sim.loop.batch import BatchRunner
+
+    run_dir = out / "runs" if sweep.run_files else None
+    for i in range(0, len(todo), group):
+        chunk = todo[i:i + group]
+        plans, rows, t0 = [], {}, time.perf_counter()
+        for c in chunk:
+            try:
+                plans.append((c, plan_scenario(sweep.scenario, duration_s=sweep.duration_s,
+                                               iterations=sweep.iterations, overrides=c.overrides)))
+            except UserError as e:
+                rows[c.id] = error_row(c, str(e), 0.0)
+        batchable = [(c, p) for c, p in plans if BatchRunner.accepts(p)]
+        other = [(c, p) for c, p in plans if not BatchRunner.accepts(p)]
+        if batchable:
+            runner = BatchRunner([p.sim for _, p in batchable], nthread=workers)
+            results = runner.run([p.reference for _, p in batchable])
+            wall = (time.perf_counter() - t0) / len(chunk)
+            for (c, p), res in zip(batchable, results):
+                try:
+                    rows[c.id] = outcome_row(c, p.outcome(res), run_dir, wall)
+                except UserError as e:
+                    rows[c.id] = error_row(c, str(e), wall)
+        for c, p in other:  # drive iterations, analog controller: the plan's own loop
+            t1 = time.perf_counter()
+            try:
+                rows[c.id] = outcome_row(c, p.run(), run_dir, time.perf_counter() - t1)
+            except UserError as e:
+                rows[c.id] = error_row(c, str(e), time.perf_counter() - t1)
+        for c in chunk:
+            done_cb(c, rows[c.id])
+
+
+def _dask(sweep, todo, out, workers, address, done_cb):
+    import dask
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    run_dir = out / "runs" if sweep.run_files else None
+    cluster = None
+    if address is None:
+        # a case holds its worker's GIL for seconds; on a loaded machine heartbeats come
+        # late: no time-to-live, so a slow worker is waited for, not restarted
+        with dask.config.set({"distributed.scheduler.worker-ttl": None}):
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0")
+        address = cluster
+    client = Client(address)
+    try:
+        futs = {client.submit(run_case, sweep.scenario, c, duration_s=sweep.duration_s, iterations=sweep.iterations,
+                              run_dir=run_dir, pure=False, key=f"case-{sweep.name}-{c.id}"): c for c in todo}
+        for fut in as_completed(futs):
+            done_cb(futs[fut], fut.result())
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def run_sweep(sweep, out, *, workers: int | None = None, executor: str = "local", address: str | None = None,
+              group: int = 32, progress=None) -> dict:
+    """Run every case of ``sweep`` not yet in ``out``; write the results table.
+
+    ``workers``: threads (local) or worker processes (a Dask ``LocalCluster``); default
+    the machine's cores. ``address``: a Dask scheduler to submit to instead of a local
+    cluster. ``progress(done, total)`` is called after each case. Returns
+    ``{"cases", "ran", "skipped", "wall_s", "table", "rows"}``.
+    """
+    from sim.runs.files import out_dir, write_json_atomic
+
+    if executor not in EXECUTORS:
+        raise UserError(f"--executor must be one of {', '.join(EXECUTORS)} (got '{executor}')")
+    workers = workers or os.cpu_count() or 1
+    if workers < 1:
+        raise UserError(f"--workers must be at least 1 (got {workers})")
+    from sim.assess.run import check_overrides
+
+    cases = sweep.cases()
+    where = str(sweep.path or sweep.name)
+    for c in cases[:1] + cases[-1:]:  # every case has the same keys: a bad key fails here, before any run
+        try:
+            check_overrides(sweep.scenario, c.overrides)
+        except UserError as e:
+            raise UserError(f"{where}: case {c.id}: {e}") from None
+    out = out_dir(out)
+    (out / "cases").mkdir(exist_ok=True)
+    todo = [c for c in cases if not _case_path(out, c).exists()]
+    skipped = len(cases) - len(todo)
+    n_done = [skipped]
+    if progress:
+        progress(skipped, len(cases))
+
+    def done(case, row):
+        write_json_atomic(_case_path(out, case), row)
+        n_done[0] += 1
+        if progress:
+            progress(n_done[0], len(cases))
+
+    t0 = time.perf_counter()
+    if todo:
+        if executor == "local":
+            _local(sweep, todo, out, workers, group, done)
+        else:
+            _dask(sweep, todo, out, workers, address, done)
+    wall = time.perf_counter() - t0
+    rows = [json.loads(_case_path(out, c).read_text()) for c in cases]
+    table = write_table(out, rows)
+    info = {"sweep": sweep.name, "scenario": sweep.scenario, "cases": len(cases), "ran": len(todo),
+            "skipped": skipped, "executor": executor, "workers": workers, "wall_s": wall, "table": str(table)}
+    write_json_atomic(out / "sweep.json", info)
+    return {**info, "rows": rows}
+
+
+def write_table(out: Path, rows: list) -> Path:
+    """``results.csv`` (always) and ``results.parquet`` (with pyarrow); returns the
+    Parquet path when written, else the CSV path."""
+    from sim.runs.files import write_text_atomic
+
+    cols = []
+    for r in rows:
+        cols += [k for k in r if k not in cols]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in cols})
+    write_text_atomic(out / "results.csv", buf.getvalue())
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        return out / "results.csv"
+    tbl = pa.Table.from_pylist([{k: r.get(k) for k in cols} for r in rows])
+    tmp = out / ".results.parquet.tmp"
+    pq.write_table(tbl, tmp)
+    os.replace(tmp, out / "results.parquet")
+    return out / "results.parquet"
+
+
+class ProgressLine:
+    """A progress bar on a terminal; one line per ``every`` cases otherwise."""
+
+    def __init__(self, stream, every: int = 10):
+        self.stream, self.every = stream, max(1, every)
+        self.tty = hasattr(stream, "isatty") and stream.isatty()
+        self.t0 = time.perf_counter()
+
+    def __call__(self, done: int, total: int) -> None:
+        el = time.perf_counter() - self.t0
+        if self.tty:
+            bar = "#" * int(30 * done / max(total, 1))
+            self.stream.write(f"\r  [{bar:<30s}] {done}/{total} cases  {el:7.1f} s")
+            if done == total:
+                self.stream.write("\n")
+        elif done % self.every == 0 or done == total:
+            self.stream.write(f"  {done}/{total} cases  {el:.1f} s\n")
+        self.stream.flush()
+
+
+__all__ = ["EXECUTORS", "ProgressLine", "error_row", "outcome_row", "run_case", "run_sweep", "write_table"]
