@@ -30,7 +30,7 @@ def bare_rate(model, seconds: float = 1.0) -> float:
     mujoco.mj_resetDataKeyframe(model, d, 0)
     rng = np.random.default_rng(0)
     forces = rng.normal(0, 5e4, (64, model.nu))
-    for i in range(200):
+    for _ in range(200):
         mujoco.mj_step(model, d)
     n, t0 = 0, time.perf_counter()
     while time.perf_counter() - t0 < seconds:
