@@ -159,7 +159,7 @@ def test_callback_stops_where_the_loop_stops(scenario):
     loop = sim.run(reference=ref)
     sim.reset()
     cb = run_callback(sim, ref)
-    assert loop.incomplete_reason and "above relief" in loop.incomplete_reason
+    assert loop.incomplete_reason and "above the relief pressure" in loop.incomplete_reason
     assert 1 < len(loop.t) < len(full.t)
     _same(loop, cb)
     res = BatchRunner([sim], nthread=1).run([ref])[0]

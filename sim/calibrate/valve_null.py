@@ -39,7 +39,7 @@ class ValveNull:
     def as_dict(self, actuators) -> dict:
         return {"offset": {a: float(v) for a, v in zip(actuators, self.offset)},
                 "drift_per_s": {a: float(v) for a, v in zip(actuators, self.drift_per_s)},
-                "velocity_gain_m_s": {a: float(v) for a, v in zip(actuators, self.gain)},
+                "velocity_gain_m_s": {a: (float(v) if np.isfinite(v) else None) for a, v in zip(actuators, self.gain)},
                 "velocity_from": self.velocity_from,
                 "method": "least squares of stroke velocity on valve command: v = K (u + offset + drift (t - t_mid))"}
 
@@ -80,6 +80,11 @@ def estimate(run, desc, *, drift: bool = True) -> ValveNull:
     n_act = u.shape[1]
     off, dr, gain = np.zeros(n_act), np.zeros(n_act), np.zeros(n_act)
     for i in range(n_act):
+        if np.ptp(u[:, i]) < 1e-12 and np.max(np.abs(v[:, i])) < 1e-9:
+            # a constant command holding a still actuator: that command is the null itself
+            # (no flow gain can be read from such a record, and none is needed)
+            off[i], dr[i], gain[i] = -float(u[0, i]), 0.0, float("nan")
+            continue
         cols = [u[:, i], np.ones_like(t)] + ([t - tm] if drift else [])
         A = np.stack(cols, axis=1)
         coef, *_ = np.linalg.lstsq(A, v[:, i], rcond=None)

@@ -46,14 +46,14 @@ from numba.extending import intrinsic
 from hydraulics import _layout as HL
 from sim.errors import ScenarioError
 from sim.loop import _kernels as FL
-from sim.loop.simulation import GAP_LIMIT_M, RunResult
+from sim.loop.simulation import CAUSE_STEP, GAP_LIMIT_M, RunResult
 
 NUSERDATA = 2  #: userdata[0] = context address, userdata[1] = physics-step counter
 _FIELDS = ("qpos", "qvel", "qacc", "ctrl", "qfrc_applied", "xpos", "xmat", "userdata")
 
 # ---- context scalars
 S_N, S_SPT, S_GAP_EVERY, S_RELIEF, S_PD, S_PB, S_DT, S_ZSS, S_AC, S_AN, S_DONE, S_PENDING, S_CODE, S_VALUE, \
-    S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ = range(22)
+    S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ, S_VAPOUR = range(23)
 NS = 24
 # ---- context arrays (descriptor rows: address, dim0, dim1, dim2)
 ARRAYS = ("Q", "V", "ACC", "HSP", "HF", "HPA", "HPB", "HCMD", "EPS", "EGAS", "GAP",
@@ -126,29 +126,35 @@ def _i3(C, i):
 
 
 @numba.njit(**_J)
-def check_state(qpos, qvel, X, gap, relief):
-    """The divergence check of ``Simulation._check`` as a code: 0 fine, 1 mechanical
-    state not finite, 2 pressures not finite, 3 swivel gap, 4 pressure above relief; and
-    the value the message names (gap or pressure)."""
+def check_state(qpos, qvel, X, gap, relief, vapour):
+    """The divergence check of ``Simulation._check``, in its order, as a code: 0 fine;
+    2/9 chamber a/b pressures not finite; 1/8 positions/velocities not finite; 3 swivel
+    gap; 4/6 chamber a above relief/below vapour, 5/7 the same for chamber b; and the
+    value the message names (gap or pressure)."""
+    for r, code in ((HL.PA, 2), (HL.PB, 9)):
+        for s in range(X.shape[1]):
+            for i in range(X.shape[2]):
+                if not np.isfinite(X[r, s, i]):
+                    return code, 0.0
     for v in qpos:
         if not np.isfinite(v):
             return 1, 0.0
     for v in qvel:
         if not np.isfinite(v):
-            return 1, 0.0
-    pmax = -np.inf
-    for r in (HL.PA, HL.PB):
+            return 8, 0.0
+    if gap > GAP_LIMIT_M:
+        return 3, gap
+    for r, above, below in ((HL.PA, 4, 6), (HL.PB, 5, 7)):
+        pmax, pmin = -np.inf, np.inf
         for s in range(X.shape[1]):
             for i in range(X.shape[2]):
                 p = X[r, s, i]
-                if not np.isfinite(p):
-                    return 2, 0.0
-                if p > pmax:
-                    pmax = p
-    if gap > GAP_LIMIT_M:
-        return 3, gap
-    if pmax > relief:
-        return 4, pmax
+                pmax = max(pmax, p)
+                pmin = min(pmin, p)
+        if pmax > relief:
+            return above, pmax
+        if pmin < vapour:
+            return below, pmin
     return 0, 0.0
 
 
@@ -187,7 +193,7 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud):
             XMP[pb, r] = xmat[pb, r]
     if j == 0 and C[S_PENDING] > 0:  # the check of the previous tick, on the state after its steps
         C[S_PENDING] = 0.0
-        code, val = check_state(qpos, qvel, X, C[S_VALUE], C[S_RELIEF])
+        code, val = check_state(qpos, qvel, X, C[S_VALUE], C[S_RELIEF], C[S_VAPOUR])
         if code:
             C[S_CODE] = code
             C[S_VALUE] = val
@@ -430,7 +436,8 @@ class Context:
         arr["GA1"], arr["GA2"] = np.ascontiguousarray(sim._g_a1), np.ascontiguousarray(sim._g_a2)
         C = np.zeros(NCTX)
         C[S_N], C[S_SPT], C[S_GAP_EVERY] = n, sim.steps_per_tick, gap_every
-        C[S_RELIEF] = sim.hp.relief_pressure_pa * (1 + 1e-9)
+        C[S_RELIEF] = sim.hp.relief_pressure_pa * (1 + 1e-9)  # the bounds of Simulation._check
+        C[S_VAPOUR] = sim.hp.vapour_pressure_pa * (1 - 1e-9) - 1e-3
         C[S_PD], C[S_PB], C[S_DT] = tm.platen_dadr, tm.platen_body, sim.dt
         C[S_ZSS], C[S_AC], C[S_AN] = tm.friction_presliding_m, tm.air_area_over_volume, tm.air_exponent
         C[S_DONE] = -1
@@ -455,7 +462,7 @@ class Context:
         C, arr, sim = self.C, self.arrays, self.sim
         rate = sim.gains.rate_hz
         if C[S_DONE] < 0 and C[S_PENDING] > 0:  # the last tick's check, as the loop does after it
-            code, val = check_state(final_state[0], final_state[1], arr["X"], C[S_VALUE], C[S_RELIEF])
+            code, val = check_state(final_state[0], final_state[1], arr["X"], C[S_VALUE], C[S_RELIEF], C[S_VAPOUR])
             if code:
                 C[S_CODE], C[S_VALUE], C[S_DONE] = code, val, self.n
         n_done = self.n if C[S_DONE] < 0 else int(C[S_DONE])
@@ -463,12 +470,29 @@ class Context:
         if C[S_DONE] >= 0:
             tk = int(C[S_TICK]) / rate
             code, val = int(C[S_CODE]), float(C[S_VALUE])
-            reason = {1: f"simulation diverged at t = {tk:.4f} s: the mechanical state is not finite (NaN/inf)",
-                      2: f"simulation diverged at t = {tk:.4f} s: chamber pressures are not finite",
-                      3: (f"simulation diverged at t = {tk:.4f} s: a swivel opened by {val * 1e3:.3g} mm "
-                          f"(limit {GAP_LIMIT_M * 1e3:.3g} mm); the loop closure failed"),
-                      4: f"simulation diverged at t = {tk:.4f} s: chamber pressure {val / 1e6:.1f} MPa above relief",
-                      }[code]
+            at = f"simulation diverged at t = {tk:.4f} s"
+            step = f"physics step {sim.dt * 1e3:.3g} ms"
+            hp = sim.hp
+            side = {2: "a", 9: "b", 4: "a", 5: "b", 6: "a", 7: "b"}.get(code, "")
+            reason = {  # the words of Simulation._check, so both routes stop with the same reason
+                2: f"{at}: the hydraulic state is not finite: NaN/Inf in the chamber {side} pressures; {CAUSE_STEP} "
+                   f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})",
+                9: f"{at}: the hydraulic state is not finite: NaN/Inf in the chamber {side} pressures; {CAUSE_STEP} "
+                   f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})",
+                1: f"{at}: the mechanical state is not finite: NaN/Inf in the platen/linkage positions (qpos); "
+                   f"{CAUSE_STEP} ({step})",
+                8: f"{at}: the mechanical state is not finite: NaN/Inf in the velocities (qvel); {CAUSE_STEP} ({step})",
+                3: (f"{at}: a swivel opened by {val * 1e3:.3g} mm (limit {GAP_LIMIT_M * 1e3:.3g} mm): the "
+                    f"loop closure failed; {CAUSE_STEP} ({step}), or a motion beyond the linkages' reach"),
+                4: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa above the relief pressure "
+                   f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
+                5: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa above the relief pressure "
+                   f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
+                6: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa below the vapour pressure "
+                   f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
+                7: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa below the vapour pressure "
+                   f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
+            }[code]
         t0 = time.perf_counter()
         ch = sim._derive(arr["Q"][:n_done], arr["V"][:n_done], arr["ACC"][:n_done])
         for key, name in (("valve_command", "HCMD"), ("spool_position", "HSP"), ("actuator_force", "HF"),
