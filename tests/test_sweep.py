@@ -76,7 +76,7 @@ def test_local_sweep_resumes_without_redoing_cases(tmp_path, sweep_file):
     rows = first["rows"]
     assert all(r["complete"] and r["error"] == "" for r in rows)
     # a heavier block needs more force: the varied inputs reached the runs
-    f = {(r["bulk_modulus_pa"], r["mass_factor"]): r["util_force"] for r in rows}
+    f = {(r["bulk_modulus_pa"], r["mass_factor"]): r["util_actuator_force"] for r in rows}
     assert f[(0.8e9, 1.25)] > f[(0.8e9, 1.0)]
     # the batch gives each case its single run: compare one case with run_scenario
     from sim.sweep.run import run_case

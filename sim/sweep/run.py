@@ -60,11 +60,15 @@ def outcome_row(case, out, run_dir, wall) -> dict:
     s = out.summary
     f = s["feasibility"]
     row = {"id": case.id, **case.values, "feasible": bool(f["feasible"]), "limiting": f["limiting"],
-           "limiting_utilisation": float(f["limiting_utilisation"]), "failed": ";".join(f["failed"]),
+           "limiting_utilisation": (float(f["limiting_utilisation"]) if f["limiting_utilisation"] is not None
+                                    else math.nan), "failed": ";".join(f["failed"]),
            "complete": bool(s["complete"]), "incomplete_reason": s["incomplete_reason"] or "",
            "duration_s": s["duration_s"], "sim_wall_s": s["wall_s"], "case_wall_s": wall, "error": ""}
-    for k, v in f["utilisation"].items():
-        row[f"util_{k}"] = float(v)
+    for c in f["checks"]:  # one column per kind of check ("actuator_force_X3" -> util_actuator_force)
+        name = c["name"]
+        kind = "_".join(name.split("_")[:2]) if name.startswith("actuator_") else name
+        u = float(c["utilisation"])
+        row[f"util_{kind}"] = max(u, row.get(f"util_{kind}", -math.inf))
     if run_dir is not None:
         from sim.runs.files import out_dir
         from sim.runs.runfile import write_run
