@@ -9,13 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcf.description import DOFS6
-from sim.runs.files import out_dir, write_json_atomic, write_text_atomic
-
-
-def _save(fig, path: Path) -> None:
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=90)
-    tmp.replace(path)
+from sim.runs.files import out_dir, save_figure_atomic, write_json_atomic, write_text_atomic
 
 
 def figures(r: dict, out: Path) -> list[str]:
@@ -39,7 +33,7 @@ def figures(r: dict, out: Path) -> list[str]:
             a.set_aspect("equal")
         fig.suptitle(f"{r['table']}: over the x-y offset plane (other DOFs at home)")
         fig.tight_layout()
-        _save(fig, out / "geometry_maps.png")
+        save_figure_atomic(fig, out / "geometry_maps.png", dpi=90)
         plt.close(fig)
         names.append("geometry_maps.png")
     for name, h in (r.get("_histories") or {}).items():
@@ -58,7 +52,7 @@ def figures(r: dict, out: Path) -> list[str]:
         ax[-1, 0].set_xlabel("time (s)")
         fig.suptitle(f"{name}: motion in the DOFs the reference leaves at rest")
         fig.tight_layout()
-        _save(fig, out / f"crosstalk_{name}.png")
+        save_figure_atomic(fig, out / f"crosstalk_{name}.png", dpi=90)
         plt.close(fig)
         names.append(f"crosstalk_{name}.png")
     return names

@@ -42,7 +42,7 @@ def jsonable(obj):
     return obj
 
 
-def _atomic(path: Path, write) -> None:
+def atomic_write(path: Path, write, error=None) -> None:
     """Call ``write(fh)`` on a temporary file beside ``path``, then rename it onto ``path``.
 
     A failure or an interruption (Ctrl-C included) at any point removes the temporary
@@ -63,6 +63,8 @@ def _atomic(path: Path, write) -> None:
         os.replace(tmp, path)
         tmp = None
     except OSError as e:
+        if error is not None:  # the caller's one-line error for this file kind
+            raise error(e) from None
         raise UserError(f"cannot write {path}: {e.strerror or e}; choose a writable folder with free space") from None
     finally:
         if tmp is not None:
@@ -74,7 +76,7 @@ def _atomic(path: Path, write) -> None:
 
 def write_bytes_atomic(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary file and a rename."""
-    _atomic(path, lambda fh: fh.write(data))
+    atomic_write(path, lambda fh: fh.write(data))
 
 
 def write_text_atomic(path: Path, text: str) -> None:
@@ -86,7 +88,7 @@ def save_figure_atomic(fig, path: Path, **kwargs) -> None:
     """``fig.savefig(path, **kwargs)`` through a temporary file and a rename (the format
     is taken from ``path``'s suffix, not from the temporary name)."""
     fmt = kwargs.pop("format", None) or Path(path).suffix.lstrip(".") or "png"
-    _atomic(path, lambda fh: fig.savefig(fh, format=fmt, **kwargs))
+    atomic_write(path, lambda fh: fig.savefig(fh, format=fmt, **kwargs))
 
 
 def json_text(obj, indent: int = 2) -> str:

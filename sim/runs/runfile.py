@@ -25,7 +25,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -382,27 +381,11 @@ def write_run(path: str | os.PathLike, run: RunFile) -> Path:
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise _error(name, f"cannot be written: folder {folder} does not exist", "create the folder first")
-    tmp_name = None
-    try:
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp_name, 0o666 & ~umask)
-        os.replace(tmp_name, path)
-        tmp_name = None
-    except OSError as exc:
-        raise _error(name, f"cannot be written ({_one_line(exc.strerror or exc)})",
-                     "choose a folder you can write to, with free space") from None
-    finally:
-        if tmp_name is not None:
-            try:
-                os.unlink(tmp_name)
-            except OSError:
-                pass
+    from sim.runs.files import atomic_write
+
+    atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays),
+                 error=lambda exc: _error(name, f"cannot be written ({_one_line(exc.strerror or exc)})",
+                                          "choose a folder you can write to, with free space"))
     run.path = name
     return path
 
