@@ -49,6 +49,17 @@ def _axis_extremes(desc: TableDescription):
             yield d, p
 
 
+def dof_stiffness(desc: TableDescription, hp, pose, dofs) -> np.ndarray:
+    """The oil columns' stiffness in DOF space at ``pose``: J(q)^T diag(k(q)) J(q), with each
+    actuator's chamber volumes at its stroke there, k = beta (A_a^2/V_a + A_b^2/V_b)."""
+    x = actuator_strokes(desc, pose)
+    va = hp.dead_volume_a_m3 + hp.area_a_m2 * (hp.half_stroke_m + x)
+    vb = hp.dead_volume_b_m3 + hp.area_b_m2 * (hp.half_stroke_m - x)
+    k = hp.bulk_modulus_pa * (hp.area_a_m2 ** 2 / va + hp.area_b_m2 ** 2 / vb)
+    J = dof_jacobian(desc, pose)[:, dofs]
+    return J.T @ np.diag(k) @ J
+
+
 def study(desc: TableDescription, effective_mass: np.ndarray | None = None, hydraulics=None) -> dict:
     """The geometric-nonlinearity report (dict, SI units)."""
     names = list(desc.actuator_names)
@@ -93,12 +104,7 @@ def study(desc: TableDescription, effective_mass: np.ndarray | None = None, hydr
         M = effective_mass
 
         def freqs(pose):
-            x = actuator_strokes(desc, pose)
-            va = hp.dead_volume_a_m3 + hp.area_a_m2 * (hp.half_stroke_m + x)
-            vb = hp.dead_volume_b_m3 + hp.area_b_m2 * (hp.half_stroke_m - x)
-            k = hp.bulk_modulus_pa * (hp.area_a_m2 ** 2 / va + hp.area_b_m2 ** 2 / vb)
-            J = dof_jacobian(desc, pose)[:, dofs]
-            K = J.T @ np.diag(k) @ J
+            K = dof_stiffness(desc, hp, pose, dofs)
             w2 = np.linalg.eigvals(np.linalg.solve(M, K)).real
             return np.sort(np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi))
 
@@ -217,12 +223,7 @@ def offset_plane_maps(desc: TableDescription, tm=None, hydraulics=None, *, n: in
                 tm.set_platen_pose(d, p)
                 M = analysis.effective_mass_matrix(tm.model, d)
                 m_x[i, j] = float(M[0, 0])
-                s = actuator_strokes(desc, p)
-                va = hp.dead_volume_a_m3 + hp.area_a_m2 * (hp.half_stroke_m + s)
-                vb = hp.dead_volume_b_m3 + hp.area_b_m2 * (hp.half_stroke_m - s)
-                k = hp.bulk_modulus_pa * (hp.area_a_m2 ** 2 / va + hp.area_b_m2 ** 2 / vb)
-                J = dof_jacobian(desc, p)[:, dofs]
-                K = J.T @ np.diag(k) @ J
+                K = dof_stiffness(desc, hp, p, dofs)
                 w2, vec = np.linalg.eig(np.linalg.solve(M, K))
                 f = np.sqrt(np.clip(w2.real, 0, None)) / (2 * np.pi)
                 f_low[i, j] = float(f.min())
