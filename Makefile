@@ -20,6 +20,7 @@ demo: setup
 
 test: setup
 	$(BIN)/ruff check sim mjcf hydraulics tests bench
+	$(BIN)/ruff format --check sim mjcf hydraulics tests bench
 	$(BIN)/python -m pytest -q
 
 bench: setup

@@ -34,8 +34,12 @@ from sim.scenario.files import DOFS
 from sim.scenario.records import el_centro_motions
 from sim.scenario.reference import Reference
 
-SCENES = [("bare", None), ("rigid 20 t", "rigid_20t"), ("3-storey frame", "frame_3storey_297"),
-          ("6 m tower", "tower_6m")]
+SCENES = [
+    ("bare", None),
+    ("rigid 20 t", "rigid_20t"),
+    ("3-storey frame", "frame_3storey_297"),
+    ("6 m tower", "tower_6m"),
+]
 
 
 def bare_step_us(model, n=4000) -> float:
@@ -102,25 +106,35 @@ def main(argv=None) -> int:
     secs = 5.0 if args.quick else 15.0
     desc = mjcf.load_table("cgs")
     ref = strong_motion(secs)
-    print(f"shaketable bench: CGS table, El Centro 80 % strong motion, {secs:.0f} s simulated per scene; "
-          f"physics step {1e3 / 2048:.3f} ms (2048 Hz), controller/recorder 1024 Hz")
-    print(f"{'scene':16s} {'mj_step':>8s} {'loop/step':>9s} {'ratio':>6s} {'ratio*':>6s} {'RTF':>6s} | "
-          f"{'unfused':>8s} {'ratio*':>6s} {'physics':>8s} {'hydr.':>7s} {'ctrl':>7s} {'output':>7s}  "
-          "(us per physics step)")
+    print(
+        f"shaketable bench: CGS table, El Centro 80 % strong motion, {secs:.0f} s simulated per scene; "
+        f"physics step {1e3 / 2048:.3f} ms (2048 Hz), controller/recorder 1024 Hz"
+    )
+    print(
+        f"{'scene':16s} {'mj_step':>8s} {'loop/step':>9s} {'ratio':>6s} {'ratio*':>6s} {'RTF':>6s} | "
+        f"{'unfused':>8s} {'ratio*':>6s} {'physics':>8s} {'hydr.':>7s} {'ctrl':>7s} {'output':>7s}  "
+        "(us per physics step)"
+    )
     for label, payload in SCENES:
         tm = build_model(desc, mjcf.load_payload(payload) if payload else None)
         bare = bare_step_us(tm.model)
         f = loop_figures(tm, ref)
-        print(f"{label:16s} {bare:8.1f} {f['wall_per_step_us']:9.1f} {f['wall_per_step_us'] / bare:6.2f} "
-              f"{f['wall_per_step_us'] / f['physics_us']:6.2f} "
-              f"{f['rtf']:6.2f} | {f['split_wall_per_step_us']:8.1f} "
-              f"{f['split_wall_per_step_us'] / f['split_physics_us']:6.2f} {f['split_physics_us']:8.1f} "
-              f"{f['hydraulics_us']:7.1f} {f['controller_us']:7.1f} {f['output_us']:7.1f}")
+        print(
+            f"{label:16s} {bare:8.1f} {f['wall_per_step_us']:9.1f} {f['wall_per_step_us'] / bare:6.2f} "
+            f"{f['wall_per_step_us'] / f['physics_us']:6.2f} "
+            f"{f['rtf']:6.2f} | {f['split_wall_per_step_us']:8.1f} "
+            f"{f['split_wall_per_step_us'] / f['split_physics_us']:6.2f} {f['split_physics_us']:8.1f} "
+            f"{f['hydraulics_us']:7.1f} {f['controller_us']:7.1f} {f['output_us']:7.1f}"
+        )
         sys.stdout.flush()
-    print("ratio = loop per step / isolated mj_step (random forces); ratio* = loop per step / the mj_step calls "
-          "inside the same loop (same motion, same solver work); target <= 1.3")
-    print("left: the default loop (recorder, controller and hydraulics fused into one compiled call per physics "
-          "step); right: the same run unfused, one compiled call per stage, for the cost split")
+    print(
+        "ratio = loop per step / isolated mj_step (random forces); ratio* = loop per step / the mj_step calls "
+        "inside the same loop (same motion, same solver work); target <= 1.3"
+    )
+    print(
+        "left: the default loop (recorder, controller and hydraulics fused into one compiled call per physics "
+        "step); right: the same run unfused, one compiled call per stage, for the cost split"
+    )
     print()
     from bench import hydraulics_bench
 
@@ -133,8 +147,9 @@ def main(argv=None) -> int:
     from bench import batch_bench
 
     tm = build_model(desc, mjcf.load_payload("rigid_20t"))
-    b = batch_bench.main(tm, ref, batch_seconds=0.25 if args.quick else 0.5,
-                         sizes=(1, 8, 32) if args.quick else (1, 8, 32, 128))
+    b = batch_bench.main(
+        tm, ref, batch_seconds=0.25 if args.quick else 0.5, sizes=(1, 8, 32) if args.quick else (1, 8, 32, 128)
+    )
     n = b["summary_n"]
     print(f"single loop / bare mj_step: {b['callback_ratio']:.3f}")
     print(f"batch efficiency ({n} sims, {b['threads']} threads): {b['batches'][n]['efficiency']:.3f}")

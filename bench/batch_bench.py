@@ -71,15 +71,24 @@ def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads:
     rate1 = bare_replay_rate(tm, F, sim.steps_per_tick)
     bare_us = 2e6 / (rate0 + rate1)  # before and after the callback run
     steps = cb.timing["steps"]
-    out = {"bare_us": bare_us, "loop_us": loop.wall_s / loop.timing["steps"] * 1e6,
-           "callback_us": cb.wall_s / steps * 1e6, "threads": threads, "batches": {}}
+    out = {
+        "bare_us": bare_us,
+        "loop_us": loop.wall_s / loop.timing["steps"] * 1e6,
+        "callback_us": cb.wall_s / steps * 1e6,
+        "threads": threads,
+        "batches": {},
+    }
     out["loop_ratio"] = out["loop_us"] / bare_us
     out["callback_ratio"] = out["callback_us"] / bare_us
-    print(f"single simulation, {cb.sim_s:.1f} s of El Centro: bare mj_step (same model, same forces) {bare_us:.1f} us; "
-          f"Python loop {out['loop_us']:.1f} us/step ({out['loop_ratio']:.2f} x); "
-          f"callback route {out['callback_us']:.1f} us/step ({out['callback_ratio']:.2f} x)")
-    print(f"batches on {threads} threads, {batch_seconds:g} s simulated each "
-          f"(efficiency = physics steps/s over {threads} x the bare mj_step rate):")
+    print(
+        f"single simulation, {cb.sim_s:.1f} s of El Centro: bare mj_step (same model, same forces) {bare_us:.1f} us; "
+        f"Python loop {out['loop_us']:.1f} us/step ({out['loop_ratio']:.2f} x); "
+        f"callback route {out['callback_us']:.1f} us/step ({out['callback_ratio']:.2f} x)"
+    )
+    print(
+        f"batches on {threads} threads, {batch_seconds:g} s simulated each "
+        f"(efficiency = physics steps/s over {threads} x the bare mj_step rate):"
+    )
     print(f"  {'N':>5s} {'sim s / wall s':>15s} {'steps/s':>10s} {'efficiency':>10s}")
     for n in sizes:
         sims = [Simulation(tm) for _ in range(n)]

@@ -71,8 +71,10 @@ def main(argv=None) -> int:
         run_file = out / f"{args.scenario}.run.npz"
         run = read_run(run_file)
         run_size = run_file.stat().st_size
-        tm = build_model(mjcf.load_table(run.meta["table"]),
-                        mjcf.load_payload(run.meta["payload"]) if run.meta.get("payload") else None)
+        tm = build_model(
+            mjcf.load_table(run.meta["table"]),
+            mjcf.load_payload(run.meta["payload"]) if run.meta.get("payload") else None,
+        )
         import rerun  # noqa: F401  (import cost is in the end-to-end figures above)
 
         alone = {}
@@ -93,12 +95,15 @@ def main(argv=None) -> int:
     print(f"  without --rrd  wall {fmt(w0)}")
     print(f"  with --rrd     wall {fmt(w1)}")
     print(f"  overhead       {100 * ratio:+.1f} % (min/min), {100 * med:+.1f} % (median/median); target <= 10 %")
-    print(f"  CPU time       {statistics.median(c0):.2f} s -> {statistics.median(c1):.2f} s "
-          f"({100 * cpu:+.1f} %, medians, all threads)")
-    print(f"  run file {run_size / 1e6:.1f} MB; "
-          f"recording (--rrd) {size / 1e6:.1f} MB, {run.n_samples} samples")
+    print(
+        f"  CPU time       {statistics.median(c0):.2f} s -> {statistics.median(c1):.2f} s "
+        f"({100 * cpu:+.1f} %, medians, all threads)"
+    )
+    print(f"  run file {run_size / 1e6:.1f} MB; recording (--rrd) {size / 1e6:.1f} MB, {run.n_samples} samples")
     for label, (secs, sz) in alone.items():
-        print(f"  recording alone (open + write_run, writer import included), {label:9s}: {secs:.2f} s, {sz / 1e6:.1f} MB")
+        print(
+            f"  recording alone (open + write_run, writer import included), {label:9s}: {secs:.2f} s, {sz / 1e6:.1f} MB"
+        )
     return 0
 
 

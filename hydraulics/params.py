@@ -298,8 +298,11 @@ class HydraulicParams:
                 f"supply.line_resistance_pa_s_m3 must be 0 (supply line loss is not modelled; got {self.line_resistance_pa_s_m3!r})"
             )
         if self.model not in ("first", "second"):
-            raise HydraulicsParamError(f"servovalve.model must be \"first\" or \"second\" (got {self.model!r})")
-        if not self.vapour_pressure_pa < self.return_pressure_pa or not self.return_pressure_pa < self.supply_pressure_pa:
+            raise HydraulicsParamError(f'servovalve.model must be "first" or "second" (got {self.model!r})')
+        if (
+            not self.vapour_pressure_pa < self.return_pressure_pa
+            or not self.return_pressure_pa < self.supply_pressure_pa
+        ):
             raise HydraulicsParamError(
                 "supply.return_pressure_pa must lie between fluid.vapour_pressure_pa and supply.pressure_pa "
                 f"(got {self.return_pressure_pa!r})"

@@ -93,7 +93,9 @@ def _numba_kernel():
         # helpers must be jitted for the kernel to call them
         for name in ("land_flow", "inv_beta", "store_of_p", "dstore_dp", "p_of_store"):
             setattr(_kernel, name, numba.njit(**opts)(getattr(_kernel, name)))
-        _kernel.step_loops = numba.njit(**opts)(_kernel.step_loops.py_func if hasattr(_kernel.step_loops, "py_func") else _kernel.step_loops)
+        _kernel.step_loops = numba.njit(**opts)(
+            _kernel.step_loops.py_func if hasattr(_kernel.step_loops, "py_func") else _kernel.step_loops
+        )
         _NUMBA_KERNEL = _kernel.step_loops
     return _NUMBA_KERNEL
 
@@ -156,7 +158,7 @@ class HydraulicSystem:
         if not (dt > 0 and math.isfinite(dt)):
             raise ValueError(f"dt must be > 0 (got {dt!r})")
         if backend not in ("numba", "numpy"):
-            raise ValueError(f"backend must be \"numba\" or \"numpy\" (got {backend!r})")
+            raise ValueError(f'backend must be "numba" or "numpy" (got {backend!r})')
         self.params = params
         self.n_sim = int(n_sim)
         self.n_act = params.n_act
@@ -241,7 +243,13 @@ class HydraulicSystem:
                 P[L.P_G0, i], P[L.P_G1, i] = E[0, 2], E[1, 2]
             # the globals keep the nominal (scalar) valve, for reference
             G[L.G_F00], G[L.G_F01], G[L.G_F10], G[L.G_F11], G[L.G_G0], G[L.G_G1] = (
-                P[L.P_F00, 0], P[L.P_F01, 0], P[L.P_F10, 0], P[L.P_F11, 0], P[L.P_G0, 0], P[L.P_G1, 0])
+                P[L.P_F00, 0],
+                P[L.P_F01, 0],
+                P[L.P_F10, 0],
+                P[L.P_F11, 0],
+                P[L.P_G0, 0],
+                P[L.P_G1, 0],
+            )
         else:
             G[L.G_MODEL] = 0.0
         P[L.P_A1] = np.exp(-dt / p.per_actuator("valve_tau_s"))

@@ -6,6 +6,16 @@ from mjcf.errors import DescriptionError, MjcfError
 from mjcf.model import TableModel
 
 __all__ = [
-    "BuildOptions", "DescriptionError", "MjcfError", "TableDescription", "TableModel", "actuator_strokes",
-    "build", "build_spec", "load_payload", "load_table", "rotation_matrix", "write_xml",
+    "BuildOptions",
+    "DescriptionError",
+    "MjcfError",
+    "TableDescription",
+    "TableModel",
+    "actuator_strokes",
+    "build",
+    "build_spec",
+    "load_payload",
+    "load_table",
+    "rotation_matrix",
+    "write_xml",
 ]

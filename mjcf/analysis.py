@@ -32,8 +32,8 @@ def connect_rows(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[np.ndarray
         p2 = data.xpos[b2] + data.xmat[b2].reshape(3, 3) @ model.eq_data[i, 3:6]
         mujoco.mj_jac(model, data, jp1, None, p1, b1)
         mujoco.mj_jac(model, data, jp2, None, p2, b2)
-        r[3 * k:3 * k + 3] = p1 - p2
-        J[3 * k:3 * k + 3] = jp1 - jp2
+        r[3 * k : 3 * k + 3] = p1 - p2
+        J[3 * k : 3 * k + 3] = jp1 - jp2
     return r, J
 
 
@@ -136,7 +136,7 @@ def static_balance(model: mujoco.MjModel, force_dofs, qpos=None) -> np.ndarray:
     res = np.abs(A @ x - b).max()
     if res > 1e-6 * max(np.abs(b).max(), 1.0):
         raise ValueError(f"static balance not met (residual {res:.3g} N)")
-    return x[-len(force_dofs):]
+    return x[-len(force_dofs) :]
 
 
 def support_preloads(model: mujoco.MjModel, desc) -> np.ndarray:
@@ -188,8 +188,9 @@ def settle_loops(model: mujoco.MjModel, data: mujoco.MjData, *, tol: float = 1e-
     return err
 
 
-def linear_modes(model: mujoco.MjModel, dofs: np.ndarray, *, gravity: bool = True,
-                 qpos: np.ndarray | None = None, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+def linear_modes(
+    model: mujoco.MjModel, dofs: np.ndarray, *, gravity: bool = True, qpos: np.ndarray | None = None, eps: float = 1e-6
+) -> tuple[np.ndarray, np.ndarray]:
     """Natural frequencies (Hz) and mode shapes of the coordinates ``dofs``, others held.
 
     Mass from ``mj_fullM``; stiffness by central differences of the passive force

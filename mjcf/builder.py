@@ -51,7 +51,7 @@ from mjcf.description import (
 
 @dataclass(frozen=True, kw_only=True)
 class BuildOptions:
-    """Integrator and constraint settings (proved in tests/test_model.py).
+    """Integrator and constraint settings (proved in tests/mjcf/test_model.py).
 
     The loop-closing ``connect`` equalities carry hundreds of kN through light rods.
     MuJoCo's default (solref 0.02 s, solimp 0.9/0.95) lets them open by millimetres, so
@@ -124,8 +124,9 @@ class BuildInfo:
     air_joints: list[str] = field(default_factory=list)  #: support joints whose nonlinear air law the loop adds
 
 
-def build_spec(desc: TableDescription, payload: Payload | None = None,
-               options: BuildOptions | None = None, *, effects=None) -> tuple[mujoco.MjSpec, BuildInfo]:
+def build_spec(
+    desc: TableDescription, payload: Payload | None = None, options: BuildOptions | None = None, *, effects=None
+) -> tuple[mujoco.MjSpec, BuildInfo]:
     """Build the table's MjSpec (supports not yet preloaded: see :func:`build`).
 
     ``effects``: ``effects(spec, entries, desc) -> (step_effects, effects)`` builds the
@@ -169,8 +170,9 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
 
     world = spec.worldbody
     world.add_light(name="sun", pos=[0, 0, 12], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
-    _visual(world, name="pit_floor", type=mujoco.mjtGeom.mjGEOM_BOX,
-            pos=[0, 0, -3.3], size=[7.5, 7.5, 0.2], rgba=_CONCRETE)
+    _visual(
+        world, name="pit_floor", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, -3.3], size=[7.5, 7.5, 0.2], rgba=_CONCRETE
+    )
 
     # Foundation.
     fd = desc.foundation
@@ -189,8 +191,14 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
             j = base_parent.add_joint(name=f"foundation_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
             j.stiffness = [fd.mass_kg * w * w, 0, 0]
             j.damping = [2 * fd.damping_ratio[k] * fd.mass_kg * w, 0, 0]
-        _visual(base_parent, name="foundation_block", type=mujoco.mjtGeom.mjGEOM_BOX,
-                pos=[0, 0, -3.2], size=[7.0, 7.0, 0.05], rgba=_CONCRETE)
+        _visual(
+            base_parent,
+            name="foundation_block",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            pos=[0, 0, -3.2],
+            size=[7.0, 7.0, 0.05],
+            rgba=_CONCRETE,
+        )
 
     # Platen.
     pl = desc.platen
@@ -207,27 +215,47 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
     platen.mass = pl.mass_kg
     platen.ipos = pl.com_m.tolist()
     platen.inertia = pl.inertia_kg_m2.tolist()
-    _visual(platen, name="platen_box", type=mujoco.mjtGeom.mjGEOM_BOX,
-            pos=[0, 0, -pl.size_m[2] / 2], size=(pl.size_m / 2).tolist(), rgba=_STEEL)
+    _visual(
+        platen,
+        name="platen_box",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        pos=[0, 0, -pl.size_m[2] / 2],
+        size=(pl.size_m / 2).tolist(),
+        rgba=_STEEL,
+    )
     platen.add_site(name="reference", pos=[0, 0, 0], size=[0.05, 0, 0])
     for acc in desc.accelerometers:
-        platen.add_site(name=f"acc_{acc.name}", pos=acc.position_m.tolist(), size=[0.04, 0, 0],
-                        quat=_frame_from_z(acc.direction).tolist(), rgba=[1, 0.2, 0.2, 1])
+        platen.add_site(
+            name=f"acc_{acc.name}",
+            pos=acc.position_m.tolist(),
+            size=[0.04, 0, 0],
+            quat=_frame_from_z(acc.direction).tolist(),
+            rgba=[1, 0.2, 0.2, 1],
+        )
 
     # Linkages.
     for a in desc.actuators:
         c = a.cls
         L0 = a.length0_m
-        cyl = base_parent.add_body(name=f"{a.name}_cylinder", pos=a.base_m.tolist(),
-                                   quat=_frame_from_z(a.axis).tolist(), childclass=link_cls[c.name].name)
+        cyl = base_parent.add_body(
+            name=f"{a.name}_cylinder",
+            pos=a.base_m.tolist(),
+            quat=_frame_from_z(a.axis).tolist(),
+            childclass=link_cls[c.name].name,
+        )
         cyl.explicitinertial = True
         cyl.mass = c.cylinder_mass_kg
         cyl.ipos = [0, 0, c.cylinder_length_m / 2]
         cyl.inertia = _cyl_inertia(c.cylinder_mass_kg, c.cylinder_radius_m, c.cylinder_length_m)
         cyl.add_joint(name=f"{a.name}_swivel_u", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[1, 0, 0])
         cyl.add_joint(name=f"{a.name}_swivel_v", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
-        _visual(cyl, name=f"{a.name}_cylinder", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                fromto=[0, 0, 0, 0, 0, c.cylinder_length_m], size=[c.cylinder_radius_m, 0, 0])
+        _visual(
+            cyl,
+            name=f"{a.name}_cylinder",
+            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+            fromto=[0, 0, 0, 0, 0, c.cylinder_length_m],
+            size=[c.cylinder_radius_m, 0, 0],
+        )
         cyl.add_site(name=f"{a.name}_base", pos=[0, 0, 0], size=[0.05, 0, 0])
 
         rod = cyl.add_body(name=f"{a.name}_rod", pos=[0, 0, 0])
@@ -238,8 +266,14 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
         js = rod.add_joint(name=f"{a.name}_stroke", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
         js.frictionloss = c.seal_friction_n
         js.damping = [c.seal_viscous_n_s_m, 0, 0]
-        _visual(rod, name=f"{a.name}_rod", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                fromto=[0, 0, L0 - c.rod_length_m, 0, 0, L0], size=[c.rod_radius_m, 0, 0], rgba=_ROD)
+        _visual(
+            rod,
+            name=f"{a.name}_rod",
+            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+            fromto=[0, 0, L0 - c.rod_length_m, 0, 0, L0],
+            size=[c.rod_radius_m, 0, 0],
+            rgba=_ROD,
+        )
         rod.add_site(name=f"{a.name}_rod_end", pos=[0, 0, L0], size=[0.05, 0, 0])
 
         eq = spec.add_equality(name=f"{a.name}_swivel")
@@ -260,16 +294,22 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
     if sp is not None:
         for i, p in enumerate(sp.positions_m, start=1):
             nm = f"S{i}"
-            pis = base_parent.add_body(name=f"{nm}_piston", pos=[p[0], p[1], p[2] - sp.piston_length_m],
-                                       childclass=sup_cls.name)
+            pis = base_parent.add_body(
+                name=f"{nm}_piston", pos=[p[0], p[1], p[2] - sp.piston_length_m], childclass=sup_cls.name
+            )
             pis.explicitinertial = True
             pis.mass = sp.piston_mass_kg
             pis.ipos = [0, 0, sp.piston_length_m / 2]
             pis.inertia = _cyl_inertia(sp.piston_mass_kg, sp.piston_radius_m, sp.piston_length_m)
             ja = pis.add_joint(name=f"{nm}_air", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
             ja.frictionloss = sp.piston_friction_n
-            _visual(pis, name=f"{nm}_piston", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                    fromto=[0, 0, 0, 0, 0, sp.piston_length_m], size=[sp.piston_radius_m, 0, 0])
+            _visual(
+                pis,
+                name=f"{nm}_piston",
+                type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                fromto=[0, 0, 0, 0, 0, sp.piston_length_m],
+                size=[sp.piston_radius_m, 0, 0],
+            )
             shoe = pis.add_body(name=f"{nm}_shoe", pos=[0, 0, sp.piston_length_m])
             shoe.explicitinertial = True
             shoe.mass = sp.shoe_mass_kg
@@ -278,8 +318,14 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
             for ax, vec in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
                 jsh = shoe.add_joint(name=f"{nm}_shoe_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=vec)
                 jsh.frictionloss = sp.shoe_friction_n / math.sqrt(2)
-            _visual(shoe, name=f"{nm}_shoe", type=mujoco.mjtGeom.mjGEOM_BOX,
-                    pos=[0, 0, -0.05], size=[0.2, 0.2, 0.05], rgba=_ROD)
+            _visual(
+                shoe,
+                name=f"{nm}_shoe",
+                type=mujoco.mjtGeom.mjGEOM_BOX,
+                pos=[0, 0, -0.05],
+                size=[0.2, 0.2, 0.05],
+                rgba=_ROD,
+            )
             eq = spec.add_equality(name=f"{nm}_pin")
             eq.type = mujoco.mjtEq.mjEQ_CONNECT
             eq.objtype = mujoco.mjtObj.mjOBJ_BODY
@@ -294,7 +340,8 @@ def build_spec(desc: TableDescription, payload: Payload | None = None,
         if effects is None:
             raise DescriptionError(
                 f"{desc.source}: the description declares [[effect]] entries, which mjcf alone cannot build; "
-                "build it with sim.effects.build_model")
+                "build it with sim.effects.build_model"
+            )
         info.step_effects, info.effects = effects(spec, list(desc.effects), desc)
     return spec, info
 
@@ -333,9 +380,14 @@ def _add_payload(spec, platen, payload, info):
         body.inertia = (a * p.inertia_kg_m2).tolist()
         info.payload_bodies.append("payload")
         # The block drawn from its footprint and height, resting on the platen.
-        _visual(body, name="payload_block", type=mujoco.mjtGeom.mjGEOM_BOX,
-                pos=[0, 0, p.height_m / 2 - p.com_m[2]],
-                size=[p.footprint_m[0] / 2, p.footprint_m[1] / 2, p.height_m / 2], rgba=_PAYLOAD)
+        _visual(
+            body,
+            name="payload_block",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            pos=[0, 0, p.height_m / 2 - p.com_m[2]],
+            size=[p.footprint_m[0] / 2, p.footprint_m[1] / 2, p.height_m / 2],
+            rgba=_PAYLOAD,
+        )
     elif isinstance(payload, ShearFramePayload):
         info.payload_kind = "shear_frame"
         p = payload
@@ -351,8 +403,13 @@ def _add_payload(spec, platen, payload, info):
             b.inertia = _box_inertia(float(p.mass_kg[i]), [p.footprint_m[0], p.footprint_m[1], 0.05])
             j = b.add_joint(name=f"floor{i + 1}_drift", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
             names.append(j.name)
-            _visual(b, name=f"floor{i + 1}_slab", type=mujoco.mjtGeom.mjGEOM_BOX,
-                    size=[p.footprint_m[0] / 2, p.footprint_m[1] / 2, 0.02], rgba=_PAYLOAD)
+            _visual(
+                b,
+                name=f"floor{i + 1}_slab",
+                type=mujoco.mjtGeom.mjGEOM_BOX,
+                size=[p.footprint_m[0] / 2, p.footprint_m[1] / 2, 0.02],
+                rgba=_PAYLOAD,
+            )
             info.payload_bodies.append(b.name)
         info.payload_joints.extend(names)
         # K and C as sums of rank-one springs/dampers on fixed tendons: K = sum k_i v_i v_i^T
@@ -386,14 +443,20 @@ def _add_payload(spec, platen, payload, info):
         seg = p.height_m / n
         mu = p.mass_per_length_kg_m
         k_rot = p.bending_stiffness_n_m2 / seg
-        w1 = (1.875104 ** 2) * math.sqrt(p.bending_stiffness_n_m2 / (mu * p.height_m ** 4))
+        w1 = (1.875104**2) * math.sqrt(p.bending_stiffness_n_m2 / (mu * p.height_m**4))
         foot = platen.add_body(name="segment0", pos=p.base_m.tolist())
         foot.explicitinertial = True
         foot.mass = mu * seg / 2
         foot.ipos = [0, 0, seg / 4]
         foot.inertia = _box_inertia(mu * seg / 2, [p.width_m, p.width_m, seg / 2])
-        _visual(foot, name="segment0", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, seg / 4],
-                size=[p.width_m / 2, p.width_m / 2, seg / 4 * 0.98], rgba=_PAYLOAD)
+        _visual(
+            foot,
+            name="segment0",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            pos=[0, 0, seg / 4],
+            size=[p.width_m / 2, p.width_m / 2, seg / 4 * 0.98],
+            rgba=_PAYLOAD,
+        )
         info.payload_bodies.append("segment0")
         parent = foot
         pos = [0, 0, seg / 2]
@@ -411,8 +474,14 @@ def _add_payload(spec, platen, payload, info):
                 # stiffness-proportional damping giving damping_ratio at the first mode
                 j.damping = [2 * p.damping_ratio * k_rot / w1, 0, 0]
                 info.payload_joints.append(j.name)
-            _visual(b, name=f"segment{i + 1}", type=mujoco.mjtGeom.mjGEOM_BOX,
-                    pos=[0, 0, length / 2], size=[p.width_m / 2, p.width_m / 2, length / 2 * 0.98], rgba=_PAYLOAD)
+            _visual(
+                b,
+                name=f"segment{i + 1}",
+                type=mujoco.mjtGeom.mjGEOM_BOX,
+                pos=[0, 0, length / 2],
+                size=[p.width_m / 2, p.width_m / 2, length / 2 * 0.98],
+                rgba=_PAYLOAD,
+            )
             info.payload_bodies.append(b.name)
             parent = b
             pos = [0, 0, length]
@@ -426,8 +495,7 @@ def _generalized_eig(K, M):
     return w2, phi
 
 
-def build(desc: TableDescription, payload: Payload | None = None,
-          options: BuildOptions | None = None, *, effects=None):
+def build(desc: TableDescription, payload: Payload | None = None, options: BuildOptions | None = None, *, effects=None):
     """Build and compile the table, with the static supports preloaded for equilibrium.
 
     Returns a :class:`mjcf.model.TableModel`. The supports' air springs are given the
@@ -456,7 +524,7 @@ def build(desc: TableDescription, payload: Payload | None = None,
             )
         for i, f in enumerate(loads, start=1):
             p0 = f / sp.piston_area_m2
-            k = sp.polytropic_exponent * p0 * sp.piston_area_m2 ** 2 / sp.chamber_volume_m3
+            k = sp.polytropic_exponent * p0 * sp.piston_area_m2**2 / sp.chamber_volume_m3
             j = spec.joint(f"S{i}_air")
             j.stiffness = [k, 0, 0]
             j.springref = f / k
@@ -504,13 +572,24 @@ def write_xml(tm, out_dir: str | Path) -> tuple[Path, Path]:
         ET.SubElement(vis, "global", azimuth="135", elevation="-25")
         ET.SubElement(vis, "headlight", diffuse="0.6 0.6 0.6", ambient="0.3 0.3 0.3")
         wb = ET.SubElement(root, "worldbody")
-        ET.SubElement(wb, "geom", name="ground", type="plane", pos="0 0 -3.5", size="20 20 0.1",
-                      rgba="0.3 0.32 0.35 1", contype="0", conaffinity="0")
+        ET.SubElement(
+            wb,
+            "geom",
+            name="ground",
+            type="plane",
+            pos="0 0 -3.5",
+            size="20 20 0.1",
+            rgba="0.3 0.32 0.35 1",
+            contype="0",
+            conaffinity="0",
+        )
         ET.SubElement(wb, "camera", name="overview", pos="14 -14 9", xyaxes="0.707 0.707 0 -0.3 0.3 0.9")
         ET.indent(root)
         write_text_replacing(scene_xml, ET.tostring(root, encoding="unicode"))
     except OSError as e:
-        raise DescriptionError(f"cannot write the scene to {out}: {e.strerror}; choose a writable --xml folder") from None
+        raise DescriptionError(
+            f"cannot write the scene to {out}: {e.strerror}; choose a writable --xml folder"
+        ) from None
     return table_xml, scene_xml
 
 

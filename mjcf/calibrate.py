@@ -38,12 +38,19 @@ def published_effective_mass(desc: TableDescription) -> dict[str, float]:
     """The measured effective masses of the description's ``[published] effective_mass``
     (kg for x, y, z; kg m^2 for rx, ry, rz)."""
     em = (desc.raw.get("published") or {}).get("effective_mass")
-    if not isinstance(em, dict) or set(em) != set(DOF_NAMES) or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
-            for v in em.values()):
-        raise DescriptionError(f"{desc.source}: mass calibration needs '[published] effective_mass' with a positive "
-                               f"number for each of {', '.join(DOF_NAMES)} (the table's measured effective masses)")
+    if (
+        not isinstance(em, dict)
+        or set(em) != set(DOF_NAMES)
+        or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0 for v in em.values()
+        )
+    ):
+        raise DescriptionError(
+            f"{desc.source}: mass calibration needs '[published] effective_mass' with a positive "
+            f"number for each of {', '.join(DOF_NAMES)} (the table's measured effective masses)"
+        )
     return {d: float(em[d]) for d in DOF_NAMES}
+
 
 PARAMS = (
     ("platen", "mass_kg", None),
@@ -84,8 +91,13 @@ def _with(desc: TableDescription, values) -> TableDescription:
             cname = sec.split(".")[1]
             classes[cname] = dataclasses.replace(classes[cname], **{key: v})
     acts = tuple(dataclasses.replace(a, cls=classes[a.cls.name]) for a in desc.actuators)
-    return dataclasses.replace(desc, platen=dataclasses.replace(platen, mass_kg=mass, inertia_kg_m2=inertia),
-                               actuator_classes=classes, actuators=acts, supports=supports)
+    return dataclasses.replace(
+        desc,
+        platen=dataclasses.replace(platen, mass_kg=mass, inertia_kg_m2=inertia),
+        actuator_classes=classes,
+        actuators=acts,
+        supports=supports,
+    )
 
 
 def values_into_raw(raw: dict, values: dict) -> None:
@@ -120,16 +132,19 @@ def mass_offset(desc: TableDescription) -> dict[str, float]:
         raise DescriptionError(f"{desc.source}: '[calibration]' must be a table")
     extra = sorted(set(cal) - {"effective_mass_offset"})
     if extra:
-        raise DescriptionError(f"{desc.source}: unknown key '{extra[0]}' in [calibration]; known keys: "
-                               "effective_mass_offset")
+        raise DescriptionError(
+            f"{desc.source}: unknown key '{extra[0]}' in [calibration]; known keys: effective_mass_offset"
+        )
     v = cal.get("effective_mass_offset", [0.0] * 6)
     try:
         arr = np.asarray(v, dtype=float)
     except (TypeError, ValueError):
         arr = np.array([])
     if arr.shape != (6,) or not np.all(np.isfinite(arr)):
-        raise DescriptionError(f"{desc.source}: 'calibration.effective_mass_offset' must be 6 finite numbers "
-                               "(x, y, z in kg, rx, ry, rz in kg m^2); rerun `shaketable characterize TABLE --calibrate`")
+        raise DescriptionError(
+            f"{desc.source}: 'calibration.effective_mass_offset' must be 6 finite numbers "
+            "(x, y, z in kg, rx, ry, rz in kg m^2); rerun `shaketable characterize TABLE --calibrate`"
+        )
     return dict(zip(DOF_NAMES, arr.tolist()))
 
 
@@ -162,8 +177,10 @@ def calibrate_masses(desc: TableDescription, targets: dict[str, float] | None = 
     x = x0 + np.linalg.solve(B, tgt - e0)
     bad = [PARAMS[k] for k in range(len(x)) if x[k] <= 0]
     if bad:
-        raise DescriptionError(f"{desc.source}: calibration asks for a non-positive {bad[0][0]}.{bad[0][1]}; "
-                               "the assumed masses or layout cannot reproduce the targets")
+        raise DescriptionError(
+            f"{desc.source}: calibration asks for a non-positive {bad[0][0]}.{bad[0][1]}; "
+            "the assumed masses or layout cannot reproduce the targets"
+        )
     new = _with(desc, x)
     e1 = _eff(new)
     return {
@@ -199,20 +216,31 @@ def write_calibrated(path: Path, result: dict, note: str = NOTE_FORMULA, offset:
     text = set_key(text, "actuator_class.lateral", "rod_mass_kg", f"{vals['actuator_class.lateral.rod_mass_kg']:.2f}")
     text = set_key(text, "supports", "piston_mass_kg", f"{vals['supports.piston_mass_kg']:.2f}")
     if offset is not None:
-        line = ("effective_mass_offset = [" + ", ".join(f"{offset[d]:.1f}" for d in DOF_NAMES) + "]"
-                "  # measured: rigid-body minus virtual-test effective mass (mean of R1, R2), x y z kg, rx ry rz kg m^2")
+        line = (
+            "effective_mass_offset = [" + ", ".join(f"{offset[d]:.1f}" for d in DOF_NAMES) + "]"
+            "  # measured: rigid-body minus virtual-test effective mass (mean of R1, R2), x y z kg, rx ry rz kg m^2"
+        )
         lines = text.split("\n")
         i = toml_key_index(lines, "calibration", "effective_mass_offset")
         if i is not None:
             lines[i] = line
             text = "\n".join(lines)
         else:
-            text = text.rstrip("\n") + "\n\n" + "\n".join([
-                "# What the virtual effective-mass tests (characterize, R1/R2) read below the rigid-body",
-                "# effective mass diag(T^T M T): the parallel stiffness (pre-sliding friction, supports) as",
-                "# -K/w^2 over the test band. `shaketable calibrate` aims the rigid-body masses at Table 2",
-                "# plus this, so that the virtual tests reproduce Table 2; `characterize --calibrate` measures it.",
-                "[calibration]", line]) + "\n"
+            text = (
+                text.rstrip("\n")
+                + "\n\n"
+                + "\n".join(
+                    [
+                        "# What the virtual effective-mass tests (characterize, R1/R2) read below the rigid-body",
+                        "# effective mass diag(T^T M T): the parallel stiffness (pre-sliding friction, supports) as",
+                        "# -K/w^2 over the test band. `shaketable calibrate` aims the rigid-body masses at Table 2",
+                        "# plus this, so that the virtual tests reproduce Table 2; `characterize --calibrate` measures it.",
+                        "[calibration]",
+                        line,
+                    ]
+                )
+                + "\n"
+            )
     from mjcf.errors import write_text_replacing
 
     write_text_replacing(path, text)

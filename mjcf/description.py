@@ -107,9 +107,7 @@ class _Section:
         if not isinstance(v, str):
             raise DescriptionError(f"{self.src}: '{self._name(key)}' must be text (got {v!r})")
         if choices is not None and v not in choices:
-            raise DescriptionError(
-                f"{self.src}: '{self._name(key)}' must be one of {', '.join(choices)} (got {v!r})"
-            )
+            raise DescriptionError(f"{self.src}: '{self._name(key)}' must be one of {', '.join(choices)} (got {v!r})")
         return v
 
     def sub(self, key, default=...):
@@ -250,9 +248,7 @@ class TableDescription:
         for a in self.actuators:
             if a.name == name:
                 return a
-        raise DescriptionError(
-            f"no actuator named '{name}'; actuators are {', '.join(self.actuator_names)}"
-        )
+        raise DescriptionError(f"no actuator named '{name}'; actuators are {', '.join(self.actuator_names)}")
 
 
 def load_toml(path: Path, error: type[Exception] = DescriptionError, what: str = "file") -> dict:
@@ -280,8 +276,10 @@ def resolve(name_or_path: str | Path, folder: Path, kind: str) -> Path:
     if cand.exists():
         return cand
     known = sorted(x.stem for x in folder.glob("*.toml"))
-    raise DescriptionError(f"no {kind} named '{name_or_path}'{suggest(name_or_path, known)}; known {kind}s: "
-                           f"{', '.join(known)} (or give a path to a .toml file)")
+    raise DescriptionError(
+        f"no {kind} named '{name_or_path}'{suggest(name_or_path, known)}; known {kind}s: "
+        f"{', '.join(known)} (or give a path to a .toml file)"
+    )
 
 
 def load_table(name_or_path: str | Path) -> TableDescription:
@@ -333,7 +331,9 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
     pl = top.sub("platen")
     guide = pl.text("guide", "free", choices=("free", "bearings"))
     if guide == "bearings" and any(d in ("rx", "ry", "rz") for d in dofs):
-        raise DescriptionError(f"{src}: 'platen.guide = \"bearings\"' allows translations only; table.dofs has rotations")
+        raise DescriptionError(
+            f"{src}: 'platen.guide = \"bearings\"' allows translations only; table.dofs has rotations"
+        )
     platen = Platen(
         guided=(guide == "bearings"),
         size_m=pl.vec("size_m", 3, positive=True),
@@ -374,9 +374,15 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
             rod_radius_m=c.num("rod_radius_m", positive=True),
         )
         # Hydraulic-only keys are validated by the hydraulics package; mark them used.
-        for k in ("leakage_cross_m3_s_pa", "leakage_external_m3_s_pa", "cushion_length_m",
-                  "cushion_stiffness_n_m", "seal_static_friction_n", "stribeck_velocity_m_s",
-                  "friction_smoothing_m_s"):
+        for k in (
+            "leakage_cross_m3_s_pa",
+            "leakage_external_m3_s_pa",
+            "cushion_length_m",
+            "cushion_stiffness_n_m",
+            "seal_static_friction_n",
+            "stribeck_velocity_m_s",
+            "friction_smoothing_m_s",
+        ):
             if c.has(k):
                 c.num(k, nonneg=True)
         c.done()
@@ -395,9 +401,7 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         seen.add(nm)
         cname = a.text("class")
         if cname not in classes:
-            raise DescriptionError(
-                f"{src}: actuator '{nm}' has class '{cname}'; known classes: {', '.join(classes)}"
-            )
+            raise DescriptionError(f"{src}: actuator '{nm}' has class '{cname}'; known classes: {', '.join(classes)}")
         base = a.vec("base_m", 3)
         plat = a.vec("platen_m", 3)
         a.done()
@@ -474,11 +478,24 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
     top.done()
 
     desc = TableDescription(
-        name=name, title=title, dofs=tuple(dofs), gravity_m_s2=g, limits=limits, platen=platen,
-        foundation=foundation, actuator_classes=classes, actuators=tuple(actuators),
-        supports=supports, accelerometers=tuple(accs), recorder_rate_hz=rate,
-        accelerometer_bandwidth_hz=bw, source=src, raw=data, effects=tuple(effects),
-        friction_model=fmodel, friction_presliding_m=fpre,
+        name=name,
+        title=title,
+        dofs=tuple(dofs),
+        gravity_m_s2=g,
+        limits=limits,
+        platen=platen,
+        foundation=foundation,
+        actuator_classes=classes,
+        actuators=tuple(actuators),
+        supports=supports,
+        accelerometers=tuple(accs),
+        recorder_rate_hz=rate,
+        accelerometer_bandwidth_hz=bw,
+        source=src,
+        raw=data,
+        effects=tuple(effects),
+        friction_model=fmodel,
+        friction_presliding_m=fpre,
     )
     check_stroke_reach(desc)
     return desc
@@ -487,7 +504,9 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
 def _check_inertia(I, what):
     a, b, c = sorted(I)
     if a + b < c * (1 - 1e-9):
-        raise DescriptionError(f"{what} violates the triangle inequality (got {list(I)}); principal moments need A + B >= C")
+        raise DescriptionError(
+            f"{what} violates the triangle inequality (got {list(I)}); principal moments need A + B >= C"
+        )
 
 
 def toml_key_index(lines: list[str], section: str, key: str) -> int | None:
@@ -543,9 +562,9 @@ def actuator_strokes(desc: TableDescription, pose) -> np.ndarray:
     L0 = np.linalg.norm(plat - base, axis=1)
     out = np.empty((len(P), len(base)))
     for i0 in range(0, len(P), 8192):  # in blocks: (block, n_act, 3) temporaries stay small
-        blk = P[i0:i0 + 8192]
+        blk = P[i0 : i0 + 8192]
         pts = blk[:, None, :3] + plat @ rotation_matrices(blk[:, 3:6]).transpose(0, 2, 1)
-        out[i0:i0 + len(blk)] = np.linalg.norm(pts - base, axis=2) - L0
+        out[i0 : i0 + len(blk)] = np.linalg.norm(pts - base, axis=2) - L0
     return out[0] if single else out
 
 
@@ -641,7 +660,9 @@ def parse_payload(data: dict, src: str = "<payload>") -> Payload:
             clamp_mass_fraction=p.num("clamp_mass_fraction", 1.0, positive=True),
         )
         if out.clamp_mass_fraction > 1.0:
-            raise DescriptionError(f"{src}: 'payload.clamp_mass_fraction' must be in (0, 1] (got {out.clamp_mass_fraction:g})")
+            raise DescriptionError(
+                f"{src}: 'payload.clamp_mass_fraction' must be in (0, 1] (got {out.clamp_mass_fraction:g})"
+            )
         if p.has("clamp_mass_fraction") and out.clamp_frequency_hz is None:
             raise DescriptionError(f"{src}: 'payload.clamp_mass_fraction' needs 'payload.clamp_frequency_hz'")
         _check_inertia(out.inertia_kg_m2, f"{src}: 'payload.inertia_kg_m2'")
@@ -655,7 +676,9 @@ def parse_payload(data: dict, src: str = "<payload>") -> Payload:
             raise DescriptionError(f"{src}: 'payload.mass_kg' and 'payload.stiffness_n_m' must be numbers") from None
         n = len(m)
         if m.ndim != 1 or n < 1 or np.any(m <= 0) or not np.all(np.isfinite(m)):
-            raise DescriptionError(f"{src}: 'payload.mass_kg' must be a list of positive floor masses (got {m.tolist()})")
+            raise DescriptionError(
+                f"{src}: 'payload.mass_kg' must be a list of positive floor masses (got {m.tolist()})"
+            )
         if K.shape != (n, n) or not np.all(np.isfinite(K)):
             raise DescriptionError(f"{src}: 'payload.stiffness_n_m' must be a {n}x{n} matrix (one row per floor)")
         if not np.allclose(K, K.T, rtol=1e-9, atol=0):

@@ -66,10 +66,14 @@ class TableModel:
             self.platen_qadr = int(self.platen_slide_qadr[0])
             self.platen_dadr = int(self.platen_slide_dadr[0])
         self.platen_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "platen")
-        self.acc_sites = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"acc_{a.name}")
-                                   for a in self.desc.accelerometers], dtype=int)
+        self.acc_sites = np.array(
+            [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"acc_{a.name}") for a in self.desc.accelerometers],
+            dtype=int,
+        )
         self.home_key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home")
-        self.support_names = [f"S{i + 1}" for i in range(len(self.desc.supports.positions_m))] if self.desc.supports else []
+        self.support_names = (
+            [f"S{i + 1}" for i in range(len(self.desc.supports.positions_m))] if self.desc.supports else []
+        )
         self.support_qadr = np.array([m.jnt_qposadr[jid(f"{s}_air")] for s in self.support_names], dtype=int)
         fj = list(getattr(self.info, "friction_joints", []))
         self.friction_dofs = np.array([m.jnt_dofadr[jid(n)] for n in fj], dtype=np.int64)
@@ -81,13 +85,15 @@ class TableModel:
         self.air_qadr = np.array([m.jnt_qposadr[jid(n)] for n in aj], dtype=np.int64)
         self.air_dadr = np.array([m.jnt_dofadr[jid(n)] for n in aj], dtype=np.int64)
         loads = np.asarray(getattr(self.info, "support_loads_n", np.zeros(0)), dtype=float)
-        self.air_preload = loads[:len(aj)].copy() if aj else np.zeros(0)
+        self.air_preload = loads[: len(aj)].copy() if aj else np.zeros(0)
         sp = self.desc.supports
         self.air_area_over_volume = sp.piston_area_m2 / sp.chamber_volume_m3 if aj else 0.0
         self.air_exponent = sp.polytropic_exponent if aj else 1.0
         self.step_effects = list(getattr(self.info, "step_effects", []))
         self.effects = list(getattr(self.info, "effects", []))  # bound by the loop (with its hydraulics)
-        self.payload_dadr = np.array([m.jnt_dofadr[jid(n)] for n in getattr(self.info, "payload_joints", [])], dtype=int)
+        self.payload_dadr = np.array(
+            [m.jnt_dofadr[jid(n)] for n in getattr(self.info, "payload_joints", [])], dtype=int
+        )
 
     # ------------------------------------------------------------------ data
     def new_data(self) -> mujoco.MjData:
@@ -114,7 +120,7 @@ class TableModel:
             out = np.zeros(6)
             out[self.platen_dof_index] = d.qpos[self.platen_slide_qadr]
             return out
-        q = d.qpos[self.platen_qadr:self.platen_qadr + 7]
+        q = d.qpos[self.platen_qadr : self.platen_qadr + 7]
         return np.concatenate([q[:3], quat_to_xyz(q[3:7])])
 
     def _platen_rate(self, d: mujoco.MjData, vec: np.ndarray) -> np.ndarray:
@@ -126,7 +132,7 @@ class TableModel:
             out = np.zeros(6)
             out[self.platen_dof_index] = vec[self.platen_slide_dadr]
             return out
-        v = vec[self.platen_dadr:self.platen_dadr + 6]
+        v = vec[self.platen_dadr : self.platen_dadr + 6]
         R = d.xmat[self.platen_body].reshape(3, 3)
         return np.concatenate([v[:3], R @ v[3:6]])
 
@@ -146,8 +152,8 @@ class TableModel:
             err = analysis.settle_loops(self.model, d)
             mujoco.mj_forward(self.model, d)
             return err
-        d.qpos[self.platen_qadr:self.platen_qadr + 3] = pose[:3]
-        d.qpos[self.platen_qadr + 3:self.platen_qadr + 7] = xyz_to_quat(*pose[3:6])
+        d.qpos[self.platen_qadr : self.platen_qadr + 3] = pose[:3]
+        d.qpos[self.platen_qadr + 3 : self.platen_qadr + 7] = xyz_to_quat(*pose[3:6])
         err = analysis.settle_loops(self.model, d)
         mujoco.mj_forward(self.model, d)
         return err

@@ -44,8 +44,14 @@ def default_workers(n_jobs: int) -> int:
     return max(1, min(n_jobs, os.cpu_count() or 1))
 
 
-def map_jobs(fn: Callable, jobs: Iterable, *, workers: int | None = None,
-             progress: Callable[[int, int], None] | None = None, context: str | None = None) -> list:
+def map_jobs(
+    fn: Callable,
+    jobs: Iterable,
+    *,
+    workers: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    context: str | None = None,
+) -> list:
     """``[fn(job) for job in jobs]``, in parallel processes, in the jobs' order.
 
     Args:

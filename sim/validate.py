@@ -24,7 +24,7 @@ from sim.errors import UserError
 #: at 1024 Hz, 35 min at 4000 Hz; assumed: a table test lasts minutes, and a run keeps
 #: ~60 columns of state per sample, ~4 GiB at this length). A longer request is a typo
 #: (a duration of 1e7 s); it is refused with one line before anything is allocated.
-MAX_SAMPLES = 2 ** 23
+MAX_SAMPLES = 2**23
 
 
 def one_line(text) -> str:
@@ -44,12 +44,14 @@ def check_keys(data: Mapping, known: Iterable[str], where: str, src, error: type
     known = sorted(known)
     extra = sorted(str(k) for k in set(data) - set(known))
     if extra:
-        raise error(f"{src}: unknown key '{extra[0]}' in [{where}]{suggest(extra[0], known)}; "
-                    f"known keys: {', '.join(known)}")
+        raise error(
+            f"{src}: unknown key '{extra[0]}' in [{where}]{suggest(extra[0], known)}; known keys: {', '.join(known)}"
+        )
 
 
-def require_table(data: Mapping, key: str, where: str, src, error: type[UserError] = UserError,
-                  *, what: str = "keys") -> dict:
+def require_table(
+    data: Mapping, key: str, where: str, src, error: type[UserError] = UserError, *, what: str = "keys"
+) -> dict:
     """``data[key]`` when it is a TOML table; a one-line error when absent or not a table."""
     v = data.get(key)
     if not isinstance(v, dict):
@@ -58,9 +60,19 @@ def require_table(data: Mapping, key: str, where: str, src, error: type[UserErro
     return v
 
 
-def number(value, field: str, src, error: type[UserError] = UserError, *, unit: str = "",
-           positive: bool = False, nonneg: bool = False, integer: bool = False,
-           lo: float | None = None, hi: float | None = None) -> float:
+def number(
+    value,
+    field: str,
+    src,
+    error: type[UserError] = UserError,
+    *,
+    unit: str = "",
+    positive: bool = False,
+    nonneg: bool = False,
+    integer: bool = False,
+    lo: float | None = None,
+    hi: float | None = None,
+) -> float:
     """A finite number (int when ``integer``) within the stated bounds, or a one-line error
     naming the file and the field. ``unit`` (e.g. "s", "Hz") only words the message."""
     u = f" {unit}" if unit else ""
@@ -103,8 +115,16 @@ def boolean(value, field: str, src, error: type[UserError] = UserError) -> bool:
     return value
 
 
-def numbers(value, field: str, src, error: type[UserError] = UserError, *, n: int | None = None,
-            positive: bool = False, increasing: bool = False) -> list[float]:
+def numbers(
+    value,
+    field: str,
+    src,
+    error: type[UserError] = UserError,
+    *,
+    n: int | None = None,
+    positive: bool = False,
+    increasing: bool = False,
+) -> list[float]:
     """A list of finite numbers (``n`` of them when given)."""
     if not isinstance(value, (list, tuple)) or (n is not None and len(value) != n) or not value:
         need = f"a list of {n} numbers" if n is not None else "a list of numbers"
@@ -125,13 +145,24 @@ def check_samples(n: float, what: str, src, error: type[UserError] = UserError) 
     (``src`` None: the caller names the file)."""
     if not math.isfinite(n) or n > MAX_SAMPLES:
         where = f"{src}: " if src else ""
-        raise error(f"{where}{what} needs {n:.3g} samples, over the maximum of {MAX_SAMPLES} "
-                    f"({MAX_SAMPLES * 8 / 2 ** 30:.0f} GiB per channel); shorten the duration or lower the rate")
+        raise error(
+            f"{where}{what} needs {n:.3g} samples, over the maximum of {MAX_SAMPLES} "
+            f"({MAX_SAMPLES * 8 / 2**30:.0f} GiB per channel); shorten the duration or lower the rate"
+        )
     return int(n)
 
 
-def finite_array(arr, field: str, src, error: type[UserError] = UserError, *, ndim: int | None = None,
-                 columns: int | None = None, min_rows: int = 0, t=None) -> np.ndarray:
+def finite_array(
+    arr,
+    field: str,
+    src,
+    error: type[UserError] = UserError,
+    *,
+    ndim: int | None = None,
+    columns: int | None = None,
+    min_rows: int = 0,
+    t=None,
+) -> np.ndarray:
     """``arr`` as float64, refusing a wrong shape or a NaN/Inf (named by sample and time)."""
     a = np.asarray(arr)
     if a.dtype.kind not in "fiu":
@@ -153,5 +184,17 @@ def finite_array(arr, field: str, src, error: type[UserError] = UserError, *, nd
     return a
 
 
-__all__ = ["MAX_SAMPLES", "boolean", "check_keys", "check_samples", "finite_array", "number", "numbers",
-           "one_line", "require_table", "sample_rate", "suggest", "text"]
+__all__ = [
+    "MAX_SAMPLES",
+    "boolean",
+    "check_keys",
+    "check_samples",
+    "finite_array",
+    "number",
+    "numbers",
+    "one_line",
+    "require_table",
+    "sample_rate",
+    "suggest",
+    "text",
+]

@@ -11,17 +11,23 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: rank of each layer: a module may import its own layer or lower ones, never higher.
 LAYERS = {
-    "sim.errors": 0, "sim.validate": 0, "sim.parallel": 0, "sim.signals": 0,
+    "sim.errors": 0,
+    "sim.validate": 0,
+    "sim.parallel": 0,
+    "sim.signals": 0,
     "sim.scenario": 1,
-    "sim.effects": 2, "sim.control": 2,
+    "sim.effects": 2,
+    "sim.control": 2,
     "sim.loop": 3,
     "sim.runs": 4,
-    "sim.assess": 5, "sim.identify": 5,
+    "sim.assess": 5,
+    "sim.identify": 5,
     "sim.calibrate": 6,
     "sim.sweep": 7,
     "sim.papers": 8,
     "sim.report": 9,
-    "sim.cli": 10, "sim.__main__": 10,
+    "sim.cli": 10,
+    "sim.__main__": 10,
 }
 TABLE_NAMES = {"cgs", "rice", "ucsd"}
 
@@ -71,8 +77,12 @@ def test_imports_go_downwards_only():
 
 @pytest.mark.parametrize("pkg", ["mjcf", "hydraulics"])
 def test_model_layers_import_nothing_from_sim(pkg):
-    bad = [f"{p.relative_to(ROOT)}:{line} imports {imp}" for _, p in _modules(pkg)
-           for imp, line in _imports(p) if imp == "sim" or imp.startswith("sim.")]
+    bad = [
+        f"{p.relative_to(ROOT)}:{line} imports {imp}"
+        for _, p in _modules(pkg)
+        for imp, line in _imports(p)
+        if imp == "sim" or imp.startswith("sim.")
+    ]
     assert not bad, bad
 
 
@@ -84,18 +94,30 @@ def test_only_papers_name_a_table():
             if mod.startswith("sim.papers"):
                 continue
             tree = ast.parse(path.read_text())
-            docstrings = {id(n.body[0].value) for n in ast.walk(tree)
-                          if isinstance(n, (ast.Module, ast.FunctionDef, ast.ClassDef, ast.AsyncFunctionDef))
-                          and n.body and isinstance(n.body[0], ast.Expr)
-                          and isinstance(n.body[0].value, ast.Constant)}
+            docstrings = {
+                id(n.body[0].value)
+                for n in ast.walk(tree)
+                if isinstance(n, (ast.Module, ast.FunctionDef, ast.ClassDef, ast.AsyncFunctionDef))
+                and n.body
+                and isinstance(n.body[0], ast.Expr)
+                and isinstance(n.body[0].value, ast.Constant)
+            }
             for node in ast.walk(tree):
-                if (isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings
-                        and node.value.strip().lower() in TABLE_NAMES):
+                if (
+                    isinstance(node, ast.Constant)
+                    and isinstance(node.value, str)
+                    and id(node) not in docstrings
+                    and node.value.strip().lower() in TABLE_NAMES
+                ):
                     bad.append(f"{path.relative_to(ROOT)}:{node.lineno} names table '{node.value}'")
     assert not bad, "\n".join(bad)
 
 
 def test_no_module_over_800_lines():
-    long = [f"{p.relative_to(ROOT)}: {n}" for pkg in ("sim", "mjcf", "hydraulics") for _, p in _modules(pkg)
-            if (n := len(p.read_text().splitlines())) > 800]
+    long = [
+        f"{p.relative_to(ROOT)}: {n}"
+        for pkg in ("sim", "mjcf", "hydraulics")
+        for _, p in _modules(pkg)
+        if (n := len(p.read_text().splitlines())) > 800
+    ]
     assert not long, long

@@ -44,16 +44,23 @@ def _motions(name: str, desc, rate: float, quick: bool):
         amp = min(amp, float(half))
         cycles = 1.0 if quick else 2.0
         dur = (2 * cycles + (1.0 if quick else 2.0)) / f
-        return {dof: tapered_sine(amplitude=amp, frequency_hz=f, duration_s=dur, sample_rate_hz=rate,
-                                  taper_cycles=cycles)}
+        return {
+            dof: tapered_sine(amplitude=amp, frequency_hz=f, duration_s=dur, sample_rate_hz=rate, taper_cycles=cycles)
+        }
     if name == "elcentro_3c":
         mo = el_centro_motions(sample_rate_hz=rate, amplitude_factor=EL_CENTRO_FACTOR)
         return {d: m for d, m in mo.items() if d in desc.dofs}
     raise ValueError(f"unknown crosstalk motion '{name}'")
 
 
-def crosstalk(desc, payload=None, *, motions=("x_250mm_sine", "y_150mm_sine", "elcentro_3c"),
-              quick: bool = False, duration_s: float | None = None) -> Crosstalk:
+def crosstalk(
+    desc,
+    payload=None,
+    *,
+    motions=("x_250mm_sine", "y_150mm_sine", "elcentro_3c"),
+    quick: bool = False,
+    duration_s: float | None = None,
+) -> Crosstalk:
     """Run each motion closed loop with the exact and with the linearised transformation.
 
     ``quick``: one-cycle sines (tests). ``duration_s``: cut every run to this length.
@@ -89,15 +96,27 @@ def crosstalk(desc, payload=None, *, motions=("x_250mm_sine", "y_150mm_sine", "e
                 continue
             ex, li = runs["exact"][:n, i], runs["linear"][:n, i]
             ex, li = ex - ex[0], li - li[0]  # about the rest pose at the start
-            row[d] = {"linearised_peak": float(np.max(np.abs(li))), "exact_peak": float(np.max(np.abs(ex))),
-                      "linearised_rms": float(np.sqrt(np.mean(li ** 2))), "exact_rms": float(np.sqrt(np.mean(ex ** 2)))}
+            row[d] = {
+                "linearised_peak": float(np.max(np.abs(li))),
+                "exact_peak": float(np.max(np.abs(ex))),
+                "linearised_rms": float(np.sqrt(np.mean(li**2))),
+                "exact_rms": float(np.sqrt(np.mean(ex**2))),
+            }
             # linearised / exact peak, where the linearised crosstalk is above round-off
             floor = 1e-9
-            row[d]["ratio"] = (float(row[d]["linearised_peak"] / max(row[d]["exact_peak"], floor))
-                               if row[d]["linearised_peak"] > floor else None)
+            row[d]["ratio"] = (
+                float(row[d]["linearised_peak"] / max(row[d]["exact_peak"], floor))
+                if row[d]["linearised_peak"] > floor
+                else None
+            )
         table[name] = row
-        hist[name] = {"t": np.arange(n) / rate, "exact": runs["exact"][:n], "linearised": runs["linear"][:n],
-                      "reference": ref.d[:n], "driven": sorted(driven)}
+        hist[name] = {
+            "t": np.arange(n) / rate,
+            "exact": runs["exact"][:n],
+            "linearised": runs["linear"][:n],
+            "reference": ref.d[:n],
+            "driven": sorted(driven),
+        }
     return Crosstalk(table=table, histories=hist)
 
 

@@ -39,10 +39,10 @@ from mjcf.description import DOFS6
 #: Tolerances of the checks that have no rated value in a table file.
 TOLERANCES = {
     "valve_saturation_fraction": 0.01,  # assumed: valves fully open at most 1 % of the run (flow limit reached)
-    "pga_error": 0.10,                  # assumed: achieved PGA within +/-10 % of the target's, a common acceptance band
-    "spectrum": 0.20,                   # assumed: 5 %-damped spectrum within +/-20 % ...
-    "spectrum_band_fraction": 0.10,     # assumed: ... over at least 90 % of the 0.5-20 Hz band
-    "loop_gap_m": 1e-4,                 # numerical: a swivel gap above 0.1 mm means the linkage solve failed
+    "pga_error": 0.10,  # assumed: achieved PGA within +/-10 % of the target's, a common acceptance band
+    "spectrum": 0.20,  # assumed: 5 %-damped spectrum within +/-20 % ...
+    "spectrum_band_fraction": 0.10,  # assumed: ... over at least 90 % of the 0.5-20 Hz band
+    "loop_gap_m": 1e-4,  # numerical: a swivel gap above 0.1 mm means the linkage solve failed
 }
 
 
@@ -53,8 +53,14 @@ def check(name, demand, capacity, unit) -> dict:
         u = demand / capacity
     else:
         u = 0.0 if demand <= 0 else float("inf")
-    return {"name": name, "demand": demand, "capacity": capacity, "unit": unit,
-            "utilisation": float(u), "pass": bool(u <= 1.0)}
+    return {
+        "name": name,
+        "demand": demand,
+        "capacity": capacity,
+        "unit": unit,
+        "utilisation": float(u),
+        "pass": bool(u <= 1.0),
+    }
 
 
 TRACKING_PREFIXES = ("pga_error_", "spectrum_")
@@ -78,11 +84,19 @@ def verdict(checks: list[dict], warnings: list[str] | None = None) -> dict:
     tfailed = [c["name"] for c in checks if is_tracking(c) and not c["pass"]]
     warns = list(warnings or [])
     if tfailed:
-        warns.append("tracking outside tolerance (" + ", ".join(tfailed) + "): drive iterations "
-                     "(--iterations) should bring it in; not part of the verdict")
-    return {"feasible": not failed, "limiting": lim["name"] if lim else None,
-            "limiting_utilisation": lim["utilisation"] if lim else None,
-            "failed": failed, "tracking_failed": tfailed, "checks": checks, "warnings": warns}
+        warns.append(
+            "tracking outside tolerance (" + ", ".join(tfailed) + "): drive iterations "
+            "(--iterations) should bring it in; not part of the verdict"
+        )
+    return {
+        "feasible": not failed,
+        "limiting": lim["name"] if lim else None,
+        "limiting_utilisation": lim["utilisation"] if lim else None,
+        "failed": failed,
+        "tracking_failed": tfailed,
+        "checks": checks,
+        "warnings": warns,
+    }
 
 
 # ------------------------------------------------------------------ specimen
@@ -147,7 +161,9 @@ def usable_accumulator_oil(hp) -> float:
     """Oil the accumulators give between the supply pressure and their precharge (m^3)."""
     if hp.accumulator_volume_m3 <= 0:
         return 0.0
-    v_supply = hp.accumulator_volume_m3 * (hp.accumulator_precharge_pa / hp.supply_pressure_pa) ** (1.0 / hp.polytropic_exponent)
+    v_supply = hp.accumulator_volume_m3 * (hp.accumulator_precharge_pa / hp.supply_pressure_pa) ** (
+        1.0 / hp.polytropic_exponent
+    )
     return float(hp.accumulator_volume_m3 - v_supply)
 
 
@@ -183,8 +199,13 @@ def specimen_response(res, tm) -> dict:
     if isinstance(p, RigidPayload):
         m, h = p.mass_kg, float(p.com_m[2])
         shear = m * np.hypot(a[:, 0], a[:, 1])
-        return {"kind": "rigid", "base_shear_n": shear, "overturning_n_m": shear * h,
-                "deformation": None, "deformation_name": None}
+        return {
+            "kind": "rigid",
+            "base_shear_n": shear,
+            "overturning_n_m": shear * h,
+            "deformation": None,
+            "deformation_name": None,
+        }
     q = res.extras.get("payload_qpos")
     if q is None:
         return None
@@ -192,8 +213,13 @@ def specimen_response(res, tm) -> dict:
         f = q @ p.stiffness_n_m  # K symmetric: (K q)_i per sample
         h = p.storey_height_m * np.arange(1, len(p.mass_kg) + 1)
         drift = np.diff(np.concatenate([np.zeros((len(q), 1)), q], axis=1), axis=1)
-        return {"kind": "shear_frame", "base_shear_n": np.abs(f.sum(axis=1)), "overturning_n_m": np.abs(f @ h),
-                "deformation": np.max(np.abs(drift), axis=1), "deformation_name": "storey_drift_m"}
+        return {
+            "kind": "shear_frame",
+            "base_shear_n": np.abs(f.sum(axis=1)),
+            "overturning_n_m": np.abs(f @ h),
+            "deformation": np.max(np.abs(drift), axis=1),
+            "deformation_name": "storey_drift_m",
+        }
     if isinstance(p, CantileverPayload):
         n = p.n_segments
         seg = p.height_m / n
@@ -205,8 +231,13 @@ def specimen_response(res, tm) -> dict:
         m1 = k * np.hypot(th[:, 0, 0], th[:, 0, 1])
         m2 = k * np.hypot(th[:, 1, 0], th[:, 1, 1]) if n > 1 else np.zeros(len(q))
         shear = np.abs(m1 - m2) / seg
-        return {"kind": "cantilever", "base_shear_n": shear, "overturning_n_m": m1 + shear * seg / 2,
-                "deformation": np.hypot(tip_x, tip_y), "deformation_name": "tip_displacement_m"}
+        return {
+            "kind": "cantilever",
+            "base_shear_n": shear,
+            "overturning_n_m": m1 + shear * seg / 2,
+            "deformation": np.hypot(tip_x, tip_y),
+            "deformation_name": "tip_displacement_m",
+        }
     return None
 
 
@@ -220,12 +251,16 @@ def run_checks(res, tm, hp, ref) -> tuple[list[dict], dict]:
     n = len(res.t)
     names = tm.actuator_names
     checks = []
-    usable = (hp.half_stroke_m - hp.cushion_length_m)
+    usable = hp.half_stroke_m - hp.cushion_length_m
     s = np.nanmax(np.abs(ch["actuator_displacement"]), axis=0) if n else np.zeros(len(names))
     i = int(np.argmax(s / usable))
     checks.append(check(f"actuator_stroke_{names[i]}", s[i], usable[i], "m"))
     v = np.nanmax(np.abs(actuator_velocity(res)), axis=0) if n else np.zeros(len(names))
-    vmax = hp.rated_flow_m3_s * np.sqrt(max(hp.supply_pressure_pa - hp.return_pressure_pa, 0.0) / hp.rated_drop_pa) / np.maximum(hp.area_a_m2, hp.area_b_m2)
+    vmax = (
+        hp.rated_flow_m3_s
+        * np.sqrt(max(hp.supply_pressure_pa - hp.return_pressure_pa, 0.0) / hp.rated_drop_pa)
+        / np.maximum(hp.area_a_m2, hp.area_b_m2)
+    )
     i = int(np.argmax(v / vmax))
     checks.append(check(f"actuator_velocity_{names[i]}", v[i], vmax[i], "m/s"))
     fu, cap = force_utilisation(res, hp)
@@ -241,15 +276,27 @@ def run_checks(res, tm, hp, ref) -> tuple[list[dict], dict]:
         gas = res.extras["accumulator_gas_volume"]
         drawn = float(np.nanmax(gas) - gas[0]) if n else 0.0
         checks.append(check("accumulator_oil", drawn, usable_accumulator_oil(hp), "m^3"))
-        checks.append(check("supply_pressure_drop", hp.supply_pressure_pa - float(np.nanmin(ps)),
-                            hp.supply_pressure_pa - hp.accumulator_precharge_pa, "Pa"))
+        checks.append(
+            check(
+                "supply_pressure_drop",
+                hp.supply_pressure_pa - float(np.nanmin(ps)),
+                hp.supply_pressure_pa - hp.accumulator_precharge_pa,
+                "Pa",
+            )
+        )
     else:
         q = flow_demand(res, hp)
         checks.append(check("oil_flow", float(np.max(q)) if n else 0.0, hp.pump_flow_m3_s, "m^3/s"))
     resp = specimen_response(res, tm)
     if resp is not None and desc.limits.overturning_moment_n_m > 0:
-        checks.append(check("overturning_moment", float(np.nanmax(resp["overturning_n_m"])),
-                            desc.limits.overturning_moment_n_m, "N m"))
+        checks.append(
+            check(
+                "overturning_moment",
+                float(np.nanmax(resp["overturning_n_m"])),
+                desc.limits.overturning_moment_n_m,
+                "N m",
+            )
+        )
     gap = float(np.nanmax(res.extras["loop_gap"])) if n else 0.0
     checks.append(check("loop_closure", gap, TOLERANCES["loop_gap_m"], "m"))
     t_total = (len(ref.t) - 1) / ref.rate_hz
@@ -269,8 +316,11 @@ def run_checks(res, tm, hp, ref) -> tuple[list[dict], dict]:
             checks.append(check(f"spectrum_{dof}", out, TOLERANCES["spectrum_band_fraction"], "-"))
     figures = {"tracking": tr, "simulated_s": float(res.sim_s), "reference_s": float(t_total)}
     if resp is not None:
-        figures["specimen"] = {"kind": resp["kind"], "peak_base_shear_n": float(np.nanmax(resp["base_shear_n"])),
-                               "peak_overturning_n_m": float(np.nanmax(resp["overturning_n_m"]))}
+        figures["specimen"] = {
+            "kind": resp["kind"],
+            "peak_base_shear_n": float(np.nanmax(resp["base_shear_n"])),
+            "peak_overturning_n_m": float(np.nanmax(resp["overturning_n_m"])),
+        }
         if resp["deformation"] is not None:
             figures["specimen"]["peak_" + resp["deformation_name"]] = float(np.nanmax(resp["deformation"]))
     return checks, figures
@@ -284,9 +334,11 @@ def assess_run(res, tm, hp, ref, *, payload=None, envelope_reference=None, warni
     """The verdict of a run: specimen, envelope (of ``envelope_reference``, default the
     simulated reference) and run checks; ``figures`` holds tracking and specimen response."""
     desc = tm.desc
-    checks = specimen_checks(desc, payload if payload is not None else tm.payload,
-                             bare_support_n=None if desc.supports is None else
-                             float(np.sum(tm.info.support_loads_n)) - _payload_weight(tm))
+    checks = specimen_checks(
+        desc,
+        payload if payload is not None else tm.payload,
+        bare_support_n=None if desc.supports is None else float(np.sum(tm.info.support_loads_n)) - _payload_weight(tm),
+    )
     checks += envelope_checks(desc, envelope_reference if envelope_reference is not None else ref)
     rc, figures = run_checks(res, tm, hp, ref)
     out = verdict(checks + rc, warnings)
@@ -313,24 +365,38 @@ def diagnostics(res, tm, hp, ref=None, *, payload=None, envelope_reference=None,
     ticks = max(len(res.t), 1)
     out = {}
     if ref is not None:
-        out["feasibility"] = assess_run(res, tm, hp, ref, payload=payload, envelope_reference=envelope_reference,
-                                        warnings=warnings)
-    out.update({
-        "peak_force_fraction_of_capacity": {n: float(f / c) for n, f, c in zip(tm.actuator_names, fmax, cap)},
-        "peak_stroke_fraction": {n: float(s / h) for n, s, h in zip(tm.actuator_names, smax, half)},
-        "valve_saturation_fraction": float(np.mean(np.abs(vc) >= 0.999)),
-        "min_supply_pressure_pa": float(np.nanmin(res.extras["supply_pressure"])),
-        "max_loop_gap_m": float(np.nanmax(res.extras["loop_gap"])),
-        "cost_us": {
-            "physics_per_step": 1e6 * timing.get("physics_s", 0) / steps,
-            "hydraulics_per_step": 1e6 * timing.get("hydraulics_s", 0) / steps,
-            "controller_per_tick": 1e6 * timing.get("controller_s", 0) / ticks,
-            "output_per_tick": 1e6 * timing.get("output_s", 0) / ticks,
-        },
-    })
+        out["feasibility"] = assess_run(
+            res, tm, hp, ref, payload=payload, envelope_reference=envelope_reference, warnings=warnings
+        )
+    out.update(
+        {
+            "peak_force_fraction_of_capacity": {n: float(f / c) for n, f, c in zip(tm.actuator_names, fmax, cap)},
+            "peak_stroke_fraction": {n: float(s / h) for n, s, h in zip(tm.actuator_names, smax, half)},
+            "valve_saturation_fraction": float(np.mean(np.abs(vc) >= 0.999)),
+            "min_supply_pressure_pa": float(np.nanmin(res.extras["supply_pressure"])),
+            "max_loop_gap_m": float(np.nanmax(res.extras["loop_gap"])),
+            "cost_us": {
+                "physics_per_step": 1e6 * timing.get("physics_s", 0) / steps,
+                "hydraulics_per_step": 1e6 * timing.get("hydraulics_s", 0) / steps,
+                "controller_per_tick": 1e6 * timing.get("controller_s", 0) / ticks,
+                "output_per_tick": 1e6 * timing.get("output_s", 0) / ticks,
+            },
+        }
+    )
     return out
 
 
-__all__ = ["TOLERANCES", "assess_run", "check", "diagnostics", "envelope_checks", "flow_demand",
-           "force_utilisation", "run_checks", "specimen_checks", "specimen_response", "usable_accumulator_oil",
-           "verdict"]
+__all__ = [
+    "TOLERANCES",
+    "assess_run",
+    "check",
+    "diagnostics",
+    "envelope_checks",
+    "flow_demand",
+    "force_utilisation",
+    "run_checks",
+    "specimen_checks",
+    "specimen_response",
+    "usable_accumulator_oil",
+    "verdict",
+]

@@ -55,7 +55,7 @@ def dof_stiffness(desc: TableDescription, hp, pose, dofs) -> np.ndarray:
     x = actuator_strokes(desc, pose)
     va = hp.dead_volume_a_m3 + hp.area_a_m2 * (hp.half_stroke_m + x)
     vb = hp.dead_volume_b_m3 + hp.area_b_m2 * (hp.half_stroke_m - x)
-    k = hp.bulk_modulus_pa * (hp.area_a_m2 ** 2 / va + hp.area_b_m2 ** 2 / vb)
+    k = hp.bulk_modulus_pa * (hp.area_a_m2**2 / va + hp.area_b_m2**2 / vb)
     J = dof_jacobian(desc, pose)[:, dofs]
     return J.T @ np.diag(k) @ J
 
@@ -68,9 +68,11 @@ def study(desc: TableDescription, effective_mass: np.ndarray | None = None, hydr
     exact = actuator_strokes(desc, corners)
     lin = corners @ J0.T
     dev = np.abs(exact - lin)
-    out = {"table": desc.name,
-           "kinematic_nonlinearity_m": {n: float(v) for n, v in zip(names, dev.max(axis=0))},
-           "worst_corner": corners[int(np.argmax(dev.max(axis=1)))].tolist()}
+    out = {
+        "table": desc.name,
+        "kinematic_nonlinearity_m": {n: float(v) for n, v in zip(names, dev.max(axis=0))},
+        "worst_corner": corners[int(np.argmax(dev.max(axis=1)))].tolist(),
+    }
 
     # cross-axis strokes from a pure motion of one DOF (second-order geometry)
     cross = {}
@@ -122,8 +124,10 @@ def study(desc: TableDescription, effective_mass: np.ndarray | None = None, hydr
 def print_report(r: dict) -> None:
     print(f"geometric nonlinearity of {r['table']} over the rated envelope")
     kn = r["kinematic_nonlinearity_m"]
-    print("  exact stroke - linear J(0) estimate, worst corner (mm): "
-          + ", ".join(f"{n} {1e3 * v:.2f}" for n, v in kn.items()))
+    print(
+        "  exact stroke - linear J(0) estimate, worst corner (mm): "
+        + ", ".join(f"{n} {1e3 * v:.2f}" for n, v in kn.items())
+    )
     print("  second-order strokes from one axis at full stroke (mm, largest actuator):")
     for d, m in r["second_order_stroke_m"].items():
         n, v = max(m.items(), key=lambda kv: kv[1])
@@ -131,18 +135,28 @@ def print_report(r: dict) -> None:
     print("  parasitic motion if the reference went through the linear map J(0):")
     for k, e in r["parasitic_motion_linear_map"].items():
         big = {d: v for d, v in e.items() if abs(v) > 1e-9}
-        txt = ", ".join(f"{d} {v * (1e3 if d in ('x', 'y', 'z') else 1e3):+.3f} {'mm' if d in ('x', 'y', 'z') else 'mrad'}"
-                        for d, v in big.items()) or "none"
+        txt = (
+            ", ".join(
+                f"{d} {v * (1e3 if d in ('x', 'y', 'z') else 1e3):+.3f} {'mm' if d in ('x', 'y', 'z') else 'mrad'}"
+                for d, v in big.items()
+            )
+            or "none"
+        )
         print(f"    {k:4s}: {txt}")
     print(f"  actuator-to-DOF force map: largest entry change over the envelope {r['force_map_change_max']:.4f}")
     if "max_tilt_rad" in r:
         jc = r["jacobian_condition"]
-        print(f"  over {r['n_poses']} poses of the rated envelope: largest length error "
-              f"{1e3 * max(r['max_length_error_m'].values()):.2f} mm, largest linkage tilt "
-              f"{np.degrees(max(r['max_tilt_rad'].values())):.1f} deg, Jacobian condition {jc['min']:.2f}-{jc['max']:.2f}")
+        print(
+            f"  over {r['n_poses']} poses of the rated envelope: largest length error "
+            f"{1e3 * max(r['max_length_error_m'].values()):.2f} mm, largest linkage tilt "
+            f"{np.degrees(max(r['max_tilt_rad'].values())):.1f} deg, Jacobian condition {jc['min']:.2f}-{jc['max']:.2f}"
+        )
     for name, row in r.get("crosstalk", {}).items():
-        txt = ", ".join(f"{d} {1e3 * v['linearised_peak']:.3f} vs {1e3 * v['exact_peak']:.4f}"
-                        for d, v in row.items() if v["ratio"] is not None)
+        txt = ", ".join(
+            f"{d} {1e3 * v['linearised_peak']:.3f} vs {1e3 * v['exact_peak']:.4f}"
+            for d, v in row.items()
+            if v["ratio"] is not None
+        )
         print(f"  crosstalk {name} (peak, mm or mrad, linearised vs exact): {txt or 'none'}")
     if "oil_column_hz" in r:
         oc = r["oil_column_hz"]
@@ -188,11 +202,16 @@ def envelope_study(desc: TableDescription, *, n: int = 4000, seed: int = 0) -> d
         ax = actuator_axes(desc, p)
         tilt = np.maximum(tilt, np.arccos(np.clip(np.sum(ax * a0, axis=1), -1, 1)))
         conds.append(np.linalg.cond(dof_jacobian(desc, p)[:, dofs]))
-    return {"max_length_error_m": {nm: float(v) for nm, v in zip(names, err.max(axis=0))},
-            "max_tilt_rad": {nm: float(v) for nm, v in zip(names, tilt)},
-            "jacobian_condition": {"home": float(np.linalg.cond(J0[:, dofs])), "min": float(np.min(conds)),
-                                   "max": float(np.max(conds))},
-            "n_poses": int(len(P))}
+    return {
+        "max_length_error_m": {nm: float(v) for nm, v in zip(names, err.max(axis=0))},
+        "max_tilt_rad": {nm: float(v) for nm, v in zip(names, tilt)},
+        "jacobian_condition": {
+            "home": float(np.linalg.cond(J0[:, dofs])),
+            "min": float(np.min(conds)),
+            "max": float(np.max(conds)),
+        },
+        "n_poses": int(len(P)),
+    }
 
 
 def offset_plane_maps(desc: TableDescription, tm=None, hydraulics=None, *, n: int = 11) -> dict:
@@ -228,9 +247,14 @@ def offset_plane_maps(desc: TableDescription, tm=None, hydraulics=None, *, n: in
                 f = np.sqrt(np.clip(w2.real, 0, None)) / (2 * np.pi)
                 f_low[i, j] = float(f.min())
                 f_x[i, j] = float(f[int(np.argmax(np.abs(vec[0].real)))])  # the mode most in x
-    return {"x_m": xs.tolist(), "y_m": ys.tolist(), "max_length_error_m": err.tolist(),
-            "lowest_oil_column_hz": f_low.tolist(), "x_oil_column_hz": f_x.tolist(),
-            "x_effective_mass_kg": m_x.tolist()}
+    return {
+        "x_m": xs.tolist(),
+        "y_m": ys.tolist(),
+        "max_length_error_m": err.tolist(),
+        "lowest_oil_column_hz": f_low.tolist(),
+        "x_oil_column_hz": f_x.tolist(),
+        "x_effective_mass_kg": m_x.tolist(),
+    }
 
 
 def force_coupling(desc: TableDescription) -> dict:
@@ -259,8 +283,11 @@ def force_coupling(desc: TableDescription) -> dict:
             tilt_h = max(tilt_h, float(np.abs(J[vert][:, :2]).max()))
         worst = max(worst, ot_per_moment(J))
     ot["envelope_max"] = worst
-    return {"vertical_tilt_into_horizontal": tilt_h, "vertical_actuators": [desc.actuators[i].name for i in vert],
-            "overturning_to_actuator_n_per_n_m": ot}
+    return {
+        "vertical_tilt_into_horizontal": tilt_h,
+        "vertical_actuators": [desc.actuators[i].name for i in vert],
+        "overturning_to_actuator_n_per_n_m": ot,
+    }
 
 
 def stroke_for_error(desc: TableDescription, dof: str, error_m: float) -> float | None:
@@ -277,8 +304,15 @@ def stroke_for_error(desc: TableDescription, dof: str, error_m: float) -> float 
     return float(ds[hit[0]]) if len(hit) else None
 
 
-def geometry(desc: TableDescription, payload=None, *, quick: bool = False, crosstalk_motions=None,
-             envelope_poses: int = 4000, map_points: int = 11) -> dict:
+def geometry(
+    desc: TableDescription,
+    payload=None,
+    *,
+    quick: bool = False,
+    crosstalk_motions=None,
+    envelope_poses: int = 4000,
+    map_points: int = 11,
+) -> dict:
     """The whole geometric-nonlinearity study of a table, as data: the static report
     (:func:`study`), the envelope (:func:`envelope_study`), the x-y offset-plane maps
     (:func:`offset_plane_maps`), the strokes at which the linearised map misses by 0.1, 1
@@ -297,17 +331,23 @@ def geometry(desc: TableDescription, payload=None, *, quick: bool = False, cross
     out["maps"] = offset_plane_maps(desc, tm, hp, n=5 if quick else map_points)
     out["stroke_for_length_error_m"] = {
         d: {f"{e * 1e3:g}mm": stroke_for_error(desc, d, e) for e in (1e-4, 1e-3, 1e-2)}
-        for d in ("x", "y", "z") if d in desc.dofs}
+        for d in ("x", "y", "z")
+        if d in desc.dofs
+    }
     out["force_coupling"] = force_coupling(desc)
     if payload is not None:
         out["maps"]["effective_mass_note"] = "with the payload"
     if crosstalk_motions is None:
-        crosstalk_motions = ("x_250mm_sine", "y_150mm_sine") if quick else (
-            "x_250mm_sine", "y_150mm_sine", "elcentro_3c")
+        crosstalk_motions = (
+            ("x_250mm_sine", "y_150mm_sine") if quick else ("x_250mm_sine", "y_150mm_sine", "elcentro_3c")
+        )
     if crosstalk_motions:
-        c = crosstalk(desc, payload, motions=tuple(m for m in crosstalk_motions
-                                                   if m == "elcentro_3c" or m.split("_")[0] in desc.dofs),
-                      quick=quick)
+        c = crosstalk(
+            desc,
+            payload,
+            motions=tuple(m for m in crosstalk_motions if m == "elcentro_3c" or m.split("_")[0] in desc.dofs),
+            quick=quick,
+        )
         out["crosstalk"] = c.table
         out["_histories"] = c.histories
     return out

@@ -15,7 +15,7 @@ def nrmse(achieved: np.ndarray, reference: np.ndarray) -> float:
     """RMS(achieved - reference) / RMS(reference); NaN if the reference is zero."""
     ok = np.isfinite(achieved) & np.isfinite(reference)
     r = reference[ok]
-    den = float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
+    den = float(np.sqrt(np.mean(r**2))) if r.size else 0.0
     if den == 0.0:
         return float("nan")
     return float(np.sqrt(np.mean((achieved[ok] - r) ** 2)) / den)
@@ -41,7 +41,7 @@ def tracking(t, reference_d, reference_a, achieved_d, achieved_a, *, commanded_t
     n = min(len(achieved_d), len(reference_d))
     for i, dof in enumerate(DOFS):
         rd = reference_d[:n, i]
-        if np.sqrt(np.mean(rd ** 2)) <= commanded_tol:
+        if np.sqrt(np.mean(rd**2)) <= commanded_tol:
             continue
         ra = reference_a[:n, i]
         ad = achieved_d[:n, i]

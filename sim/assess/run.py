@@ -28,8 +28,10 @@ class DivergenceAtStart(UserError):
 
 def gains_json(g) -> dict:
     """A controller's settings as plain JSON data."""
-    return {k: (v.tolist() if isinstance(v, np.ndarray) else asdict(v) if is_dataclass(v) else v)
-            for k, v in g.__dict__.items()}
+    return {
+        k: (v.tolist() if isinstance(v, np.ndarray) else asdict(v) if is_dataclass(v) else v)
+        for k, v in g.__dict__.items()
+    }
 
 
 @dataclass
@@ -124,8 +126,14 @@ class ScenarioPlan:
             settings = IterationSettings.from_scenario(self.iteration)
             if settings.frf == "noise":
                 say(f"measuring the table's FRF ({settings.noise_duration_s:g} s of white noise)")
-            results, _drives = iterate(sim, ref, settings, progress=lambda i: say(
-                "run with the plain controller" if i == 0 else f"drive iteration {i} of {settings.count}"))
+            results, _drives = iterate(
+                sim,
+                ref,
+                settings,
+                progress=lambda i: say(
+                    "run with the plain controller" if i == 0 else f"drive iteration {i} of {settings.count}"
+                ),
+            )
             scores = []
             for i, r in enumerate(results):
                 tr = _tracking(r, ref)
@@ -159,9 +167,14 @@ class ScenarioPlan:
 
         if len(res.t) < 2:
             raise DivergenceAtStart(res.incomplete_reason or "the simulation stopped before its second sample")
-        run = build_runfile(res, self.tm, description=sc.description or sc.name,
-                            payload_name=self.payload.name if self.payload else None, reference=ref,
-                            extra_meta={"scenario": sc.name, "controller": gains_json(self.gains)})
+        run = build_runfile(
+            res,
+            self.tm,
+            description=sc.description or sc.name,
+            payload_name=self.payload.name if self.payload else None,
+            reference=ref,
+            extra_meta={"scenario": sc.name, "controller": gains_json(self.gains)},
+        )
         summary = {
             "schema": SCHEMA,
             "scenario": sc.name,
@@ -175,17 +188,30 @@ class ScenarioPlan:
             "incomplete_reason": res.incomplete_reason,
             "interrupted": bool(getattr(res, "interrupted", False)),
             "tracking": _tracking(res, ref),
-            "drive_iterations": {"count": len(history) - 1 if history else 0, "chosen": best,
-                                 "frf": settings.frf if history else None,
-                                 "tracking_plain_controller": _tracking(plain, ref),
-                                 "history": [{"iteration": h["iteration"],
-                                              "mean_nrmse_acceleration": h["mean_nrmse_acceleration"]}
-                                             for h in history]},
+            "drive_iterations": {
+                "count": len(history) - 1 if history else 0,
+                "chosen": best,
+                "frf": settings.frf if history else None,
+                "tracking_plain_controller": _tracking(plain, ref),
+                "history": [
+                    {"iteration": h["iteration"], "mean_nrmse_acceleration": h["mean_nrmse_acceleration"]}
+                    for h in history
+                ],
+            },
             "wall_s_all_runs": float(wall_total),
             "warnings": self.warnings,
         }
-        summary.update(diagnostics(res, self.tm, sim.hp, ref, payload=self.payload,
-                                   envelope_reference=self.envelope_reference, warnings=self.warnings))
+        summary.update(
+            diagnostics(
+                res,
+                self.tm,
+                sim.hp,
+                ref,
+                payload=self.payload,
+                envelope_reference=self.envelope_reference,
+                warnings=self.warnings,
+            )
+        )
         return RunOutcome(run=run, result=res, summary=summary, tm=self.tm, warnings=self.warnings)
 
 
@@ -199,8 +225,7 @@ def _with_overrides(sc, overrides: dict):
     from sim.scenario.overrides import apply_all
 
     tpath = resolve(sc.table, TABLES_DIR, "table")
-    data = {"table": load_toml(tpath), "motion": sc.motion, "controller": sc.controller,
-            "iteration": sc.iteration}
+    data = {"table": load_toml(tpath), "motion": sc.motion, "controller": sc.controller, "iteration": sc.iteration}
     ppath = resolve(sc.payload, PAYLOADS_DIR, "payload") if sc.payload else None
     if ppath is not None:
         data["payload"] = load_toml(ppath)["payload"]
@@ -222,9 +247,16 @@ def check_overrides(scenario, overrides: dict) -> None:
     _with_overrides(sc, overrides)
 
 
-def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
-                  payload=..., motions: dict | None = None, overrides: dict | None = None,
-                  engine: str = "loop") -> ScenarioPlan:
+def plan_scenario(
+    scenario,
+    *,
+    duration_s: float | None = None,
+    iterations: int | None = None,
+    payload=...,
+    motions: dict | None = None,
+    overrides: dict | None = None,
+    engine: str = "loop",
+) -> ScenarioPlan:
     """Build everything a run of ``scenario`` (a :class:`~sim.scenario.files.Scenario` or
     its name/path) needs; raises :class:`~sim.errors.UserError` for bad inputs.
 
@@ -272,31 +304,53 @@ def plan_scenario(scenario, *, duration_s: float | None = None, iterations: int 
     if rice is None and is_rice(desc):
         rice = RiceSimulation(desc, payload, gains)
     if abs(gains.rate_hz - sc.sample_rate_hz) > 1e-9:
-        raise ScenarioError(f"{sc.path}: output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
-                            f"({gains.rate_hz:g}): the recorder samples at the controller ticks")
+        raise ScenarioError(
+            f"{sc.path}: output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
+            f"({gains.rate_hz:g}): the recorder samples at the controller ticks"
+        )
     if motions is None:
         motions = build_motions(sc)
     for dof, mo in motions.items():
         if dof not in desc.dofs and np.any(mo.d != 0):
-            raise ScenarioError(f"{sc.path or sc.name}: a motion in {dof} but table '{desc.name}' moves only "
-                                f"{', '.join(desc.dofs)}; remove [motion.{dof}] or use a table with {dof}")
+            raise ScenarioError(
+                f"{sc.path or sc.name}: a motion in {dof} but table '{desc.name}' moves only "
+                f"{', '.join(desc.dofs)}; remove [motion.{dof}] or use a table with {dof}"
+            )
     ref, window = build_window(sc, motions, duration_s)
     warns = limit_warnings(desc, motions)
     tm = rice.tm if rice else build_model(desc, payload)
     sim = rice or Simulation(tm, gains=gains)
     if engine not in ("loop", "callback"):
-        raise ScenarioError(f"engine must be \"loop\" or \"callback\" (got {engine!r})")
+        raise ScenarioError(f'engine must be "loop" or "callback" (got {engine!r})')
     if engine == "callback":
         from sim.loop.callback import accepts
 
         if rice or it.get("count", 0) or accepts(sim):
             engine = "loop"  # the callback runs the fused closed loop only
-    return ScenarioPlan(scenario=sc, desc=desc, payload=payload, tm=tm, sim=sim, gains=gains, reference=ref,
-                        iteration=it, warnings=warns, window=window, engine=engine)
+    return ScenarioPlan(
+        scenario=sc,
+        desc=desc,
+        payload=payload,
+        tm=tm,
+        sim=sim,
+        gains=gains,
+        reference=ref,
+        iteration=it,
+        warnings=warns,
+        window=window,
+        engine=engine,
+    )
 
 
-def run_scenario(scenario, *, duration_s: float | None = None, iterations: int | None = None,
-                 progress=None, overrides: dict | None = None, engine: str = "loop") -> RunOutcome:
+def run_scenario(
+    scenario,
+    *,
+    duration_s: float | None = None,
+    iterations: int | None = None,
+    progress=None,
+    overrides: dict | None = None,
+    engine: str = "loop",
+) -> RunOutcome:
     """Simulate ``scenario`` (a :class:`~sim.scenario.files.Scenario` or its name/path).
 
     ``duration_s``: simulate only this long; ``iterations``: off-line drive iterations
@@ -305,8 +359,18 @@ def run_scenario(scenario, *, duration_s: float | None = None, iterations: int |
     :func:`plan_scenario`). Returns a :class:`RunOutcome`; raises
     :class:`~sim.errors.UserError` for anything wrong with the inputs.
     """
-    return plan_scenario(scenario, duration_s=duration_s, iterations=iterations, overrides=overrides,
-                         engine=engine).run(progress=progress)
+    return plan_scenario(
+        scenario, duration_s=duration_s, iterations=iterations, overrides=overrides, engine=engine
+    ).run(progress=progress)
 
 
-__all__ = ["DivergenceAtStart", "check_overrides", "RunOutcome", "SCHEMA", "ScenarioPlan", "gains_json", "plan_scenario", "run_scenario"]
+__all__ = [
+    "DivergenceAtStart",
+    "check_overrides",
+    "RunOutcome",
+    "SCHEMA",
+    "ScenarioPlan",
+    "gains_json",
+    "plan_scenario",
+    "run_scenario",
+]

@@ -55,8 +55,17 @@ def shear_frame_stiffness(masses: np.ndarray, freqs_hz) -> np.ndarray:
     return (K + K.T) / 2
 
 
-def specimen_from_numbers(*, mass_kg: float, cg_height_m: float, footprint_m=None, modes_hz=None,
-                          direction: str = "x", damping_ratio: float = 0.02, platen_size_m=None, name=None):
+def specimen_from_numbers(
+    *,
+    mass_kg: float,
+    cg_height_m: float,
+    footprint_m=None,
+    modes_hz=None,
+    direction: str = "x",
+    damping_ratio: float = 0.02,
+    platen_size_m=None,
+    name=None,
+):
     """A payload description from numbers.
 
     Rigid (no ``modes_hz``): a uniform block of ``mass_kg`` resting on the platen, height
@@ -76,19 +85,27 @@ def specimen_from_numbers(*, mass_kg: float, cg_height_m: float, footprint_m=Non
     if fp.shape != (2,) or np.any(~np.isfinite(fp)) or np.any(fp <= 0):
         raise SpecimenError(f"--payload-footprint must be LxW in m, both positive (got {footprint_m!r})")
     if platen_size_m is not None and (fp[0] > platen_size_m[0] + 1e-9 or fp[1] > platen_size_m[1] + 1e-9):
-        raise SpecimenError(f"--payload-footprint {fp[0]:g}x{fp[1]:g} m is larger than the platen "
-                            f"({platen_size_m[0]:g} x {platen_size_m[1]:g} m); give a footprint that fits")
+        raise SpecimenError(
+            f"--payload-footprint {fp[0]:g}x{fp[1]:g} m is larger than the platen "
+            f"({platen_size_m[0]:g} x {platen_size_m[1]:g} m); give a footprint that fits"
+        )
     tag = name or (f"specimen_{mass_kg / 1000:g}t_cg{cg_height_m:g}m")
     if not modes_hz:
         h = 2.0 * cg_height_m
-        data = {"payload": {
-            "type": "rigid", "name": tag,
-            "description": f"rigid block {mass_kg / 1000:g} t, centre of gravity {cg_height_m:g} m, "
-                           f"footprint {fp[0]:g} x {fp[1]:g} m",
-            "source": "assumed: a uniform block resting on the platen (inertia of a uniform box)",
-            "mass_kg": float(mass_kg), "com_m": [0.0, 0.0, float(cg_height_m)],
-            "inertia_kg_m2": uniform_box_inertia(mass_kg, fp[0], fp[1], h),
-            "footprint_m": fp.tolist(), "height_m": h}}
+        data = {
+            "payload": {
+                "type": "rigid",
+                "name": tag,
+                "description": f"rigid block {mass_kg / 1000:g} t, centre of gravity {cg_height_m:g} m, "
+                f"footprint {fp[0]:g} x {fp[1]:g} m",
+                "source": "assumed: a uniform block resting on the platen (inertia of a uniform box)",
+                "mass_kg": float(mass_kg),
+                "com_m": [0.0, 0.0, float(cg_height_m)],
+                "inertia_kg_m2": uniform_box_inertia(mass_kg, fp[0], fp[1], h),
+                "footprint_m": fp.tolist(),
+                "height_m": h,
+            }
+        }
         return parse_payload(data, src="--payload-mass")
     f = np.asarray(modes_hz, dtype=float)
     if f.ndim != 1 or len(f) < 1 or len(f) > 20 or np.any(~np.isfinite(f)) or np.any(f <= 0):
@@ -98,13 +115,21 @@ def specimen_from_numbers(*, mass_kg: float, cg_height_m: float, footprint_m=Non
     n = len(f)
     m = np.full(n, mass_kg / n)
     K = shear_frame_stiffness(m, f)
-    data = {"payload": {
-        "type": "shear_frame", "name": tag + f"_{n}storey",
-        "description": f"{n}-storey shear frame {mass_kg / 1000:g} t, modes {', '.join(f'{x:g}' for x in f)} Hz",
-        "source": "assumed: equal floor masses, mode shapes of the uniform shear building, stiffness from the given modes",
-        "direction": direction, "mass_kg": m.tolist(), "stiffness_n_m": K.tolist(),
-        "damping_ratio": float(damping_ratio), "storey_height_m": 2.0 * cg_height_m / (n + 1),
-        "base_m": [0.0, 0.0, 0.0], "footprint_m": fp.tolist()}}
+    data = {
+        "payload": {
+            "type": "shear_frame",
+            "name": tag + f"_{n}storey",
+            "description": f"{n}-storey shear frame {mass_kg / 1000:g} t, modes {', '.join(f'{x:g}' for x in f)} Hz",
+            "source": "assumed: equal floor masses, mode shapes of the uniform shear building, stiffness from the given modes",
+            "direction": direction,
+            "mass_kg": m.tolist(),
+            "stiffness_n_m": K.tolist(),
+            "damping_ratio": float(damping_ratio),
+            "storey_height_m": 2.0 * cg_height_m / (n + 1),
+            "base_m": [0.0, 0.0, 0.0],
+            "footprint_m": fp.tolist(),
+        }
+    }
     return parse_payload(data, src="--payload-modes")
 
 
@@ -118,18 +143,30 @@ def specimen_modes(payload) -> list[dict]:
         if payload.clamp_frequency_hz is None:
             return []
         m = payload.mass_kg * payload.clamp_mass_fraction
-        return [{"frequency_hz": payload.clamp_frequency_hz, "direction": d, "modal_mass_kg": m} for d in ("x", "y", "z")]
+        return [
+            {"frequency_hz": payload.clamp_frequency_hz, "direction": d, "modal_mass_kg": m} for d in ("x", "y", "z")
+        ]
     if isinstance(payload, ShearFramePayload):
         M = np.diag(payload.mass_kg)
         w2, phi = scipy.linalg.eigh(payload.stiffness_n_m, M)
         L = phi.T @ payload.mass_kg  # participation (mass-normalised shapes)
-        return [{"frequency_hz": float(np.sqrt(w) / (2 * np.pi)), "direction": payload.direction,
-                 "modal_mass_kg": float(li ** 2)} for w, li in zip(w2, L)]
+        return [
+            {
+                "frequency_hz": float(np.sqrt(w) / (2 * np.pi)),
+                "direction": payload.direction,
+                "modal_mass_kg": float(li**2),
+            }
+            for w, li in zip(w2, L)
+        ]
     if isinstance(payload, CantileverPayload):
         out = []
         mtot = payload.mass_per_length_kg_m * payload.height_m
         for beta, share in ((1.875104, 0.6131), (4.694091, 0.1883), (7.854757, 0.0647)):  # Euler-Bernoulli cantilever
-            f = beta ** 2 * np.sqrt(payload.bending_stiffness_n_m2 / (payload.mass_per_length_kg_m * payload.height_m ** 4)) / (2 * np.pi)
+            f = (
+                beta**2
+                * np.sqrt(payload.bending_stiffness_n_m2 / (payload.mass_per_length_kg_m * payload.height_m**4))
+                / (2 * np.pi)
+            )
             out += [{"frequency_hz": float(f), "direction": d, "modal_mass_kg": share * mtot} for d in ("x", "y")]
         return out
     return []
@@ -156,19 +193,35 @@ def interaction(desc, payload) -> dict:
             continue
         r = mo["frequency_hz"] / oil[d]
         if abs(r - 1.0) <= CLOSE_RATIO:
-            close.append({"dof": d, "specimen_hz": mo["frequency_hz"], "oil_column_hz": oil[d], "ratio": float(r),
-                          "modal_mass_kg": mo["modal_mass_kg"]})
-            warns.append(f"specimen mode {mo['frequency_hz']:.1f} Hz ({d}) is within {100 * abs(r - 1):.0f} % of "
-                         f"the {d} oil column at {oil[d]:.1f} Hz: the table will amplify or notch it")
+            close.append(
+                {
+                    "dof": d,
+                    "specimen_hz": mo["frequency_hz"],
+                    "oil_column_hz": oil[d],
+                    "ratio": float(r),
+                    "modal_mass_kg": mo["modal_mass_kg"],
+                }
+            )
+            warns.append(
+                f"specimen mode {mo['frequency_hz']:.1f} Hz ({d}) is within {100 * abs(r - 1):.0f} % of "
+                f"the {d} oil column at {oil[d]:.1f} Hz: the table will amplify or notch it"
+            )
     eff = build_model(desc, None).effective_mass()
     m = payload_mass(payload)
     ratio = {d: float(m / eff[d]) for d in ("x", "y") if d in desc.dofs and d in eff}
     for d, r in ratio.items():
         if r > INERTIA_RATIO_WARN:
-            warns.append(f"specimen mass is {r:.2f} x the table's effective mass in {d}: its reaction will "
-                         "distort the table motion (drive iterations needed)")
-    return {"oil_columns_hz": {d: oil[d] for d in desc.dofs if d in oil}, "specimen_modes": modes, "close": close,
-            "inertia_ratio": ratio, "warnings": warns}
+            warns.append(
+                f"specimen mass is {r:.2f} x the table's effective mass in {d}: its reaction will "
+                "distort the table motion (drive iterations needed)"
+            )
+    return {
+        "oil_columns_hz": {d: oil[d] for d in desc.dofs if d in oil},
+        "specimen_modes": modes,
+        "close": close,
+        "inertia_ratio": ratio,
+        "warnings": warns,
+    }
 
 
 def _as_rigid(payload):
@@ -184,10 +237,24 @@ def _as_rigid(payload):
         h = payload.height_m / 2
         fp = np.array([payload.width_m, payload.width_m])
         base = payload.base_m
-    return RigidPayload(name=payload.name + "_rigid", mass_kg=m, com_m=np.array([base[0], base[1], base[2] + h]),
-                        inertia_kg_m2=np.array(uniform_box_inertia(m, fp[0], fp[1], 2 * h)), footprint_m=fp,
-                        height_m=2 * h)
+    return RigidPayload(
+        name=payload.name + "_rigid",
+        mass_kg=m,
+        com_m=np.array([base[0], base[1], base[2] + h]),
+        inertia_kg_m2=np.array(uniform_box_inertia(m, fp[0], fp[1], 2 * h)),
+        footprint_m=fp,
+        height_m=2 * h,
+    )
 
 
-__all__ = ["CLOSE_RATIO", "INERTIA_RATIO_WARN", "SpecimenError", "interaction", "shear_frame_stiffness",
-           "specimen_from_numbers", "specimen_modes", "uniform_box_inertia", "DOFS6"]
+__all__ = [
+    "CLOSE_RATIO",
+    "INERTIA_RATIO_WARN",
+    "SpecimenError",
+    "interaction",
+    "shear_frame_stiffness",
+    "specimen_from_numbers",
+    "specimen_modes",
+    "uniform_box_inertia",
+    "DOFS6",
+]

@@ -27,8 +27,13 @@ from sim.errors import UserError
 
 #: Built-in records: name -> what it is. Aliases map to the same record.
 BUILTIN_RECORDS = {"elcentro1940": "1940 Imperial Valley, El Centro Array #9 (PEER RSN6), 3 components"}
-_ALIASES = {"elcentro1940": "elcentro1940", "elcentro": "elcentro1940", "el_centro_1940": "elcentro1940",
-            "el_centro": "elcentro1940", "elcentro_1940": "elcentro1940"}
+_ALIASES = {
+    "elcentro1940": "elcentro1940",
+    "elcentro": "elcentro1940",
+    "el_centro_1940": "elcentro1940",
+    "el_centro": "elcentro1940",
+    "elcentro_1940": "elcentro1940",
+}
 LEAD_IN_S = 1.0  # run choice: blend from rest into the window over 1 s (well below the record's 0.1 Hz high-pass)
 
 
@@ -76,8 +81,10 @@ def record_motions(spec: str, *, rate_hz: float) -> tuple[dict, str]:
             raise CaseError(f"{p}: more than one vertical component ({', '.join(f.name for f in vert)}); keep one")
         hor = [f for f in files if f not in vert]
         if len(hor) > 2:
-            raise CaseError(f"{p}: {len(hor)} horizontal components and no vertical one (UP/DWN/V in the file name); "
-                            "name the vertical component or give 2 horizontals")
+            raise CaseError(
+                f"{p}: {len(hor)} horizontal components and no vertical one (UP/DWN/V in the file name); "
+                "name the vertical component or give 2 horizontals"
+            )
         comps = dict(zip(("x", "y"), (recs[f] for f in hor)))
         if vert:
             comps["z"] = recs[vert[0]]
@@ -93,8 +100,10 @@ def check_dofs(desc, motions: dict, where: str) -> None:
     """A motion in a DOF the table does not have is a user error."""
     for dof, m in motions.items():
         if dof not in desc.dofs and np.any(m.d != 0):
-            raise CaseError(f"{where}: a motion in {dof} but table '{desc.name}' moves only {', '.join(desc.dofs)}; "
-                            f"give a motion in {', '.join(desc.dofs)} only")
+            raise CaseError(
+                f"{where}: a motion in {dof} but table '{desc.name}' moves only {', '.join(desc.dofs)}; "
+                f"give a motion in {', '.join(desc.dofs)} only"
+            )
 
 
 def scaled(motions: dict, scale: float) -> dict:
@@ -125,25 +134,31 @@ def strongest_window(motions: dict, window_s: float, lead_in_s: float = LEAD_IN_
     tau = np.clip(t / lead_in_s, 0.0, 1.0)
     out = {}
     for dof, m in motions.items():
-        d, v, a = m.d[s0:s0 + nw + nl].copy(), m.v[s0:s0 + nw + nl].copy(), m.a[s0:s0 + nw + nl].copy()
+        d, v, a = m.d[s0 : s0 + nw + nl].copy(), m.v[s0 : s0 + nw + nl].copy(), m.a[s0 : s0 + nw + nl].copy()
         cd, cv, ca = _quintic_fade(d[0], v[0], a[0], tau, lead_in_s)
-        out[dof] = Motion(t, d - cd, v - cv, a - ca, m.name + f" (window {s0 / rate:.1f} s + {lead_in_s + window_s:.1f} s)",
-                          dict(m.info, window_start_s=s0 / rate))
+        out[dof] = Motion(
+            t,
+            d - cd,
+            v - cv,
+            a - ca,
+            m.name + f" (window {s0 / rate:.1f} s + {lead_in_s + window_s:.1f} s)",
+            dict(m.info, window_start_s=s0 / rate),
+        )
     return out, s0 / rate
 
 
 def _quintic_fade(d0, v0, a0, tau, T):
     """c(t) with c, c', c'' = d0, v0, a0 at t = 0 and 0 at t = T (tau = t / T), zero after."""
     # c(tau) = d0 h0 + v0 T h1 + a0 T^2 h2 with the quintic Hermite basis of the start point
-    h0 = 1 - 10 * tau ** 3 + 15 * tau ** 4 - 6 * tau ** 5
-    h1 = tau - 6 * tau ** 3 + 8 * tau ** 4 - 3 * tau ** 5
-    h2 = 0.5 * tau ** 2 - 1.5 * tau ** 3 + 1.5 * tau ** 4 - 0.5 * tau ** 5
-    dh0 = -30 * tau ** 2 + 60 * tau ** 3 - 30 * tau ** 4
-    dh1 = 1 - 18 * tau ** 2 + 32 * tau ** 3 - 15 * tau ** 4
-    dh2 = tau - 4.5 * tau ** 2 + 6 * tau ** 3 - 2.5 * tau ** 4
-    ddh0 = -60 * tau + 180 * tau ** 2 - 120 * tau ** 3
-    ddh1 = -36 * tau + 96 * tau ** 2 - 60 * tau ** 3
-    ddh2 = 1 - 9 * tau + 18 * tau ** 2 - 10 * tau ** 3
+    h0 = 1 - 10 * tau**3 + 15 * tau**4 - 6 * tau**5
+    h1 = tau - 6 * tau**3 + 8 * tau**4 - 3 * tau**5
+    h2 = 0.5 * tau**2 - 1.5 * tau**3 + 1.5 * tau**4 - 0.5 * tau**5
+    dh0 = -30 * tau**2 + 60 * tau**3 - 30 * tau**4
+    dh1 = 1 - 18 * tau**2 + 32 * tau**3 - 15 * tau**4
+    dh2 = tau - 4.5 * tau**2 + 6 * tau**3 - 2.5 * tau**4
+    ddh0 = -60 * tau + 180 * tau**2 - 120 * tau**3
+    ddh1 = -36 * tau + 96 * tau**2 - 60 * tau**3
+    ddh2 = 1 - 9 * tau + 18 * tau**2 - 10 * tau**3
     c = d0 * h0 + v0 * T * h1 + a0 * T * T * h2
     cv = (d0 * dh0 + v0 * T * dh1 + a0 * T * T * dh2) / T
     ca = (d0 * ddh0 + v0 * T * ddh1 + a0 * T * T * ddh2) / (T * T)
@@ -178,10 +193,18 @@ def _scenario_for(case: Case, desc):
     from sim.loop.analog import RiceGains, is_rice
 
     gains = RiceGains.for_table(desc, {}) if is_rice(desc) else ControllerGains.for_table(desc, {})
-    return Scenario(name=case.name, table=case.table, payload=None, duration_s=None, pad_to_duration=False,
-                    description=f"feasibility of {case.motion} on {desc.name}", motion={"type": "el_centro_1940"},
-                    controller={}, sample_rate_hz=float(gains.rate_hz),
-                    iteration=dict(case.iteration, count=case.iterations or 0))
+    return Scenario(
+        name=case.name,
+        table=case.table,
+        payload=None,
+        duration_s=None,
+        pad_to_duration=False,
+        description=f"feasibility of {case.motion} on {desc.name}",
+        motion={"type": "el_centro_1940"},
+        controller={},
+        sample_rate_hz=float(gains.rate_hz),
+        iteration=dict(case.iteration, count=case.iterations or 0),
+    )
 
 
 def prepare(case: Case) -> Prepared:
@@ -192,7 +215,9 @@ def prepare(case: Case) -> Prepared:
     from sim.scenario.files import build_motions
 
     if not (case.scale > 0 and np.isfinite(case.scale)):
-        raise CaseError(f"--scale must be a positive amplitude factor (got {case.scale:g}); 1.0 is the record as recorded")
+        raise CaseError(
+            f"--scale must be a positive amplitude factor (got {case.scale:g}); 1.0 is the record as recorded"
+        )
     if case.window_s is not None and not case.window_s > 0:
         raise CaseError(f"--window must be a positive number of seconds (got {case.window_s:g})")
     sc = case.scenario
@@ -217,8 +242,17 @@ def prepare(case: Case) -> Prepared:
         window, t0 = strongest_window(motions, case.window_s)
     else:
         window, t0 = motions, 0.0
-    return Prepared(case=case, desc=desc, payload=payload, motions=motions, window=window, window_start_s=t0,
-                    static=static, interaction=inter, buildable=buildable)
+    return Prepared(
+        case=case,
+        desc=desc,
+        payload=payload,
+        motions=motions,
+        window=window,
+        window_start_s=t0,
+        static=static,
+        interaction=inter,
+        buildable=buildable,
+    )
 
 
 _BARE: dict = {}
@@ -251,18 +285,23 @@ def evaluate(prep: Prepared, scale: float, *, simulate: bool = True, progress=No
     if not prep.buildable or not simulate:
         out = verdict(prep.static + env, warns)
         out["simulated"] = False
-        out["note"] = ("not simulated: the static supports cannot carry the specimen" if not prep.buildable
-                       else "not simulated: the specimen or envelope checks already fail")
+        out["note"] = (
+            "not simulated: the static supports cannot carry the specimen"
+            if not prep.buildable
+            else "not simulated: the specimen or envelope checks already fail"
+        )
         out["scale"] = float(scale)
         return out
     win = scaled(prep.window, scale)
     wlen = max(m.duration_s for m in win.values())
     if prep.plan is None:
-        prep.plan = plan_scenario(_scenario_for(prep.case, prep.desc), payload=prep.payload, motions=win,
-                                  iterations=prep.case.iterations)
+        prep.plan = plan_scenario(
+            _scenario_for(prep.case, prep.desc), payload=prep.payload, motions=win, iterations=prep.case.iterations
+        )
     prep.plan.sim.reset()  # Simulation.run continues from where the last run ended
-    plan = replace(prep.plan, reference=reference_from_motions(win, rate, wlen), envelope_reference=env_ref,
-                   warnings=warns)
+    plan = replace(
+        prep.plan, reference=reference_from_motions(win, rate, wlen), envelope_reference=env_ref, warnings=warns
+    )
     outcome = plan.run(progress=progress)
     fe = dict(outcome.summary["feasibility"])
     fe["simulated"] = True
@@ -325,8 +364,13 @@ def max_scale(case: Case, *, rel_tol: float = 0.02, max_runs: int = 6, progress=
     result = _finish(prep, dict(first))
     scale_free = [c["name"] for c in prep.static if not c["pass"]]
     if scale_free:
-        result.update(max_scale=None, max_scale_limiting=scale_free[0], at_max=None, limiting_above=scale_free[0],
-                      max_scale_runs=runs)
+        result.update(
+            max_scale=None,
+            max_scale_limiting=scale_free[0],
+            at_max=None,
+            limiting_above=scale_free[0],
+            max_scale_runs=runs,
+        )
         return result
     lo = hi = None
     if first["feasible"]:
@@ -357,18 +401,27 @@ def max_scale(case: Case, *, rel_tol: float = 0.02, max_runs: int = 6, progress=
         if steps > 40:  # evaluations without a simulation are free; never loop for ever
             break
     if lo is None:
-        result.update(max_scale=None, max_scale_limiting=first["limiting"], at_max=None,
-                      limiting_above=last["limiting"], max_scale_runs=runs)
+        result.update(
+            max_scale=None,
+            max_scale_limiting=first["limiting"],
+            at_max=None,
+            limiting_above=last["limiting"],
+            max_scale_runs=runs,
+        )
         return result
     above = cache.get(hi) if hi is not None else None
     at = cache[lo]
     if result.get("_outcome") is None and at.get("_outcome") is not None:
         result["_outcome"] = at["_outcome"]  # the report's figures: the run at the largest scale
         result["figures_scale"] = float(lo)
-    result.update(max_scale=float(lo), max_scale_upper=None if hi is None else float(hi),
-                  max_scale_limiting=(above or at)["limiting"] if above is None else _first_failed(above),
-                  at_max=_strip(at), limiting_above=None if above is None else _first_failed(above),
-                  max_scale_runs=runs)
+    result.update(
+        max_scale=float(lo),
+        max_scale_upper=None if hi is None else float(hi),
+        max_scale_limiting=(above or at)["limiting"] if above is None else _first_failed(above),
+        at_max=_strip(at),
+        limiting_above=None if above is None else _first_failed(above),
+        max_scale_runs=runs,
+    )
     return result
 
 
@@ -380,9 +433,13 @@ def _first_failed(v: dict) -> str:
 def _scaling_utilisation(v: dict) -> float:
     """Highest utilisation among the checks that grow with the amplitude."""
     skip = ("specimen_mass", "support_load", "loop_closure", "run_completed")
-    us = [c["utilisation"] for c in v["checks"]
-          if not c["name"].startswith(("pga_error", "spectrum_")) and c["name"] not in skip
-          and np.isfinite(c["utilisation"])]
+    us = [
+        c["utilisation"]
+        for c in v["checks"]
+        if not c["name"].startswith(("pga_error", "spectrum_"))
+        and c["name"] not in skip
+        and np.isfinite(c["utilisation"])
+    ]
     return max(us) if us else 0.0
 
 
@@ -408,21 +465,47 @@ def suite_records(folder) -> list[str]:
 SUITE_COLUMNS = ("record", "scale", "payload", "feasible", "limiting", "limiting_utilisation", "failed", "simulated")
 
 
-def suite(table: str, records: list[str], scales: list[float], payloads: list, *, window_s=None, iterations=0,
-          progress=None) -> list[dict]:
+def suite(
+    table: str, records: list[str], scales: list[float], payloads: list, *, window_s=None, iterations=0, progress=None
+) -> list[dict]:
     """Every record x scale x payload: one row per case (see :data:`SUITE_COLUMNS`)."""
     rows = []
     for rec in records:
         for pay in payloads:
             for s in scales:
-                v = assess(Case(table=table, motion=rec, payload=pay, scale=s, window_s=window_s, iterations=iterations),
-                           progress=progress)
-                rows.append({"record": Path(rec).name, "scale": s, "payload": getattr(pay, "name", None) or "bare",
-                             "feasible": v["feasible"], "limiting": v["limiting"],
-                             "limiting_utilisation": v["limiting_utilisation"], "failed": ";".join(v["failed"]),
-                             "simulated": v["simulated"]})
+                v = assess(
+                    Case(table=table, motion=rec, payload=pay, scale=s, window_s=window_s, iterations=iterations),
+                    progress=progress,
+                )
+                rows.append(
+                    {
+                        "record": Path(rec).name,
+                        "scale": s,
+                        "payload": getattr(pay, "name", None) or "bare",
+                        "feasible": v["feasible"],
+                        "limiting": v["limiting"],
+                        "limiting_utilisation": v["limiting_utilisation"],
+                        "failed": ";".join(v["failed"]),
+                        "simulated": v["simulated"],
+                    }
+                )
     return rows
 
 
-__all__ = ["BUILTIN_RECORDS", "Case", "CaseError", "Prepared", "SUITE_COLUMNS", "assess", "check_dofs", "evaluate",
-           "max_scale", "prepare", "record_motions", "strongest_window", "suite", "suite_records", "DOFS6"]
+__all__ = [
+    "BUILTIN_RECORDS",
+    "Case",
+    "CaseError",
+    "Prepared",
+    "SUITE_COLUMNS",
+    "assess",
+    "check_dofs",
+    "evaluate",
+    "max_scale",
+    "prepare",
+    "record_motions",
+    "strongest_window",
+    "suite",
+    "suite_records",
+    "DOFS6",
+]

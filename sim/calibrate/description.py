@@ -81,8 +81,17 @@ class TomlText:
         m = re.match(r"^[^#]*#\s*(.*)$", self.lines[i])
         return m.group(1).strip() if m else ""
 
-    def set_value(self, section: str, key: str, value, comment: str | None = None, *,
-                  value_text: str | None = None, keep_comment: bool = False, create: bool = False) -> None:
+    def set_value(
+        self,
+        section: str,
+        key: str,
+        value,
+        comment: str | None = None,
+        *,
+        value_text: str | None = None,
+        keep_comment: bool = False,
+        create: bool = False,
+    ) -> None:
         """Rewrite ``[section] key`` in place. ``comment``: the new source comment (with
         ``keep_comment`` the old comment is appended after it); ``create``: add the key
         (and the section at the end) when missing."""
@@ -90,8 +99,9 @@ class TomlText:
         i = self.key_index(section, key)
         if i is None:
             if not create:
-                raise DescriptionWriteError(f"{self.source}: cannot find {section}.{key} to rewrite; "
-                                            "add the key to the file first")
+                raise DescriptionWriteError(
+                    f"{self.source}: cannot find {section}.{key} to rewrite; add the key to the file first"
+                )
             j = self._section_end(section)
             if j is None:
                 self.lines = self._rstrip() + ["", f"[{section}]", _line(key, vt, comment)]
@@ -137,11 +147,13 @@ class TomlText:
             end = heads[n + 1] if n + 1 < len(heads) else len(self.lines)
             end = self._back_over_blank(end) if end > i + 1 else end
             end = max(end, i + 1)
-            body = "\n".join(self.lines[i + 1:end])
+            body = "\n".join(self.lines[i + 1 : end])
             try:
                 entry = tomllib.loads(body)
             except tomllib.TOMLDecodeError as e:
-                raise DescriptionWriteError(f"{self.source}: the [[effect]] entry at line {i + 1} is not TOML ({e})") from None
+                raise DescriptionWriteError(
+                    f"{self.source}: the [[effect]] entry at line {i + 1} is not TOML ({e})"
+                ) from None
             out.append((i, end, entry))
         return out
 
@@ -158,8 +170,9 @@ class TomlText:
                 for k, v in entry.items():
                     if k in ("type", "where"):
                         continue
-                    j = next((n for n in range(i + 1, end) if re.match(rf"^\s*{re.escape(k)}\s*=", self.lines[n])),
-                             None)
+                    j = next(
+                        (n for n in range(i + 1, end) if re.match(rf"^\s*{re.escape(k)}\s*=", self.lines[n])), None
+                    )
                     line = _line(k, format_value(v), comments.get(k))
                     if j is None:
                         self.lines.insert(end, line)
@@ -182,7 +195,9 @@ class TomlText:
         try:
             return tomllib.loads(self.text)
         except tomllib.TOMLDecodeError as e:
-            raise DescriptionWriteError(f"{self.source}: the rewritten description is not TOML ({e}); nothing written") from None
+            raise DescriptionWriteError(
+                f"{self.source}: the rewritten description is not TOML ({e}); nothing written"
+            ) from None
 
     def save(self, path) -> Path:
         """Write atomically (after checking that the text parses)."""
@@ -201,8 +216,9 @@ def changed_values(old: dict, new: dict, prefix: str = "") -> list[tuple[str, st
     out = []
     for k, v in new.items():
         if isinstance(v, dict):
-            out += changed_values(old.get(k, {}) if isinstance(old.get(k), dict) else {}, v,
-                                  f"{prefix}.{k}" if prefix else k)
+            out += changed_values(
+                old.get(k, {}) if isinstance(old.get(k), dict) else {}, v, f"{prefix}.{k}" if prefix else k
+            )
         elif isinstance(v, list) and v and isinstance(v[0], dict):
             continue
         elif prefix and old.get(k) != v:

@@ -51,6 +51,7 @@ def _scale_key(section_path, key):
                 cls[key] = cls[key] * v
         else:
             raw[section_path][key] = raw[section_path][key] * v
+
     return apply
 
 
@@ -71,14 +72,22 @@ def _added_mass(raw, v):
 
 
 CANDIDATES = (
-    Candidate("bulk_modulus", "effective bulk modulus scale (entrained air, hose compliance)", (0.4, 1.6), 1.0,
-              _scale_key("fluid", "bulk_modulus_pa"), "x"),
+    Candidate(
+        "bulk_modulus",
+        "effective bulk modulus scale (entrained air, hose compliance)",
+        (0.4, 1.6),
+        1.0,
+        _scale_key("fluid", "bulk_modulus_pa"),
+        "x",
+    ),
     Candidate("friction", "seal and support friction scale", (0.0, 5.0), 1.0, _friction, "x"),
     Candidate("valve_delay", "extra pure delay of the servovalves", (0.0, 0.006), 0.0, _delay, "s"),
-    Candidate("added_mass", "mass moving with the platen that the description lacks", (0.0, 20000.0), 0.0,
-              _added_mass, "kg"),
-    Candidate("valve_gain", "servovalve rated-flow scale", (0.6, 1.4), 1.0,
-              _scale_key("servovalve", "rated_flow_m3_s"), "x"),
+    Candidate(
+        "added_mass", "mass moving with the platen that the description lacks", (0.0, 20000.0), 0.0, _added_mass, "kg"
+    ),
+    Candidate(
+        "valve_gain", "servovalve rated-flow scale", (0.6, 1.4), 1.0, _scale_key("servovalve", "rated_flow_m3_s"), "x"
+    ),
 )
 
 
@@ -88,7 +97,9 @@ def score(measured, replayed) -> tuple[float, dict]:
     vals = []
     dof_used = None
     if measured.reference is not None:
-        dof_used = [j for j in range(measured.reference.shape[1]) if np.sqrt(np.mean(measured.reference[:, j] ** 2)) > 0]
+        dof_used = [
+            j for j in range(measured.reference.shape[1]) if np.sqrt(np.mean(measured.reference[:, j] ** 2)) > 0
+        ]
     n = min(measured.n_samples, len(replayed["t"]))
     for ch in FIT_CHANNELS:
         m = getattr(measured, ch)
@@ -119,16 +130,26 @@ def _replay(raw: dict, payload, measured, src: str):
     # at the record's own rate: commands held (or interpolated, meta.command_hold) onto the
     # model's ticks, channels sampled back at the record's instants in its DOF columns
     t_rec = np.asarray(measured.t, float) - float(measured.t[0])
-    res, ch, _, n = run_at_record(tm, t_rec, measured.valve_command, measured.dofs,
-                                  hold=measured.meta.get("command_hold", "zoh"))
+    res, ch, _, n = run_at_record(
+        tm, t_rec, measured.valve_command, measured.dofs, hold=measured.meta.get("command_hold", "zoh")
+    )
     out = dict(ch)
     out["t"] = t_rec[:n]
     out["_incomplete"] = res.incomplete_reason
     return out
 
 
-def fit(measured, raw_table: dict, payload=None, *, candidates=CANDIDATES, rounds: int = 2,
-        min_gain: float = 0.2, xatol_frac: float = 2e-3, log=None) -> dict:
+def fit(
+    measured,
+    raw_table: dict,
+    payload=None,
+    *,
+    candidates=CANDIDATES,
+    rounds: int = 2,
+    min_gain: float = 0.2,
+    xatol_frac: float = 2e-3,
+    log=None,
+) -> dict:
     """Greedy effect search; returns a report dict and the calibrated raw description."""
     say = log or (lambda *_: None)
     src = "<fit>"
@@ -142,6 +163,7 @@ def fit(measured, raw_table: dict, payload=None, *, candidates=CANDIDATES, round
     for rnd in range(rounds):
         best = None
         for c in remaining:
+
             def obj(v, c=c):
                 r2 = copy.deepcopy(raw)
                 c.apply(r2, v)
@@ -152,8 +174,9 @@ def fit(measured, raw_table: dict, payload=None, *, candidates=CANDIDATES, round
 
             lo, hi = c.bounds
             say(f"round {rnd + 1}: trying {c.name} ({lo:g}..{hi:g} {c.unit})")
-            res = minimize_scalar(obj, bounds=(lo, hi), method="bounded",
-                                  options={"xatol": xatol_frac * (hi - lo), "maxiter": 25})
+            res = minimize_scalar(
+                obj, bounds=(lo, hi), method="bounded", options={"xatol": xatol_frac * (hi - lo), "maxiter": 25}
+            )
             tried.setdefault(c.name, []).append({"round": rnd, "value": float(res.x), "residual": float(res.fun)})
             say(f"  {c.name:12s} -> {res.x:.6g} {c.unit}: residual {100 * res.fun:.2f} %")
             if best is None or res.fun < best[1]:
@@ -162,8 +185,16 @@ def fit(measured, raw_table: dict, payload=None, *, candidates=CANDIDATES, round
             break
         c, s_new, v = best
         c.apply(raw, v)
-        chosen.append({"effect": c.name, "what": c.what, "value": v, "unit": c.unit,
-                       "residual_before": current, "residual_after": s_new})
+        chosen.append(
+            {
+                "effect": c.name,
+                "what": c.what,
+                "value": v,
+                "unit": c.unit,
+                "residual_before": current,
+                "residual_after": s_new,
+            }
+        )
         say(f"added {c.name} = {v:.6g} {c.unit}: residual {100 * current:.2f} % -> {100 * s_new:.2f} %")
         current = s_new
         remaining = [x for x in remaining if x.name != c.name]
@@ -191,8 +222,9 @@ def write_table_toml(raw: dict, path, note: str, original=None) -> None:
     from sim.calibrate.description import DescriptionWriteError, TomlText, changed_values
 
     if original is None:
-        raise DescriptionWriteError(f"{path}: the calibrated description is written into a copy of the original "
-                                    "file; give original=")
+        raise DescriptionWriteError(
+            f"{path}: the calibrated description is written into a copy of the original file; give original="
+        )
     doc = TomlText.read(original)
     old = tomllib.loads(doc.text)
     for section, key, value in changed_values(old, raw):

@@ -85,18 +85,53 @@ def _coulomb(u, v, a, s):
     return dahl_series(v, zss, s["_dt"]) / zss
 
 
-add_law(Law("coulomb_friction", {"force_n": ("N", 0.0, np.inf)}, "force_n", _coulomb,
-            what="dry friction F sign(v) (with the table's pre-sliding law, if it has one)"))
-add_law(Law("viscous_damping", {"damping_n_s_m": ("N s/m", 0.0, np.inf)}, "damping_n_s_m",
-            lambda u, v, a, s: v, what="linear damping c v"))
-add_law(Law("power_damping", {"coefficient": ("N (s/m)^exponent", 0.0, np.inf), "exponent": ("1", 0.05, 2.0)},
-            "coefficient", lambda u, v, a, s: np.abs(v) ** s["exponent"] * _sign(v),
-            shape={"exponent": tuple(np.round(np.arange(0.2, 1.51, 0.1), 3))},
-            what="power-law damping C |v|^alpha sign(v)"))
-add_law(Law("spring", {"stiffness_n_m": ("N/m", -np.inf, np.inf)}, "stiffness_n_m",
-            lambda u, v, a, s: u, what="linear spring k u"))
-add_law(Law("added_mass", {"mass_kg": ("kg", -np.inf, np.inf)}, "mass_kg",
-            lambda u, v, a, s: a, inertial=True, what="mass moving with the place m a"))
+add_law(
+    Law(
+        "coulomb_friction",
+        {"force_n": ("N", 0.0, np.inf)},
+        "force_n",
+        _coulomb,
+        what="dry friction F sign(v) (with the table's pre-sliding law, if it has one)",
+    )
+)
+add_law(
+    Law(
+        "viscous_damping",
+        {"damping_n_s_m": ("N s/m", 0.0, np.inf)},
+        "damping_n_s_m",
+        lambda u, v, a, s: v,
+        what="linear damping c v",
+    )
+)
+add_law(
+    Law(
+        "power_damping",
+        {"coefficient": ("N (s/m)^exponent", 0.0, np.inf), "exponent": ("1", 0.05, 2.0)},
+        "coefficient",
+        lambda u, v, a, s: np.abs(v) ** s["exponent"] * _sign(v),
+        shape={"exponent": tuple(np.round(np.arange(0.2, 1.51, 0.1), 3))},
+        what="power-law damping C |v|^alpha sign(v)",
+    )
+)
+add_law(
+    Law(
+        "spring",
+        {"stiffness_n_m": ("N/m", -np.inf, np.inf)},
+        "stiffness_n_m",
+        lambda u, v, a, s: u,
+        what="linear spring k u",
+    )
+)
+add_law(
+    Law(
+        "added_mass",
+        {"mass_kg": ("kg", -np.inf, np.inf)},
+        "mass_kg",
+        lambda u, v, a, s: a,
+        inertial=True,
+        what="mass moving with the place m a",
+    )
+)
 
 
 def declared_forces(entry: dict):
@@ -113,8 +148,11 @@ def declared_forces(entry: dict):
     if kind == "platen_coulomb" and entry.get("presliding_m"):
         return LAWS["coulomb_friction"], where, {"force_n": float(entry["force_n"])}
     if kind == "platen_power_damping":
-        return LAWS["power_damping"], where, {"coefficient": float(entry["coefficient"]),
-                                              "exponent": float(entry.get("exponent", 0.5))}
+        return (
+            LAWS["power_damping"],
+            where,
+            {"coefficient": float(entry["coefficient"]), "exponent": float(entry.get("exponent", 0.5))},
+        )
     if kind in LAWS and "where" in entry:
         cls = EFFECTS.get(kind)
         if cls is not None and not getattr(cls, "per_step", False):

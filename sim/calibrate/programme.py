@@ -32,8 +32,9 @@ CAL_CLASSES = ("longitudinal", "lateral", "vertical")
 CAL_CLASS_DOF = {"longitudinal": "x", "lateral": "y", "vertical": "z"}
 
 
-def _with_values(desc, dead: dict | None = None, seal: dict | None = None, masses: dict | None = None,
-                 offset: dict | None = None):
+def _with_values(
+    desc, dead: dict | None = None, seal: dict | None = None, masses: dict | None = None, offset: dict | None = None
+):
     from mjcf.description import parse_table
 
     raw = copy.deepcopy(desc.raw)
@@ -56,8 +57,14 @@ def _fit_dead_volumes(desc, targets: dict) -> dict:
     ``targets`` (least squares on log frequency over the six DOFs)."""
     import scipy.optimize
 
-    v0 = np.array([desc.actuator_classes[c].dead_volume_a_m3 if hasattr(desc.actuator_classes[c], "dead_volume_a_m3")
-                   else desc.raw["actuator_class"][c]["dead_volume_a_m3"] for c in CAL_CLASSES])
+    v0 = np.array(
+        [
+            desc.actuator_classes[c].dead_volume_a_m3
+            if hasattr(desc.actuator_classes[c], "dead_volume_a_m3")
+            else desc.raw["actuator_class"][c]["dead_volume_a_m3"]
+            for c in CAL_CLASSES
+        ]
+    )
 
     def res(lv):
         d = _with_values(desc, dict(zip(CAL_CLASSES, np.exp(lv))))
@@ -67,14 +74,19 @@ def _fit_dead_volumes(desc, targets: dict) -> dict:
     sol = scipy.optimize.least_squares(res, np.log(v0), bounds=(np.log(1e-5), np.log(0.05)), diff_step=1e-4)
     # three dead volumes cannot meet six frequencies exactly: from the least-squares
     # point, minimise the largest relative error instead (Table 1 is held per DOF)
-    mm = scipy.optimize.minimize(lambda lv: float(np.max(np.abs(res(np.clip(lv, np.log(1e-5), np.log(0.05)))))),
-                                 sol.x, method="Nelder-Mead", options={"xatol": 1e-5, "fatol": 1e-7, "maxiter": 400})
+    mm = scipy.optimize.minimize(
+        lambda lv: float(np.max(np.abs(res(np.clip(lv, np.log(1e-5), np.log(0.05)))))),
+        sol.x,
+        method="Nelder-Mead",
+        options={"xatol": 1e-5, "fatol": 1e-7, "maxiter": 400},
+    )
     x = np.clip(mm.x, np.log(1e-5), np.log(0.05)) if mm.fun <= np.max(np.abs(sol.fun)) else sol.x
     return dict(zip(CAL_CLASSES, np.exp(x).tolist()))
 
 
-def calibrate(table: str, *, quick: bool = False, workers: int | None = None, progress=None,
-              masses: bool = True) -> dict:
+def calibrate(
+    table: str, *, quick: bool = False, workers: int | None = None, progress=None, masses: bool = True
+) -> dict:
     """Choose the moving masses (effective-mass tests, Table 2), dead volumes (oil
     columns, Table 1) and seal friction per class (friction tests) from virtual tests
     (one correction pass); returns the values and the before/after figures."""
@@ -84,8 +96,9 @@ def calibrate(table: str, *, quick: bool = False, workers: int | None = None, pr
     pub = published(desc)
     need = ("oil_column_hz", "friction_fraction") + (("effective_mass",) if masses else ())
     if pub is None or any(getattr(pub, k) is None for k in need):
-        raise CharacterizeError(f"{desc.source}: calibration needs the table's measured values in [published] "
-                                f"({', '.join(need)})")
+        raise CharacterizeError(
+            f"{desc.source}: calibration needs the table's measured values in [published] ({', '.join(need)})"
+        )
     dur = QUICK if quick else FULL
     cap = capability(desc)
     # 1. virtual tests at the current values
@@ -110,8 +123,7 @@ def calibrate(table: str, *, quick: bool = False, workers: int | None = None, pr
     # by half of pass 1's step.)
     # c = K_par / M: scaled to the new masses
     extra = {d: (res0["oil_column_hz"][d] ** 2 - lin_meas[d] ** 2) * rigid0[d] / rigid1[d] for d in DOFS}
-    targets = {d: math.sqrt(max(pub.oil_column_hz[d] ** 2 - extra[d], 0.25 * pub.oil_column_hz[d] ** 2))
-               for d in DOFS}
+    targets = {d: math.sqrt(max(pub.oil_column_hz[d] ** 2 - extra[d], 0.25 * pub.oil_column_hz[d] ** 2)) for d in DOFS}
     dead = _fit_dead_volumes(desc, targets)
     # 2. seal friction per class: the measured Coulomb wrench moves with the seal friction
     # of the class's actuators through sum_i |J_ik| (the DOF sees each seal once per unit
@@ -127,10 +139,19 @@ def calibrate(table: str, *, quick: bool = False, workers: int | None = None, pr
         old = float(desc.raw["actuator_class"][c]["seal_friction_n"])
         seal[c] = max(0.0, old + (target - res0["friction_force"][dof]) / gain)
     new = _with_values(desc, dead, seal)
-    return {"dead_volume_m3": dead, "seal_friction_n": seal, "before": res0, "linear_before": lin_meas,
-            "linear_after": linear_oil_columns(new), "linear_targets": targets, "description": new,
-            "masses": mass_cal, "effective_mass_offset": offset, "rigid_effective_mass_before": rigid0,
-            "rigid_effective_mass_after": rigid1}
+    return {
+        "dead_volume_m3": dead,
+        "seal_friction_n": seal,
+        "before": res0,
+        "linear_before": lin_meas,
+        "linear_after": linear_oil_columns(new),
+        "linear_targets": targets,
+        "description": new,
+        "masses": mass_cal,
+        "effective_mass_offset": offset,
+        "rigid_effective_mass_before": rigid0,
+        "rigid_effective_mass_after": rigid1,
+    }
 
 
 def write_calibration(path: str | Path, cal: dict) -> None:
@@ -148,8 +169,9 @@ def write_calibration(path: str | Path, cal: dict) -> None:
             raise CharacterizeError(f"{path}: cannot find {section}.{key} to rewrite")
         old = doc.old_comment(i)
         old = re.sub(r"^calibrated:\s*(matches\s+)?", "", old)
-        old = re.sub(r"^(Table 1|the friction tests[^;(]*)\s*(\(shaketable characterize --calibrate\))?[;,]?\s*",
-                     "", old).strip()
+        old = re.sub(
+            r"^(Table 1|the friction tests[^;(]*)\s*(\(shaketable characterize --calibrate\))?[;,]?\s*", "", old
+        ).strip()
         old = re.sub(r"^friction ~1\.25 % of capability \(friction tests\)$", "", old).strip()
         doc.set_value(section, key, None, tag + (f"; {old}" if old else ""), value_text=value_text)
 
@@ -172,7 +194,8 @@ OFFSET_COMMENTS = [
     "# What the virtual effective-mass tests (characterize, R1/R2) read below the rigid-body",
     "# effective mass diag(T^T M T): the parallel stiffness (pre-sliding friction, supports) as",
     "# -K/w^2 over the test band. `shaketable calibrate` aims the rigid-body masses at Table 2",
-    "# plus this, so that the virtual tests reproduce Table 2; `characterize --calibrate` measures it."]
+    "# plus this, so that the virtual tests reproduce Table 2; `characterize --calibrate` measures it.",
+]
 
 
 def write_masses(doc, result: dict, note: str, offset: dict | None = None) -> None:
@@ -186,8 +209,9 @@ def write_masses(doc, result: dict, note: str, offset: dict | None = None) -> No
     doc.set_value("platen", "mass_kg", None, c, value_text=f"{vals['platen.mass_kg']:.1f}")
     inertia = [vals[f"platen.inertia_kg_m2[{i}]"] for i in range(3)]
     doc.set_value("platen", "inertia_kg_m2", None, c, value_text="[" + ", ".join(f"{v:.1f}" for v in inertia) + "]")
-    doc.set_value("actuator_class.lateral", "rod_mass_kg", None, c,
-                  value_text=f"{vals['actuator_class.lateral.rod_mass_kg']:.2f}")
+    doc.set_value(
+        "actuator_class.lateral", "rod_mass_kg", None, c, value_text=f"{vals['actuator_class.lateral.rod_mass_kg']:.2f}"
+    )
     doc.set_value("supports", "piston_mass_kg", None, c, value_text=f"{vals['supports.piston_mass_kg']:.2f}")
     if offset is not None:
         vt = "[" + ", ".join(f"{offset[d]:.1f}" for d in DOFS) + "]"

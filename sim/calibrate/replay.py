@@ -52,12 +52,20 @@ class ReplayOutcome:
         return self.result.incomplete_reason is None
 
     def summary(self) -> dict:
-        return {"replay_of": self.source, "record_rate_hz": self.run.sample_rate_hz, "model_tick_hz": self.tick_hz,
-                "complete": self.complete, "incomplete_reason": self.result.incomplete_reason,
-                "realtime_factor": float(self.result.realtime_factor), "valve_null": self.valve_null,
-                "peak_stroke_fraction": self.stroke_fraction, "residual_nrmse": self.residual_nrmse,
-                "not_compared": self.not_compared,
-                "command_hold": self.hold, "notes": self.notes}
+        return {
+            "replay_of": self.source,
+            "record_rate_hz": self.run.sample_rate_hz,
+            "model_tick_hz": self.tick_hz,
+            "complete": self.complete,
+            "incomplete_reason": self.result.incomplete_reason,
+            "realtime_factor": float(self.result.realtime_factor),
+            "valve_null": self.valve_null,
+            "peak_stroke_fraction": self.stroke_fraction,
+            "residual_nrmse": self.residual_nrmse,
+            "not_compared": self.not_compared,
+            "command_hold": self.hold,
+            "notes": self.notes,
+        }
 
 
 def tick_rate(record_hz: float, hold: str = "zoh") -> float:
@@ -92,8 +100,11 @@ def not_compared(src, run) -> dict:
         if a is None:
             continue
         if ch in INPUTS:
-            out[ch] = ("the replay's input" if ch == "valve_command"
-                       else "kept in the replay file; the open-loop replay does not use it")
+            out[ch] = (
+                "the replay's input"
+                if ch == "valve_command"
+                else "kept in the replay file; the open-loop replay does not use it"
+            )
             continue
         if getattr(run, ch) is None:
             out[ch] = "the model does not record it"
@@ -101,8 +112,10 @@ def not_compared(src, run) -> dict:
         names_b = run.column_names(ch)
         miss = [nm for nm in src.column_names(ch) if nm not in names_b]
         if miss:
-            out[ch] = (f"column(s) {', '.join(miss)} are not sensors of the table description "
-                       f"(it has {', '.join(names_b) or 'none'}); declare them as [[accelerometer]] to compare")
+            out[ch] = (
+                f"column(s) {', '.join(miss)} are not sensors of the table description "
+                f"(it has {', '.join(names_b) or 'none'}); declare them as [[accelerometer]] to compare"
+            )
     return out
 
 
@@ -127,8 +140,12 @@ def residuals(src, run) -> dict:
         a = getattr(src, ch)[:n]
         b = b[:n]
         out[ch] = {nm: nrmse(b[:, j], a[:, j]) for j, nm in enumerate(src.column_names(ch))}
-        if ch in ("table_displacement", "actuator_displacement") and n > 30 and np.all(np.isfinite(a)) \
-                and np.all(np.isfinite(b)):
+        if (
+            ch in ("table_displacement", "actuator_displacement")
+            and n > 30
+            and np.all(np.isfinite(a))
+            and np.all(np.isfinite(b))
+        ):
             ab, bb = bandpass(a, fs, DISPLACEMENT_BAND_HZ), bandpass(b, fs, DISPLACEMENT_BAND_HZ)
             out[ch + "_bandpassed"] = {nm: nrmse(bb[:, j], ab[:, j]) for j, nm in enumerate(src.column_names(ch))}
     if src.table_velocity is None and src.table_displacement is not None and run.table_velocity is not None:
@@ -136,13 +153,20 @@ def residuals(src, run) -> dict:
         if b is not None and n > 2:
             va = np.gradient(src.table_displacement[:n], 1.0 / fs, axis=0)
             vb = np.gradient(b[:n], 1.0 / fs, axis=0)
-            out["table_velocity_from_displacement"] = {nm: nrmse(vb[:, j], va[:, j])
-                                                       for j, nm in enumerate(src.dofs)}
+            out["table_velocity_from_displacement"] = {nm: nrmse(vb[:, j], va[:, j]) for j, nm in enumerate(src.dofs)}
     return out
 
 
-def replay(source, *, table: str | None = None, payload: str | None = None, progress: bool = False,
-           bias: str | float | None = None, drift: bool = False, hold: str | None = None) -> ReplayOutcome:
+def replay(
+    source,
+    *,
+    table: str | None = None,
+    payload: str | None = None,
+    progress: bool = False,
+    bias: str | float | None = None,
+    drift: bool = False,
+    hold: str | None = None,
+) -> ReplayOutcome:
     """Replay ``source`` (a run-file path or :class:`~sim.runs.runfile.RunFile`) open loop.
 
     ``table``/``payload``: override the descriptions the run carries
@@ -165,18 +189,20 @@ def replay(source, *, table: str | None = None, payload: str | None = None, prog
         src.validate(require=("valve_command",))
     hold = hold or src.meta.get("command_hold", "zoh")
     if hold not in ("zoh", "linear"):
-        raise RunFileError(f"{name}: command hold must be 'zoh' or 'linear' (got {hold!r}); fix meta.command_hold "
-                           "or --hold")
+        raise RunFileError(
+            f"{name}: command hold must be 'zoh' or 'linear' (got {hold!r}); fix meta.command_hold or --hold"
+        )
     desc = table_of(src, table)  # --table, else the description the run carries, else the stock file
     if list(src.actuators) != list(desc.actuator_names):
-        raise RunFileError(f"{name}: actuators {src.actuators} do not match table '{desc.name}' "
-                           f"({list(desc.actuator_names)}); give --table or rename the actuator columns")
+        raise RunFileError(
+            f"{name}: actuators {src.actuators} do not match table '{desc.name}' "
+            f"({list(desc.actuator_names)}); give --table or rename the actuator columns"
+        )
     from mjcf.description import DOFS6
 
     missing = [d for d in src.dofs if d not in DOFS6]
     if missing:
-        raise RunFileError(f"{name}: DOF column(s) {missing} are not DOF names ({', '.join(DOFS6)}); "
-                           "fix meta.dofs")
+        raise RunFileError(f"{name}: DOF column(s) {missing} are not DOF names ({', '.join(DOFS6)}); fix meta.dofs")
     pl = payload_of(src, payload)
     tm = build_model(desc, pl)
 
@@ -190,9 +216,11 @@ def replay(source, *, table: str | None = None, payload: str | None = None, prog
         est = estimate(src, desc, drift=drift)
         vn = est.as_dict(src.actuators)
         u = u + est.at(np.asarray(src.t, float))
-        notes.append("valve null offset estimated from the recorded motion and added to the command "
-                     f"(mean {100 * float(np.mean(est.offset)):+.3f} % of rated opening"
-                     + (f", drift {100 * float(np.mean(est.drift_per_s)):+.4f} %/s)" if drift else ")"))
+        notes.append(
+            "valve null offset estimated from the recorded motion and added to the command "
+            f"(mean {100 * float(np.mean(est.offset)):+.3f} % of rated opening"
+            + (f", drift {100 * float(np.mean(est.drift_per_s)):+.4f} %/s)" if drift else ")")
+        )
     elif bias != "none":
         try:
             b = float(bias)
@@ -202,15 +230,19 @@ def replay(source, *, table: str | None = None, payload: str | None = None, prog
         u = u + b
     rate = tick_rate(src.sample_rate_hz, hold)
     if rate != src.sample_rate_hz:
-        notes.append(f"record at {src.sample_rate_hz:g} Hz: command "
-                     + ("held (zero-order hold)" if hold == "zoh" else "interpolated")
-                     + f" onto the model's {rate:g} Hz ticks, model sampled at the record's instants")
+        notes.append(
+            f"record at {src.sample_rate_hz:g} Hz: command "
+            + ("held (zero-order hold)" if hold == "zoh" else "interpolated")
+            + f" onto the model's {rate:g} Hz ticks, model sampled at the record's instants"
+        )
     res, chans, extras, n = run_at_record(tm, t_rec, u, src.dofs, hold=hold, progress=progress)
-    tick_run = build_runfile(res, tm, description=f"open-loop replay of {Path(name).name}",
-                             payload_name=pl.name if pl else None)
+    tick_run = build_runfile(
+        res, tm, description=f"open-loop replay of {Path(name).name}", payload_name=pl.name if pl else None
+    )
     meta = dict(tick_run.meta)
-    meta.update({"sample_rate_hz": src.sample_rate_hz, "dofs": list(src.dofs), "replay_of": name,
-                 "model_tick_hz": rate})
+    meta.update(
+        {"sample_rate_hz": src.sample_rate_hz, "dofs": list(src.dofs), "replay_of": name, "model_tick_hz": rate}
+    )
     if vn is not None:
         meta["valve_null"] = vn
     if src.reference is not None:
@@ -221,18 +253,36 @@ def replay(source, *, table: str | None = None, payload: str | None = None, prog
     half = np.array([a.cls.half_stroke_m for a in desc.actuators])
     peak = np.nanmax(np.abs(res.channels["actuator_displacement"]), axis=0) / half
     frac = {a: float(p) for a, p in zip(desc.actuator_names, peak)}
-    cush = np.array([1.0 - float(desc.raw["actuator_class"][a.cls.name].get("cushion_length_m", 0.0))
-                     / a.cls.half_stroke_m for a in desc.actuators])
+    cush = np.array(
+        [
+            1.0 - float(desc.raw["actuator_class"][a.cls.name].get("cushion_length_m", 0.0)) / a.cls.half_stroke_m
+            for a in desc.actuators
+        ]
+    )
     hit = [a for a, p, c in zip(desc.actuator_names, peak, cush) if p >= c]
     if hit:
-        notes.append(f"actuator(s) {', '.join(hit)} reached the end cushions: the replay drifted to the stroke end "
-                     "(a valve null bias not removed, or a flow-gain error); the comparison after that is meaningless")
-    notes.append(f"open loop the displacement is the integral of the flow (a small flow error drifts): "
-                 f"displacements are also compared band-passed {DISPLACEMENT_BAND_HZ[0]:g}-"
-                 f"{min(DISPLACEMENT_BAND_HZ[1], 0.45 * src.sample_rate_hz):g} Hz; velocity and acceleration "
-                 "are the meaningful comparisons")
-    return ReplayOutcome(run=run, result=res, residual_nrmse=residuals(src, run), source=name, valve_null=vn,
-                         tick_hz=rate, notes=notes, stroke_fraction=frac, not_compared=not_compared(src, run), hold=hold)
+        notes.append(
+            f"actuator(s) {', '.join(hit)} reached the end cushions: the replay drifted to the stroke end "
+            "(a valve null bias not removed, or a flow-gain error); the comparison after that is meaningless"
+        )
+    notes.append(
+        f"open loop the displacement is the integral of the flow (a small flow error drifts): "
+        f"displacements are also compared band-passed {DISPLACEMENT_BAND_HZ[0]:g}-"
+        f"{min(DISPLACEMENT_BAND_HZ[1], 0.45 * src.sample_rate_hz):g} Hz; velocity and acceleration "
+        "are the meaningful comparisons"
+    )
+    return ReplayOutcome(
+        run=run,
+        result=res,
+        residual_nrmse=residuals(src, run),
+        source=name,
+        valve_null=vn,
+        tick_hz=rate,
+        notes=notes,
+        stroke_fraction=frac,
+        not_compared=not_compared(src, run),
+        hold=hold,
+    )
 
 
 def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress: bool = False):
@@ -267,9 +317,10 @@ def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress
         if ch in DOF_CHANNELS:
             arr = arr[:, [list(tick_run.dofs).index(d) for d in dofs]]
         chans[ch] = arr[:n].copy() if rate == fs else interpolate(res.t, arr, t_rec[:n])
-    extras = {k: (np.asarray(v, float)[:n].copy() if rate == fs else interpolate(res.t, np.asarray(v, float),
-                                                                                   t_rec[:n]))
-              for k, v in tick_run.extras.items()}
+    extras = {
+        k: (np.asarray(v, float)[:n].copy() if rate == fs else interpolate(res.t, np.asarray(v, float), t_rec[:n]))
+        for k, v in tick_run.extras.items()
+    }
     return res, chans, extras, n
 
 

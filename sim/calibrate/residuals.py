@@ -144,12 +144,16 @@ def choose_path(runs) -> str:
     for r, h, o in zip(runs, have, outputs):
         if not (set(MECH_CHANNELS) <= h or (o and {"valve_command", "reference"} & h)):
             miss = [c for c in MECH_CHANNELS if c not in h]
-            raise CalibrationError(f"{r.name}: lacks {', '.join(miss)} (mechanical path)"
-                                   + ("" if o else " and any output to compare a replay with")
-                                   + "; record table motion with actuator forces, or valve commands or the "
-                                   "reference with the force/acceleration/displacement they produced")
-    raise CalibrationError(f"{runs[0].name}: the runs support different residual paths; calibrate runs that "
-                           "record the same channels together")
+            raise CalibrationError(
+                f"{r.name}: lacks {', '.join(miss)} (mechanical path)"
+                + ("" if o else " and any output to compare a replay with")
+                + "; record table motion with actuator forces, or valve commands or the "
+                "reference with the force/acceleration/displacement they produced"
+            )
+    raise CalibrationError(
+        f"{runs[0].name}: the runs support different residual paths; calibrate runs that "
+        "record the same channels together"
+    )
 
 
 def check_finite(run, channels) -> None:
@@ -160,8 +164,10 @@ def check_finite(run, channels) -> None:
         bad = ~np.isfinite(arr)
         if bad.any():
             k = int(np.argmax(bad.any(axis=1) if arr.ndim > 1 else bad))
-            raise CalibrationError(f"{run.name}: channel {ch} has NaN/inf (first at sample {k}, t = {run.t[k]:.4f} s); "
-                                   "cut the run or fill the gap before calibrating")
+            raise CalibrationError(
+                f"{run.name}: channel {ch} has NaN/inf (first at sample {k}, t = {run.t[k]:.4f} s); "
+                "cut the run or fill the gap before calibrating"
+            )
 
 
 def _still_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.ndarray:
@@ -170,8 +176,8 @@ def _still_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.n
     keep = np.ones(n, bool)
     on = np.flatnonzero(speed > trim * speed.max()) if speed.max() > 0 else np.array([], int)
     if len(on) >= 16:
-        keep[:on[0]] = False
-        keep[on[-1] + 1:] = False
+        keep[: on[0]] = False
+        keep[on[-1] + 1 :] = False
     from sim.calibrate.laws import DEADBAND
 
     still = speed < DEADBAND
@@ -217,13 +223,27 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             from sim.identify.least_squares import analog_lowpass
 
             if accel_lowpass_hz >= 0.5 / r.dt:
-                raise CalibrationError(f"{r.name}: the accelerometer low-pass {accel_lowpass_hz:g} Hz is above the "
-                                       f"Nyquist frequency {0.5 / r.dt:g} Hz; give --accel-lowpass none")
+                raise CalibrationError(
+                    f"{r.name}: the accelerometer low-pass {accel_lowpass_hz:g} Hz is above the "
+                    f"Nyquist frequency {0.5 / r.dt:g} Hz; give --accel-lowpass none"
+                )
             pre = analog_lowpass(accel_lowpass_hz, 1.0 / r.dt)
-        mr = MechRun(name=r.name, dt=r.dt, dofs=list(desc.dofs), u=u, v=v, a=a, force=np.zeros_like(u),
-                     model=np.zeros_like(u), J=J, actuators=list(desc.actuator_names), classes=classes,
-                     rows=np.ones(len(u), bool), prefilter=pre,
-                     presliding_m=desc.friction_presliding_m if desc.friction_model == "presliding" else None)
+        mr = MechRun(
+            name=r.name,
+            dt=r.dt,
+            dofs=list(desc.dofs),
+            u=u,
+            v=v,
+            a=a,
+            force=np.zeros_like(u),
+            model=np.zeros_like(u),
+            J=J,
+            actuators=list(desc.actuator_names),
+            classes=classes,
+            rows=np.ones(len(u), bool),
+            prefilter=pre,
+            presliding_m=desc.friction_presliding_m if desc.friction_model == "presliding" else None,
+        )
         mr.force = mr.filt(f @ J)
         other = joints.force(u, v, r.dt)
         for law, where, vals in declared:
@@ -318,9 +338,19 @@ def joint_terms(tm, k_of) -> JointTerms:
         tK = np.array(m.tendon_stiffness, float).reshape(m.ntendon, -1)[:, 0]
         tD = np.array(m.tendon_damping, float).reshape(m.ntendon, -1)[:, 0]
         tFL = np.array(m.tendon_frictionloss, float)
-    return JointTerms(T=T, K=K, D=np.array(m.dof_damping, float), FL=np.array(m.dof_frictionloss, float),
-                      fr_dofs=fr_dofs, fr_force=fr_force, fr_zss=float(getattr(tm, "friction_presliding_m", 1e-4)),
-                      TT=TT, tK=tK, tD=tD, tFL=tFL)
+    return JointTerms(
+        T=T,
+        K=K,
+        D=np.array(m.dof_damping, float),
+        FL=np.array(m.dof_frictionloss, float),
+        fr_dofs=fr_dofs,
+        fr_force=fr_force,
+        fr_zss=float(getattr(tm, "friction_presliding_m", 1e-4)),
+        TT=TT,
+        tK=tK,
+        tD=tD,
+        tFL=tFL,
+    )
 
 
 def nrmse_runs(mruns, residuals) -> float:
@@ -330,7 +360,7 @@ def nrmse_runs(mruns, residuals) -> float:
     for mr, e in zip(mruns, residuals):
         for j in range(len(mr.dofs)):
             F = mr.demean(mr.force)[mr.rows, j]
-            den = float(np.sum(F ** 2))
+            den = float(np.sum(F**2))
             if den > 0:
                 vals.append(float(np.sum(e[mr.rows, j] ** 2)) / den)
     return float(math.sqrt(np.mean(vals))) if vals else float("nan")
@@ -424,10 +454,23 @@ def path_nrmse(run, res: dict, n: int) -> float:
         m = getattr(run, ch)[:n]
         for j in range(m.shape[1]):
             den = float(np.sum(m[:, j] ** 2))
-            if den > 1e-12 * max(1.0, float(np.sum(m ** 2))):
+            if den > 1e-12 * max(1.0, float(np.sum(m**2))):
                 vals.append(float(np.sum(e[:, j] ** 2)) / den)
     return float(math.sqrt(np.mean(vals))) if vals else float("nan")
 
 
-__all__ = ["CalibrationError", "MechRun", "PATHS", "choose_path", "mechanical_runs", "nrmse_runs", "null_offset",
-           "path_nrmse", "path_residuals", "places", "simulate_path", "spectra", "spectral_flatness"]
+__all__ = [
+    "CalibrationError",
+    "MechRun",
+    "PATHS",
+    "choose_path",
+    "mechanical_runs",
+    "nrmse_runs",
+    "null_offset",
+    "path_nrmse",
+    "path_residuals",
+    "places",
+    "simulate_path",
+    "spectra",
+    "spectral_flatness",
+]

@@ -50,8 +50,20 @@ class CalibrationResult:
     series: dict = field(default_factory=dict, repr=False)
 
     def to_json(self) -> dict:
-        keys = ("table", "runs", "holdout", "holdout_note", "residual_path", "error_before", "error_after",
-                "effects_added", "candidates", "unexplained", "per_channel", "timing")
+        keys = (
+            "table",
+            "runs",
+            "holdout",
+            "holdout_note",
+            "residual_path",
+            "error_before",
+            "error_after",
+            "effects_added",
+            "candidates",
+            "unexplained",
+            "per_channel",
+            "timing",
+        )
         return {k: getattr(self, k) for k in keys}
 
 
@@ -63,12 +75,16 @@ def load_runs(paths, table=None):
     runs = [read_run(p) for p in paths]
     tables = {r.meta["table"] for r in runs}
     if table is None and len(tables) > 1:
-        raise CalibrationError(f"runs come from different tables ({', '.join(sorted(tables))}): "
-                               "calibrate the runs of one table at a time (or give --table)")
+        raise CalibrationError(
+            f"runs come from different tables ({', '.join(sorted(tables))}): "
+            "calibrate the runs of one table at a time (or give --table)"
+        )
     rates = {float(r.sample_rate_hz) for r in runs}
     if len(rates) > 1:
-        raise CalibrationError(f"{runs[-1].name}: sample rates differ between runs ({', '.join(f'{x:g}' for x in sorted(rates))} Hz); "
-                               "resample the runs to one rate")
+        raise CalibrationError(
+            f"{runs[-1].name}: sample rates differ between runs ({', '.join(f'{x:g}' for x in sorted(rates))} Hz); "
+            "resample the runs to one rate"
+        )
     return runs
 
 
@@ -92,12 +108,16 @@ def candidate_laws(effects=None) -> list:
             import difflib
 
             close = difflib.get_close_matches(bad[0], known, n=1)
-            raise CalibrationError(f"--effects: unknown effect '{bad[0]}'" + (f" (did you mean '{close[0]}'?)" if close
-                                   else f"; known: {', '.join(known)}"))
+            raise CalibrationError(
+                f"--effects: unknown effect '{bad[0]}'"
+                + (f" (did you mean '{close[0]}'?)" if close else f"; known: {', '.join(known)}")
+            )
         nolaw = [e for e in effects if e not in LAWS]
         if nolaw:
-            raise CalibrationError(f"--effects: '{nolaw[0]}' has no force law for the mechanical path; "
-                                   f"the mechanical path can try {', '.join(sorted(LAWS))}")
+            raise CalibrationError(
+                f"--effects: '{nolaw[0]}' has no force law for the mechanical path; "
+                f"the mechanical path can try {', '.join(sorted(LAWS))}"
+            )
     return [LAWS[k] for k in sorted(LAWS) if usable(LAWS[k]) and (not effects or k in effects)]
 
 
@@ -107,14 +127,18 @@ def load_effect_file(path) -> None:
 
     p = Path(path)
     if not p.is_file():
-        raise CalibrationError(f"{path}: effect file does not exist; give the path of a .py file that registers effects")
+        raise CalibrationError(
+            f"{path}: effect file does not exist; give the path of a .py file that registers effects"
+        )
     try:
         spec = importlib.util.spec_from_file_location(f"user_effects_{p.stem}", p)
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
     except Exception as e:  # a user's file: any failure is theirs to fix
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise CalibrationError(f"{path}: effect file does not load ({type(e).__name__}: {msg}); fix it or leave it out") from None
+        raise CalibrationError(
+            f"{path}: effect file does not load ({type(e).__name__}: {msg}); fix it or leave it out"
+        ) from None
 
 
 def split_holdout(runs, holdout_runs):
@@ -128,8 +152,11 @@ def split_holdout(runs, holdout_runs):
         return fit, ho, "held out (no --holdout): " + ", ".join(Path(r.name).name for r in ho)
     r = runs[0]
     cut = int(0.7 * r.n_samples)
-    return [_slice_run(r, 0, cut, "fit part")], [_slice_run(r, cut, r.n_samples, "held-out part")], \
-        f"held out (one run, no --holdout): the last 30 % of {Path(r.name).name} (from t = {r.t[cut]:.2f} s)"
+    return (
+        [_slice_run(r, 0, cut, "fit part")],
+        [_slice_run(r, cut, r.n_samples, "held-out part")],
+        f"held out (one run, no --holdout): the last 30 % of {Path(r.name).name} (from t = {r.t[cut]:.2f} s)",
+    )
 
 
 def _slice_run(r, a: int, b: int, label: str):
@@ -209,17 +236,31 @@ def unexplained(mruns, residuals, kind: str = "mechanical") -> dict | None:
         frac = float(P[w].sum() / P[1:].sum())
         if best is None or frac > best["fraction_of_residual"]:
             coh = float(C[k])
-            best = {"peak_hz": float(f[k]), "channel": "actuator_force",
-                    "where": f"dof:{d}" if coh >= 0.5 else "channel:actuator_force",
-                    "fraction_of_residual": frac, "coherence_with_motion": coh}
+            best = {
+                "peak_hz": float(f[k]),
+                "channel": "actuator_force",
+                "where": f"dof:{d}" if coh >= 0.5 else "channel:actuator_force",
+                "fraction_of_residual": frac,
+                "coherence_with_motion": coh,
+            }
     if best is None or best["fraction_of_residual"] < UNEXPLAINED_FRACTION:
         return None
     return best
 
 
 # ------------------------------------------------------------------ the search
-def calibrate(run_paths, *, table=None, payload=None, holdout=None, effects=None, effect_file=None,
-              accel_lowpass_hz="table", margin: float = HOLDOUT_MARGIN, log=None) -> CalibrationResult:
+def calibrate(
+    run_paths,
+    *,
+    table=None,
+    payload=None,
+    holdout=None,
+    effects=None,
+    effect_file=None,
+    accel_lowpass_hz="table",
+    margin: float = HOLDOUT_MARGIN,
+    log=None,
+) -> CalibrationResult:
     """Calibrate ``table`` (default: the runs' table) against the runs; see the module docstring."""
     import mjcf
     from sim.calibrate.residuals import choose_path, mechanical_runs, nrmse_runs, places
@@ -234,19 +275,23 @@ def calibrate(run_paths, *, table=None, payload=None, holdout=None, effects=None
         load_effect_file(effect_file)
     laws = candidate_laws(effects)
     all_runs = load_runs(list(run_paths) + list(holdout or []), table)
-    runs, ho_given = all_runs[:len(run_paths)], all_runs[len(run_paths):]
+    runs, ho_given = all_runs[: len(run_paths)], all_runs[len(run_paths) :]
     desc = mjcf.load_table(table or runs[0].meta["table"])
     for r in all_runs:
         if list(r.actuators) != list(desc.actuator_names):
-            raise CalibrationError(f"{r.name}: actuators {r.actuators} do not match table '{desc.name}' "
-                                   f"({list(desc.actuator_names)}); give --table")
+            raise CalibrationError(
+                f"{r.name}: actuators {r.actuators} do not match table '{desc.name}' "
+                f"({list(desc.actuator_names)}); give --table"
+            )
     pay = payload if payload is not None else runs[0].meta.get("payload")
     pl = mjcf.load_payload(pay) if pay else None
     path = choose_path(all_runs)
     if path != "mechanical":
-        raise CalibrationError(f"{runs[0].name}: the runs support only the {path} path; this version calibrates "
-                               "from table motion and actuator forces (record actuator_force and table "
-                               "displacement/velocity/acceleration), the replay search is `shaketable fit`")
+        raise CalibrationError(
+            f"{runs[0].name}: the runs support only the {path} path; this version calibrates "
+            "from table motion and actuator forces (record actuator_force and table "
+            "displacement/velocity/acceleration), the replay search is `shaketable fit`"
+        )
     lp = desc.accelerometer_bandwidth_hz if accel_lowpass_hz == "table" else accel_lowpass_hz
     if lp and lp >= 0.5 * runs[0].sample_rate_hz:
         lp = None  # the conditioner is above the recorder's Nyquist: it does not delay the record
@@ -281,11 +326,25 @@ def calibrate(run_paths, *, table=None, payload=None, holdout=None, effects=None
             term = next(t for t in new.terms if t.key == (law.type, w))
             ok, why, unc = accept(cur, new, e_ho, e_new, flat, f_new, term, margin)
             i = [t.key for t in new.terms].index(term.key)
-            tried.append({"round": rnd, "name": law.type, "where": w, "explained_fraction": expl,
-                          "parameters": new.values[i], "uncertainty": unc, "holdout_error": e_new,
-                          "bic_change": new.bic - cur.bic, "flatness": f_new, "accepted": ok, "reason": why})
-            say(f"  {law.type:18s} {w:14s} explains {100 * expl:6.2f} %  held-out {e_new:.4f}"
-                + ("  ACCEPTED" if ok else f"  ({why})"))
+            tried.append(
+                {
+                    "round": rnd,
+                    "name": law.type,
+                    "where": w,
+                    "explained_fraction": expl,
+                    "parameters": new.values[i],
+                    "uncertainty": unc,
+                    "holdout_error": e_new,
+                    "bic_change": new.bic - cur.bic,
+                    "flatness": f_new,
+                    "accepted": ok,
+                    "reason": why,
+                }
+            )
+            say(
+                f"  {law.type:18s} {w:14s} explains {100 * expl:6.2f} %  held-out {e_new:.4f}"
+                + ("  ACCEPTED" if ok else f"  ({why})")
+            )
             if ok:
                 accepted = (new, e_new, f_new)
                 break
@@ -295,8 +354,15 @@ def calibrate(run_paths, *, table=None, payload=None, holdout=None, effects=None
         e_ho, flat = nrmse_runs(mho, predict(mho, cur)), flatness(mfit, cur.residuals)
     for i, t in enumerate(cur.terms):
         _, _, unc = param_report(t, cur.values[i], cur.sigma[i])
-        added.append({"name": t.law.type, "where": t.where, "parameters": cur.values[i],
-                      "uncertainty": unc, "units": {k: u for k, (u, *_r) in t.law.params.items()}})
+        added.append(
+            {
+                "name": t.law.type,
+                "where": t.where,
+                "parameters": cur.values[i],
+                "uncertainty": unc,
+                "units": {k: u for k, (u, *_r) in t.law.params.items()},
+            }
+        )
     ho_res = predict(mho, cur)
     ho_res0 = [mr.residual for mr in mho]
     per = {}
@@ -305,14 +371,34 @@ def calibrate(run_paths, *, table=None, payload=None, holdout=None, effects=None
             per[f"{Path(mr.name).name}:{d}"] = {"before": _nrmse_col(mr, e0, j), "after": _nrmse_col(mr, e1, j)}
     t3 = time.perf_counter()
     res = CalibrationResult(
-        table=desc.name, table_source=str(desc.source), runs=[str(r.name) for r in runs],
-        holdout=[str(r.name) for r in ho_runs], holdout_note=ho_note,
-        residual_path=path, error_before=e_ho0, error_after=nrmse_runs(mho, ho_res), effects_added=added,
-        candidates=tried, unexplained=unexplained(mfit, cur.residuals), per_channel=per,
-        timing={"read_s": t1 - t0, "residuals_s": t2 - t1, "search_s": t3 - t2, "total_s": t3 - t0,
-                "least_squares_fits": n_fits},
-        series={"fit": mfit, "holdout": mho, "before": ho_res0, "after": ho_res,
-                "fit_before": [mr.residual for mr in mfit], "fit_after": cur.residuals})
+        table=desc.name,
+        table_source=str(desc.source),
+        runs=[str(r.name) for r in runs],
+        holdout=[str(r.name) for r in ho_runs],
+        holdout_note=ho_note,
+        residual_path=path,
+        error_before=e_ho0,
+        error_after=nrmse_runs(mho, ho_res),
+        effects_added=added,
+        candidates=tried,
+        unexplained=unexplained(mfit, cur.residuals),
+        per_channel=per,
+        timing={
+            "read_s": t1 - t0,
+            "residuals_s": t2 - t1,
+            "search_s": t3 - t2,
+            "total_s": t3 - t0,
+            "least_squares_fits": n_fits,
+        },
+        series={
+            "fit": mfit,
+            "holdout": mho,
+            "before": ho_res0,
+            "after": ho_res,
+            "fit_before": [mr.residual for mr in mfit],
+            "fit_after": cur.residuals,
+        },
+    )
     return res
 
 
@@ -332,7 +418,7 @@ def distinct_places(mr, wheres) -> list:
 
 def _nrmse_col(mr, e, j) -> float:
     F = mr.demean(mr.force)[mr.rows, j]
-    den = float(np.sum(F ** 2))
+    den = float(np.sum(F**2))
     return float(math.sqrt(np.sum(e[mr.rows, j] ** 2) / den)) if den > 0 else float("nan")
 
 
@@ -358,5 +444,15 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
     return js
 
 
-__all__ = ["CalibrationResult", "HOLDOUT_MARGIN", "accept", "calibrate", "candidate_laws", "load_effect_file",
-           "load_runs", "split_holdout", "unexplained", "write_outputs"]
+__all__ = [
+    "CalibrationResult",
+    "HOLDOUT_MARGIN",
+    "accept",
+    "calibrate",
+    "candidate_laws",
+    "load_effect_file",
+    "load_runs",
+    "split_holdout",
+    "unexplained",
+    "write_outputs",
+]

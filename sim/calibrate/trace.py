@@ -52,7 +52,7 @@ class Fit:
 
 def _weights(mr) -> np.ndarray:
     F = mr.demean(mr.force)[mr.rows]
-    den = np.sqrt(np.sum(F ** 2, axis=0))
+    den = np.sqrt(np.sum(F**2, axis=0))
     return np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
 
 
@@ -94,7 +94,7 @@ def _solve(y, X):
 
 def _shape_jacobian(mruns, term, coef, h=1e-3):
     """Column d(model)/d(shape parameter) (stacked, weighted), central differences."""
-    (name, val), = term.shape.items()
+    ((name, val),) = term.shape.items()
     up = Term(term.law, term.where, {name: val + h})
     dn = Term(term.law, term.where, {name: val - h})
     _, Xu = _stack(mruns, [up])
@@ -106,8 +106,9 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
     """Fit ``terms`` jointly on ``mruns`` (shape parameters chosen in turn on their grid,
     then refined: ``refine`` "all" terms, the "last" one only (a candidate added to an
     accepted set), or "none"); returns the :class:`Fit`."""
-    terms = [Term(t.law, t.where, {**{k: float(np.median(g)) for k, g in t.law.shape.items()}, **t.shape})
-             for t in terms]
+    terms = [
+        Term(t.law, t.where, {**{k: float(np.median(g)) for k, g in t.law.shape.items()}, **t.shape}) for t in terms
+    ]
     todo = {"all": range(len(terms)), "last": range(len(terms) - 1, len(terms)), "none": ()}[refine]
     for i, t in enumerate(terms):
         if i not in todo:
@@ -157,17 +158,26 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
             js += 1
         values.append(v)
         sigma.append(s)
-    residuals = [mr.residual - sum((th * mr.demean(mr.column(t.law, t.where, t.shape))
-                                    for th, t in zip(theta, terms)), np.zeros_like(mr.force))
-                 for mr in mruns]
+    residuals = [
+        mr.residual
+        - sum(
+            (th * mr.demean(mr.column(t.law, t.where, t.shape)) for th, t in zip(theta, terms)), np.zeros_like(mr.force)
+        )
+        for mr in mruns
+    ]
     return Fit(terms=terms, theta=theta, values=values, sigma=sigma, rss=rss, n=n, p=p, residuals=residuals)
 
 
 def predict(mruns, fit: Fit) -> list:
     """Residuals of other runs (held out) with the fitted terms' values."""
-    return [mr.residual - sum((th * mr.demean(mr.column(t.law, t.where, t.shape))
-                               for th, t in zip(fit.theta, fit.terms)), np.zeros_like(mr.force))
-            for mr in mruns]
+    return [
+        mr.residual
+        - sum(
+            (th * mr.demean(mr.column(t.law, t.where, t.shape)) for th, t in zip(fit.theta, fit.terms)),
+            np.zeros_like(mr.force),
+        )
+        for mr in mruns
+    ]
 
 
 def flatness(mruns, residuals) -> float:

@@ -37,11 +37,13 @@ class ValveNull:
         return self.offset[None, :] + np.outer(np.asarray(t) - self.t_mid, self.drift_per_s)
 
     def as_dict(self, actuators) -> dict:
-        return {"offset": {a: float(v) for a, v in zip(actuators, self.offset)},
-                "drift_per_s": {a: float(v) for a, v in zip(actuators, self.drift_per_s)},
-                "velocity_gain_m_s": {a: (float(v) if np.isfinite(v) else None) for a, v in zip(actuators, self.gain)},
-                "velocity_from": self.velocity_from,
-                "method": "least squares of stroke velocity on valve command: v = K (u + offset + drift (t - t_mid))"}
+        return {
+            "offset": {a: float(v) for a, v in zip(actuators, self.offset)},
+            "drift_per_s": {a: float(v) for a, v in zip(actuators, self.drift_per_s)},
+            "velocity_gain_m_s": {a: (float(v) if np.isfinite(v) else None) for a, v in zip(actuators, self.gain)},
+            "velocity_from": self.velocity_from,
+            "method": "least squares of stroke velocity on valve command: v = K (u + offset + drift (t - t_mid))",
+        }
 
 
 def stroke_velocity(run, desc) -> tuple[np.ndarray, str]:
@@ -58,15 +60,21 @@ def stroke_velocity(run, desc) -> tuple[np.ndarray, str]:
     elif run.table_displacement is not None and np.all(np.isfinite(run.table_displacement)):
         q, what = np.gradient(run.table_displacement, 1.0 / fs, axis=0), "table_displacement (differentiated)"
     else:
-        raise RunFileError(f"run file {run.name} has no complete actuator_displacement, table_velocity or "
-                           "table_displacement; the valve null bias needs the recorded motion: import one of them "
-                           "(or replay with --no-bias)")
+        raise RunFileError(
+            f"run file {run.name} has no complete actuator_displacement, table_velocity or "
+            "table_displacement; the valve null bias needs the recorded motion: import one of them "
+            "(or replay with --no-bias)"
+        )
     q6 = np.zeros((len(q), 6))
     for j, d in enumerate(run.dofs):
         q6[:, DOFS6.index(d)] = q[:, j]
     eps = 1e-6
-    J = np.stack([actuator_strokes(desc, eps * np.eye(6)[k]) - actuator_strokes(desc, np.zeros(6))
-                  for k in range(6)], axis=1) / eps  # (n_act, 6)
+    J = (
+        np.stack(
+            [actuator_strokes(desc, eps * np.eye(6)[k]) - actuator_strokes(desc, np.zeros(6)) for k in range(6)], axis=1
+        )
+        / eps
+    )  # (n_act, 6)
     return q6 @ J.T, what + " through the kinematic Jacobian"
 
 
@@ -90,8 +98,10 @@ def estimate(run, desc, *, drift: bool = True) -> ValveNull:
         coef, *_ = np.linalg.lstsq(A, v[:, i], rcond=None)
         K = coef[0]
         if not np.isfinite(K) or abs(K) < 1e-12:
-            raise RunFileError(f"run file {run.name}: actuator {run.actuators[i]}'s motion does not follow its "
-                               "valve command (no flow gain); check the valve_command column and its sign in the map")
+            raise RunFileError(
+                f"run file {run.name}: actuator {run.actuators[i]}'s motion does not follow its "
+                "valve command (no flow gain); check the valve_command column and its sign in the map"
+            )
         gain[i] = K
         off[i] = coef[1] / K
         dr[i] = coef[2] / K if drift else 0.0

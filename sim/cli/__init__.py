@@ -25,9 +25,16 @@ def cmd_model(args) -> int:
     m = tm.model
     eff = tm.effective_mass()
     acts = [
-        {"name": a.name, "class": a.cls.name, "base": a.base_m.tolist(), "platen": a.platen_m.tolist(),
-         "stroke": a.cls.half_stroke_m, "length_m": a.length0_m,
-         "area_a_m2": a.cls.area_a_m2, "area_b_m2": a.cls.area_b_m2}
+        {
+            "name": a.name,
+            "class": a.cls.name,
+            "base": a.base_m.tolist(),
+            "platen": a.platen_m.tolist(),
+            "stroke": a.cls.half_stroke_m,
+            "length_m": a.length0_m,
+            "area_a_m2": a.cls.area_a_m2,
+            "area_b_m2": a.cls.area_b_m2,
+        }
         for a in desc.actuators
     ]
     sup = []
@@ -50,8 +57,10 @@ def cmd_model(args) -> int:
         "effective_mass": eff,
         "actuators": acts,
         "supports": sup,
-        "accelerometers": [{"name": a.name, "position": a.position_m.tolist(), "direction": a.direction.tolist()}
-                           for a in desc.accelerometers],
+        "accelerometers": [
+            {"name": a.name, "position": a.position_m.tolist(), "direction": a.direction.tolist()}
+            for a in desc.accelerometers
+        ],
     }
     if args.xml:
         t, s = mjcf.write_xml(tm, args.xml)
@@ -60,8 +69,10 @@ def cmd_model(args) -> int:
         print(json_text(out, indent=2))
         return 0
     print(f"{desc.title}  [{desc.name}]" + (f" + payload {payload.name} ({tm.info.payload_kind})" if payload else ""))
-    print(f"  bodies {out['n_bodies']}, joints {out['n_joints']} (nq {m.nq}, nv {m.nv}), "
-          f"loop equalities {m.neq}, step {m.opt.timestep * 1e3:.2f} ms")
+    print(
+        f"  bodies {out['n_bodies']}, joints {out['n_joints']} (nq {m.nq}, nv {m.nv}), "
+        f"loop equalities {m.neq}, step {m.opt.timestep * 1e3:.2f} ms"
+    )
     print(f"  moving mass {out['total_mass_kg'] / 1000:.2f} t (payload {out['payload_mass_kg'] / 1000:.2f} t)")
     print("  effective mass at the reference point:")
     for k, v in eff.items():
@@ -71,11 +82,15 @@ def cmd_model(args) -> int:
     for a in acts:
         b = ", ".join(f"{v:+.2f}" for v in a["base"])
         p = ", ".join(f"{v:+.2f}" for v in a["platen"])
-        print(f"    {a['name']:3s} {a['class']:12s} ({b}) -> ({p})  L {a['length_m']:.2f}  +/-{a['stroke'] * 1000:.0f} mm")
+        print(
+            f"    {a['name']:3s} {a['class']:12s} ({b}) -> ({p})  L {a['length_m']:.2f}  +/-{a['stroke'] * 1000:.0f} mm"
+        )
     if sup:
         print("  static supports (preload holding the home pose):")
         for s_ in sup:
-            print(f"    {s_['name']}  at ({s_['position'][0]:+.2f}, {s_['position'][1]:+.2f})  {s_['preload_n'] / 1e3:8.1f} kN")
+            print(
+                f"    {s_['name']}  at ({s_['position'][0]:+.2f}, {s_['position'][1]:+.2f})  {s_['preload_n'] / 1e3:8.1f} kN"
+            )
     if args.xml:
         print(f"  wrote {out['xml']['scene']} (includes {out['xml']['table']})")
     return 0
@@ -83,8 +98,9 @@ def cmd_model(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="shaketable", description="Digital twin of servo-hydraulic shaking tables")
-    p.add_argument("--debug", action="store_true",
-                   help="show the full traceback of an error instead of its one-line message")
+    p.add_argument(
+        "--debug", action="store_true", help="show the full traceback of an error instead of its one-line message"
+    )
     sub = p.add_subparsers(dest="command", required=True)
 
     m = sub.add_parser("model", help="build a table (+ payload) and show its model")

@@ -69,43 +69,64 @@ def cmd_calibrate(args) -> int:
         raise UserError("calibrate RUN...: give --out DIR for calibration.json, report.md and the calibrated table")
     effects = [x.strip() for x in args.effects.split(",") if x.strip()] if args.effects else None
     log = None if args.json else (lambda m: print(m, flush=True))
-    res = calibrate(args.inputs, table=args.table, payload=args.payload, holdout=args.holdout or None,
-                    effects=effects, effect_file=args.effect_file, accel_lowpass_hz=_lowpass(args.accel_lowpass),
-                    log=log)
+    res = calibrate(
+        args.inputs,
+        table=args.table,
+        payload=args.payload,
+        holdout=args.holdout or None,
+        effects=effects,
+        effect_file=args.effect_file,
+        accel_lowpass_hz=_lowpass(args.accel_lowpass),
+        log=log,
+    )
     out = out_dir(args.out)
     js = write_outputs(res, out, args.inputs)
     write_report(res, out, Path(js["calibrated_table_file"]).name)
     if args.json:
-
         print(json_text(js, indent=2))
         return 0
     print(f"held-out NRMSE {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} % ({res.holdout_note})")
     for e in res.effects_added:
-        vals = ", ".join(f"{k} = {v:.6g} +/- {e['uncertainty'][k]:.2g} {e['units'][k]}" for k, v in e["parameters"].items())
+        vals = ", ".join(
+            f"{k} = {v:.6g} +/- {e['uncertainty'][k]:.2g} {e['units'][k]}" for k, v in e["parameters"].items()
+        )
         print(f"  added {e['name']} at {e['where']}: {vals}")
     if res.unexplained:
         u = res.unexplained
-        print(f"  unexplained: {u['peak_hz']:.2f} Hz in {u['channel']} ({u['where']}), "
-              f"{100 * u['fraction_of_residual']:.1f} % of the residual")
+        print(
+            f"  unexplained: {u['peak_hz']:.2f} Hz in {u['channel']} ({u['where']}), "
+            f"{100 * u['fraction_of_residual']:.1f} % of the residual"
+        )
     print(f"  wrote {out / 'calibration.json'}, {out / 'report.md'}, {js['calibrated_table_file']}")
     return 0
 
 
 def add_parsers(sub) -> None:
-    c = sub.add_parser("calibrate", help="find what the model lacks in measured runs, add it, prove it on held-out "
-                                         "runs (or, given a table: calibrate its unpublished masses)")
+    c = sub.add_parser(
+        "calibrate",
+        help="find what the model lacks in measured runs, add it, prove it on held-out "
+        "runs (or, given a table: calibrate its unpublished masses)",
+    )
     c.add_argument("inputs", nargs="+", metavar="RUN", help="run files (.run.npz); or one table name for --masses")
     c.add_argument("--table", help="the table description to calibrate (default: the runs' table)")
     c.add_argument("--payload", help="payload on the table (default: the runs' payload)")
-    c.add_argument("--holdout", nargs="+", metavar="RUN", help="runs held out to prove the effects "
-                   "(default: every third run)")
+    c.add_argument(
+        "--holdout", nargs="+", metavar="RUN", help="runs held out to prove the effects (default: every third run)"
+    )
     c.add_argument("--out", help="output folder: calibration.json, report.md, <table>_calibrated.toml")
     c.add_argument("--effects", help="comma-separated effect types to try (default: every one with a force law)")
     c.add_argument("--effect-file", help="a Python file that registers the user's own effects")
-    c.add_argument("--accel-lowpass", help="the accelerometer conditioner's low-pass in Hz, 'table' (the "
-                   "description's [sensors] accelerometer_bandwidth_hz, default) or 'none'")
-    c.add_argument("--masses", action="store_true", help="calibrate the table's unpublished masses against its "
-                   "published effective masses (the first argument is a table)")
+    c.add_argument(
+        "--accel-lowpass",
+        help="the accelerometer conditioner's low-pass in Hz, 'table' (the "
+        "description's [sensors] accelerometer_bandwidth_hz, default) or 'none'",
+    )
+    c.add_argument(
+        "--masses",
+        action="store_true",
+        help="calibrate the table's unpublished masses against its "
+        "published effective masses (the first argument is a table)",
+    )
     c.add_argument("--write", action="store_true", help="--masses: rewrite the calibrated values in the table file")
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=cmd_calibrate)

@@ -27,8 +27,22 @@ def cmd_effects(args) -> int:
     desc = mjcf.load_table(args.table)
     ps = table_parameters(desc)
     if args.json:
-        print(json_text([{"name": p.name, "value": p.value, "unit": p.unit, "lower": p.lower, "upper": p.upper,
-                          "where": p.where} for p in ps], indent=1))
+        print(
+            json_text(
+                [
+                    {
+                        "name": p.name,
+                        "value": p.value,
+                        "unit": p.unit,
+                        "lower": p.lower,
+                        "upper": p.upper,
+                        "where": p.where,
+                    }
+                    for p in ps
+                ],
+                indent=1,
+            )
+        )
         return 0
     print(f"{desc.title}: {len(ps)} parameters (name = value unit [bounds] where)")
     for p in ps:

@@ -42,14 +42,18 @@ def verdict_lines(fe: dict, top: int = 6) -> list[str]:
     lines.append(head)
     from sim.assess.feasibility import is_tracking
 
-    ranked = sorted((c for c in fe["checks"] if c["utilisation"] == c["utilisation"] and not is_tracking(c)),
-                    key=lambda c: -c["utilisation"])[:top]
+    ranked = sorted(
+        (c for c in fe["checks"] if c["utilisation"] == c["utilisation"] and not is_tracking(c)),
+        key=lambda c: -c["utilisation"],
+    )[:top]
     ranked += [c for c in fe["checks"] if is_tracking(c)]
     for c in ranked:
         margin = 100 * (1 - c["utilisation"])
-        lines.append(f"  {c['name']:28s} {_fmt(c['demand'], c['unit']):>12s} of {_fmt(c['capacity'], c['unit']):>12s}"
-                     f"  {100 * c['utilisation']:6.0f} %  margin {margin:+.0f} %"
-                     + ("" if c["pass"] else "  (tracking)" if is_tracking(c) else "  FAIL"))
+        lines.append(
+            f"  {c['name']:28s} {_fmt(c['demand'], c['unit']):>12s} of {_fmt(c['capacity'], c['unit']):>12s}"
+            f"  {100 * c['utilisation']:6.0f} %  margin {margin:+.0f} %"
+            + ("" if c["pass"] else "  (tracking)" if is_tracking(c) else "  FAIL")
+        )
     for w in fe.get("warnings", []):
         lines.append(f"warning: {w}")
     return lines
@@ -82,8 +86,14 @@ def _payload(args, desc_size):
     if fp is not None and len(fp) != 2:
         raise UserError(f"--payload-footprint must be LxW in m (got {args.payload_footprint!r})")
     modes = _floats(args.payload_modes, "--payload-modes") if args.payload_modes else None
-    return specimen_from_numbers(mass_kg=args.payload_mass, cg_height_m=args.payload_cg_height, footprint_m=fp,
-                                 modes_hz=modes, direction=args.payload_direction, platen_size_m=desc_size)
+    return specimen_from_numbers(
+        mass_kg=args.payload_mass,
+        cg_height_m=args.payload_cg_height,
+        footprint_m=fp,
+        modes_hz=modes,
+        direction=args.payload_direction,
+        platen_size_m=desc_size,
+    )
 
 
 def cmd_feasibility(args) -> int:
@@ -114,8 +124,16 @@ def cmd_feasibility(args) -> int:
     out = out_dir(args.out)  # checked before the work starts
     if args.suite:
         return _suite(args, table, payload, window, out, say)
-    case = study.Case(table=table, motion=args.motion, payload=payload, scale=args.scale, window_s=window,
-                      iterations=args.iterations, scenario=sc, name=sc.name if sc else "feasibility")
+    case = study.Case(
+        table=table,
+        motion=args.motion,
+        payload=payload,
+        scale=args.scale,
+        window_s=window,
+        iterations=args.iterations,
+        scenario=sc,
+        name=sc.name if sc else "feasibility",
+    )
     if sc is not None and payload is None and sc.payload:
         case.payload = mjcf.load_payload(sc.payload)
     res = study.max_scale(case, progress=say) if args.max_scale else study.assess(case, progress=say)
@@ -134,9 +152,11 @@ def cmd_feasibility(args) -> int:
                 print(f"largest scale: none (limited by {res['max_scale_limiting']}, whatever the amplitude)")
             else:
                 up = res.get("max_scale_upper")
-                print(f"largest scale: {res['max_scale']:.3f}" + (f" (fails at {up:.3f} on {res['limiting_above']})"
-                                                                   if up else " (no failure found above it)")
-                      + f"; {res['max_scale_runs']} simulations")
+                print(
+                    f"largest scale: {res['max_scale']:.3f}"
+                    + (f" (fails at {up:.3f} on {res['limiting_above']})" if up else " (no failure found above it)")
+                    + f"; {res['max_scale_runs']} simulations"
+                )
         print(f"wrote {out / 'feasibility.json'} and {out / 'report.md'}")
     return 0 if res["feasible"] else 1
 
@@ -164,9 +184,11 @@ def _suite(args, table, payload, window, out, say) -> int:
         print(json_text(rows, indent=2))
     else:
         for r in rows:
-            print(f"{r['record']:30s} x{r['scale']:<6g} {r['payload']:24s} "
-                  f"{'feasible' if r['feasible'] else 'NOT feasible'}  limiting {r['limiting']} "
-                  f"({100 * r['limiting_utilisation']:.0f} %)")
+            print(
+                f"{r['record']:30s} x{r['scale']:<6g} {r['payload']:24s} "
+                f"{'feasible' if r['feasible'] else 'NOT feasible'}  limiting {r['limiting']} "
+                f"({100 * r['limiting_utilisation']:.0f} %)"
+            )
         print(f"wrote {out / 'suite.csv'}")
     return 0 if all(r["feasible"] for r in rows) else 1
 
@@ -184,8 +206,13 @@ def add_parsers(sub) -> None:
     p.add_argument("--motion", help="elcentro1940, an .AT2 file (x) or a folder of .AT2 components (x, y, z)")
     p.add_argument("--scale", type=float, default=1.0, help="amplitude scale (default 1.0)")
     p.add_argument("--max-scale", action="store_true", help="find the largest scale at which every check passes")
-    p.add_argument("--window", type=float, default=None, metavar="S",
-                   help=f"simulate the strongest S seconds of a record (default {DEFAULT_WINDOW_S:g}; 0: all of it)")
+    p.add_argument(
+        "--window",
+        type=float,
+        default=None,
+        metavar="S",
+        help=f"simulate the strongest S seconds of a record (default {DEFAULT_WINDOW_S:g}; 0: all of it)",
+    )
     p.add_argument("--iterations", type=int, default=None, help="drive iterations (default: the scenario's, or 0)")
     p.add_argument("--suite", metavar="DIR", help="every record folder in DIR x --scales x --payloads -> suite.csv")
     p.add_argument("--scales", help="suite: comma-separated scales (default --scale)")

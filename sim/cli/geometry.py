@@ -18,8 +18,12 @@ def cmd_geometry(args) -> int:
     if args.out:
         out_dir(args.out)  # checked before the work starts
     if not args.json:
-        print(f"geometric nonlinearity of {desc.name}: envelope, offset maps"
-              + ("" if args.static else ", closed-loop crosstalk (simulations)"), file=sys.stderr, flush=True)
+        print(
+            f"geometric nonlinearity of {desc.name}: envelope, offset maps"
+            + ("" if args.static else ", closed-loop crosstalk (simulations)"),
+            file=sys.stderr,
+            flush=True,
+        )
     r = geometry.geometry(desc, payload, quick=args.quick, crosstalk_motions=() if args.static else None)
     if args.out:
         from sim.report.geometry import write_geometry

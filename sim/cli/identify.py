@@ -14,19 +14,38 @@ from sim.runs.files import json_text
 def add_parsers(sub) -> None:
     p = sub.add_parser("identify", help="identify a uni-axial table's mechanical model from run files")
     p.add_argument("runs", nargs="+", metavar="RUN", help="run files (.run.npz), pooled")
-    p.add_argument("--model", required=True, choices=["ucsd-ls"],
-                   help="ucsd-ls: M u'' + K u + C |u'|^alpha sign u' + F sign u' = F_act by least squares (the LHPOST paper)")
+    p.add_argument(
+        "--model",
+        required=True,
+        choices=["ucsd-ls"],
+        help="ucsd-ls: M u'' + K u + C |u'|^alpha sign u' + F sign u' = F_act by least squares (the LHPOST paper)",
+    )
     p.add_argument("--alpha", type=float, default=0.5, help="power-law exponent (default 0.5, as the LHPOST paper)")
     p.add_argument("--scan-alpha", action="store_true", help="also print the error for alpha = 0.1 ... 1.0")
     p.add_argument("--ce", type=float, metavar="N(s/m)^a", help="constrain C_e to this value (the LHPOST paper: 45900)")
-    p.add_argument("--weights", default="force", choices=["force", "unit", "velocity", "velocity_sqrt"],
-                   help="per-test weights (default force: 1/int F^2 dt, every test counts alike)")
-    p.add_argument("--accel-lowpass", "--force-lowpass", dest="accel_lowpass", type=float, metavar="HZ",
-                   help="the accelerometers' analog low-pass (4-pole Butterworth, e.g. 100 for the LHPOST): "
-                        "the force and the other regressors are passed through the same filter")
-    p.add_argument("--deadband", type=float, default=0.0, metavar="M/S",
-                   help="leave out samples with |velocity| below this (stick at reversals, sign of the "
-                        "velocity noise); e.g. 0.001 for the LHPOST (4 x its velocity noise). Default 0")
+    p.add_argument(
+        "--weights",
+        default="force",
+        choices=["force", "unit", "velocity", "velocity_sqrt"],
+        help="per-test weights (default force: 1/int F^2 dt, every test counts alike)",
+    )
+    p.add_argument(
+        "--accel-lowpass",
+        "--force-lowpass",
+        dest="accel_lowpass",
+        type=float,
+        metavar="HZ",
+        help="the accelerometers' analog low-pass (4-pole Butterworth, e.g. 100 for the LHPOST): "
+        "the force and the other regressors are passed through the same filter",
+    )
+    p.add_argument(
+        "--deadband",
+        type=float,
+        default=0.0,
+        metavar="M/S",
+        help="leave out samples with |velocity| below this (stick at reversals, sign of the "
+        "velocity noise); e.g. 0.001 for the LHPOST (4 x its velocity noise). Default 0",
+    )
     p.add_argument("--no-trim", action="store_true", help="keep the rest before and after the motion")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_identify)
@@ -34,6 +53,7 @@ def add_parsers(sub) -> None:
 
 def cmd_identify(args) -> int:
     from sim.identify import least_squares as I
+
     if not (0.0 < args.alpha <= 2.0):
         raise UserError(f"--alpha must be in (0, 2] (got {args.alpha:g})")
     if args.deadband < 0:
@@ -43,13 +63,17 @@ def cmd_identify(args) -> int:
         if not Path(path).is_file():
             raise UserError(f"{path}: no such run file")
         r = I.record_from_run(path)
-        recs.append(I.prepare(r, trim=None if args.no_trim else 0.01, accel_lowpass_hz=args.accel_lowpass,
-                              deadband_m_s=args.deadband))
+        recs.append(
+            I.prepare(
+                r, trim=None if args.no_trim else 0.01, accel_lowpass_hz=args.accel_lowpass, deadband_m_s=args.deadband
+            )
+        )
     try:
         res = I.identify(recs, args.alpha, weights=args.weights, ce_fixed=args.ce)
     except Exception as e:  # singular normal equations: no motion, or a constant velocity sign
-        raise UserError(f"the least squares has no unique solution for these runs ({e}); give tests with "
-                        "motion in both directions") from None
+        raise UserError(
+            f"the least squares has no unique solution for these runs ({e}); give tests with motion in both directions"
+        ) from None
     scan = I.scan_alpha(recs, weights=args.weights, ce_fixed=args.ce) if args.scan_alpha else []
     for w in res.warnings():
         print(f"warning: {w}", file=sys.stderr)
@@ -59,8 +83,10 @@ def cmd_identify(args) -> int:
             out["alpha_scan"] = [{"alpha": s.alpha, "error": s.error} for s in scan]
         print(json_text(out, indent=1))
         return 0
-    print(f"ucsd-ls on {len(recs)} run(s), alpha = {res.alpha:g}, weights {res.weights}"
-          f"{', C_e constrained' if res.constrained else ''}")
+    print(
+        f"ucsd-ls on {len(recs)} run(s), alpha = {res.alpha:g}, weights {res.weights}"
+        f"{', C_e constrained' if res.constrained else ''}"
+    )
     print(f"  M_e   = {res.M_e_kg / 1e3:10.2f} t")
     print(f"  K_e   = {res.K_e_N_per_m / 1e6:10.4f} MN/m")
     print(f"  C_e   = {res.C_e / 1e3:10.2f} kN (s/m)^{res.alpha:g}")

@@ -19,12 +19,16 @@ def cmd_import(args) -> int:
         return 0
     for r in reports:
         print(f"{r['file']} -> {r['run_file']}")
-        print(f"  {r['samples']} samples at {r['sample_rate_hz']:g} Hz ({r['rate_from']}), "
-              f"{r['duration_s']:.3f} s, table {r['table']}")
+        print(
+            f"  {r['samples']} samples at {r['sample_rate_hz']:g} Hz ({r['rate_from']}), "
+            f"{r['duration_s']:.3f} s, table {r['table']}"
+        )
         for ch, cols in r["ranges_si"].items():
-            txt = ", ".join(f"{k} {v['min']:.4g}..{v['max']:.4g}" + (f" ({v['missing_samples']} missing)"
-                                                                       if v["missing_samples"] else "")
-                            for k, v in cols.items())
+            txt = ", ".join(
+                f"{k} {v['min']:.4g}..{v['max']:.4g}"
+                + (f" ({v['missing_samples']} missing)" if v["missing_samples"] else "")
+                for k, v in cols.items()
+            )
             print(f"  {ch:22s} {txt}")
         for p, st in r["paths"].items():
             print(f"  {p:28s} " + ("ready" if st["ready"] else "needs " + "; ".join(st["missing"])))

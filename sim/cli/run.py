@@ -42,8 +42,11 @@ def cmd_run(args) -> int:
     res = outcome.result
     if res.interrupted:  # Ctrl-C: keep what was computed (no recording: the user asked to stop)
         summary = outcome.write(out)
-        print(f"interrupted: kept {res.sim_s:.3f} s in {summary['run_file']} (marked incomplete) "
-              f"and {out / 'summary.json'}", file=sys.stderr)
+        print(
+            f"interrupted: kept {res.sim_s:.3f} s in {summary['run_file']} (marked incomplete) "
+            f"and {out / 'summary.json'}",
+            file=sys.stderr,
+        )
         return 130
     if target is not None:
         target.write_run(outcome.run, outcome.tm)
@@ -51,17 +54,26 @@ def cmd_run(args) -> int:
     if sensors is not None:
         from sim.runs.measure import write_measured
 
-        outcome.summary["measured_run_file"] = str(write_measured(
-            outcome.run, out, outcome.summary["scenario"], sensors, seed=args.measure_seed,
-            model_file=None if args.measure is True else args.measure))
+        outcome.summary["measured_run_file"] = str(
+            write_measured(
+                outcome.run,
+                out,
+                outcome.summary["scenario"],
+                sensors,
+                seed=args.measure_seed,
+                model_file=None if args.measure is True else args.measure,
+            )
+        )
     summary = outcome.write(out)
     if args.json:
         print(json_text(summary, indent=2))
     else:
         _print_summary(summary, prog.elapsed_s)
     if res.incomplete_reason:
-        print(f"error: {res.incomplete_reason}; kept {res.sim_s:.3f} s in {summary['run_file']} (marked incomplete)",
-              file=sys.stderr)
+        print(
+            f"error: {res.incomplete_reason}; kept {res.sim_s:.3f} s in {summary['run_file']} (marked incomplete)",
+            file=sys.stderr,
+        )
         return 3
     return 0
 
@@ -69,18 +81,24 @@ def cmd_run(args) -> int:
 def _print_summary(s: dict, command_wall_s: float | None = None) -> None:
     runs = 1 + s.get("drive_iterations", {}).get("count", 0)
     last = "" if runs == 1 else " (the chosen run)"
-    print(f"{s['scenario']}: {s['table']}" + (f" + {s['payload']}" if s["payload"] else "")
-          + f", {s['duration_s']:.2f} s simulated in {s['wall_s']:.1f} s{last} ({s['realtime_factor']:.2f}x real time)")
+    print(
+        f"{s['scenario']}: {s['table']}"
+        + (f" + {s['payload']}" if s["payload"] else "")
+        + f", {s['duration_s']:.2f} s simulated in {s['wall_s']:.1f} s{last} ({s['realtime_factor']:.2f}x real time)"
+    )
     if command_wall_s:
-        print(f"  whole command: {command_wall_s:.1f} s wall for {runs} run(s) of {s['duration_s']:.2f} s"
-              + (" and the FRF measurement" if s.get("drive_iterations", {}).get("frf") == "noise" and runs > 1 else "")
-              + f" ({s['duration_s'] / command_wall_s:.2f}x real time)")
+        print(
+            f"  whole command: {command_wall_s:.1f} s wall for {runs} run(s) of {s['duration_s']:.2f} s"
+            + (" and the FRF measurement" if s.get("drive_iterations", {}).get("frf") == "noise" and runs > 1 else "")
+            + f" ({s['duration_s'] / command_wall_s:.2f}x real time)"
+        )
     print(f"  {'dof':4s} {'NRMSE d':>8s} {'NRMSE a':>8s} {'PGA ratio':>9s} {'spectrum ratio (0.5-20 Hz)':>28s}")
     for dof, e in s["tracking"].items():
-        sr = (f"{e['spectrum_ratio_min']:.2f} .. {e['spectrum_ratio_max']:.2f}"
-              if "spectrum_ratio_min" in e else "-")
-        print(f"  {dof:4s} {100 * e['nrmse_displacement']:7.2f}% {100 * e['nrmse_acceleration']:7.1f}% "
-              f"{e['pga_ratio']:9.3f} {sr:>28s}")
+        sr = f"{e['spectrum_ratio_min']:.2f} .. {e['spectrum_ratio_max']:.2f}" if "spectrum_ratio_min" in e else "-"
+        print(
+            f"  {dof:4s} {100 * e['nrmse_displacement']:7.2f}% {100 * e['nrmse_acceleration']:7.1f}% "
+            f"{e['pga_ratio']:9.3f} {sr:>28s}"
+        )
     w = s.get("window")
     if w and (w["start_s"] > 0 or w["end_s"] < w["of_record_s"] - 1e-6):
         print(f"  ran {w['start_s']:.1f}-{w['end_s']:.1f} s of the {w['of_record_s']:.1f} s motion ({w['why']})")
@@ -92,8 +110,10 @@ def _print_summary(s: dict, command_wall_s: float | None = None) -> None:
             print("  " + line)
     ff = max(s["peak_force_fraction_of_capacity"].values())
     sf = max(s["peak_stroke_fraction"].values())
-    print(f"  peak force {100 * ff:.0f} % of capacity, peak stroke {100 * sf:.0f} % of half-stroke, "
-          f"min supply {s['min_supply_pressure_pa'] / 1e6:.1f} MPa, max swivel gap {s['max_loop_gap_m'] * 1e6:.2f} um")
+    print(
+        f"  peak force {100 * ff:.0f} % of capacity, peak stroke {100 * sf:.0f} % of half-stroke, "
+        f"min supply {s['min_supply_pressure_pa'] / 1e6:.1f} MPa, max swivel gap {s['max_loop_gap_m'] * 1e6:.2f} um"
+    )
     di = s.get("drive_iterations", {})
     if di.get("count"):
         hist = ", ".join(f"{100 * h['mean_nrmse_acceleration']:.1f}%" for h in di["history"])
@@ -111,8 +131,15 @@ def cmd_replay(args) -> int:
     out = out_dir(args.out)
     prog.stage(f"replaying {args.run} open loop")
     bias = "none" if args.no_bias else args.bias  # None: estimated for a measured run
-    rep = replay(args.run, table=args.table, payload=args.payload, progress=prog.enabled and prog.tty,
-                 bias=bias, drift=args.drift, hold=args.hold)
+    rep = replay(
+        args.run,
+        table=args.table,
+        payload=args.payload,
+        progress=prog.enabled and prog.tty,
+        bias=bias,
+        drift=args.drift,
+        hold=args.hold,
+    )
     res = rep.result
     stem = Path(args.run).name[: -len(".run.npz")] if args.run.endswith(".run.npz") else Path(args.run).stem
     path = out / f"{stem}.replay.run.npz"
@@ -122,9 +149,11 @@ def cmd_replay(args) -> int:
     if args.json:
         print(json_text(summary, indent=2))
     else:
-        print(f"replayed {args.run} open loop ({res.sim_s:.2f} s at the record's {rep.run.sample_rate_hz:g} Hz, "
-              f"model ticks {rep.tick_hz:g} Hz, {res.realtime_factor:.2f}x real time; "
-              f"whole command {prog.elapsed_s:.1f} s) -> {path}")
+        print(
+            f"replayed {args.run} open loop ({res.sim_s:.2f} s at the record's {rep.run.sample_rate_hz:g} Hz, "
+            f"model ticks {rep.tick_hz:g} Hz, {res.realtime_factor:.2f}x real time; "
+            f"whole command {prog.elapsed_s:.1f} s) -> {path}"
+        )
         for note in rep.notes:
             print(f"  note: {note}")
         sf = ", ".join(f"{k} {100 * v:.0f}%" for k, v in rep.stroke_fraction.items())
@@ -159,19 +188,31 @@ def cmd_fit(args) -> int:
     out = out_dir(args.out)
     prog = _progress(args)
     prog.stage(f"fitting {args.run}: replays per candidate effect, {args.rounds} round(s) at most")
-    rep = F.fit(run, desc.raw, payload, candidates=cands, rounds=args.rounds,
-                log=(lambda m: prog.stage(m.strip())) if prog.enabled else None)
+    rep = F.fit(
+        run,
+        desc.raw,
+        payload,
+        candidates=cands,
+        rounds=args.rounds,
+        log=(lambda m: prog.stage(m.strip())) if prog.enabled else None,
+    )
     toml_path = out / f"{desc.name}_calibrated.toml"
-    note = ("calibrated: shaketable fit of " + Path(args.run).name + "; effects added: "
-            + (", ".join(f"{e['effect']} = {e['value']:.6g} {e['unit']}" for e in rep["effects_added"]) or "none"))
+    note = (
+        "calibrated: shaketable fit of "
+        + Path(args.run).name
+        + "; effects added: "
+        + (", ".join(f"{e['effect']} = {e['value']:.6g} {e['unit']}" for e in rep["effects_added"]) or "none")
+    )
     F.write_table_toml(rep.pop("calibrated_table"), toml_path, note, original=desc.source)
     rep["calibrated_table_file"] = str(toml_path)
     write_json_atomic(out / "fit.json", rep)
     if args.json:
         print(json_text(rep, indent=2))
     else:
-        print(f"residual (mean NRMSE of force/acceleration/displacement): "
-              f"{100 * rep['baseline_residual']:.2f} % -> {100 * rep['final_residual']:.2f} %")
+        print(
+            f"residual (mean NRMSE of force/acceleration/displacement): "
+            f"{100 * rep['baseline_residual']:.2f} % -> {100 * rep['final_residual']:.2f} %"
+        )
         for e in rep["effects_added"]:
             print(f"  added {e['effect']} = {e['value']:.6g} {e['unit']} ({e['what']})")
         print(f"  wrote {toml_path} and {out / 'fit.json'} ({prog.elapsed_s:.0f} s)")
@@ -192,16 +233,30 @@ def add_parsers(sub) -> None:
     r = sub.add_parser("run", help="simulate a scenario and write its run file and summary")
     r.add_argument("scenario", help="scenario name in scenarios/ or a .toml path")
     r.add_argument("--out", default="out", help="output folder (default: out)")
-    r.add_argument("--duration", type=float, default=None, metavar="S",
-                   help="simulate S seconds: of an earthquake record its strongest S s (tapered), "
-                        "of other motions the first S s")
+    r.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="simulate S seconds: of an earthquake record its strongest S s (tapered), of other motions the first S s",
+    )
     r.add_argument("--json", action="store_true", help="print the summary as JSON")
     r.add_argument("--rrd", metavar="FILE", help="also write a rerun recording")
-    r.add_argument("--iterations", type=int, default=None,
-                   help="off-line drive iterations on the model (default: the scenario's [iteration] count)")
-    r.add_argument("--measure", nargs="?", const=True, default=None, metavar="SENSORS.toml",
-                   help="also write <scenario>.measured.run.npz through a sensor model (docs/sensors.md; "
-                        "default: the built-in 1024 Hz recorder, scenarios/sensors/recorder_1024hz.toml)")
+    r.add_argument(
+        "--iterations",
+        type=int,
+        default=None,
+        help="off-line drive iterations on the model (default: the scenario's [iteration] count)",
+    )
+    r.add_argument(
+        "--measure",
+        nargs="?",
+        const=True,
+        default=None,
+        metavar="SENSORS.toml",
+        help="also write <scenario>.measured.run.npz through a sensor model (docs/sensors.md; "
+        "default: the built-in 1024 Hz recorder, scenarios/sensors/recorder_1024hz.toml)",
+    )
     r.add_argument("--measure-seed", type=int, default=0, help="seed of the measurement noise (default 0)")
     r.set_defaults(func=cmd_run)
 
@@ -210,16 +265,26 @@ def add_parsers(sub) -> None:
     p.add_argument("--table", help="table (default: the description the run carries, else its meta.table)")
     p.add_argument("--payload", help="payload (default: the description the run carries; 'none' for a bare table)")
     p.add_argument("--out", default="out", help="output folder")
-    p.add_argument("--bias", type=float, default=None, metavar="FRACTION",
-                   help="valve null offset to add to every command (default: estimated from the recorded motion "
-                        "for a measured run, none for a simulated one)")
+    p.add_argument(
+        "--bias",
+        type=float,
+        default=None,
+        metavar="FRACTION",
+        help="valve null offset to add to every command (default: estimated from the recorded motion "
+        "for a measured run, none for a simulated one)",
+    )
     p.add_argument("--no-bias", action="store_true", help="replay the commands as recorded (no valve null offset)")
-    p.add_argument("--drift", action="store_true",
-                   help="also estimate and apply a linear drift of the valve null over the record")
-    p.add_argument("--hold", choices=["zoh", "linear"], default=None,
-                   help="command onto the model's ticks: zero-order hold (the record is the controller's DAC "
-                        "rate) or linear (a slower recorder sampled the drive); default the run's "
-                        "meta.command_hold, else zoh")
+    p.add_argument(
+        "--drift", action="store_true", help="also estimate and apply a linear drift of the valve null over the record"
+    )
+    p.add_argument(
+        "--hold",
+        choices=["zoh", "linear"],
+        default=None,
+        help="command onto the model's ticks: zero-order hold (the record is the controller's DAC "
+        "rate) or linear (a slower recorder sampled the drive); default the run's "
+        "meta.command_hold, else zoh",
+    )
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_replay)
 

@@ -5,9 +5,14 @@ from __future__ import annotations
 import sys
 
 FLAGS = {  # flag -> key of sim.scenario.tablegen.LAB_KEYS
-    "moving_mass": "moving_mass_kg", "piston_area": "piston_area_m2", "half_stroke": "half_stroke_m",
-    "supply_pressure": "supply_pressure_pa", "valve_flow": "valve_rated_flow_m3_s",
-    "valve_bandwidth": "valve_bandwidth_hz", "actuators": "n_actuators", "oil_column": "oil_column_hz",
+    "moving_mass": "moving_mass_kg",
+    "piston_area": "piston_area_m2",
+    "half_stroke": "half_stroke_m",
+    "supply_pressure": "supply_pressure_pa",
+    "valve_flow": "valve_rated_flow_m3_s",
+    "valve_bandwidth": "valve_bandwidth_hz",
+    "actuators": "n_actuators",
+    "oil_column": "oil_column_hz",
     "kp": "kp_per_s",
 }
 
@@ -17,8 +22,10 @@ def cmd_table_new(args) -> int:
     from sim.scenario import tablegen
 
     if args.kind != "uniaxial":
-        raise UserError("table new --kind 6dof is not generated (a 6-DOF layout is a drawing): copy "
-                        "scenarios/tables/cgs.toml and change its [[actuator]] positions and classes")
+        raise UserError(
+            "table new --kind 6dof is not generated (a 6-DOF layout is a drawing): copy "
+            "scenarios/tables/cgs.toml and change its [[actuator]] positions and classes"
+        )
     inputs, src = {}, "the command line"
     if args.from_file:
         inputs = dict(tablegen.read_lab_inputs(args.from_file))
@@ -29,8 +36,11 @@ def cmd_table_new(args) -> int:
             inputs[key] = int(v) if key == "n_actuators" else v
     out = args.out or f"scenarios/tables/{args.name}.toml"
     path = tablegen.write_uniaxial(args.name, inputs, out, src=src)
-    print(f"wrote {path} (uni-axial, {inputs.get('n_actuators', 1)} actuator(s)); "
-          "every number not given is marked assumed: or derived: in the file", file=sys.stderr)
+    print(
+        f"wrote {path} (uni-axial, {inputs.get('n_actuators', 1)} actuator(s)); "
+        "every number not given is marked assumed: or derived: in the file",
+        file=sys.stderr,
+    )
     print(path)
     return 0
 

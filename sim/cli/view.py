@@ -33,19 +33,30 @@ def cmd_view(args) -> int:
     if not args.rrd and not args.spawn and args.connect is None:
         raise UserError("view needs a target: give --rrd FILE.rrd, --spawn or --connect [URL]")
     # check the target before reading anything large
-    target = recording.RrdTarget.open(args.rrd, spawn=args.spawn, connect=args.connect, rate_hz=args.rate,
-                                      series_rate_hz=None if args.full_rate else recording.DEFAULT_SERIES_RATE_HZ,
-                                      timeout_s=args.timeout)
+    target = recording.RrdTarget.open(
+        args.rrd,
+        spawn=args.spawn,
+        connect=args.connect,
+        rate_hz=args.rate,
+        series_rate_hz=None if args.full_rate else recording.DEFAULT_SERIES_RATE_HZ,
+        timeout_s=args.timeout,
+    )
     run = read_run(args.run)
     compare = read_run(args.compare) if args.compare else None
     desc = table_of(run, args.table)  # --table, else the description the run carries, else the stock file
     payload = payload_of(run, args.payload)
     tm = build_model(desc, payload)
     path = target.write_run(run, tm, compare=compare)
-    out = {"run": str(args.run), "compare": args.compare, "table": desc.name,
-           "payload": payload.name if payload else None, "recording": str(path) if path else None,
-           "samples": run.n_samples, "display_rate_hz": args.rate,
-           "series_rate_hz": run.sample_rate_hz / recording.series_stride(run.sample_rate_hz, target.series_rate_hz)}
+    out = {
+        "run": str(args.run),
+        "compare": args.compare,
+        "table": desc.name,
+        "payload": payload.name if payload else None,
+        "recording": str(path) if path else None,
+        "samples": run.n_samples,
+        "display_rate_hz": args.rate,
+        "series_rate_hz": run.sample_rate_hz / recording.series_stride(run.sample_rate_hz, target.series_rate_hz),
+    }
     if args.json:
         print(json_text(out, indent=2))
     else:
@@ -82,17 +93,34 @@ def add_parsers(sub) -> None:
     v.add_argument("--compare", metavar="OTHER", help="a second .run.npz laid beside the first (with residuals)")
     v.add_argument("--table", help="table model (default: the run's meta.table)")
     v.add_argument("--payload", help="payload (default: the run's meta.payload; 'none' for a bare table)")
-    v.add_argument("--rate", type=_rate, default=DEFAULT_RATE_HZ, metavar="HZ",
-                   help=f"display rate of the 3-D scene (default {DEFAULT_RATE_HZ:g} Hz)")
-    v.add_argument("--full-rate", action="store_true",
-                   help=f"time series at the run's full rate (default: every n-th sample, at least "
-                        f"{DEFAULT_SERIES_RATE_HZ:g} Hz)")
+    v.add_argument(
+        "--rate",
+        type=_rate,
+        default=DEFAULT_RATE_HZ,
+        metavar="HZ",
+        help=f"display rate of the 3-D scene (default {DEFAULT_RATE_HZ:g} Hz)",
+    )
+    v.add_argument(
+        "--full-rate",
+        action="store_true",
+        help=f"time series at the run's full rate (default: every n-th sample, at least {DEFAULT_SERIES_RATE_HZ:g} Hz)",
+    )
     v.add_argument("--spawn", action="store_true", help="also stream to a viewer started now (needs a screen)")
-    v.add_argument("--connect", nargs="?", const="", default=None, metavar="URL",
-                   help="also stream to a running viewer (default rerun+http://127.0.0.1:9876/proxy)")
-    v.add_argument("--timeout", type=_rate, default=None, metavar="S",
-                   help="with --spawn/--connect: give up when the viewer has not taken the recording after S "
-                        "seconds (default 30)")
+    v.add_argument(
+        "--connect",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="URL",
+        help="also stream to a running viewer (default rerun+http://127.0.0.1:9876/proxy)",
+    )
+    v.add_argument(
+        "--timeout",
+        type=_rate,
+        default=None,
+        metavar="S",
+        help="with --spawn/--connect: give up when the viewer has not taken the recording after S seconds (default 30)",
+    )
     v.add_argument("--json", action="store_true", help="print a JSON summary")
     v.set_defaults(func=cmd_view)
 

@@ -50,8 +50,9 @@ class RiceController:
         g, c = self.g, self.c
         e = xd - xt
         self.integral += e * self.dt
-        return ((g.p * e + g.i_hz * self.integral) * c.k_x + (g.d_s * (vd - vt) + g.ff_s * vd) * c.k_d
-                + g.dp * c.k_dp * dp)
+        return (
+            (g.p * e + g.i_hz * self.integral) * c.k_x + (g.d_s * (vd - vt) + g.ff_s * vd) * c.k_d + g.dp * c.k_dp * dp
+        )
 
     def opening(self, xd, vd, xt, vt, dp) -> float:
         u = self.scale * self.volts(xd, vd, xt, vt, dp)

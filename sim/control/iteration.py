@@ -50,8 +50,15 @@ class IterationSettings:
     def from_scenario(cls, it: dict) -> "IterationSettings":
         """From a scenario's (validated, see :mod:`sim.scenario.files`) ``[iteration]`` table;
         keys left out keep the defaults above."""
-        conv = {"count": int, "gain": float, "band_hz": tuple, "h_min": float, "frf": str,
-                "noise_level": float, "seed": int}
+        conv = {
+            "count": int,
+            "gain": float,
+            "band_hz": tuple,
+            "h_min": float,
+            "frf": str,
+            "noise_level": float,
+            "seed": int,
+        }
         return cls(**{k: conv[k](v) for k, v in it.items() if k in conv})
 
 
@@ -60,7 +67,7 @@ def _spectral_derivatives(d: np.ndarray, rate: float) -> tuple[np.ndarray, np.nd
     D = np.fft.rfft(d, axis=0)
     w = 2 * np.pi * np.fft.rfftfreq(n, 1.0 / rate)
     v = np.fft.irfft(1j * w[:, None] * D, n=n, axis=0)
-    a = np.fft.irfft(-(w ** 2)[:, None] * D, n=n, axis=0)
+    a = np.fft.irfft(-(w**2)[:, None] * D, n=n, axis=0)
     return v, a
 
 
@@ -93,8 +100,13 @@ def identify_frf(sim, target: Reference, dofs: list[int], s: IterationSettings) 
         level = s.noise_level * float(np.sqrt(np.mean(target.a[:, i] ** 2)))
         if not level > 0:
             raise ValueError(f"DOF {i} has a displacement target but no acceleration to scale the noise to")
-        motions[DOFS[i]] = white_noise(duration_s=s.noise_duration_s, sample_rate_hz=rate, band_hz=s.noise_band_hz,
-                                       seed=(s.seed, i), rms_acceleration=level)
+        motions[DOFS[i]] = white_noise(
+            duration_s=s.noise_duration_s,
+            sample_rate_hz=rate,
+            band_hz=s.noise_band_hz,
+            seed=(s.seed, i),
+            rms_acceleration=level,
+        )
     noise = reference_from_motions(motions, rate, s.noise_duration_s)
     d, n = noise.d, len(noise.t)
     sim.reset()
@@ -107,15 +119,23 @@ def identify_frf(sim, target: Reference, dofs: list[int], s: IterationSettings) 
     if res.incomplete_reason:
         from sim.errors import ScenarioError
 
-        raise ScenarioError(f"the white-noise identification run before the drive iteration stopped "
-                            f"({res.incomplete_reason}); lower [iteration] noise_level or set frf = \"record\"")
+        raise ScenarioError(
+            f"the white-noise identification run before the drive iteration stopped "
+            f'({res.incomplete_reason}); lower [iteration] noise_level or set frf = "record"'
+        )
     y = res.channels["table_displacement"]
     m = min(n, len(y))
     return {i: _welch_frf(d[:m, i], y[:m, i], rate, s.nperseg) for i in dofs}
 
 
-def update_drive(drive: Reference, target: Reference, achieved_d: np.ndarray, s: IterationSettings,
-                 dofs: list[int], frf: dict | None = None) -> Reference:
+def update_drive(
+    drive: Reference,
+    target: Reference,
+    achieved_d: np.ndarray,
+    s: IterationSettings,
+    dofs: list[int],
+    frf: dict | None = None,
+) -> Reference:
     """One iteration step: a corrected drive from the last run's achieved displacement."""
     rate = target.rate_hz
     n = len(target.t)
@@ -131,7 +151,7 @@ def update_drive(drive: Reference, target: Reference, achieved_d: np.ndarray, s:
     taper = np.ones(n)
     ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(nt) / nt)
     taper[:nt] = ramp
-    taper[n - nt:] = ramp[::-1]
+    taper[n - nt :] = ramp[::-1]
     for i in dofs:
         if frf is not None:
             fw, H = frf[i]

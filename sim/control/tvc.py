@@ -106,8 +106,19 @@ class ControllerGains:
                 raise ScenarioError(f"controller.flow_linearisation must be true or false (got {v!r})")
             kw["flow_linearisation"] = v
         if d:
-            known = ("kp_per_s", "kff_velocity", "kff_acceleration_s", "kff_jerk_s2", "kv_feedback", "kdp",
-                     "dp_highpass_hz", "kfb", "flow_linearisation", "command_limit", "rate_hz")
+            known = (
+                "kp_per_s",
+                "kff_velocity",
+                "kff_acceleration_s",
+                "kff_jerk_s2",
+                "kv_feedback",
+                "kdp",
+                "dp_highpass_hz",
+                "kfb",
+                "flow_linearisation",
+                "command_limit",
+                "rate_hz",
+            )
             from sim.validate import suggest
 
             key = sorted(d)[0]
@@ -134,8 +145,16 @@ def dof_jacobian(desc: TableDescription, pose=None, h: float = 1e-6) -> np.ndarr
 class TableController:
     """Closed-loop controller of one table (see the module docstring)."""
 
-    def __init__(self, desc: TableDescription, gains: ControllerGains, *, area_m2: np.ndarray,
-                 full_flow_m3_s: float, supply_pressure_pa: float, return_pressure_pa: float):
+    def __init__(
+        self,
+        desc: TableDescription,
+        gains: ControllerGains,
+        *,
+        area_m2: np.ndarray,
+        full_flow_m3_s: float,
+        supply_pressure_pa: float,
+        return_pressure_pa: float,
+    ):
         self.desc = desc
         self.g = gains
         self.J = dof_jacobian(desc)
@@ -155,10 +174,23 @@ class TableController:
         # constants of the compiled tick: per-actuator [area, opening per velocity], and
         # [kp (6), kv (6), kdp, kfb, hp_a (-1 = no high-pass), ps, dp0, flow linearisation, limit]
         self._consts = np.ascontiguousarray(np.stack([self.area, self.open_per_velocity]))
-        self._gains_arr = np.ascontiguousarray(np.concatenate([
-            self._kp, gains.kv_feedback,
-            [gains.kdp, gains.kfb, self._hp_a if self._hp_a is not None else -1.0, self.ps, self.dp0,
-             1.0 if gains.flow_linearisation else 0.0, gains.command_limit]]))
+        self._gains_arr = np.ascontiguousarray(
+            np.concatenate(
+                [
+                    self._kp,
+                    gains.kv_feedback,
+                    [
+                        gains.kdp,
+                        gains.kfb,
+                        self._hp_a if self._hp_a is not None else -1.0,
+                        self.ps,
+                        self.dp0,
+                        1.0 if gains.flow_linearisation else 0.0,
+                        gains.command_limit,
+                    ],
+                ]
+            )
+        )
         self.reset()
 
     def reset(self):
@@ -173,8 +205,24 @@ class TableController:
         if _tick is None:
             out[:] = self.command(s_ref, v_ref6, vff6, strokes, v6, force, supply_pressure)
             return out
-        _tick(s_ref, v_ref6, vff6, strokes, v6, force, supply_pressure, self.J, self.Jp, self.N,
-              self._consts, self._gains_arr, self._state, self._pl_hp, self._pl_prev, out)
+        _tick(
+            s_ref,
+            v_ref6,
+            vff6,
+            strokes,
+            v6,
+            force,
+            supply_pressure,
+            self.J,
+            self.Jp,
+            self.N,
+            self._consts,
+            self._gains_arr,
+            self._state,
+            self._pl_hp,
+            self._pl_prev,
+            out,
+        )
         return out
 
     def kernel_args(self) -> tuple:
@@ -186,17 +234,32 @@ class TableController:
     def has_compiled_tick() -> bool:
         return _tick_state is not None
 
-    def command_from_state(self, k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force,
-                           supply_pressure, out) -> np.ndarray:
+    def command_from_state(
+        self, k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force, supply_pressure, out
+    ) -> np.ndarray:
         """Compiled tick reading strokes and the platen velocity straight from MuJoCo's arrays."""
         if _tick_state is None:
             x = qpos[qa]
             R = xmat[pb].reshape(3, 3)
-            v6 = np.concatenate([qvel[pd:pd + 3], R @ qvel[pd + 3:pd + 6]])
+            v6 = np.concatenate([qvel[pd : pd + 3], R @ qvel[pd + 3 : pd + 6]])
             out[:] = self.command(s_ref_all[k], v_ref_all[k], vff_all[k], x, v6, force, supply_pressure)
             return out
-        _tick_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force, supply_pressure,
-                    *self.kernel_args(), out)
+        _tick_state(
+            k,
+            s_ref_all,
+            v_ref_all,
+            vff_all,
+            qpos,
+            qvel,
+            xmat,
+            qa,
+            pd,
+            pb,
+            force,
+            supply_pressure,
+            *self.kernel_args(),
+            out,
+        )
         return out
 
     def feedforward(self, v_ref: np.ndarray, a_ref: np.ndarray, rate_hz: float) -> np.ndarray:
@@ -248,7 +311,6 @@ class TableController:
         return c
 
 
-
 if _nb is not None:
 
     @_nb.njit(cache=True)
@@ -257,8 +319,15 @@ if _nb is not None:
         opv = consts[1]
         kp = gains[0:6]
         kv = gains[6:12]
-        kdp, kfb, hp_a, ps, dp0, flowlin, lim = gains[12], gains[13], gains[14], gains[15], gains[16], gains[17], \
-            gains[18]
+        kdp, kfb, hp_a, ps, dp0, flowlin, lim = (
+            gains[12],
+            gains[13],
+            gains[14],
+            gains[15],
+            gains[16],
+            gains[17],
+            gains[18],
+        )
         n = x.shape[0]
         e = np.empty(n)
         for i in range(n):
@@ -306,8 +375,29 @@ if _nb is not None:
         return out
 
     @_nb.njit(cache=True)
-    def _tick_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, force, ps_now, consts, J, Jp,
-                    N, gains, state, pl_hp, pl_prev, out):
+    def _tick_state(
+        k,
+        s_ref_all,
+        v_ref_all,
+        vff_all,
+        qpos,
+        qvel,
+        xmat,
+        qa,
+        pd,
+        pb,
+        force,
+        ps_now,
+        consts,
+        J,
+        Jp,
+        N,
+        gains,
+        state,
+        pl_hp,
+        pl_prev,
+        out,
+    ):
         n = qa.shape[0]
         x = np.empty(n)
         for i in range(n):
@@ -317,11 +407,27 @@ if _nb is not None:
         v6[1] = qvel[pd + 1]
         v6[2] = qvel[pd + 2]
         for r in range(3):
-            v6[3 + r] = (xmat[pb, 3 * r] * qvel[pd + 3] + xmat[pb, 3 * r + 1] * qvel[pd + 4]
-                         + xmat[pb, 3 * r + 2] * qvel[pd + 5])
-        _tick(s_ref_all[k], v_ref_all[k], vff_all[k], x, v6, force, ps_now, J, Jp, N, consts, gains, state, pl_hp,
-              pl_prev, out)
+            v6[3 + r] = (
+                xmat[pb, 3 * r] * qvel[pd + 3] + xmat[pb, 3 * r + 1] * qvel[pd + 4] + xmat[pb, 3 * r + 2] * qvel[pd + 5]
+            )
+        _tick(
+            s_ref_all[k],
+            v_ref_all[k],
+            vff_all[k],
+            x,
+            v6,
+            force,
+            ps_now,
+            J,
+            Jp,
+            N,
+            consts,
+            gains,
+            state,
+            pl_hp,
+            pl_prev,
+            out,
+        )
         return out
 else:  # pragma: no cover
     _tick = _tick_state = None
-

@@ -29,5 +29,18 @@ def build_model(desc, payload=None, options=None):
     return tm
 
 
-__all__ = ["EFFECTS", "Effect", "Parameter", "build_effects", "build_model", "catalogue", "create", "dahl_step", "known",
-           "load_user_effect", "register", "table_parameters", "with_parameter_values"]
+__all__ = [
+    "EFFECTS",
+    "Effect",
+    "Parameter",
+    "build_effects",
+    "build_model",
+    "catalogue",
+    "create",
+    "dahl_step",
+    "known",
+    "load_user_effect",
+    "register",
+    "table_parameters",
+    "with_parameter_values",
+]

@@ -73,7 +73,8 @@ class Parameter:
         """Is the value on (within ``rel`` of the typical size of) one of its bounds?"""
         tol = rel * self.typical
         return (math.isfinite(self.lower) and self.value - self.lower <= tol) or (
-            math.isfinite(self.upper) and self.upper - self.value <= tol)
+            math.isfinite(self.upper) and self.upper - self.value <= tol
+        )
 
 
 def parse_where(where: str, source: str = "effect") -> tuple[str, str]:
@@ -82,8 +83,10 @@ def parse_where(where: str, source: str = "effect") -> tuple[str, str]:
         raise ScenarioError(f"{source}: 'where' must name a place ({', '.join(k + ':...' for k in PLACE_KINDS)})")
     kind, _, name = where.partition(":")
     if kind not in PLACE_KINDS:
-        raise ScenarioError(f"{source}: where = '{where}' is not a place{_did_you_mean(kind, PLACE_KINDS)}; "
-                            "places are " + ", ".join(PLACE_KINDS))
+        raise ScenarioError(
+            f"{source}: where = '{where}' is not a place{_did_you_mean(kind, PLACE_KINDS)}; "
+            "places are " + ", ".join(PLACE_KINDS)
+        )
     return kind, name
 
 
@@ -121,8 +124,10 @@ class Effect:
         self.label = entry.pop("name", None)
         kind, _ = parse_where(self.where, source)
         if self.places and kind not in self.places:
-            raise ScenarioError(f"{source}: a {self.type} effect acts at {', '.join(self.places)}, "
-                                f"not at '{self.where}'{_did_you_mean(kind, self.places)}")
+            raise ScenarioError(
+                f"{source}: a {self.type} effect acts at {', '.join(self.places)}, "
+                f"not at '{self.where}'{_did_you_mean(kind, self.places)}"
+            )
         known = set(self.SPEC) | set(self.OPTIONS)
         for k in entry:
             if k not in known:
@@ -148,8 +153,10 @@ class Effect:
         return ""
 
     def parameters(self) -> list[Parameter]:
-        return [Parameter(name=k, value=self.values[k], unit=u, lower=lo, upper=hi, where=self.where)
-                for k, (u, lo, hi, _d) in self.SPEC.items()]
+        return [
+            Parameter(name=k, value=self.values[k], unit=u, lower=lo, upper=hi, where=self.where)
+            for k, (u, lo, hi, _d) in self.SPEC.items()
+        ]
 
     def with_values(self, values: dict[str, float]) -> "Effect":
         """A copy with some parameter values changed (state reset)."""

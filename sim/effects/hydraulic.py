@@ -39,12 +39,15 @@ def actuator_indices(effect: Effect, params) -> np.ndarray:
     kind, name = effect.where.partition(":")[::2]
     if kind == "actuator":
         if name not in params.names:
-            raise ScenarioError(f"{effect.source}: where = '{effect.where}' names no actuator; "
-                                f"actuators: {', '.join(params.names)}")
+            raise ScenarioError(
+                f"{effect.source}: where = '{effect.where}' names no actuator; actuators: {', '.join(params.names)}"
+            )
         return np.array([params.names.index(name)])
     if name not in params.classes:
-        raise ScenarioError(f"{effect.source}: where = '{effect.where}' names no actuator class; "
-                            f"classes: {', '.join(sorted(set(params.classes)))}")
+        raise ScenarioError(
+            f"{effect.source}: where = '{effect.where}' names no actuator class; "
+            f"classes: {', '.join(sorted(set(params.classes)))}"
+        )
     return np.array([i for i, c in enumerate(params.classes) if c == name])
 
 
@@ -139,7 +142,7 @@ class Leakage(_PerActuator):
     def set_values(self, p, idx):
         kind = self.options["kind"]
         if kind not in ("cross", "external"):
-            raise ScenarioError(f"{self.source}: kind = {kind!r}; use \"cross\" or \"external\"")
+            raise ScenarioError(f'{self.source}: kind = {kind!r}; use "cross" or "external"')
         getattr(p, f"leakage_{kind}_m3_s_pa")[idx] = self.values["coefficient_m3_s_pa"]
 
 
@@ -160,12 +163,22 @@ class SupplyPressureDrop(Effect):
         p.supply_pressure_pa = params.supply_pressure_pa - self.values["drop_pa"]
         low = max(p.return_pressure_pa, p.accumulator_precharge_pa if p.accumulator_volume_m3 > 0 else 0.0)
         if p.supply_pressure_pa <= low:
-            raise ScenarioError(f"{self.source}: drop_pa = {self.values['drop_pa']:g} Pa leaves the supply at "
-                                f"{p.supply_pressure_pa:g} Pa, not above {low:g} Pa (return or accumulator "
-                                f"precharge); use a smaller drop")
+            raise ScenarioError(
+                f"{self.source}: drop_pa = {self.values['drop_pa']:g} Pa leaves the supply at "
+                f"{p.supply_pressure_pa:g} Pa, not above {low:g} Pa (return or accumulator "
+                f"precharge); use a smaller drop"
+            )
         p.validate()
         return p
 
 
-__all__ = ["BulkModulus", "Leakage", "SupplyPressureDrop", "ValveBandwidth", "ValveDelay", "ValveFlowGain",
-           "ValveNullOffset", "actuator_indices"]
+__all__ = [
+    "BulkModulus",
+    "Leakage",
+    "SupplyPressureDrop",
+    "ValveBandwidth",
+    "ValveDelay",
+    "ValveFlowGain",
+    "ValveNullOffset",
+    "actuator_indices",
+]

@@ -79,20 +79,24 @@ class Place:
                 raise ScenarioError(f"{src}: where = '{effect.where}': no DOF '{name}'{_hint(name, DOFS6)}")
             if desc.platen.guided:
                 if name not in desc.dofs:
-                    raise ScenarioError(f"{src}: where = '{effect.where}': the platen of '{desc.name}' slides along "
-                                        f"{', '.join(desc.dofs)} only (table.dofs){_hint(name, desc.dofs)}")
+                    raise ScenarioError(
+                        f"{src}: where = '{effect.where}': the platen of '{desc.name}' slides along "
+                        f"{', '.join(desc.dofs)} only (table.dofs){_hint(name, desc.dofs)}"
+                    )
                 self.joints = [f"platen_{name}"]
             else:
                 self.free_dof = DOFS6.index(name)
         elif kind == "actuator":
             if name not in desc.actuator_names:
-                raise ScenarioError(f"{src}: where = '{effect.where}': no actuator '{name}'"
-                                    f"{_hint(name, desc.actuator_names)}")
+                raise ScenarioError(
+                    f"{src}: where = '{effect.where}': no actuator '{name}'{_hint(name, desc.actuator_names)}"
+                )
             self.joints = [f"{name}_stroke"]
         elif kind == "class":
             if name not in desc.actuator_classes:
-                raise ScenarioError(f"{src}: where = '{effect.where}': no actuator class '{name}'"
-                                    f"{_hint(name, desc.actuator_classes)}")
+                raise ScenarioError(
+                    f"{src}: where = '{effect.where}': no actuator class '{name}'{_hint(name, desc.actuator_classes)}"
+                )
             self.joints = [f"{a.name}_stroke" for a in desc.actuators if a.cls.name == name]
         if spec is not None:
             for j in self.joints:
@@ -109,8 +113,10 @@ def dof_tendon(spec, desc, i: int):
         return t
     J = dof_jacobian(desc)
     if np.linalg.matrix_rank(J, tol=1e-9 * np.abs(J).max()) < 6:
-        raise ScenarioError(f"{desc.source}: the actuators do not fix all six DOF of the free platen, so an effect "
-                            f"at dof:{DOFS6[i]} has no linkage to act through; put it at 'actuator:<name>'")
+        raise ScenarioError(
+            f"{desc.source}: the actuators do not fix all six DOF of the free platen, so an effect "
+            f"at dof:{DOFS6[i]} has no linkage to act through; put it at 'actuator:<name>'"
+        )
     c = np.linalg.pinv(J)[i]
     t = spec.add_tendon(name=name)
     for a, coef in zip(desc.actuators, c):
@@ -162,8 +168,14 @@ class StepForce(Effect):
             self._d = np.array([model.jnt_dofadr[j] for j in ids], dtype=int)
             self._q = np.array([model.jnt_qposadr[j] for j in ids], dtype=int)
             self._q0 = model.qpos0[self._q].copy()
-            self._act = np.array([mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, j[:-len("_stroke")])
-                                  for j in p.joints], dtype=int) if p.kind in ("actuator", "class") else None
+            self._act = (
+                np.array(
+                    [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, j[: -len("_stroke")]) for j in p.joints],
+                    dtype=int,
+                )
+                if p.kind in ("actuator", "class")
+                else None
+            )
             self.n = len(ids)
             self._d0 = int(self._d[0]) if self.n == 1 else None  # one slide: the scalar fast path
         else:
@@ -171,7 +183,7 @@ class StepForce(Effect):
             j = jid("platen")
             self._pd, self._pq = int(model.jnt_dofadr[j]), int(model.jnt_qposadr[j])
             self._body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "platen")
-            self._q0 = model.qpos0[self._pq:self._pq + 7].copy()
+            self._q0 = model.qpos0[self._pq : self._pq + 7].copy()
             self._act = None
             self.n = 1
         self.reset()
@@ -181,9 +193,9 @@ class StepForce(Effect):
             return data.qvel[self._d]
         i, pd = self._i, self._pd
         if i < 3:
-            return data.qvel[pd + i:pd + i + 1]
+            return data.qvel[pd + i : pd + i + 1]
         R = data.xmat[self._body].reshape(3, 3)
-        return (R @ data.qvel[pd + 3:pd + 6])[i - 3:i - 2]
+        return (R @ data.qvel[pd + 3 : pd + 6])[i - 3 : i - 2]
 
     def displacement(self, data) -> np.ndarray:
         """From home (m, or rad to first order for a free platen's rotation)."""
@@ -191,8 +203,8 @@ class StepForce(Effect):
             return data.qpos[self._q] - self._q0
         i, pq = self._i, self._pq
         if i < 3:
-            return data.qpos[pq + i:pq + i + 1] - self._q0[i:i + 1]
-        q = data.qpos[pq + 3:pq + 7]
+            return data.qpos[pq + i : pq + i + 1] - self._q0[i : i + 1]
+        q = data.qpos[pq + 3 : pq + 7]
         return np.array([2.0 * q[i - 2] * math.copysign(1.0, q[0])])  # small-angle: 2 x vector part
 
     def add(self, data, force: np.ndarray) -> None:
@@ -204,7 +216,7 @@ class StepForce(Effect):
             data.qfrc_applied[pd + i] += force[0]
         else:  # a world torque about axis i-3, in the free joint's (platen-frame) angular coordinates
             R = data.xmat[self._body].reshape(3, 3)
-            data.qfrc_applied[pd + 3:pd + 6] += R[i - 3, :] * force[0]
+            data.qfrc_applied[pd + 3 : pd + 6] += R[i - 3, :] * force[0]
 
 
 # ------------------------------------------------------------------------ springs and dampers
@@ -239,8 +251,7 @@ class PowerDamping(StepForce):
 
     type = "power_damping"
     places = ("dof", "actuator", "class")
-    SPEC = {"coefficient": ("N (s/m)^alpha", 0.0, INF, None),
-            "exponent": ("1", 1e-3, 5.0, None)}
+    SPEC = {"coefficient": ("N (s/m)^alpha", 0.0, INF, None), "exponent": ("1", 1e-3, 5.0, None)}
     OPTIONS = {"linear_below_m_s": 1e-3}  # assumed: regularisation below 1 mm/s (a setting, not calibrated)
 
     def __init__(self, entry, *, source="effect"):
@@ -250,12 +261,12 @@ class PowerDamping(StepForce):
     def force(self, v):
         c, a, v0 = self.values["coefficient"], self.values["exponent"], self.options["linear_below_m_s"]
         av = np.abs(v)
-        return np.where(av >= v0, -c * av ** a * np.sign(v), -c * v0 ** a * (v / v0))
+        return np.where(av >= v0, -c * av**a * np.sign(v), -c * v0**a * (v / v0))
 
     def bind(self, model, hydraulics=None):
         super().bind(model, hydraulics)
         c, a, v0 = self.values["coefficient"], self.values["exponent"], self.options["linear_below_m_s"]
-        self._k = (c, a, v0, c * v0 ** a / v0)
+        self._k = (c, a, v0, c * v0**a / v0)
 
     def apply(self, model, data):
         d = self._d0
@@ -265,7 +276,7 @@ class PowerDamping(StepForce):
         c, a, v0, slope = self._k  # one slide: scalar arithmetic (this runs every physics step)
         v = float(data.qvel[d])
         av = abs(v)
-        data.qfrc_applied[d] -= c * av ** a * math.copysign(1.0, v) if av >= v0 else slope * v
+        data.qfrc_applied[d] -= c * av**a * math.copysign(1.0, v) if av >= v0 else slope * v
 
 
 # ------------------------------------------------------------------------ friction
@@ -293,10 +304,14 @@ class CoulombFriction(StepForce):
 
     type = "coulomb_friction"
     places = ("dof", "actuator", "class")
-    per_step = False  # per instance: only a level that changes, pre-sliding, or a free platen's DOF on a pre-sliding table
-    SPEC = {"force_n": ("N", 0.0, INF, None),
-            "coefficient": ("1 (load) or N/m (displacement)", 0.0, INF, 0.0),
-            "presliding_m": ("m", 0.0, INF, 0.0)}
+    per_step = (
+        False  # per instance: only a level that changes, pre-sliding, or a free platen's DOF on a pre-sliding table
+    )
+    SPEC = {
+        "force_n": ("N", 0.0, INF, None),
+        "coefficient": ("1 (load) or N/m (displacement)", 0.0, INF, 0.0),
+        "presliding_m": ("m", 0.0, INF, 0.0),
+    }
     OPTIONS = {"grows_with": "none", "linear_below_m_s": 1e-3}  # assumed: regularisation below 1 mm/s
 
     def __init__(self, entry, *, source="effect"):
@@ -313,8 +328,11 @@ class CoulombFriction(StepForce):
         1 (load) or N/m (displacement)."""
         g = self.options["grows_with"]
         unit = {"load": "1", "displacement": "N/m"}.get(g)
-        return [p if p.name != "coefficient" else replace(p, unit=unit)
-                for p in super().parameters() if p.name != "coefficient" or unit]
+        return [
+            p if p.name != "coefficient" else replace(p, unit=unit)
+            for p in super().parameters()
+            if p.name != "coefficient" or unit
+        ]
 
     def _needs_step(self, desc) -> bool:
         v = self.values
@@ -333,13 +351,18 @@ class CoulombFriction(StepForce):
         super().edit_spec(spec, desc)
         self.per_step = self._needs_step(desc)
         self._table_zss = 0.0
-        if (not self.per_step and self._place.free_dof is not None and self.values["presliding_m"] == 0
-                and desc.friction_model == "presliding"):
+        if (
+            not self.per_step
+            and self._place.free_dof is not None
+            and self.values["presliding_m"] == 0
+            and desc.friction_model == "presliding"
+        ):
             # a table whose joint friction is pre-sliding: a free platen's DOF friction too
             # (its tendon has no place in the loop's pre-sliding law), with the table's travel
             self.per_step, self._table_zss = True, float(desc.friction_presliding_m)
-        self._constant_load = not self.per_step and self.options["grows_with"] == "load" \
-            and self.values["coefficient"] > 0
+        self._constant_load = (
+            not self.per_step and self.options["grows_with"] == "load" and self.values["coefficient"] > 0
+        )
         if not self.per_step:
             level = self.values["force_n"]
             if self._constant_load:
@@ -413,8 +436,10 @@ class CoulombFriction(StepForce):
 
 def _platen_weight(spec, desc) -> float:
     """Weight (N) of the platen and every body on it, from the spec being built."""
+
     def mass(b):
         return float(b.mass) + sum(mass(c) for c in b.bodies)
+
     return mass(spec.body("platen")) * desc.gravity_m_s2
 
 
@@ -432,19 +457,23 @@ class AddedMass(Effect):
 
     type = "added_mass"
     places = ("payload", "dof", "actuator", "class")
-    SPEC = {"mass_kg": ("kg", 0.0, INF, None),
-            "inertia_x_kg_m2": ("kg m^2", 0.0, INF, 0.0),
-            "inertia_y_kg_m2": ("kg m^2", 0.0, INF, 0.0),
-            "inertia_z_kg_m2": ("kg m^2", 0.0, INF, 0.0)}
+    SPEC = {
+        "mass_kg": ("kg", 0.0, INF, None),
+        "inertia_x_kg_m2": ("kg m^2", 0.0, INF, 0.0),
+        "inertia_y_kg_m2": ("kg m^2", 0.0, INF, 0.0),
+        "inertia_z_kg_m2": ("kg m^2", 0.0, INF, 0.0),
+    }
     OPTIONS = {"position_m": None}
 
     def __init__(self, entry, *, source="effect"):
         super().__init__(entry, source=source)
         a, b, c = sorted(self.values[f"inertia_{k}_kg_m2"] for k in "xyz")
         if a + b < c * (1 - 1e-12):
-            raise ScenarioError(f"{source}: inertia_x/y/z_kg_m2 are not the principal moments of a body (the two "
-                                "smaller must sum to at least the largest); give all three, e.g. equal ones for a "
-                                "compact mass")
+            raise ScenarioError(
+                f"{source}: inertia_x/y/z_kg_m2 are not the principal moments of a body (the two "
+                "smaller must sum to at least the largest); give all three, e.g. equal ones for a "
+                "compact mass"
+            )
 
     def edit_spec(self, spec, desc):
         v = self.values
@@ -503,9 +532,11 @@ class PayloadMode(Effect):
 
     type = "payload_mode"
     places = ("dof",)
-    SPEC = {"frequency_hz": ("Hz", 1e-3, INF, None),
-            "mass_kg": ("kg", 1e-9, INF, None),
-            "damping_ratio": ("1", 0.0, 10.0, None)}
+    SPEC = {
+        "frequency_hz": ("Hz", 1e-3, INF, None),
+        "mass_kg": ("kg", 1e-9, INF, None),
+        "damping_ratio": ("1", 0.0, 10.0, None),
+    }
     OPTIONS = {"position_m": None}
 
     def edit_spec(self, spec, desc):
@@ -539,10 +570,12 @@ class FoundationMode(Effect):
 
     type = "foundation_mode"
     places = ("table",)
-    SPEC = {"frequency_hz": ("Hz", 1e-3, INF, None),
-            "frequency_z_hz": ("Hz", 0.0, INF, 0.0),
-            "mass_kg": ("kg", 1e-9, INF, None),
-            "damping_ratio": ("1", 0.0, 10.0, None)}
+    SPEC = {
+        "frequency_hz": ("Hz", 1e-3, INF, None),
+        "frequency_z_hz": ("Hz", 0.0, INF, 0.0),
+        "mass_kg": ("kg", 1e-9, INF, None),
+        "damping_ratio": ("1", 0.0, 10.0, None),
+    }
 
     def default_where(self):
         return "table"
@@ -567,8 +600,22 @@ class FoundationMode(Effect):
 
 _MOVED = "moved_"
 _EQ_KEYS = ("name", "type", "objtype", "name1", "name2", "data", "solref", "solimp", "active")
-_ACT_KEYS = ("name", "target", "trntype", "gear", "ctrllimited", "ctrlrange", "forcelimited", "forcerange",
-             "dyntype", "gaintype", "biastype", "dynprm", "gainprm", "biasprm")
+_ACT_KEYS = (
+    "name",
+    "target",
+    "trntype",
+    "gear",
+    "ctrllimited",
+    "ctrlrange",
+    "forcelimited",
+    "forcerange",
+    "dyntype",
+    "gaintype",
+    "biastype",
+    "dynprm",
+    "gainprm",
+    "biasprm",
+)
 
 
 def _copy(v):
@@ -592,8 +639,10 @@ def _make_foundation(spec, desc):
     # prefix that is taken off again); the copy brings the equalities and actuators that
     # name its bodies and joints, so the originals go
     if len(spec.tendons):
-        raise ScenarioError("foundation_mode must come before the effects that act on a DOF of a free platen "
-                            "(they make tendons); move its [[effect]] entry up")
+        raise ScenarioError(
+            "foundation_mode must come before the effects that act on a DOF of a free platen "
+            "(they make tendons); move its [[effect]] entry up"
+        )
     src = spec.copy()
     eqs = [{k: _copy(getattr(e, k)) for k in _EQ_KEYS} for e in spec.equalities]
     acts = [{k: _copy(getattr(a, k)) for k in _ACT_KEYS} for a in spec.actuators]
@@ -607,7 +656,7 @@ def _make_foundation(spec, desc):
         for k in ("name", "name1", "name2", "target"):
             v = getattr(el, k, None)
             if isinstance(v, str) and v.startswith(_MOVED):
-                setattr(el, k, v[len(_MOVED):])
+                setattr(el, k, v[len(_MOVED) :])
     # those the copy did not bring (they also name a body that stayed): made again
     have = {e.name for e in spec.equalities} | {"act:" + a.name for a in spec.actuators}
     for saved, add, tag in ((eqs, spec.add_equality, ""), (acts, spec.add_actuator, "act:")):
@@ -649,8 +698,7 @@ def _payload_bodies(spec) -> list:
     out = [b for b in plat.bodies if b.name in names]
     if out:
         return out
-    return [b for b in plat.find_all(mujoco.mjtObj.mjOBJ_BODY)
-            if b.name.startswith(("floor", "segment"))]
+    return [b for b in plat.find_all(mujoco.mjtObj.mjOBJ_BODY) if b.name.startswith(("floor", "segment"))]
 
 
 def _payload_body(spec):
@@ -700,5 +748,18 @@ class PlatenPowerDamping(PowerDamping):
         super().__init__(_legacy(entry, source), source=source)
 
 
-__all__ = ["AddedMass", "CgOffset", "CoulombFriction", "FoundationMode", "PayloadMode", "Place",
-           "PowerDamping", "Spring", "StepForce", "ViscousDamping", "dahl_step", "dof_jacobian", "dof_tendon"]
+__all__ = [
+    "AddedMass",
+    "CgOffset",
+    "CoulombFriction",
+    "FoundationMode",
+    "PayloadMode",
+    "Place",
+    "PowerDamping",
+    "Spring",
+    "StepForce",
+    "ViscousDamping",
+    "dahl_step",
+    "dof_jacobian",
+    "dof_tendon",
+]

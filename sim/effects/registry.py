@@ -47,8 +47,10 @@ def load_user_effect(kind: str, folder: Path, source: str = "effect") -> type[Ef
     file, _, cls_name = kind.rpartition(":")
     path = (folder / file).resolve()
     if not path.is_file():
-        raise ScenarioError(f"{source}: type = '{kind}': no file {path}; give the path of a .py file "
-                            "relative to the description, then ':' and the class name")
+        raise ScenarioError(
+            f"{source}: type = '{kind}': no file {path}; give the path of a .py file "
+            "relative to the description, then ':' and the class name"
+        )
     tag = hashlib.sha1(str(path).encode()).hexdigest()[:10]
     name = f"shaketable_user_effects_{tag}"
     try:
@@ -59,14 +61,18 @@ def load_user_effect(kind: str, folder: Path, source: str = "effect") -> type[Ef
     except Exception as e:  # noqa: BLE001 - any failure of the user's file is a user error
         sys.modules.pop(name, None)
         msg = str(e).splitlines()[0] if str(e) else ""
-        raise ScenarioError(f"{source}: type = '{kind}': {path.name} does not load "
-                            f"({type(e).__name__}: {msg}); fix the file") from None
+        raise ScenarioError(
+            f"{source}: type = '{kind}': {path.name} does not load ({type(e).__name__}: {msg}); fix the file"
+        ) from None
     cls = getattr(module, cls_name, None)
     if not (isinstance(cls, type) and issubclass(cls, Effect)):
         have = [n for n, v in vars(module).items() if isinstance(v, type) and issubclass(v, Effect) and v is not Effect]
         close = difflib.get_close_matches(cls_name, have, n=1)
-        hint = (f" (did you mean '{close[0]}'?)" if close else f"; its Effect classes: {', '.join(have)}") if have \
+        hint = (
+            (f" (did you mean '{close[0]}'?)" if close else f"; its Effect classes: {', '.join(have)}")
+            if have
             else "; it defines no subclass of sim.effects.Effect"
+        )
         raise ScenarioError(f"{source}: type = '{kind}': '{cls_name}' in {path.name} is not an Effect{hint}")
     # registered as a subclass whose type is the entry's string, so that Effect.entry()
     # writes back a type that loads again (the user's class itself is left as it is)
@@ -82,10 +88,18 @@ def catalogue() -> list[dict]:
     for kind in known():
         cls = EFFECTS[kind]
         doc = (cls.__doc__ or "").strip().split("\n\n")[0]
-        out.append({"type": kind, "places": list(cls.places), "per_step": bool(cls.per_step),
-                    "parameters": {k: {"unit": u, "lower": lo, "upper": hi, "default": d}
-                                   for k, (u, lo, hi, d) in cls.SPEC.items()},
-                    "settings": dict(cls.OPTIONS), "doc": " ".join(doc.split())})
+        out.append(
+            {
+                "type": kind,
+                "places": list(cls.places),
+                "per_step": bool(cls.per_step),
+                "parameters": {
+                    k: {"unit": u, "lower": lo, "upper": hi, "default": d} for k, (u, lo, hi, d) in cls.SPEC.items()
+                },
+                "settings": dict(cls.OPTIONS),
+                "doc": " ".join(doc.split()),
+            }
+        )
     return out
 
 

@@ -36,9 +36,19 @@ from sim.signals import sensing
 
 #: the run-file channels a sensor effect can act on (sim.runs.runfile.CHANNELS; the
 #: effects layer sits below sim.runs, so the list is repeated and checked by a test)
-CHANNEL_NAMES = ("valve_command", "reference", "spool_position", "actuator_displacement", "actuator_force",
-                 "pressure_a", "pressure_b", "table_displacement", "table_velocity", "table_acceleration",
-                 "accelerometers")
+CHANNEL_NAMES = (
+    "valve_command",
+    "reference",
+    "spool_position",
+    "actuator_displacement",
+    "actuator_force",
+    "pressure_a",
+    "pressure_b",
+    "table_displacement",
+    "table_velocity",
+    "table_acceleration",
+    "accelerometers",
+)
 
 _PLACE = re.compile(r"^([a-z_]+)(?:\[(\d+)\])?$")
 
@@ -48,8 +58,10 @@ def parse_channel(where: str, source: str = "effect") -> tuple[str, int | None]:
     kind, _, rest = where.partition(":")
     m = _PLACE.match(rest)
     if kind != "channel" or not m or m.group(1) not in CHANNEL_NAMES:
-        raise ScenarioError(f"{source}: where = '{where}' is not a channel; use 'channel:<name>' or "
-                            f"'channel:<name>[<column>]' with a name among {', '.join(CHANNEL_NAMES)}")
+        raise ScenarioError(
+            f"{source}: where = '{where}' is not a channel; use 'channel:<name>' or "
+            f"'channel:<name>[<column>]' with a name among {', '.join(CHANNEL_NAMES)}"
+        )
     return m.group(1), None if m.group(2) is None else int(m.group(2))
 
 
@@ -74,8 +86,10 @@ class _Sensor(Effect):
             out[self.channel] = self.transform(np.asarray(t), x)
             return out
         if x.ndim != 2 or not 0 <= self.column < x.shape[1]:
-            raise ScenarioError(f"{self.source}: where = '{self.where}': channel {self.channel} has "
-                                f"{x.shape[1] if x.ndim == 2 else 1} column(s) (0-based index)")
+            raise ScenarioError(
+                f"{self.source}: where = '{self.where}': channel {self.channel} has "
+                f"{x.shape[1] if x.ndim == 2 else 1} column(s) (0-based index)"
+            )
         y = x.copy()
         y[:, self.column] = self.transform(np.asarray(t), x[:, self.column])
         out[self.channel] = y
@@ -127,8 +141,10 @@ class SensorLowpass(_Sensor):
             raise ScenarioError(f"{self.source}: order = {order!r}; use a whole number 1..12")
         fs = 1.0 / _dt(t)
         if not self.values["cutoff_hz"] < 0.5 * fs:
-            raise ScenarioError(f"{self.source}: cutoff_hz = {self.values['cutoff_hz']:g} Hz is not below the "
-                                f"run's Nyquist frequency {0.5 * fs:g} Hz; use a lower cutoff")
+            raise ScenarioError(
+                f"{self.source}: cutoff_hz = {self.values['cutoff_hz']:g} Hz is not below the "
+                f"run's Nyquist frequency {0.5 * fs:g} Hz; use a lower cutoff"
+            )
         return sensing.lowpass(x, self.values["cutoff_hz"], order, fs)
 
 
@@ -147,5 +163,12 @@ class SensorNoise(_Sensor):
         return x + self.values["rms"] * rng.standard_normal(x.shape)
 
 
-__all__ = ["CHANNEL_NAMES", "SensorDelay", "SensorGain", "SensorLowpass", "SensorNoise", "SensorOffset",
-           "parse_channel"]
+__all__ = [
+    "CHANNEL_NAMES",
+    "SensorDelay",
+    "SensorGain",
+    "SensorLowpass",
+    "SensorNoise",
+    "SensorOffset",
+    "parse_channel",
+]

@@ -68,8 +68,16 @@ def table_parameters(desc: TableDescription) -> list[Parameter]:
     for cname, c in (raw.get("actuator_class") or {}).items():
         for key, (unit, lo, hi) in _CLASS_KEYS.items():
             if key in c:
-                out.append(Parameter(f"actuator_class.{cname}.{key}", float(c[key]), unit, lo(c, ps), hi(c, ps),
-                                     where=f"class:{cname}"))
+                out.append(
+                    Parameter(
+                        f"actuator_class.{cname}.{key}",
+                        float(c[key]),
+                        unit,
+                        lo(c, ps),
+                        hi(c, ps),
+                        where=f"class:{cname}",
+                    )
+                )
     for (sec, key), (unit, lo, hi, where) in _BOUNDS.items():
         s = raw.get(sec)
         if not isinstance(s, dict) or key not in s:
@@ -87,8 +95,12 @@ def table_parameters(desc: TableDescription) -> list[Parameter]:
         # the supports' friction is at most the friction of a working seal: 10 % of the load it carries (assumed)
         cap = float(raw["supports"].get("capacity_kg", INF)) * desc.gravity_m_s2
         n = max(len(raw["supports"].get("positions_m", [])), 1)
-        out = [p if not p.name.endswith(("piston_friction_n", "shoe_friction_n")) else
-               Parameter(p.name, p.value, p.unit, p.lower, 0.1 * cap / n, p.where) for p in out]
+        out = [
+            p
+            if not p.name.endswith(("piston_friction_n", "shoe_friction_n"))
+            else Parameter(p.name, p.value, p.unit, p.lower, 0.1 * cap / n, p.where)
+            for p in out
+        ]
     folder = description_folder(desc)
     for i, e in enumerate(desc.effects):
         src = f"{desc.source}: effect[{i}]"
@@ -96,8 +108,10 @@ def table_parameters(desc: TableDescription) -> list[Parameter]:
         if kind not in EFFECTS and ".py:" in kind:
             load_user_effect(kind, folder, src)
         eff = create(e, source=src)
-        out += [Parameter(f"effect[{i}].{p.name}", p.value, p.unit, p.lower, p.upper, p.where, p.scale)
-                for p in eff.parameters()]
+        out += [
+            Parameter(f"effect[{i}].{p.name}", p.value, p.unit, p.lower, p.upper, p.where, p.scale)
+            for p in eff.parameters()
+        ]
     return out
 
 
@@ -117,7 +131,9 @@ def with_parameter_values(desc: TableDescription, values: dict[str, float]) -> T
         p = params[name]
         v = float(v)
         if not (math.isfinite(v) and p.lower <= v <= p.upper):
-            raise ScenarioError(f"{desc.source}: {name} = {v:g} {p.unit} is outside its bounds [{p.lower:g}, {p.upper:g}]")
+            raise ScenarioError(
+                f"{desc.source}: {name} = {v:g} {p.unit} is outside its bounds [{p.lower:g}, {p.upper:g}]"
+            )
         m = _PATH.match(name)
         if m.group(1) is not None:
             raw["effect"][int(m.group(1))][m.group(2)] = v

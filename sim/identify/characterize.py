@@ -69,21 +69,24 @@ RANDOM_BAND_HZ = (0.5, 50.0)  # Tables 1 and 2
 #: Servovalve test (section A): random displacement control, RMS 0.01 m, 0.5-125 Hz.
 VALVE_RMS_M = 0.01
 VALVE_BAND_HZ = (0.5, 125.0)
-FIRST_ORDER_BAND_HZ = (0.5, 20.0)   # paper: first-order phase good to ~20 Hz
+FIRST_ORDER_BAND_HZ = (0.5, 20.0)  # paper: first-order phase good to ~20 Hz
 SECOND_ORDER_BAND_HZ = (0.5, 50.0)  # paper: second-order phase good to 50 Hz
 #: Friction tests: 0.05 Hz tapered sine, amplitudes per DOF (m, rad).
 FRICTION_HZ = 0.05
 FRICTION_AMPLITUDE = {"x": 0.200, "y": 0.150, "z": 0.085, "rx": 1 * DEG, "ry": 1 * DEG, "rz": 1 * DEG}
 #: Harmonic validation: 0.25 Hz, 100 mm x, 100 mm y, 50 mm z, 90 deg lags x->y->z.
-HARMONIC = {"frequency_hz": 0.25, "amplitude": {"x": 0.10, "y": 0.10, "z": 0.05},
-            "phase_rad": {"x": 0.0, "y": -math.pi / 2, "z": -math.pi}}
+HARMONIC = {
+    "frequency_hz": 0.25,
+    "amplitude": {"x": 0.10, "y": 0.10, "z": 0.05},
+    "phase_rad": {"x": 0.0, "y": -math.pi / 2, "z": -math.pi},
+}
 
 # ---------------------------------------------------------------- evaluation choices
 OIL_PEAK_BAND_HZ = (8.0, 48.0)  # search band of the oil-column peak
-MASS_BAND_HZ = (10.0, 40.0)     # above the friction-dominated low band, below the band edge
-ACCEPT_OIL = 0.03               # brief: oil columns within 3 %
-ACCEPT_MASS = 0.02              # effective masses within 2 %
-ACCEPT_VALVE = 0.03             # servovalve fits within 3 %
+MASS_BAND_HZ = (10.0, 40.0)  # above the friction-dominated low band, below the band edge
+ACCEPT_OIL = 0.03  # brief: oil columns within 3 %
+ACCEPT_MASS = 0.02  # effective masses within 2 %
+ACCEPT_VALVE = 0.03  # servovalve fits within 3 %
 
 
 @dataclass(frozen=True)
@@ -112,8 +115,9 @@ def published(desc) -> Published | None:
     keys = {f.name for f in dataclasses.fields(Published)}
     unknown = sorted(set(pub) - keys)
     if unknown:
-        raise CharacterizeError(f"{desc.source}: [published] has unknown key '{unknown[0]}'; "
-                                f"known: {', '.join(sorted(keys))}")
+        raise CharacterizeError(
+            f"{desc.source}: [published] has unknown key '{unknown[0]}'; known: {', '.join(sorted(keys))}"
+        )
     return Published(**pub)
 
 
@@ -137,10 +141,12 @@ class Durations:
         return (2 * self.friction_taper_cycles + self.friction_plateau_cycles) / FRICTION_HZ
 
 
-FULL = Durations(valve_s=64.0, random_s=64.0, friction_taper_cycles=1.0, friction_plateau_cycles=1, nperseg=4096,
-                 harmonic=True)
-QUICK = Durations(valve_s=16.0, random_s=24.0, friction_taper_cycles=0.5, friction_plateau_cycles=1, nperseg=2048,
-                  harmonic=False)
+FULL = Durations(
+    valve_s=64.0, random_s=64.0, friction_taper_cycles=1.0, friction_plateau_cycles=1, nperseg=4096, harmonic=True
+)
+QUICK = Durations(
+    valve_s=16.0, random_s=24.0, friction_taper_cycles=0.5, friction_plateau_cycles=1, nperseg=2048, harmonic=False
+)
 
 
 # ---------------------------------------------------------------- model helpers
@@ -192,7 +198,7 @@ def linear_oil_columns(desc, payload=None) -> dict:
     J = jacobian(desc)
     Va = hp.dead_volume_a_m3 + hp.area_a_m2 * hp.half_stroke_m
     Vb = hp.dead_volume_b_m3 + hp.area_b_m2 * hp.half_stroke_m
-    k = hp.bulk_modulus_pa * (hp.area_a_m2 ** 2 / Va + hp.area_b_m2 ** 2 / Vb)
+    k = hp.bulk_modulus_pa * (hp.area_a_m2**2 / Va + hp.area_b_m2**2 / Vb)
     K = J.T @ np.diag(k) @ J
     M = build_model(desc, payload).effective_mass_matrix()
     w2, phi = scipy.linalg.eigh(K, M)
@@ -269,30 +275,59 @@ def run_test(job: dict) -> dict:
     if kind in ("random", "valve"):
         i = DOFS.index(dof)
         if kind == "random":
-            m = white_noise(duration_s=job["duration_s"], sample_rate_hz=fs, band_hz=RANDOM_BAND_HZ,
-                            seed=(job["seed"], i), rms_acceleration=job["rms"])
+            m = white_noise(
+                duration_s=job["duration_s"],
+                sample_rate_hz=fs,
+                band_hz=RANDOM_BAND_HZ,
+                seed=(job["seed"], i),
+                rms_acceleration=job["rms"],
+            )
         else:
-            m = white_noise(duration_s=job["duration_s"], sample_rate_hz=fs, band_hz=VALVE_BAND_HZ,
-                            seed=(job["seed"], i), rms_displacement=VALVE_RMS_M)
+            m = white_noise(
+                duration_s=job["duration_s"],
+                sample_rate_hz=fs,
+                band_hz=VALVE_BAND_HZ,
+                seed=(job["seed"], i),
+                rms_displacement=VALVE_RMS_M,
+            )
         motions = {dof: m}
     elif kind == "friction":
         d = job["durations"]
-        m = tapered_sine(amplitude=FRICTION_AMPLITUDE[dof], frequency_hz=FRICTION_HZ, duration_s=d.friction_s,
-                         sample_rate_hz=fs, taper_cycles=d.friction_taper_cycles)
+        m = tapered_sine(
+            amplitude=FRICTION_AMPLITUDE[dof],
+            frequency_hz=FRICTION_HZ,
+            duration_s=d.friction_s,
+            sample_rate_hz=fs,
+            taper_cycles=d.friction_taper_cycles,
+        )
         motions = {dof: m}
     elif kind == "harmonic":
         dur = 24.0
-        motions = {k: tapered_sine(amplitude=a, frequency_hz=HARMONIC["frequency_hz"], duration_s=dur,
-                                   sample_rate_hz=fs, taper_cycles=1.0, phase_rad=HARMONIC["phase_rad"][k])
-                   for k, a in HARMONIC["amplitude"].items()}
+        motions = {
+            k: tapered_sine(
+                amplitude=a,
+                frequency_hz=HARMONIC["frequency_hz"],
+                duration_s=dur,
+                sample_rate_hz=fs,
+                taper_cycles=1.0,
+                phase_rad=HARMONIC["phase_rad"][k],
+            )
+            for k, a in HARMONIC["amplitude"].items()
+        }
     else:  # pragma: no cover
         raise ValueError(kind)
     n = max(len(m.t) for m in motions.values())
     ref = _reference(motions, n, fs)
     sim.reset()
     res = sim.run(reference=ref)
-    out = {"kind": kind, "dof": dof, "level": job.get("level"), "sim_s": res.sim_s,
-           "wall_s": time.perf_counter() - t0, "incomplete": res.incomplete_reason}
+    out = {
+        "kind": kind,
+        "dof": dof,
+        "level": job.get("level"),
+        "sim_s": res.sim_s,
+        "wall_s": time.perf_counter() - t0,
+        "incomplete": res.incomplete_reason,
+    }
     if res.incomplete_reason:
         return out
     ch = res.channels
@@ -326,8 +361,13 @@ def run_test(job: dict) -> dict:
         out["oil"] = _curve(fo, 60.0)
         out["mass"] = _curve(fm, 60.0)
         pk = E.peak_pick(fo.f, fo.H, OIL_PEAK_BAND_HZ)
-        out["peak"] = {"f_hz": pk.f_hz, "zeta": pk.zeta, "magnitude": pk.magnitude, "f1_hz": pk.f1_hz,
-                       "f2_hz": pk.f2_hz}
+        out["peak"] = {
+            "f_hz": pk.f_hz,
+            "zeta": pk.zeta,
+            "magnitude": pk.magnitude,
+            "f1_hz": pk.f1_hz,
+            "f2_hz": pk.f2_hz,
+        }
         # Recorder alignment: the acceleration of tick k is produced by the force half-way
         # between the force samples k and k+1 (the hydraulic force is updated before each
         # physics step), i.e. the force record lags by half a tick; exp(+j pi f/fs) undoes
@@ -355,24 +395,41 @@ def run_test(job: dict) -> dict:
         from sim.assess.metrics import nrmse
 
         achieved = ch["table_displacement"]
-        out["nrmse_closed_loop"] = {k: nrmse(achieved[:, DOFS.index(k)], ref.d[:, DOFS.index(k)])
-                                    for k in HARMONIC["amplitude"]}
+        out["nrmse_closed_loop"] = {
+            k: nrmse(achieved[:, DOFS.index(k)], ref.d[:, DOFS.index(k)]) for k in HARMONIC["amplitude"]
+        }
         out["peak_mm"] = {k: float(np.max(np.abs(achieved[:, DOFS.index(k)]))) * 1e3 for k in HARMONIC["amplitude"]}
         sim.reset()
         rep = sim.run(valve_command=ch["valve_command"])
         ok = rep.incomplete_reason is None
         out["nrmse_replay_vs_closed_loop"] = (
-            {k: nrmse(rep.channels["table_displacement"][:, DOFS.index(k)], achieved[:, DOFS.index(k)])
-             for k in HARMONIC["amplitude"]} if ok else None)
+            {
+                k: nrmse(rep.channels["table_displacement"][:, DOFS.index(k)], achieved[:, DOFS.index(k)])
+                for k in HARMONIC["amplitude"]
+            }
+            if ok
+            else None
+        )
         step = 8
-        out["trace"] = {"t": res.t[::step], "ref": ref.d[::step, :3], "closed": achieved[::step, :3],
-                        "replay": rep.channels["table_displacement"][::step, :3] if ok else None}
+        out["trace"] = {
+            "t": res.t[::step],
+            "ref": ref.d[::step, :3],
+            "closed": achieved[::step, :3],
+            "replay": rep.channels["table_displacement"][::step, :3] if ok else None,
+        }
     return out
 
 
 # ---------------------------------------------------------------- programme
-def programme_jobs(desc, payload_name, dur: Durations, *, parts=("valve", "oil", "mass", "friction", "harmonic"),
-                   friction_dofs=DOFS, seed: int = 2024) -> list[dict]:
+def programme_jobs(
+    desc,
+    payload_name,
+    dur: Durations,
+    *,
+    parts=("valve", "oil", "mass", "friction", "harmonic"),
+    friction_dofs=DOFS,
+    seed: int = 2024,
+) -> list[dict]:
     base = {"raw": desc.raw, "src": desc.source, "payload": payload_name, "durations": dur, "seed": seed}
     jobs = []
     if "valve" in parts:
@@ -385,8 +442,7 @@ def programme_jobs(desc, payload_name, dur: Durations, *, parts=("valve", "oil",
     for d in DOFS:
         for lv in MASS_LEVELS:
             if (d, lv) in want:
-                jobs.append(dict(base, kind="random", dof=d, level=lv, rms=MASS_LEVELS[lv][d],
-                                 duration_s=dur.random_s))
+                jobs.append(dict(base, kind="random", dof=d, level=lv, rms=MASS_LEVELS[lv][d], duration_s=dur.random_s))
     if "friction" in parts:
         jobs += [dict(base, kind="friction", dof=d) for d in friction_dofs]
     if "harmonic" in parts and dur.harmonic:
@@ -422,12 +478,17 @@ def summarize(results: list[dict], desc, payload) -> dict:
     s["oil_column_damping_ratio"] = damp
     lev = {lv: {d: rnd[(d, lv)]["effective_mass"] for d in DOFS if (d, lv) in rnd} for lv in MASS_LEVELS}
     s["effective_mass_levels"] = lev
-    s["effective_mass_abs_levels"] = {lv: {d: rnd[(d, lv)]["effective_mass_abs"] for d in DOFS if (d, lv) in rnd}
-                                      for lv in MASS_LEVELS}
-    s["effective_mass"] = {d: float(np.mean([lev[lv][d] for lv in MASS_LEVELS if d in lev[lv]]))
-                           for d in DOFS if any(d in lev[lv] for lv in MASS_LEVELS)}
-    s["random_tracking_rms"] = {f"{d}_{lv}": {"reference": r["reference_rms"], "achieved": r["achieved_rms"]}
-                                for (d, lv), r in rnd.items()}
+    s["effective_mass_abs_levels"] = {
+        lv: {d: rnd[(d, lv)]["effective_mass_abs"] for d in DOFS if (d, lv) in rnd} for lv in MASS_LEVELS
+    }
+    s["effective_mass"] = {
+        d: float(np.mean([lev[lv][d] for lv in MASS_LEVELS if d in lev[lv]]))
+        for d in DOFS
+        if any(d in lev[lv] for lv in MASS_LEVELS)
+    }
+    s["random_tracking_rms"] = {
+        f"{d}_{lv}": {"reference": r["reference_rms"], "achieved": r["achieved_rms"]} for (d, lv), r in rnd.items()
+    }
     vr = [r for r in results if r["kind"] == "valve" and not r.get("incomplete")]
     if vr:
         s["servovalve"] = {
@@ -439,10 +500,17 @@ def summarize(results: list[dict], desc, payload) -> dict:
             "K_first": float(np.mean([r["first"]["K"] for r in vr])),
             "K_low": float(np.mean([r["gain_below_15hz"] for r in vr])),
             "K_second": float(np.mean([r["second"]["K"] for r in vr])),
-            "per_axis": {r["dof"]: {"tau_s": r["first"]["tau_s"], "tau_s_magnitude_fit": r["first_magnitude"]["tau_s"],
-                                    "wn_hz": r["second"]["wn_hz"],
-                                    "zeta": r["second"]["zeta"], "K_first": r["first"]["K"],
-                                    "K_second": r["second"]["K"]} for r in vr},
+            "per_axis": {
+                r["dof"]: {
+                    "tau_s": r["first"]["tau_s"],
+                    "tau_s_magnitude_fit": r["first_magnitude"]["tau_s"],
+                    "wn_hz": r["second"]["wn_hz"],
+                    "zeta": r["second"]["zeta"],
+                    "K_first": r["first"]["K"],
+                    "K_second": r["second"]["K"],
+                }
+                for r in vr
+            },
         }
     fr = [r for r in results if r["kind"] == "friction" and not r.get("incomplete")]
     if fr:
@@ -484,17 +552,40 @@ def compare(summary: dict) -> list[dict]:
         if not bare:  # with a payload the difference is the payload's effect, not an error
             group, tol = group.replace(")", ", bare table)") if ")" in group else group + " (bare table)", None
         err = model / paper - 1.0
-        rows.append({"quantity": group, "dof": key, "paper": paper * scale, "model": model * scale, "unit": unit,
-                     "error": err, "within": None if tol is None else bool(abs(err) <= tol), "tolerance": tol})
+        rows.append(
+            {
+                "quantity": group,
+                "dof": key,
+                "paper": paper * scale,
+                "model": model * scale,
+                "unit": unit,
+                "error": err,
+                "within": None if tol is None else bool(abs(err) <= tol),
+                "tolerance": tol,
+            }
+        )
 
     for d in DOFS if pub.oil_column_hz else ():
-        add(f"oil column ({pub.label('oil_column_hz')})", d, pub.oil_column_hz.get(d),
-            summary["oil_column_hz"].get(d), "Hz", tol=ACCEPT_OIL)
+        add(
+            f"oil column ({pub.label('oil_column_hz')})",
+            d,
+            pub.oil_column_hz.get(d),
+            summary["oil_column_hz"].get(d),
+            "Hz",
+            tol=ACCEPT_OIL,
+        )
     for lv in MASS_LEVELS if pub.effective_mass else ():
         for d in DOFS:
             unit = "t" if d in ("x", "y", "z") else "t m^2"
-            add(f"effective mass {lv} ({pub.label('effective_mass')})", d, pub.effective_mass.get(d),
-                summary["effective_mass_levels"].get(lv, {}).get(d), unit, scale=1e-3, tol=ACCEPT_MASS)
+            add(
+                f"effective mass {lv} ({pub.label('effective_mass')})",
+                d,
+                pub.effective_mass.get(d),
+                summary["effective_mass_levels"].get(lv, {}).get(d),
+                unit,
+                scale=1e-3,
+                tol=ACCEPT_MASS,
+            )
     sv = summary.get("servovalve")
     valve = pub.servovalve
     if sv and valve:
@@ -508,8 +599,9 @@ def compare(summary: dict) -> list[dict]:
     return rows
 
 
-def characterize(table: str, payload: str | None = None, *, quick: bool = False, workers: int | None = None,
-                 progress=None) -> dict:
+def characterize(
+    table: str, payload: str | None = None, *, quick: bool = False, workers: int | None = None, progress=None
+) -> dict:
     """Run the programme on the model; returns the summary (JSON-ready figures, the rows
     against the description's ``[published]`` values under ``comparison``) with the raw
     test results under ``_results`` (for the figures of

@@ -93,34 +93,73 @@ class Identified:
         or friction), saying what it means: the model does not describe these records
         and the other parameters absorb what it misses."""
         out = []
-        what = {"M_e_kg": ("M_e", "mass", "kg", "the acceleration term is fitting something else (a force "
-                           "channel's sign or scale, a time shift between force and motion, a filter)"),
-                "K_e_N_per_m": ("K_e", "stiffness", "N/m", "no restoring force is seen: the displacement drifts "
-                                "or the friction (or a flexible specimen's reaction) is taken for a spring; give tests that "
-                                "return to mid-stroke, on the bare table"),
-                "C_e": ("C_e", "damping", "N (s/m)^alpha", "the force does less than no dissipation: friction "
-                        "F_mu is over-fitted against it, or the force lags the motion (sensor filter); "
-                        "constrain it with --ce, or try another alpha"),
-                "F_mu_N": ("F_mu", "friction", "N", "the force does negative dry-friction work: the damping "
-                           "term takes more than all of it, or velocity and force are misaligned")}
+        what = {
+            "M_e_kg": (
+                "M_e",
+                "mass",
+                "kg",
+                "the acceleration term is fitting something else (a force "
+                "channel's sign or scale, a time shift between force and motion, a filter)",
+            ),
+            "K_e_N_per_m": (
+                "K_e",
+                "stiffness",
+                "N/m",
+                "no restoring force is seen: the displacement drifts "
+                "or the friction (or a flexible specimen's reaction) is taken for a spring; give tests that "
+                "return to mid-stroke, on the bare table",
+            ),
+            "C_e": (
+                "C_e",
+                "damping",
+                "N (s/m)^alpha",
+                "the force does less than no dissipation: friction "
+                "F_mu is over-fitted against it, or the force lags the motion (sensor filter); "
+                "constrain it with --ce, or try another alpha",
+            ),
+            "F_mu_N": (
+                "F_mu",
+                "friction",
+                "N",
+                "the force does negative dry-friction work: the damping "
+                "term takes more than all of it, or velocity and force are misaligned",
+            ),
+        }
         for key, (sym, kind, unit, why) in what.items():
             v = getattr(self, key)
             if key == "C_e" and self.constrained:
                 continue
             if v < 0:
-                out.append(f"{sym} = {v:.4g} {unit} is negative: an unphysical {kind}. It means {why}; the other "
-                           "parameters are then not the table's either (a flexible specimen's own dynamics are in the force: "
-                           "identify the bare table)")
+                out.append(
+                    f"{sym} = {v:.4g} {unit} is negative: an unphysical {kind}. It means {why}; the other "
+                    "parameters are then not the table's either (a flexible specimen's own dynamics are in the force: "
+                    "identify the bare table)"
+                )
         return out
 
     def as_dict(self) -> dict:
-        return {"M_e_kg": self.M_e_kg, "K_e_N_per_m": self.K_e_N_per_m, "C_e": self.C_e, "F_mu_N": self.F_mu_N,
-                "alpha": self.alpha, "error": self.error, "constrained": self.constrained, "weights": self.weights,
-                "per_test_error": self.per_test_error, "warnings": self.warnings()}
+        return {
+            "M_e_kg": self.M_e_kg,
+            "K_e_N_per_m": self.K_e_N_per_m,
+            "C_e": self.C_e,
+            "F_mu_N": self.F_mu_N,
+            "alpha": self.alpha,
+            "error": self.error,
+            "constrained": self.constrained,
+            "weights": self.weights,
+            "per_test_error": self.per_test_error,
+            "warnings": self.warnings(),
+        }
 
 
-def prepare(rec: Record, *, trim: float | None = 0.01, accel_lowpass_hz: float | None = None,
-            deadband_m_s: float | None = None, order: int = 4) -> Record:
+def prepare(
+    rec: Record,
+    *,
+    trim: float | None = 0.01,
+    accel_lowpass_hz: float | None = None,
+    deadband_m_s: float | None = None,
+    order: int = 4,
+) -> Record:
     """Condition a record for the least squares.
 
     ``trim``: fit only the samples from the first to the last one where |u'| exceeds that
@@ -165,8 +204,8 @@ def prepare(rec: Record, *, trim: float | None = 0.01, accel_lowpass_hz: float |
         vmax = np.max(np.abs(v))
         on = np.flatnonzero(np.abs(v) > trim * vmax)
         if len(on) >= 16:
-            keep[:on[0]] = False
-            keep[on[-1] + 1:] = False
+            keep[: on[0]] = False
+            keep[on[-1] + 1 :] = False
     if deadband_m_s:
         still = np.abs(v) < deadband_m_s
         if pre is not None:  # the filtered force carries a stuck sample's error for the filter's memory
@@ -175,8 +214,16 @@ def prepare(rec: Record, *, trim: float | None = 0.01, accel_lowpass_hz: float |
         if np.count_nonzero(keep & ~still) >= 16:
             keep &= ~still
     rows = None if keep.all() else np.flatnonzero(keep)
-    return Record(name=rec.name, dt=rec.dt, force=F, acc=np.asarray(rec.acc, float), vel=v,
-                  disp=np.asarray(rec.disp, float), prefilter=pre, rows=rows)
+    return Record(
+        name=rec.name,
+        dt=rec.dt,
+        force=F,
+        acc=np.asarray(rec.acc, float),
+        vel=v,
+        disp=np.asarray(rec.disp, float),
+        prefilter=pre,
+        rows=rows,
+    )
 
 
 def filter_memory_s(ba: tuple, dt: float, tol: float = 0.01) -> float:
@@ -207,23 +254,24 @@ def regressors(rec: Record, alpha: float) -> np.ndarray:
 def _weight(rec: Record, kind: str) -> float:
     v = rec.vel[rec.sl()]
     if kind == "force":
-        return 1.0 / (np.sum(rec.target ** 2) * rec.dt)
+        return 1.0 / (np.sum(rec.target**2) * rec.dt)
     if kind == "unit":
         return 1.0
     if kind == "velocity":
-        return 1.0 / (np.sum(v ** 2) * rec.dt)
+        return 1.0 / (np.sum(v**2) * rec.dt)
     if kind == "velocity_sqrt":
-        return 1.0 / math.sqrt(np.sum(v ** 2) * rec.dt)
+        return 1.0 / math.sqrt(np.sum(v**2) * rec.dt)
     raise ValueError(f"weights must be one of {', '.join(WEIGHTS)} (got {kind!r})")
 
 
-def identify(records: list[Record], alpha: float = 0.5, *, weights: str = "force",
-             ce_fixed: float | None = None) -> Identified:
+def identify(
+    records: list[Record], alpha: float = 0.5, *, weights: str = "force", ce_fixed: float | None = None
+) -> Identified:
     """Pooled least squares (Eqs. 2-11); ``ce_fixed`` constrains C_e to that value."""
     if not records:
         raise ValueError("no records to identify from")
     lam = np.array([_weight(r, weights) for r in records])
-    E = np.array([np.sum(r.target ** 2) * r.dt for r in records])
+    E = np.array([np.sum(r.target**2) * r.dt for r in records])
     lbar = lam / np.sum(lam * E)
     a = np.zeros((4, 4))
     b = np.zeros(4)
@@ -245,9 +293,17 @@ def identify(records: list[Record], alpha: float = 0.5, *, weights: str = "force
         res = np.sum((r.target - R @ y) ** 2) * r.dt
         per[r.name] = float(math.sqrt(res / e))
         tot += w * res
-    return Identified(M_e_kg=float(y[0]), K_e_N_per_m=float(y[1]), C_e=float(y[2]), F_mu_N=float(y[3]),
-                      alpha=float(alpha), error=float(math.sqrt(max(tot, 0.0))), constrained=ce_fixed is not None,
-                      weights=weights, per_test_error=per)
+    return Identified(
+        M_e_kg=float(y[0]),
+        K_e_N_per_m=float(y[1]),
+        C_e=float(y[2]),
+        F_mu_N=float(y[3]),
+        alpha=float(alpha),
+        error=float(math.sqrt(max(tot, 0.0))),
+        constrained=ce_fixed is not None,
+        weights=weights,
+        per_test_error=per,
+    )
 
 
 def scan_alpha(records, alphas=None, **kw) -> list[Identified]:
@@ -272,7 +328,9 @@ def record_from_run(path) -> Record:
     run = read_run(path, require=("actuator_force", "table_displacement", "table_acceleration"))
     name = run.name
     if "x" not in run.dofs:
-        raise RunFileError(f"{name}: has no 'x' DOF column; the ucsd-ls model identifies the x motion of a uni-axial table")
+        raise RunFileError(
+            f"{name}: has no 'x' DOF column; the ucsd-ls model identifies the x motion of a uni-axial table"
+        )
     _check_uniaxial(run)
     F = np.asarray(run.actuator_force, float).sum(axis=1)
     d = np.asarray(run.column("table_displacement", "x"), float)
@@ -281,12 +339,13 @@ def record_from_run(path) -> Record:
     else:  # a lab's record often has none: the displacement's central difference
         v = np.gradient(d, run.dt)
     a = np.asarray(run.column("table_acceleration", "x"), float)
-    for ch, arr in (("actuator_force", F), ("table_displacement", d), ("table_velocity", v),
-                    ("table_acceleration", a)):
+    for ch, arr in (("actuator_force", F), ("table_displacement", d), ("table_velocity", v), ("table_acceleration", a)):
         if not np.all(np.isfinite(arr)):
             k = int(np.argmin(np.isfinite(arr)))
-            raise RunFileError(f"{name}: channel {ch} has NaN/inf (first at sample {k}); the identification needs "
-                               "finite force, displacement, velocity and acceleration")
+            raise RunFileError(
+                f"{name}: channel {ch} has NaN/inf (first at sample {k}); the identification needs "
+                "finite force, displacement, velocity and acceleration"
+            )
     if len(F) < 16:
         raise RunFileError(f"{name}: only {len(F)} samples; the identification needs a test record")
     return Record(name=name, dt=run.dt, force=F, acc=a, vel=v, disp=d)
@@ -307,13 +366,17 @@ def _check_uniaxial(run) -> None:
     except MjcfError:  # a measured run of a table without a description here: judge by its data
         desc = None
     if desc is not None and list(desc.dofs) != ["x"]:
-        raise RunFileError(f"{run.name}: is a run of table '{desc.name}' with DOFs {', '.join(desc.dofs)}; "
-                           "ucsd-ls identifies a uni-axial table (one DOF, x): give runs of such a table")
+        raise RunFileError(
+            f"{run.name}: is a run of table '{desc.name}' with DOFs {', '.join(desc.dofs)}; "
+            "ucsd-ls identifies a uni-axial table (one DOF, x): give runs of such a table"
+        )
     td = np.asarray(run.table_displacement, float)
     moving = [d for j, d in enumerate(run.dofs) if d != "x" and np.any(td[:, j] != 0)]
     if moving:
-        raise RunFileError(f"{run.name}: the table moves in {', '.join(moving)} as well as x; ucsd-ls identifies "
-                           "a uni-axial table (one DOF, x): give runs of such a table")
+        raise RunFileError(
+            f"{run.name}: the table moves in {', '.join(moving)} as well as x; ucsd-ls identifies "
+            "a uni-axial table (one DOF, x): give runs of such a table"
+        )
 
 
 # ------------------------------------------------------------------ Table 8 (Eqs. 18-26)
@@ -342,8 +405,16 @@ def table8(v_m_s, M, K, C, F, alpha=0.5) -> list[dict]:
         fm = fe * math.sqrt(max(1 - 2 * xi * xi, 0.0))
         Am = 1.0 / (2 * xi * math.sqrt(1 - xi * xi))
         u = v / (2 * math.pi * fm)
-        out.append({"v_cm_s": 100 * v, "xi_pct": 100 * xi, "f_m_hz": fm, "A_m": Am, "u_max_cm": 100 * u,
-                    "F0_kN": K * u / Am / 1e3})
+        out.append(
+            {
+                "v_cm_s": 100 * v,
+                "xi_pct": 100 * xi,
+                "f_m_hz": fm,
+                "A_m": Am,
+                "u_max_cm": 100 * u,
+                "F0_kN": K * u / Am / 1e3,
+            }
+        )
     return out
 
 

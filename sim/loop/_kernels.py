@@ -4,7 +4,7 @@
 compiled call per physics step (:func:`pre_step`: read strokes, hydraulic step, write
 ``ctrl``) and one per controller tick (:func:`record`, :func:`controller_tick`). The
 plain-numpy versions in :mod:`sim.loop.simulation` and :mod:`sim.control.tvc` are the reference;
-``tests/test_loop.py`` checks that both paths give the same run.
+``tests/loop/test_loop.py`` checks that both paths give the same run.
 """
 
 from __future__ import annotations
@@ -35,8 +35,36 @@ def pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, he
 
 
 @numba.njit(**_OPTS)
-def pre_step_friction(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, head, P, G,
-                      qfa, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an):
+def pre_step_friction(
+    qpos,
+    qvel,
+    ctrl,
+    qa,
+    da,
+    ids,
+    cmd2,
+    x2,
+    v2,
+    X,
+    Y,
+    IC,
+    ICS,
+    buf,
+    head,
+    P,
+    G,
+    qfa,
+    fr_dofs,
+    fr_fc,
+    zfr,
+    zss,
+    dt,
+    aq,
+    ad,
+    aF0,
+    ac,
+    an,
+):
     """:func:`pre_step` plus the pre-sliding friction and the air springs' nonlinear part
     into ``qfrc_applied`` (zeroed first)."""
     pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, head, P, G)
@@ -66,8 +94,9 @@ def air_springs(qpos, qfrc_applied, aq, ad, F0, c, n):
 
 
 @numba.njit(**_OPTS)
-def record(k, qpos, qvel, Q, V, X, Y, i_spool, i_force, i_pa, i_pb, H_spool, H_force, H_pa, H_pb,
-           y_ps, y_gas, E_ps, E_gas):
+def record(
+    k, qpos, qvel, Q, V, X, Y, i_spool, i_force, i_pa, i_pb, H_spool, H_force, H_pa, H_pb, y_ps, y_gas, E_ps, E_gas
+):
     """Copy the raw state at tick ``k`` into the recorder's arrays."""
     Q[k, :] = qpos
     V[k, :] = qvel
@@ -99,21 +128,92 @@ def presliding_friction(qvel, qfrc_applied, dofs, fc, z, zss, dt):
 
 
 @numba.njit(**_OPTS)
-def tick_first_step(k, qpos, qvel, xmat, ctrl, qfa, Q, V, H_spool, H_force, H_pa, H_pb, H_cmd, E_ps, E_gas,
-                    s_ref_all, v_ref_all, vff_all, qa, da, ids, pd, pb, consts, J, Jp, N, gains, cstate, pl_hp,
-                    pl_prev, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac,
-                    an):
+def tick_first_step(
+    k,
+    qpos,
+    qvel,
+    xmat,
+    ctrl,
+    qfa,
+    Q,
+    V,
+    H_spool,
+    H_force,
+    H_pa,
+    H_pb,
+    H_cmd,
+    E_ps,
+    E_gas,
+    s_ref_all,
+    v_ref_all,
+    vff_all,
+    qa,
+    da,
+    ids,
+    pd,
+    pb,
+    consts,
+    J,
+    Jp,
+    N,
+    gains,
+    cstate,
+    pl_hp,
+    pl_prev,
+    cmd2,
+    x2,
+    v2,
+    X,
+    Y,
+    IC,
+    ICS,
+    buf,
+    P,
+    G,
+    fr_dofs,
+    fr_fc,
+    zfr,
+    zss,
+    dt,
+    aq,
+    ad,
+    aF0,
+    ac,
+    an,
+):
     """Everything between two ``mj_step`` calls at the start of controller tick ``k``, in
     one compiled call (each call from Python costs ~1 us plus ~0.1 us per argument):
     :func:`record`, the controller tick (:func:`sim.control.tvc._tick_state`) into
     ``cmd2`` and its row of ``H_cmd``, then :func:`pre_step` and, with friction
     coordinates, :func:`presliding_friction` and, with supports, :func:`air_springs`. Same
     operations in the same order as the separate calls, so the results are identical."""
-    record(k, qpos, qvel, Q, V, X, Y, L.SPOOL, L.FORCE, L.PA, L.PB, H_spool, H_force, H_pa, H_pb, L.PS, L.GASV,
-           E_ps, E_gas)
+    record(
+        k, qpos, qvel, Q, V, X, Y, L.SPOOL, L.FORCE, L.PA, L.PB, H_spool, H_force, H_pa, H_pb, L.PS, L.GASV, E_ps, E_gas
+    )
     cmd = cmd2[0]
-    _ctrl_tick(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa, pd, pb, X[L.FORCE, 0], Y[L.PS, 0], consts,
-               J, Jp, N, gains, cstate, pl_hp, pl_prev, cmd)
+    _ctrl_tick(
+        k,
+        s_ref_all,
+        v_ref_all,
+        vff_all,
+        qpos,
+        qvel,
+        xmat,
+        qa,
+        pd,
+        pb,
+        X[L.FORCE, 0],
+        Y[L.PS, 0],
+        consts,
+        J,
+        Jp,
+        N,
+        gains,
+        cstate,
+        pl_hp,
+        pl_prev,
+        cmd,
+    )
     H_cmd[k, :] = cmd
     pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, 0, P, G)
     if fr_dofs.shape[0] or aq.shape[0]:
@@ -121,8 +221,39 @@ def tick_first_step(k, qpos, qvel, xmat, ctrl, qfa, Q, V, H_spool, H_force, H_pa
 
 
 @numba.njit(**_OPTS)
-def later_step(k, qpos, qvel, qacc, ctrl, qfa, ACC, pd, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G,
-               fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an):
+def later_step(
+    k,
+    qpos,
+    qvel,
+    qacc,
+    ctrl,
+    qfa,
+    ACC,
+    pd,
+    qa,
+    da,
+    ids,
+    cmd2,
+    x2,
+    v2,
+    X,
+    Y,
+    IC,
+    ICS,
+    buf,
+    P,
+    G,
+    fr_dofs,
+    fr_fc,
+    zfr,
+    zss,
+    dt,
+    aq,
+    ad,
+    aF0,
+    ac,
+    an,
+):
     """The pre-step of a tick's later physics steps; on the second one (``k >= 0``) it
     first records the platen acceleration of the tick's first step (still in ``qacc``)."""
     if k >= 0:
@@ -133,8 +264,18 @@ def later_step(k, qpos, qvel, qacc, ctrl, qfa, ACC, pd, qa, da, ids, cmd2, x2, v
         applied_forces(qpos, qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an)
 
 
-__all__ = ["presliding_friction", "air_springs", "applied_forces", "pre_step_friction", "pre_step", "record", "loop_gap", "all_finite",
-           "tick_first_step", "later_step"]
+__all__ = [
+    "presliding_friction",
+    "air_springs",
+    "applied_forces",
+    "pre_step_friction",
+    "pre_step",
+    "record",
+    "loop_gap",
+    "all_finite",
+    "tick_first_step",
+    "later_step",
+]
 
 
 @numba.njit(**_OPTS)
@@ -144,10 +285,18 @@ def loop_gap(xpos, xmat, b1, b2, a1, a2):
     for i in range(b1.shape[0]):
         s = 0.0
         for r in range(3):
-            p1 = xpos[b1[i], r] + xmat[b1[i], 3 * r] * a1[i, 0] + xmat[b1[i], 3 * r + 1] * a1[i, 1] \
+            p1 = (
+                xpos[b1[i], r]
+                + xmat[b1[i], 3 * r] * a1[i, 0]
+                + xmat[b1[i], 3 * r + 1] * a1[i, 1]
                 + xmat[b1[i], 3 * r + 2] * a1[i, 2]
-            p2 = xpos[b2[i], r] + xmat[b2[i], 3 * r] * a2[i, 0] + xmat[b2[i], 3 * r + 1] * a2[i, 1] \
+            )
+            p2 = (
+                xpos[b2[i], r]
+                + xmat[b2[i], 3 * r] * a2[i, 0]
+                + xmat[b2[i], 3 * r + 1] * a2[i, 1]
                 + xmat[b2[i], 3 * r + 2] * a2[i, 2]
+            )
             s += (p1 - p2) ** 2
         if s > worst:
             worst = s

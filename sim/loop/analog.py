@@ -57,8 +57,16 @@ class RiceGains:
         c = dict(desc.raw.get("controller", {}) or {})
         c.update(overrides or {})
         keys = {"p_gain": "p", "i_gain_hz": "i_hz", "d_gain_s": "d_s", "ff_gain_s": "ff_s", "dp_gain": "dp"}
-        known = set(keys) | {"type", "parameter_set", "rate_hz", "recorder_rate_hz", "parameter_sets",
-                             "k_x_cond_v_per_m", "k_d_cond_v_per_m", "k_dp_cond_v_per_pa"}
+        known = set(keys) | {
+            "type",
+            "parameter_set",
+            "rate_hz",
+            "recorder_rate_hz",
+            "parameter_sets",
+            "k_x_cond_v_per_m",
+            "k_d_cond_v_per_m",
+            "k_dp_cond_v_per_pa",
+        }
         extra = sorted(set(c) - known)
         if extra:
             raise ScenarioError(f"unknown rice controller key '{extra[0]}'; known: {', '.join(sorted(known))}")
@@ -70,13 +78,16 @@ class RiceGains:
             kw[g] = float(v)
         ps = str(c.get("parameter_set", "d18"))
         if ps not in c.get("parameter_sets", {}):
-            raise ScenarioError(f"controller.parameter_set '{ps}' is not one of the table's parameter sets "
-                                f"({', '.join(sorted(c.get('parameter_sets', {})))})")
+            raise ScenarioError(
+                f"controller.parameter_set '{ps}' is not one of the table's parameter sets "
+                f"({', '.join(sorted(c.get('parameter_sets', {})))})"
+            )
         phys = float(c.get("rate_hz", RICE_RATE_HZ))
         rec = float(c.get("recorder_rate_hz", RICE_FS_HZ))
         if not (phys > 0 and rec > 0) or abs(phys / rec - round(phys / rec)) > 1e-9:
-            raise ScenarioError(f"controller.recorder_rate_hz ({rec:g}) must divide the controller's physics rate "
-                                f"rate_hz ({phys:g})")
+            raise ScenarioError(
+                f"controller.recorder_rate_hz ({rec:g}) must divide the controller's physics rate rate_hz ({phys:g})"
+            )
         return cls(gains=Gains(**kw), parameter_set=ps, rate_hz=rec, physics_rate_hz=phys)
 
 
@@ -102,8 +113,9 @@ class RiceSimulation:
     ``gains.rate_hz``, ``hp``, ``tm``).
     """
 
-    def __init__(self, desc, payload=None, gains: RiceGains | None = None, *, kt: float | None = None,
-                 backend: str = "numba"):
+    def __init__(
+        self, desc, payload=None, gains: RiceGains | None = None, *, kt: float | None = None, backend: str = "numba"
+    ):
         self.gains = gains or RiceGains.for_table(desc)
         if kt is None:  # the description's parameter set applied (beta, leakage, delay; k_t returned)
             desc, kt = _apply_parameter_set(desc.raw, self.gains.parameter_set, self.gains.delay, desc.source)
@@ -134,7 +146,9 @@ class RiceSimulation:
         mujoco.mj_forward(self.m, self.d)
         self.ctl.reset()
 
-    def steps(self, XD, VD, *, record_from: int = 0, every: int = 2, n_rec: int | None = None) -> tuple[dict, str | None]:
+    def steps(
+        self, XD, VD, *, record_from: int = 0, every: int = 2, n_rec: int | None = None
+    ) -> tuple[dict, str | None]:
         """Step through the per-step commands XD, VD (stroke reference m, m/s) and record
         every ``every``-th step from ``record_from`` on: the state at the step's start
         (stroke, stroke rate, absolute table displacement and velocity, pressures, spool,
@@ -155,8 +169,21 @@ class RiceSimulation:
         st = hs.state
         pa, pb, spool = st.p_a, st.p_b, st.spool
         qpos, qvel, qacc, ctrl = d.qpos, d.qvel, d.qacc, d.ctrl
-        keys = ("a_table", "x_table", "v_table", "stroke", "stroke_rate", "dp", "opening", "p_a", "p_b", "spool",
-                "force", "p_supply", "gas_volume")
+        keys = (
+            "a_table",
+            "x_table",
+            "v_table",
+            "stroke",
+            "stroke_rate",
+            "dp",
+            "opening",
+            "p_a",
+            "p_b",
+            "spool",
+            "force",
+            "p_supply",
+            "gas_volume",
+        )
         rec = {k: np.full(n_rec, np.nan) for k in keys}
         step = mujoco.mj_step
         hstep = hs.step
@@ -199,8 +226,10 @@ class RiceSimulation:
                     rec["opening"][i] = u
                     rec["force"][i] = f[0, 0]
                 if not math.isfinite(x) or abs(x) > half:
-                    reason = (f"simulation diverged at t = {k * self.dt:.4f} s: the Rice actuator left its stroke "
-                              f"(x = {x:.4g} m); unstable loop?")
+                    reason = (
+                        f"simulation diverged at t = {k * self.dt:.4f} s: the Rice actuator left its stroke "
+                        f"(x = {x:.4g} m); unstable loop?"
+                    )
                     break
         except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C: keep the samples so far (run() raises RunInterrupted)
             from sim.errors import is_interrupt
@@ -242,19 +271,35 @@ class RiceSimulation:
         accs = self.desc.accelerometers
         Dn = np.array([a.direction for a in accs]).reshape(-1, 3)
         col = lambda k: rec[k][:done, None].copy()  # noqa: E731
-        ch = {"table_displacement": D, "table_velocity": V, "table_acceleration": A,
-              "actuator_displacement": col("stroke"), "accelerometers": A[:, :3] @ Dn.T,
-              "valve_command": col("opening"), "spool_position": col("spool"), "actuator_force": col("force"),
-              "pressure_a": col("p_a"), "pressure_b": col("p_b")}
-        ex = {"supply_pressure": rec["p_supply"][:done].copy(), "accumulator_gas_volume": rec["gas_volume"][:done].copy(),
-              "loop_gap": np.full(done, loop_gap(self.m, self.d))}
-        res = RunResult(t=np.arange(done) / rate, channels=ch, extras=ex, wall_s=wall, sim_s=done / rate,
-                        timing={"physics_s": wall, "hydraulics_s": 0.0, "controller_s": 0.0, "output_s": 0.0,
-                                "steps": done * sub}, incomplete_reason=reason, interrupted=self._interrupted)
+        ch = {
+            "table_displacement": D,
+            "table_velocity": V,
+            "table_acceleration": A,
+            "actuator_displacement": col("stroke"),
+            "accelerometers": A[:, :3] @ Dn.T,
+            "valve_command": col("opening"),
+            "spool_position": col("spool"),
+            "actuator_force": col("force"),
+            "pressure_a": col("p_a"),
+            "pressure_b": col("p_b"),
+        }
+        ex = {
+            "supply_pressure": rec["p_supply"][:done].copy(),
+            "accumulator_gas_volume": rec["gas_volume"][:done].copy(),
+            "loop_gap": np.full(done, loop_gap(self.m, self.d)),
+        }
+        res = RunResult(
+            t=np.arange(done) / rate,
+            channels=ch,
+            extras=ex,
+            wall_s=wall,
+            sim_s=done / rate,
+            timing={"physics_s": wall, "hydraulics_s": 0.0, "controller_s": 0.0, "output_s": 0.0, "steps": done * sub},
+            incomplete_reason=reason,
+            interrupted=self._interrupted,
+        )
         if self._interrupted:
             from sim.errors import RunInterrupted
 
             raise RunInterrupted(res)
         return res
-
-

@@ -15,7 +15,7 @@ piston forces); each simulation's callback context points at its slice.
 
 Each simulation's result equals its single run (``Simulation.run``), bit for bit: the
 batch runs each simulation's steps on one MjData in order, and the callback does what
-the loop does (``tests/test_batch.py``).
+the loop does (``tests/loop/test_batch.py``).
 """
 
 from __future__ import annotations
@@ -47,12 +47,16 @@ class BatchRunner:
         self.sims = list(sims)
         self.nthread = nthread or os.cpu_count() or 1
         compiled = {}  # one model per table model (simulations of one TableModel share it)
-        self.models = [compiled.setdefault(id(s.tm), CB.callback_model(s)) if id(s.tm) not in compiled
-                       else compiled[id(s.tm)] for s in self.sims]
+        self.models = [
+            compiled.setdefault(id(s.tm), CB.callback_model(s)) if id(s.tm) not in compiled else compiled[id(s.tm)]
+            for s in self.sims
+        ]
         sizes = {(m.nq, m.nv, m.nu, m.nbody, m.neq, m.nuserdata) for m in self.models}
         if len(sizes) != 1:
-            raise ScenarioError("the simulations of a batch must share one table layout (same bodies, joints, "
-                                "actuators); run other tables in another batch")
+            raise ScenarioError(
+                "the simulations of a batch must share one table layout (same bodies, joints, "
+                "actuators); run other tables in another batch"
+            )
 
     @staticmethod
     def accepts(plan) -> bool:
@@ -60,8 +64,7 @@ class BatchRunner:
         the callback, no drive iterations)?"""
         from sim.loop.simulation import Simulation
 
-        return (isinstance(plan.sim, Simulation) and CB.accepts(plan.sim) is None
-                and not plan.iteration.get("count", 0))
+        return isinstance(plan.sim, Simulation) and CB.accepts(plan.sim) is None and not plan.iteration.get("count", 0)
 
     def run(self, references: list, *, duration_s: float | None = None, chunk_ticks: int = 256) -> list:
         """Run simulation i on ``references[i]`` from its current state (its
@@ -69,8 +72,12 @@ class BatchRunner:
         sims, N = self.sims, len(self.sims)
         if len(references) != N:
             raise ValueError(f"{N} simulations but {len(references)} references")
-        ns = np.array([len(r.t) if duration_s is None else min(len(r.t), int(round(duration_s * s.gains.rate_hz)) + 1)
-                       for s, r in zip(sims, references)])
+        ns = np.array(
+            [
+                len(r.t) if duration_s is None else min(len(r.t), int(round(duration_s * s.gains.rate_hz)) + 1)
+                for s, r in zip(sims, references)
+            ]
+        )
         from hydraulics import _layout as HL
 
         # the batch's hydraulic and pre-sliding state, simulations first
@@ -80,9 +87,15 @@ class BatchRunner:
         self.ICS = np.stack([s.hs._ICS for s in sims])
         self.ZFR = np.stack([s._zfr for s in sims])
         self.force = self.X[:, HL.FORCE, 0, :]  # (N, n_act) view
-        ctxs = [CB.Context(s, r, int(n), state={"X": self.X[i], "Y": self.Y[i], "IC": self.IC[i],
-                                                "ICS": self.ICS[i], "ZFR": self.ZFR[i]})
-                for i, (s, r, n) in enumerate(zip(sims, references, ns))]
+        ctxs = [
+            CB.Context(
+                s,
+                r,
+                int(n),
+                state={"X": self.X[i], "Y": self.Y[i], "IC": self.IC[i], "ICS": self.ICS[i], "ZFR": self.ZFR[i]},
+            )
+            for i, (s, r, n) in enumerate(zip(sims, references, ns))
+        ]
         m0 = self.models[0]
         b = mjbatch.Batch(m0, N, self.nthread)
         if N > 1 or self.models[0] is not m0:

@@ -19,7 +19,7 @@ descriptors: the recorder, the reference, the hydraulic and controller state), `
 the physics-step counter. A model with fewer userdata, or a simulation whose
 ``userdata[0]`` is 0 (any other MjData, a reset), is left alone.
 
-Same run as the loop, bit for bit (``tests/test_batch.py``): the same compiled kernels in
+Same run as the loop, bit for bit (``tests/loop/test_batch.py``): the same compiled kernels in
 the same order on the same MuJoCo state. Two details make it so: the loop's controller
 reads ``xmat`` as the previous ``mj_step`` left it (the pose one step before ``qpos``),
 so the callback keeps the platen's ``xmat`` of the previous step; and the loop's gap is
@@ -52,14 +52,16 @@ NUSERDATA = 2  #: userdata[0] = context address, userdata[1] = physics-step coun
 _FIELDS = ("qpos", "qvel", "qacc", "ctrl", "qfrc_applied", "xpos", "xmat", "userdata")
 
 # ---- context scalars
-S_N, S_SPT, S_GAP_EVERY, S_RELIEF, S_PD, S_PB, S_DT, S_ZSS, S_AC, S_AN, S_DONE, S_PENDING, S_CODE, S_VALUE, \
-    S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ, S_VAPOUR = range(23)
+# fmt: off
+(S_N, S_SPT, S_GAP_EVERY, S_RELIEF, S_PD, S_PB, S_DT, S_ZSS, S_AC, S_AN, S_DONE, S_PENDING, S_CODE, S_VALUE,
+ S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ, S_VAPOUR) = range(23)
 NS = 24
 # ---- context arrays (descriptor rows: address, dim0, dim1, dim2)
 ARRAYS = ("Q", "V", "ACC", "HSP", "HF", "HPA", "HPB", "HCMD", "EPS", "EGAS", "GAP",
           "SREF", "VREF", "VFF", "QA", "DA", "IDS", "CONSTS", "J", "JP", "NN", "GAINS", "CSTATE", "PLHP", "PLPREV",
           "CMD2", "X2", "V2", "X", "Y", "IC", "ICS", "BUF", "P", "G", "FRD", "FRFC", "ZFR", "AQ", "AD", "AF0",
           "XMP", "GB1", "GB2", "GA1", "GA2")
+# fmt: on
 A = {name: i for i, name in enumerate(ARRAYS)}
 NCTX = NS + 4 * len(ARRAYS)
 
@@ -67,16 +69,20 @@ NCTX = NS + 4 * len(ARRAYS)
 @intrinsic
 def _ptr(typingctx, addr):
     """int64 address -> void*."""
+
     def codegen(context, builder, sig, args):
         return builder.inttoptr(args[0], context.get_value_type(types.voidptr))
+
     return types.voidptr(types.int64), codegen
 
 
 @intrinsic
 def _addr(typingctx, p):
     """void* -> int64 address."""
+
     def codegen(context, builder, sig, args):
         return builder.ptrtoint(args[0], context.get_value_type(types.int64))
+
     return types.int64(types.voidptr), codegen
 
 
@@ -159,16 +165,98 @@ def check_state(qpos, qvel, X, gap, relief, vapour):
 
 
 @numba.njit(**_J)
-def _tick(k, C, qpos, qvel, XMP, ctrl, qfa, qa, da, ids, pd, pb, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc,
-          zfr, zss, dt, aq, ad, af0, ac, an):
+def _tick(
+    k,
+    C,
+    qpos,
+    qvel,
+    XMP,
+    ctrl,
+    qfa,
+    qa,
+    da,
+    ids,
+    pd,
+    pb,
+    cmd2,
+    x2,
+    v2,
+    X,
+    Y,
+    IC,
+    ICS,
+    buf,
+    P,
+    G,
+    frd,
+    frfc,
+    zfr,
+    zss,
+    dt,
+    aq,
+    ad,
+    af0,
+    ac,
+    an,
+):
     Q, V, HSP, HF = _f2(C, A_Q), _f2(C, A_V), _f2(C, A_HSP), _f2(C, A_HF)
     HPA, HPB, HCMD, EPS, EGAS = _f2(C, A_HPA), _f2(C, A_HPB), _f2(C, A_HCMD), _f1(C, A_EPS), _f1(C, A_EGAS)
     SREF, VREF, VFF = _f2(C, A_SREF), _f2(C, A_VREF), _f2(C, A_VFF)
     consts, J, Jp, N, gains = _f2(C, A_CONSTS), _f2(C, A_J), _f2(C, A_JP), _f2(C, A_NN), _f1(C, A_GAINS)
     cst, plhp, plprev = _f1(C, A_CSTATE), _f1(C, A_PLHP), _f1(C, A_PLPREV)
-    FL.tick_first_step(k, qpos, qvel, XMP, ctrl, qfa, Q, V, HSP, HF, HPA, HPB, HCMD, EPS, EGAS, SREF, VREF, VFF, qa,
-                       da, ids, pd, pb, consts, J, Jp, N, gains, cst, plhp, plprev, cmd2, x2, v2, X, Y, IC, ICS, buf,
-                       P, G, frd, frfc, zfr, zss, dt, aq, ad, af0, ac, an)
+    FL.tick_first_step(
+        k,
+        qpos,
+        qvel,
+        XMP,
+        ctrl,
+        qfa,
+        Q,
+        V,
+        HSP,
+        HF,
+        HPA,
+        HPB,
+        HCMD,
+        EPS,
+        EGAS,
+        SREF,
+        VREF,
+        VFF,
+        qa,
+        da,
+        ids,
+        pd,
+        pb,
+        consts,
+        J,
+        Jp,
+        N,
+        gains,
+        cst,
+        plhp,
+        plprev,
+        cmd2,
+        x2,
+        v2,
+        X,
+        Y,
+        IC,
+        ICS,
+        buf,
+        P,
+        G,
+        frd,
+        frfc,
+        zfr,
+        zss,
+        dt,
+        aq,
+        ad,
+        af0,
+        ac,
+        an,
+    )
 
 
 @numba.njit(**_J)
@@ -219,12 +307,75 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud):
     af0 = _f1(C, A_AF0)
     zss, dt, ac, an = C[S_ZSS], C[S_DT], C[S_AC], C[S_AN]
     if j == 0:
-        _tick(k, C, qpos, qvel, XMP, ctrl, qfa, qa, da, ids, pd, pb, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd,
-              frfc, zfr, zss, dt, aq, ad, af0, ac, an)
+        _tick(
+            k,
+            C,
+            qpos,
+            qvel,
+            XMP,
+            ctrl,
+            qfa,
+            qa,
+            da,
+            ids,
+            pd,
+            pb,
+            cmd2,
+            x2,
+            v2,
+            X,
+            Y,
+            IC,
+            ICS,
+            buf,
+            P,
+            G,
+            frd,
+            frfc,
+            zfr,
+            zss,
+            dt,
+            aq,
+            ad,
+            af0,
+            ac,
+            an,
+        )
     else:
         kk = k if j == 1 else -1
-        FL.later_step(kk, qpos, qvel, qacc, ctrl, qfa, _f2(C, A_ACC), pd, qa, da, ids, cmd2, x2,
-                      v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr, zss, dt, aq, ad, af0, ac, an)
+        FL.later_step(
+            kk,
+            qpos,
+            qvel,
+            qacc,
+            ctrl,
+            qfa,
+            _f2(C, A_ACC),
+            pd,
+            qa,
+            da,
+            ids,
+            cmd2,
+            x2,
+            v2,
+            X,
+            Y,
+            IC,
+            ICS,
+            buf,
+            P,
+            G,
+            frd,
+            frfc,
+            zfr,
+            zss,
+            dt,
+            aq,
+            ad,
+            af0,
+            ac,
+            an,
+        )
     if j == spt - 1 and k % np.int64(C[S_GAP_EVERY]) == 0:
         gap = FL.loop_gap(xpos, xmat, _i1(C, A_GB1), _i1(C, A_GB2), _f2(C, A_GA1), _f2(C, A_GA2))
         _f1(C, A_GAP)[k] = gap
@@ -236,8 +387,9 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud):
 
 
 A_Q, A_V, A_ACC, A_HSP, A_HF, A_HPA, A_HPB, A_HCMD, A_EPS, A_EGAS, A_GAP = range(11)
-(A_SREF, A_VREF, A_VFF, A_QA, A_DA, A_IDS, A_CONSTS, A_J, A_JP, A_NN, A_GAINS, A_CSTATE, A_PLHP,
- A_PLPREV) = range(11, 25)
+(A_SREF, A_VREF, A_VFF, A_QA, A_DA, A_IDS, A_CONSTS, A_J, A_JP, A_NN, A_GAINS, A_CSTATE, A_PLHP, A_PLPREV) = range(
+    11, 25
+)
 A_CMD2, A_X2, A_V2, A_X, A_Y, A_IC, A_ICS, A_BUF, A_P, A_G, A_FRD, A_FRFC, A_ZFR, A_AQ, A_AD, A_AF0 = range(25, 41)
 A_XMP, A_GB1, A_GB2, A_GA1, A_GA2 = range(41, 46)
 assert A_GA2 == A["GA2"] and A_XMP == A["XMP"] and A_CMD2 == A["CMD2"] and A_SREF == A["SREF"]
@@ -329,8 +481,17 @@ def _callback(m, d):
     nq, nv, na, nb = np.int64(C[S_NQ]), np.int64(C[S_NV]), np.int64(C[S_NA]), np.int64(C[S_NBODY])
     xpos = _field(base, O_XPOS, 3 * nb).reshape((nb, 3))
     xmat = _field(base, O_XMAT, 9 * nb).reshape((nb, 9))
-    coupled_step(C, _field(base, O_QPOS, nq), _field(base, O_QVEL, nv), _field(base, O_QACC, nv),
-                 _field(base, O_CTRL, na), _field(base, O_QFA, nv), xpos, xmat, ud)
+    coupled_step(
+        C,
+        _field(base, O_QPOS, nq),
+        _field(base, O_QVEL, nv),
+        _field(base, O_QACC, nv),
+        _field(base, O_CTRL, na),
+        _field(base, O_QFA, nv),
+        xpos,
+        xmat,
+        ud,
+    )
 
 
 def control_callback():
@@ -344,8 +505,9 @@ def control_callback():
         O_QPOS, O_QVEL, O_QACC, O_CTRL = off["qpos"], off["qvel"], off["qacc"], off["ctrl"]
         O_QFA, O_XPOS, O_XMAT, O_UD = off["qfrc_applied"], off["xpos"], off["xmat"], off["userdata"]
         O_NUD = off["nuserdata"]
-        _cfunc = numba.cfunc(types.void(types.voidptr, types.voidptr), nopython=True, nogil=True,
-                             boundscheck=False, cache=True)(_callback)
+        _cfunc = numba.cfunc(
+            types.void(types.voidptr, types.voidptr), nopython=True, nogil=True, boundscheck=False, cache=True
+        )(_callback)
         return _cfunc
 
 
@@ -414,12 +576,21 @@ class Context:
         arr["SREF"] = np.ascontiguousarray(actuator_strokes(tm.desc, reference.d[:n]), dtype=float)
         arr["VREF"] = np.ascontiguousarray(reference.v[:n], dtype=float)
         arr["VFF"] = np.ascontiguousarray(ctrl.feedforward(reference.v[:n], reference.a[:n], rate), dtype=float)
-        arr["QA"], arr["DA"], arr["IDS"] = (np.asarray(a, dtype=np.int64) for a in
-                                             (tm.stroke_qadr, tm.stroke_dadr, tm.actuator_ids))
+        arr["QA"], arr["DA"], arr["IDS"] = (
+            np.asarray(a, dtype=np.int64) for a in (tm.stroke_qadr, tm.stroke_dadr, tm.actuator_ids)
+        )
         consts, J, Jp, N, gains, cstate, plhp, plprev = ctrl.kernel_args()
         st = state or {}
-        arr.update(CONSTS=consts, J=J, JP=Jp, NN=N, GAINS=gains, CSTATE=st.get("CSTATE", cstate),
-                   PLHP=st.get("PLHP", plhp), PLPREV=st.get("PLPREV", plprev))
+        arr.update(
+            CONSTS=consts,
+            J=J,
+            JP=Jp,
+            NN=N,
+            GAINS=gains,
+            CSTATE=st.get("CSTATE", cstate),
+            PLHP=st.get("PLHP", plhp),
+            PLPREV=st.get("PLPREV", plprev),
+        )
         arr["CMD2"] = st.get("CMD2", np.zeros((1, na)))
         arr["X2"] = np.zeros((1, na))
         arr["V2"] = np.zeros((1, na))
@@ -448,7 +619,7 @@ class Context:
                 raise ValueError(f"context array {name}: {a.dtype}, contiguous {a.flags.c_contiguous}")
             o = NS + 4 * A[name]
             C[o] = a.ctypes.data
-            C[o + 1:o + 1 + a.ndim] = a.shape
+            C[o + 1 : o + 1 + a.ndim] = a.shape
         self.arrays, self.C = arr, C
         self.sim = sim
 
@@ -476,41 +647,58 @@ class Context:
             side = {2: "a", 9: "b", 4: "a", 5: "b", 6: "a", 7: "b"}.get(code, "")
             reason = {  # the words of Simulation._check, so both routes stop with the same reason
                 2: f"{at}: the hydraulic state is not finite: NaN/Inf in the chamber {side} pressures; {CAUSE_STEP} "
-                   f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})",
+                f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})",
                 9: f"{at}: the hydraulic state is not finite: NaN/Inf in the chamber {side} pressures; {CAUSE_STEP} "
-                   f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})",
+                f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})",
                 1: f"{at}: the mechanical state is not finite: NaN/Inf in the platen/linkage positions (qpos); "
-                   f"{CAUSE_STEP} ({step})",
+                f"{CAUSE_STEP} ({step})",
                 8: f"{at}: the mechanical state is not finite: NaN/Inf in the velocities (qvel); {CAUSE_STEP} ({step})",
-                3: (f"{at}: a swivel opened by {val * 1e3:.3g} mm (limit {GAP_LIMIT_M * 1e3:.3g} mm): the "
-                    f"loop closure failed; {CAUSE_STEP} ({step}), or a motion beyond the linkages' reach"),
+                3: (
+                    f"{at}: a swivel opened by {val * 1e3:.3g} mm (limit {GAP_LIMIT_M * 1e3:.3g} mm): the "
+                    f"loop closure failed; {CAUSE_STEP} ({step}), or a motion beyond the linkages' reach"
+                ),
                 4: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa above the relief pressure "
-                   f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
+                f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
                 5: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa above the relief pressure "
-                   f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
+                f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
                 6: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa below the vapour pressure "
-                   f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
+                f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
                 7: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa below the vapour pressure "
-                   f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
+                f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
             }[code]
         t0 = time.perf_counter()
         ch = sim._derive(arr["Q"][:n_done], arr["V"][:n_done], arr["ACC"][:n_done])
-        for key, name in (("valve_command", "HCMD"), ("spool_position", "HSP"), ("actuator_force", "HF"),
-                          ("pressure_a", "HPA"), ("pressure_b", "HPB")):
+        for key, name in (
+            ("valve_command", "HCMD"),
+            ("spool_position", "HSP"),
+            ("actuator_force", "HF"),
+            ("pressure_a", "HPA"),
+            ("pressure_b", "HPB"),
+        ):
             ch[key] = arr[name][:n_done]
-        ex = {"supply_pressure": arr["EPS"][:n_done], "accumulator_gas_volume": arr["EGAS"][:n_done],
-              "loop_gap": arr["GAP"][:n_done]}
+        ex = {
+            "supply_pressure": arr["EPS"][:n_done],
+            "accumulator_gas_volume": arr["EGAS"][:n_done],
+            "loop_gap": arr["GAP"][:n_done],
+        }
         if "_payload_qpos" in ch:
             ex["payload_qpos"] = ch.pop("_payload_qpos")
         post = time.perf_counter() - t0
         spt = sim.steps_per_tick
-        return RunResult(t=np.arange(n_done) / rate, channels=ch, extras=ex, wall_s=wall_s + post,
-                         sim_s=n_done / rate, timing={"callback_s": wall_s, "output_s": post, "steps": n_done * spt},
-                         incomplete_reason=reason)
+        return RunResult(
+            t=np.arange(n_done) / rate,
+            channels=ch,
+            extras=ex,
+            wall_s=wall_s + post,
+            sim_s=n_done / rate,
+            timing={"callback_s": wall_s, "output_s": post, "steps": n_done * spt},
+            incomplete_reason=reason,
+        )
 
 
-def run_callback(sim, reference, *, duration_s: float | None = None, gap_every: int = 8,
-                 chunk_ticks: int = 512) -> RunResult:
+def run_callback(
+    sim, reference, *, duration_s: float | None = None, gap_every: int = 8, chunk_ticks: int = 512
+) -> RunResult:
     """Closed-loop run of ``sim`` on ``reference`` with the coupled step inside MuJoCo
     (``mj_step(m, d, nstep)`` in chunks of ``chunk_ticks`` controller ticks, stopping at
     a divergence). Starts from ``sim``'s current state (its :meth:`reset`), which it
@@ -523,8 +711,13 @@ def run_callback(sim, reference, *, duration_s: float | None = None, gap_every: 
     m2 = callback_model(sim)
     d2 = mujoco.MjData(m2)
     copy_state(sim.m, sim.d, m2, d2)
-    st = {"X": sim.hs._X.copy(), "Y": sim.hs._Y.copy(), "IC": sim.hs._IC.copy(), "ICS": sim.hs._ICS.copy(),
-          "ZFR": sim._zfr.copy()}
+    st = {
+        "X": sim.hs._X.copy(),
+        "Y": sim.hs._Y.copy(),
+        "IC": sim.hs._IC.copy(),
+        "ICS": sim.hs._ICS.copy(),
+        "ZFR": sim._zfr.copy(),
+    }
     ctx = Context(sim, reference, n, gap_every=gap_every, state=st)
     d2.userdata[0] = ctx.address
     d2.userdata[1] = 0.0
@@ -554,5 +747,15 @@ def copy_state(m_from, d_from, m_to, d_to) -> None:
     mujoco.mj_forward(m_to, d_to)
 
 
-__all__ = ["Context", "NUSERDATA", "accepts", "callback_model", "check_state", "control_callback", "copy_state",
-           "coupled_step", "installed", "run_callback"]
+__all__ = [
+    "Context",
+    "NUSERDATA",
+    "accepts",
+    "callback_model",
+    "check_state",
+    "control_callback",
+    "copy_state",
+    "coupled_step",
+    "installed",
+    "run_callback",
+]

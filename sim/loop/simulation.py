@@ -68,8 +68,10 @@ def _keep_warning(text: str) -> None:
 mujoco.set_mju_user_warning(_keep_warning)
 
 #: The likely causes, said with every divergence message.
-CAUSE_STEP = ("likely cause: a physics step too large for the stiffest part of the model "
-              "(halve the time step) or a stiffness, bulk modulus or gain set too high")
+CAUSE_STEP = (
+    "likely cause: a physics step too large for the stiffest part of the model "
+    "(halve the time step) or a stiffness, bulk modulus or gain set too high"
+)
 
 
 @dataclass
@@ -110,11 +112,17 @@ class Simulation:
         if abs(ratio - self.steps_per_tick) > 1e-9 or self.steps_per_tick < 1:
             raise ScenarioError(
                 f"controller rate {self.gains.rate_hz} Hz is not a whole fraction of the physics rate "
-                f"{1 / self.dt:.1f} Hz; use a rate that divides it (e.g. 1024 Hz with a 1/2048 s step)")
+                f"{1 / self.dt:.1f} Hz; use a rate that divides it (e.g. 1024 Hz with a 1/2048 s step)"
+            )
         full_flow = float(self.hs.no_load_flow(1.0))
         self.controller = TableController(
-            tm.desc, self.gains, area_m2=self.hp.area_a_m2, full_flow_m3_s=full_flow,
-            supply_pressure_pa=self.hp.supply_pressure_pa, return_pressure_pa=self.hp.return_pressure_pa)
+            tm.desc,
+            self.gains,
+            area_m2=self.hp.area_a_m2,
+            full_flow_m3_s=full_flow,
+            supply_pressure_pa=self.hp.supply_pressure_pa,
+            return_pressure_pa=self.hp.return_pressure_pa,
+        )
         self._prepare_gap()
         self.reset()
 
@@ -170,6 +178,7 @@ class Simulation:
         self._g_b2 = self._g_b2.astype(np.int64)
         try:
             from sim.loop import _kernels as _fastloop
+
             self._fl = _fastloop
         except ImportError:  # pragma: no cover
             self._fl = None
@@ -183,9 +192,18 @@ class Simulation:
         return float(np.sqrt(((x1 - x2) ** 2).sum(axis=1).max()))
 
     # ------------------------------------------------------------------ run
-    def run(self, *, reference: Reference | None = None, valve_command: np.ndarray | None = None,
-            duration_s: float | None = None, progress: bool = False, gap_every: int = 8,
-            fast: bool = True, fuse: bool = True, kinematics: str = "exact") -> RunResult:
+    def run(
+        self,
+        *,
+        reference: Reference | None = None,
+        valve_command: np.ndarray | None = None,
+        duration_s: float | None = None,
+        progress: bool = False,
+        gap_every: int = 8,
+        fast: bool = True,
+        fuse: bool = True,
+        kinematics: str = "exact",
+    ) -> RunResult:
         """Run closed loop on ``reference`` or open loop on recorded ``valve_command``.
 
         ``kinematics``: how the controller turns the DOF reference into actuator strokes:
@@ -235,10 +253,15 @@ class Simulation:
         Q = np.full((n, m.nq), np.nan)
         V = np.full((n, m.nv), np.nan)
         ACC = np.full((n, 6), np.nan)
-        H = {k: np.full((n, na), np.nan) for k in ("valve_command", "spool_position", "actuator_force",
-                                                   "pressure_a", "pressure_b")}
-        ex = {"supply_pressure": np.full(n, np.nan), "accumulator_gas_volume": np.full(n, np.nan),
-              "loop_gap": np.full(n, np.nan)}
+        H = {
+            k: np.full((n, na), np.nan)
+            for k in ("valve_command", "spool_position", "actuator_force", "pressure_a", "pressure_b")
+        }
+        ex = {
+            "supply_pressure": np.full(n, np.nan),
+            "accumulator_gas_volume": np.full(n, np.nan),
+            "loop_gap": np.full(n, np.nan),
+        }
         Hsp, Hf, Hpa, Hpb = H["spool_position"], H["actuator_force"], H["pressure_a"], H["pressure_b"]
         Eps, Egas = ex["supply_pressure"], ex["accumulator_gas_volume"]
         st = hs.state
@@ -268,15 +291,67 @@ class Simulation:
         slide_d, pdi, n_pd = tm.platen_slide_dadr, tm.platen_dof_index, len(tm.platen_dof_index)
         xmat = d.xmat
         step = mujoco.mj_step
-        fuse_tick = (fast and fuse and fused and free and reference is not None and not effects and spt >= 2
-                     and ctrl.has_compiled_tick())
+        fuse_tick = (
+            fast
+            and fuse
+            and fused
+            and free
+            and reference is not None
+            and not effects
+            and spt >= 2
+            and ctrl.has_compiled_tick()
+        )
         if fuse_tick:
             first, later = FL.tick_first_step, FL.later_step
             g = ctrl.kernel_args()
-            hyd_args = (qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS, hs._buf, hs._P, hs._G,
-                        fr_dofs, fr_fc, zfr, fr_zss, self.dt) + air
-            first_args = (qpos, qvel, xmat, dctrl, qfa, Q, V, Hsp, Hf, Hpa, Hpb, H["valve_command"], Eps, Egas,
-                          s_ref_all, v_ref_all, vff_all, qa64, da64, ids64, pd, pb_) + g + hyd_args[3:]
+            hyd_args = (
+                qa64,
+                da64,
+                ids64,
+                cmd2,
+                x2,
+                v2,
+                hs._X,
+                hs._Y,
+                hs._IC,
+                hs._ICS,
+                hs._buf,
+                hs._P,
+                hs._G,
+                fr_dofs,
+                fr_fc,
+                zfr,
+                fr_zss,
+                self.dt,
+            ) + air
+            first_args = (
+                (
+                    qpos,
+                    qvel,
+                    xmat,
+                    dctrl,
+                    qfa,
+                    Q,
+                    V,
+                    Hsp,
+                    Hf,
+                    Hpa,
+                    Hpb,
+                    H["valve_command"],
+                    Eps,
+                    Egas,
+                    s_ref_all,
+                    v_ref_all,
+                    vff_all,
+                    qa64,
+                    da64,
+                    ids64,
+                    pd,
+                    pb_,
+                )
+                + g
+                + hyd_args[3:]
+            )
             later_args = (qpos, qvel, qacc, dctrl, qfa, ACC, pd) + hyd_args
         t_ctrl = t_hyd = t_phys = t_out = t_fused = 0.0
         reason = None
@@ -312,8 +387,27 @@ class Simulation:
                     # ---- recorder: raw state at t_k
                     t0 = clock()
                     if fast:
-                        FL.record(k, qpos, qvel, Q, V, hs._X, hs._Y, HL.SPOOL, HL.FORCE, HL.PA, HL.PB, Hsp, Hf, Hpa, Hpb,
-                                  HL.PS, HL.GASV, Eps, Egas)
+                        FL.record(
+                            k,
+                            qpos,
+                            qvel,
+                            Q,
+                            V,
+                            hs._X,
+                            hs._Y,
+                            HL.SPOOL,
+                            HL.FORCE,
+                            HL.PA,
+                            HL.PB,
+                            Hsp,
+                            Hf,
+                            Hpa,
+                            Hpb,
+                            HL.PS,
+                            HL.GASV,
+                            Eps,
+                            Egas,
+                        )
                     else:
                         Q[k] = qpos
                         V[k] = qvel
@@ -333,12 +427,13 @@ class Simulation:
                             vel6[pdi] = qvel[slide_d]
                             ctrl.command_fast(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0], cmd)
                         elif fast:
-                            ctrl.command_from_state(k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa64, pd, pb_,
-                                                    force, psup[0], cmd)
+                            ctrl.command_from_state(
+                                k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa64, pd, pb_, force, psup[0], cmd
+                            )
                         else:
                             xk[:] = qpos[qa]
-                            vel6[:3] = qvel[pd:pd + 3]
-                            vel6[3:] = xmat[pb_].reshape(3, 3) @ qvel[pd + 3:pd + 6]
+                            vel6[:3] = qvel[pd : pd + 3]
+                            vel6[3:] = xmat[pb_].reshape(3, 3) @ qvel[pd + 3 : pd + 6]
                             cmd[:] = ctrl.command(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0])
                     else:
                         cmd[:] = vc_all[k]
@@ -349,12 +444,52 @@ class Simulation:
                     for j in range(spt):
                         t3 = clock()
                         if fused and nq:
-                            FL.pre_step_friction(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y,
-                                                 hs._IC, hs._ICS, hs._buf, 0, hs._P, hs._G, qfa, fr_dofs, fr_fc, zfr,
-                                                 fr_zss, self.dt, *air)
+                            FL.pre_step_friction(
+                                qpos,
+                                qvel,
+                                dctrl,
+                                qa64,
+                                da64,
+                                ids64,
+                                cmd2,
+                                x2,
+                                v2,
+                                hs._X,
+                                hs._Y,
+                                hs._IC,
+                                hs._ICS,
+                                hs._buf,
+                                0,
+                                hs._P,
+                                hs._G,
+                                qfa,
+                                fr_dofs,
+                                fr_fc,
+                                zfr,
+                                fr_zss,
+                                self.dt,
+                                *air,
+                            )
                         elif fused:
-                            FL.pre_step(qpos, qvel, dctrl, qa64, da64, ids64, cmd2, x2, v2, hs._X, hs._Y, hs._IC, hs._ICS,
-                                        hs._buf, 0, hs._P, hs._G)
+                            FL.pre_step(
+                                qpos,
+                                qvel,
+                                dctrl,
+                                qa64,
+                                da64,
+                                ids64,
+                                cmd2,
+                                x2,
+                                v2,
+                                hs._X,
+                                hs._Y,
+                                hs._IC,
+                                hs._ICS,
+                                hs._buf,
+                                0,
+                                hs._P,
+                                hs._G,
+                            )
                         else:
                             x2[0] = qpos[qa]
                             v2[0] = qvel[da]
@@ -381,7 +516,7 @@ class Simulation:
                         t_phys += t5 - t4
                         if j == 0:
                             if free:
-                                ACC[k] = qacc[pd:pd + 6]
+                                ACC[k] = qacc[pd : pd + 6]
                             else:
                                 ACC[k, :n_pd] = qacc[slide_d]
                 done = k + 1  # tick k is complete (kept even if the check below stops the run)
@@ -403,7 +538,7 @@ class Simulation:
         except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C: keep the ticks done so far, marked incomplete
             if not is_interrupt(e):  # (SystemError: the Ctrl-C landed in a numba call)
                 raise
-            reason = (f"interrupted (Ctrl-C) at t = {done / rate:.4f} s of {n / rate:.4f} s")
+            reason = f"interrupted (Ctrl-C) at t = {done / rate:.4f} s of {n / rate:.4f} s"
             interrupted = True
         else:
             interrupted = False
@@ -421,11 +556,23 @@ class Simulation:
         if "_payload_qpos" in ch:
             ex["payload_qpos"] = ch.pop("_payload_qpos")
         t_post = clock() - t7
-        result = RunResult(t=np.arange(n_done) / rate, channels=ch, extras=ex, wall_s=wall + t_post,
-                           sim_s=n_done / rate,
-                           timing={"physics_s": t_phys, "hydraulics_s": t_hyd, "controller_s": t_ctrl,
-                                   "output_s": t_out + t_post, "fused_s": t_fused, "steps": n_done * spt},
-                           incomplete_reason=reason, interrupted=interrupted)
+        result = RunResult(
+            t=np.arange(n_done) / rate,
+            channels=ch,
+            extras=ex,
+            wall_s=wall + t_post,
+            sim_s=n_done / rate,
+            timing={
+                "physics_s": t_phys,
+                "hydraulics_s": t_hyd,
+                "controller_s": t_ctrl,
+                "output_s": t_out + t_post,
+                "fused_s": t_fused,
+                "steps": n_done * spt,
+            },
+            incomplete_reason=reason,
+            interrupted=interrupted,
+        )
         if interrupted:
             raise RunInterrupted(result)
         return result
@@ -441,9 +588,13 @@ class Simulation:
             pose[:, tm.platen_dof_index] = Q[:, tm.platen_slide_qadr]
             vel[:, tm.platen_dof_index] = V[:, tm.platen_slide_dadr]
             acc = np.zeros((n, 6))
-            acc[:, tm.platen_dof_index] = ACC[:, :len(tm.platen_dof_index)]
-            out = {"table_displacement": pose, "table_velocity": vel, "table_acceleration": acc,
-                   "actuator_displacement": Q[:, tm.stroke_qadr].copy()}
+            acc[:, tm.platen_dof_index] = ACC[:, : len(tm.platen_dof_index)]
+            out = {
+                "table_displacement": pose,
+                "table_velocity": vel,
+                "table_acceleration": acc,
+                "actuator_displacement": Q[:, tm.stroke_qadr].copy(),
+            }
             accs = tm.desc.accelerometers
             Dn = np.array([a.direction for a in accs]).reshape(-1, 3)
             out["accelerometers"] = acc[:, :3] @ Dn.T  # no rotation: every point moves alike
@@ -451,7 +602,7 @@ class Simulation:
                 qadr = [tm.model.jnt_qposadr[tm.model.dof_jntid[k]] for k in tm.payload_dadr]
                 out["_payload_qpos"] = Q[:, qadr].copy()
             return out
-        quat = Q[:, pq + 3:pq + 7]
+        quat = Q[:, pq + 3 : pq + 7]
         w, x, y, z = quat.T
         # rotation matrices of the platen (rows of R for each sample)
         R = np.empty((len(Q), 3, 3))
@@ -464,23 +615,36 @@ class Simulation:
         R[:, 2, 0] = 2 * (x * z - y * w)
         R[:, 2, 1] = 2 * (y * z + x * w)
         R[:, 2, 2] = 1 - 2 * (x * x + y * y)
-        angles = np.stack([np.arctan2(-R[:, 1, 2], R[:, 2, 2]), np.arcsin(np.clip(R[:, 0, 2], -1, 1)),
-                           np.arctan2(-R[:, 0, 1], R[:, 0, 0])], axis=1)
-        pose = np.concatenate([Q[:, pq:pq + 3], angles], axis=1)
-        w_world = np.einsum("nij,nj->ni", R, V[:, pd + 3:pd + 6])
-        vel = np.concatenate([V[:, pd:pd + 3], w_world], axis=1)
+        angles = np.stack(
+            [
+                np.arctan2(-R[:, 1, 2], R[:, 2, 2]),
+                np.arcsin(np.clip(R[:, 0, 2], -1, 1)),
+                np.arctan2(-R[:, 0, 1], R[:, 0, 0]),
+            ],
+            axis=1,
+        )
+        pose = np.concatenate([Q[:, pq : pq + 3], angles], axis=1)
+        w_world = np.einsum("nij,nj->ni", R, V[:, pd + 3 : pd + 6])
+        vel = np.concatenate([V[:, pd : pd + 3], w_world], axis=1)
         alin = ACC[:, :3]
         aang = np.einsum("nij,nj->ni", R, ACC[:, 3:6])
         acc = np.concatenate([alin, aang], axis=1)
-        out = {"table_displacement": pose, "table_velocity": vel, "table_acceleration": acc,
-               "actuator_displacement": Q[:, tm.stroke_qadr].copy()}
+        out = {
+            "table_displacement": pose,
+            "table_velocity": vel,
+            "table_acceleration": acc,
+            "actuator_displacement": Q[:, tm.stroke_qadr].copy(),
+        }
         accs = tm.desc.accelerometers
         if accs:
             P = np.array([a.position_m for a in accs])
             Dn = np.array([a.direction for a in accs])
             r = np.einsum("nij,aj->nai", R, P)  # sensor offsets in world
-            a_site = (alin[:, None, :] + np.cross(aang[:, None, :], r)
-                      + np.cross(w_world[:, None, :], np.cross(w_world[:, None, :], r)))
+            a_site = (
+                alin[:, None, :]
+                + np.cross(aang[:, None, :], r)
+                + np.cross(w_world[:, None, :], np.cross(w_world[:, None, :], r))
+            )
             dirs = np.einsum("nij,aj->nai", R, Dn)  # sensor axes in world
             out["accelerometers"] = np.einsum("nai,nai->na", a_site, dirs)
         else:
@@ -503,18 +667,32 @@ class Simulation:
         lo = hp.vapour_pressure_pa * (1 - 1e-9) - 1e-3
         hi = hp.relief_pressure_pa * (1 + 1e-9)
         warned = [w for w, n0 in zip(MJ_WARNINGS, self._warn0) if d.warning[w].number > n0]
-        if (not warned and self._fl is not None and self._fl.all_finite(d.qpos, d.qvel, st.p_a, st.p_b)
-                and gap <= GAP_LIMIT_M):
-            if (st.p_a.max() <= hi and st.p_b.max() <= hi and st.p_a.min() >= lo and st.p_b.min() >= lo
-                    and math.isfinite(st.p_supply[0])):
+        if (
+            not warned
+            and self._fl is not None
+            and self._fl.all_finite(d.qpos, d.qvel, st.p_a, st.p_b)
+            and gap <= GAP_LIMIT_M
+        ):
+            if (
+                st.p_a.max() <= hi
+                and st.p_b.max() <= hi
+                and st.p_a.min() >= lo
+                and st.p_b.min() >= lo
+                and math.isfinite(st.p_supply[0])
+            ):
                 return None
         at = f"simulation diverged at t = {tk:.4f} s"
         step = f"physics step {self.dt * 1e3:.3g} ms"
-        for what, arr in (("chamber a pressures", st.p_a), ("chamber b pressures", st.p_b),
-                          ("supply pressure", st.p_supply)):
+        for what, arr in (
+            ("chamber a pressures", st.p_a),
+            ("chamber b pressures", st.p_b),
+            ("supply pressure", st.p_supply),
+        ):
             if not np.all(np.isfinite(arr)):
-                return (f"{at}: the hydraulic state is not finite: NaN/Inf in the {what}; {CAUSE_STEP} "
-                        f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})")
+                return (
+                    f"{at}: the hydraulic state is not finite: NaN/Inf in the {what}; {CAUSE_STEP} "
+                    f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})"
+                )
         for what, arr in (("platen/linkage positions (qpos)", d.qpos), ("velocities (qvel)", d.qvel)):
             if not np.all(np.isfinite(arr)):
                 return f"{at}: the mechanical state is not finite: NaN/Inf in the {what}; {CAUSE_STEP} ({step})"
@@ -522,18 +700,24 @@ class Simulation:
             w = warned[0]
             return f"{at}: {MJ_WARNINGS[w]} (MuJoCo warning {w.name}); {CAUSE_STEP} ({step})"
         if gap > GAP_LIMIT_M:
-            return (f"{at}: a swivel opened by {gap * 1e3:.3g} mm (limit {GAP_LIMIT_M * 1e3:.3g} mm): the "
-                    f"loop closure failed; {CAUSE_STEP} ({step}), or a motion beyond the linkages' reach")
+            return (
+                f"{at}: a swivel opened by {gap * 1e3:.3g} mm (limit {GAP_LIMIT_M * 1e3:.3g} mm): the "
+                f"loop closure failed; {CAUSE_STEP} ({step}), or a motion beyond the linkages' reach"
+            )
         # the chambers only: the supply sits between the accumulators' precharge and the relief
         # setting by construction (the hydraulics clip it), and its NaN is caught above
         for what, arr in (("chamber a", st.p_a), ("chamber b", st.p_b)):
             pmax, pmin = float(np.max(arr)), float(np.min(arr))
             if pmax > hi:
-                return (f"{at}: {what} pressure {pmax / 1e6:.4g} MPa above the relief pressure "
-                        f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})")
+                return (
+                    f"{at}: {what} pressure {pmax / 1e6:.4g} MPa above the relief pressure "
+                    f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})"
+                )
             if pmin < lo:
-                return (f"{at}: {what} pressure {pmin / 1e6:.4g} MPa below the vapour pressure "
-                        f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})")
+                return (
+                    f"{at}: {what} pressure {pmin / 1e6:.4g} MPa below the vapour pressure "
+                    f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})"
+                )
         return None
 
 

@@ -39,15 +39,29 @@ def frf_random(desc, *, quick: bool = False, workers: int | None = None, progres
     for r in res:
         c = r["case"]
         mm, am = r["model_metrics"], r["analytical_metrics"]
-        cases.append({"case": c.name, "figure": c.figure, "parameter_set": c.parameter_set, "delay": c.delay,
-                      "payload": c.payload, "max_error_0_100": r["max_error_0_100"],
-                      "f_max_error_hz": r["f_max_error"], "rms_error_0_100": r["rms_error_0_100"],
-                      "oil_peak_model": _peak(mm["oil_peak"]), "oil_peak_analytical": _peak(am["oil_peak"]),
-                      "low_peak_model": _peak(mm["low_peak"]), "low_peak_analytical": _peak(am["low_peak"]),
-                      "wall_s": r["wall_s"]})
+        cases.append(
+            {
+                "case": c.name,
+                "figure": c.figure,
+                "parameter_set": c.parameter_set,
+                "delay": c.delay,
+                "payload": c.payload,
+                "max_error_0_100": r["max_error_0_100"],
+                "f_max_error_hz": r["f_max_error"],
+                "rms_error_0_100": r["rms_error_0_100"],
+                "oil_peak_model": _peak(mm["oil_peak"]),
+                "oil_peak_analytical": _peak(am["oil_peak"]),
+                "low_peak_model": _peak(mm["low_peak"]),
+                "low_peak_analytical": _peak(am["low_peak"]),
+                "wall_s": r["wall_s"],
+            }
+        )
     opt = next(r for r in res if r["case"].name == "optimal")
     return {
-        "table": desc.name, "payload": None, "programme": "frf_random", "mode": "quick" if quick else "full",
+        "table": desc.name,
+        "payload": None,
+        "programme": "frf_random",
+        "mode": "quick" if quick else "full",
         "oil_column_hz": {"x": opt["model_metrics"]["oil_peak"][0]},
         "oil_column_analytical_hz": {"x": opt["analytical_metrics"]["oil_peak"][0]},
         "cases": cases,
@@ -66,18 +80,32 @@ def ls_identification(desc, *, quick: bool = False, workers: int | None = None, 
     names = U.ucsd_tests("triangular") + U.ucsd_tests("sinusoidal") if quick else None
     res = U.ucsd_programme(names, workers=workers or 2, out_dir=runs_dir, progress=progress)
     ident = U.ucsd_identification(res)
-    sets = {k: {"unconstrained": v["unconstrained"].as_dict(), "constrained": v["constrained"].as_dict()}
-            for k, v in ident.items() if k != "alpha_scan"}
+    sets = {
+        k: {"unconstrained": v["unconstrained"].as_dict(), "constrained": v["constrained"].as_dict()}
+        for k, v in ident.items()
+        if k != "alpha_scan"
+    }
     head = ident["periodic"]["unconstrained"]
     return {
-        "table": desc.name, "payload": None, "programme": "ls_identification", "mode": "quick" if quick else "full",
-        "identification": {k: head.as_dict()[k] for k in ("M_e_kg", "K_e_N_per_m", "C_e", "F_mu_N", "alpha",
-                                                          "error")} | {"test_set": "periodic"},
+        "table": desc.name,
+        "payload": None,
+        "programme": "ls_identification",
+        "mode": "quick" if quick else "full",
+        "identification": {k: head.as_dict()[k] for k in ("M_e_kg", "K_e_N_per_m", "C_e", "F_mu_N", "alpha", "error")}
+        | {"test_set": "periodic"},
         "identification_sets": sets,
         "alpha_scan": [{"alpha": a.alpha, "error": a.error} for a in ident.get("alpha_scan", [])],
         "paper": dict(U.PAPER_PARAMS),
-        "tests": [{"name": r["name"], "peak_velocity_m_s": r["peak_velocity"], "peak_force_n": r["peak_force"],
-                   "run_file": r.get("path"), "wall_s": r["wall_s"]} for r in res],
+        "tests": [
+            {
+                "name": r["name"],
+                "peak_velocity_m_s": r["peak_velocity"],
+                "peak_force_n": r["peak_force"],
+                "run_file": r.get("path"),
+                "wall_s": r["wall_s"],
+            }
+            for r in res
+        ],
         "wall_s": time.perf_counter() - t0,
         "_report": U.ucsd_report(res, ident),
         "_results": res,

@@ -50,12 +50,12 @@ TABLE_FILE = ROOT / "scenarios" / "tables" / "rice.toml"
 # ------------------------------------------------------------------ seed 001 figures
 #: Paper's statements used as targets (seed 001; section B of the published values).
 PAPER = {
-    "oil_column_bare_hz": (67.0, 70.0),       # Sec. 6.1 "approximately 70 Hz"; Sec. 7 "67 Hz" (optimal gains)
-    "foundation_hz": 27.1,                    # Sec. 5.1
-    "rigid_central_peak_hz": (36.0, 42.0),    # Sec. 8.1/8.2: central peak 36-40 (rigid) / 36-42 Hz (clamp model)
-    "rigid_small_peak_hz": 57.0,              # Sec. 8.1/8.2: small peak ~57 Hz (split oil column)
-    "clamp_hz": 52.0,                         # Sec. 8.2: clamping SDOF 52 Hz
-    "frame_oil_column_hz": 62.0,              # Sec. 8.3.1: oil column drops from ~70 to ~62 Hz
+    "oil_column_bare_hz": (67.0, 70.0),  # Sec. 6.1 "approximately 70 Hz"; Sec. 7 "67 Hz" (optimal gains)
+    "foundation_hz": 27.1,  # Sec. 5.1
+    "rigid_central_peak_hz": (36.0, 42.0),  # Sec. 8.1/8.2: central peak 36-40 (rigid) / 36-42 Hz (clamp model)
+    "rigid_small_peak_hz": 57.0,  # Sec. 8.1/8.2: small peak ~57 Hz (split oil column)
+    "clamp_hz": 52.0,  # Sec. 8.2: clamping SDOF 52 Hz
+    "frame_oil_column_hz": 62.0,  # Sec. 8.3.1: oil column drops from ~70 to ~62 Hz
     "frame_modes_model_hz": {297: (7.22, 21.58, 33.86), 501: (5.53, 16.60, 26.15)},  # Table 4 (model)
     "frame_modes_measured_hz": {297: (6.40, 16.82, 22.20), 501: (5.15, 13.82, 20.05)},  # Table 4 (measured)
 }
@@ -130,14 +130,26 @@ def load(path=TABLE_FILE) -> RiceTable:
     mT = m_b + m_t
     f_b = math.sqrt(k_b / mT) / (2 * math.pi)
     xi_b = c_b / (2 * math.sqrt(k_b * mT))
-    sets = {n: ParameterSet(n, float(s["kt_m3_per_v_s"]), float(s["beta_pa"]), float(s["kle_m3_per_n_s"]),
-                            float(s["tau_s"])) for n, s in c["parameter_sets"].items()}
+    sets = {
+        n: ParameterSet(
+            n, float(s["kt_m3_per_v_s"]), float(s["beta_pa"]), float(s["kle_m3_per_n_s"]), float(s["tau_s"])
+        )
+        for n, s in c["parameter_sets"].items()
+    }
     return RiceTable(
-        area_m2=A, volume_m3=V, m_t=m_t, m_b=m_b, f_b_hz=f_b, xi_b=xi_b,
+        area_m2=A,
+        volume_m3=V,
+        m_t=m_t,
+        m_b=m_b,
+        f_b_hz=f_b,
+        xi_b=xi_b,
         cond=Conditioning(float(c["k_x_cond_v_per_m"]), float(c["k_d_cond_v_per_m"]), float(c["k_dp_cond_v_per_pa"])),
-        gains=Gains(float(c["p_gain"]), float(c["i_gain_hz"]), float(c["d_gain_s"]), float(c["ff_gain_s"]),
-                    float(c["dp_gain"])),
-        sets=sets, default_set=str(c.get("parameter_set", "d18")))
+        gains=Gains(
+            float(c["p_gain"]), float(c["i_gain_hz"]), float(c["d_gain_s"]), float(c["ff_gain_s"]), float(c["dp_gain"])
+        ),
+        sets=sets,
+        default_set=str(c.get("parameter_set", "d18")),
+    )
 
 
 #: Optimal bare-table gains (Table 3) and the gain sweeps of Figs. 3-7 (other gains 0, P = 1).
@@ -145,21 +157,22 @@ OPTIMAL = Gains(p=1.8, i_hz=40.0, d_s=0.018, ff_s=0.018, dp=-3.0)
 #: Sec. 8: the payload tests use the bare-table optimum with I 40 -> 30 Hz and dP -> 0.
 PAYLOAD_GAINS = Gains(p=1.8, i_hz=30.0, d_s=0.018, ff_s=0.018, dp=0.0)
 SWEEPS = {
-    "P": [Gains(p=v) for v in (1.0, 2.0, 3.0)],                   # Fig. 3, set d0
-    "I": [Gains(i_hz=v) for v in (0.0, 20.0, 40.0)],              # Fig. 4, set d0
-    "D": [Gains(d_s=v) for v in (0.0, 0.010, 0.020)],             # Fig. 5, sets d0/d10/d20
-    "FF": [Gains(ff_s=v) for v in (0.0, 0.020, 0.030)],           # Fig. 6, set d0
+    "P": [Gains(p=v) for v in (1.0, 2.0, 3.0)],  # Fig. 3, set d0
+    "I": [Gains(i_hz=v) for v in (0.0, 20.0, 40.0)],  # Fig. 4, set d0
+    "D": [Gains(d_s=v) for v in (0.0, 0.010, 0.020)],  # Fig. 5, sets d0/d10/d20
+    "FF": [Gains(ff_s=v) for v in (0.0, 0.020, 0.030)],  # Fig. 6, set d0
     # Fig. 7 labels dP 0, 1.5, 3.0; in Eq. 2's sign convention the damping values are
     # negative (Table 3's optimum is -3.0; +3 makes the loop unstable), so these are used.
-    "dP": [Gains(dp=v) for v in (0.0, -1.5, -3.0)],               # Fig. 7, set d0
+    "dP": [Gains(dp=v) for v in (0.0, -1.5, -3.0)],  # Fig. 7, set d0
 }
 #: Parameter set per D gain in the D sweep (Table 1).
 D_SET = {0.0: "d0", 0.010: "d10", 0.018: "d18", 0.020: "d20"}
 
 
 # ------------------------------------------------------------------ payloads
-def rigid_modes(mass_kg: float, clamp_hz: float | None = None, zeta: float = 0.02,
-                clamp_fraction: float = 1.0) -> list[Mode]:
+def rigid_modes(
+    mass_kg: float, clamp_hz: float | None = None, zeta: float = 0.02, clamp_fraction: float = 1.0
+) -> list[Mode]:
     """A rigid block: infinitely stiff (H_p = 1) or on a clamping SDOF (Sec. 8.2).
 
     Sec. 8.2 models the clamped block as "an SDOF payload with a natural frequency of
@@ -188,7 +201,7 @@ def frame_modes(M, K, zeta: float) -> list[Mode]:
     for j in range(len(w2)):
         p = phi[:, j]
         gam = p @ M @ r / (p @ M @ p)
-        out.append(Mode(float(gam ** 2 * (p @ M @ p)), float(np.sqrt(w2[j]) / (2 * np.pi)), zeta))
+        out.append(Mode(float(gam**2 * (p @ M @ p)), float(np.sqrt(w2[j]) / (2 * np.pi)), zeta))
     return out
 
 
@@ -235,8 +248,16 @@ class TF:
     S: np.ndarray
 
 
-def transfer(f, table: RiceTable | None = None, gains: Gains | None = None, params: ParameterSet | str | None = None,
-             payload: list[Mode] | None = None, *, delay: bool = True, foundation: bool = True) -> TF:
+def transfer(
+    f,
+    table: RiceTable | None = None,
+    gains: Gains | None = None,
+    params: ParameterSet | str | None = None,
+    payload: list[Mode] | None = None,
+    *,
+    delay: bool = True,
+    foundation: bool = True,
+) -> TF:
     """Eqs. 1-8 at frequencies ``f`` (Hz). ``delay=False``: tau = 0 (the paper's dashed
     curves); ``foundation=False``: rigid foundation (B = 0)."""
     tb = table or load()
@@ -256,7 +277,7 @@ def transfer(f, table: RiceTable | None = None, gains: Gains | None = None, para
         HF = (1 + B) * (1 + mpHp / mt)
         tau = ps.tau_s if delay else 0.0
         Ht = ps.kt_m3_per_v_s * np.exp(-tau * s)
-        S = Ht / (s ** 3 * V * mt / (4 * ps.beta_pa * A) * HF + s * s * mt * ps.kle_m3_per_n_s * HF + s * A)
+        S = Ht / (s**3 * V * mt / (4 * ps.beta_pa * A) * HF + s * s * mt * ps.kle_m3_per_n_s * HF + s * A)
         c = tb.cond
         num = S * ((g.p + g.i_hz / s) * c.k_x + s * (g.ff_s + g.d_s) * c.k_d)
         den = 1 + S * ((g.p + g.i_hz / s) * c.k_x + s * g.d_s * c.k_d - g.dp * s * s * mt / A * c.k_dp * HF)
@@ -284,8 +305,8 @@ def peaks(f, mag, band, *, min_prominence=0.0) -> list[tuple[float, float]]:
             d = 0.5 * (y0 - y2) / den if den != 0 else 0.0
             df = f[i + 1] - f[i]
             if min_prominence > 0:
-                lo = min(np.nanmin(mag[max(0, i - 40):i], initial=y1), y1)
-                hi_side = min(np.nanmin(mag[i + 1:i + 41], initial=y1), y1)
+                lo = min(np.nanmin(mag[max(0, i - 40) : i], initial=y1), y1)
+                hi_side = min(np.nanmin(mag[i + 1 : i + 41], initial=y1), y1)
                 if y1 - max(lo, hi_side) < min_prominence:
                     continue
             if np.isfinite(y1):
@@ -310,12 +331,18 @@ def summary() -> dict:
     """Headline numbers of the analytical model (the paper's statements)."""
     tb = load()
     f = np.linspace(0.05, 120, 24001)
-    out = {"oil_column_eq11_hz": {n: oil_column_hz(tb.area_m2, tb.volume_m3, tb.m_t, s.beta_pa)
-                                  for n, s in tb.sets.items()}}
+    out = {
+        "oil_column_eq11_hz": {
+            n: oil_column_hz(tb.area_m2, tb.volume_m3, tb.m_t, s.beta_pa) for n, s in tb.sets.items()
+        }
+    }
     t = transfer(f, tb, OPTIMAL, "d18")
     m = np.abs(t.T)
-    out["optimal"] = {"oil_peak": peak_in(f, m, (50, 90)), "foundation_peak": peak_in(f, m, (20, 30)),
-                      "low_peak": peak_in(f, m, (2, 12))}
+    out["optimal"] = {
+        "oil_peak": peak_in(f, m, (50, 90)),
+        "foundation_peak": peak_in(f, m, (20, 30)),
+        "low_peak": peak_in(f, m, (2, 12)),
+    }
     return out
 
 

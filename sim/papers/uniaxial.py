@@ -34,7 +34,7 @@ from sim.effects import build_model
 from sim.loop.analog import RICE_FS_HZ, RICE_RATE_HZ, RiceGains, RiceSimulation, _apply_parameter_set, is_rice  # noqa: F401
 from sim.papers import rice as R
 
-RICE_NPERSEG = 2 ** 14
+RICE_NPERSEG = 2**14
 RICE_SEGMENTS = 11
 
 
@@ -71,7 +71,7 @@ def white_noise_command(n: int, fs: float, *, rms_m_s2: float = 2.0, band_hz=(0.
     jw = 2j * np.pi * f
     with np.errstate(divide="ignore", invalid="ignore"):
         V = np.where(f > 0, A / jw, 0)
-        D = np.where(f > 0, A / jw ** 2, 0)
+        D = np.where(f > 0, A / jw**2, 0)
     return np.fft.irfft(D, n), np.fft.irfft(V, n), np.fft.irfft(A, n)
 
 
@@ -95,16 +95,27 @@ class RiceRun:
     payload: str | None
 
 
-def rice_simulation(gains: R.Gains, parameter_set: str = "d18", *, payload: str | None = None, delay: bool = True,
-                    n_segments: int = RICE_SEGMENTS, nperseg: int = RICE_NPERSEG, lead_in_s: float = 2.0,
-                    rms_m_s2: float = 2.0, seed: int = 1, backend: str = "numba") -> RiceRun:
+def rice_simulation(
+    gains: R.Gains,
+    parameter_set: str = "d18",
+    *,
+    payload: str | None = None,
+    delay: bool = True,
+    n_segments: int = RICE_SEGMENTS,
+    nperseg: int = RICE_NPERSEG,
+    lead_in_s: float = 2.0,
+    rms_m_s2: float = 2.0,
+    seed: int = 1,
+    backend: str = "numba",
+) -> RiceRun:
     """Run the paper's random test on the model and estimate T (see module docstring)."""
     from sim.signals.estimation import frf
 
     desc, kt = rice_description(parameter_set, delay=delay)
     pl = load_payload(payload) if payload else None
-    sim = RiceSimulation(desc, pl, RiceGains(gains=gains, parameter_set=parameter_set, delay=delay), kt=kt,
-                         backend=backend)
+    sim = RiceSimulation(
+        desc, pl, RiceGains(gains=gains, parameter_set=parameter_set, delay=delay), kt=kt, backend=backend
+    )
     sub = int(round(RICE_RATE_HZ / RICE_FS_HZ))
     n_rec = n_segments * nperseg
     n_lead = int(round(lead_in_s * RICE_FS_HZ))
@@ -123,11 +134,28 @@ def rice_simulation(gains: R.Gains, parameter_set: str = "d18", *, payload: str 
         raise RuntimeError(f"Rice simulation: {reason} (gains {gains})")
     a_cmd = ad[::sub][:n_rec]
     x_cmd = xd[::sub][:n_rec]
-    fr = frf(a_cmd, rec["a_table"], RICE_FS_HZ, nperseg=nperseg, overlap=0.0, window="blackmanharris",
-             estimator="H1", detrend=False)
-    return RiceRun(t=np.arange(n_rec) / RICE_FS_HZ, a_cmd=a_cmd, x_cmd=x_cmd, frf=fr, wall_s=wall, gains=gains,
-                   parameter_set=parameter_set, delay=delay, payload=payload,
-                   **{k: rec[k] for k in ("a_table", "x_table", "stroke", "dp", "opening")})
+    fr = frf(
+        a_cmd,
+        rec["a_table"],
+        RICE_FS_HZ,
+        nperseg=nperseg,
+        overlap=0.0,
+        window="blackmanharris",
+        estimator="H1",
+        detrend=False,
+    )
+    return RiceRun(
+        t=np.arange(n_rec) / RICE_FS_HZ,
+        a_cmd=a_cmd,
+        x_cmd=x_cmd,
+        frf=fr,
+        wall_s=wall,
+        gains=gains,
+        parameter_set=parameter_set,
+        delay=delay,
+        payload=payload,
+        **{k: rec[k] for k in ("a_table", "x_table", "stroke", "dp", "opening")},
+    )
 
 
 # ------------------------------------------------------------------ Rice: the paper's cases
@@ -154,12 +182,16 @@ def rice_cases() -> list[RiceCase]:
     out += [RiceCase(f"D{v * 1e3:g} ms", G(d_s=v), R.D_SET[v], figure="Fig. 5") for v in (0.010, 0.020)]
     out += [RiceCase(f"FF{v * 1e3:g} ms", G(ff_s=v), "d0", figure="Fig. 6") for v in (0.020, 0.030)]
     out += [RiceCase(f"dP{v:g}", G(dp=v), "d0", figure="Fig. 7") for v in (-1.5, -3.0)]
-    out += [RiceCase("optimal", R.OPTIMAL, "d18", figure="Fig. 9"),
-            RiceCase("optimal tau=0", R.OPTIMAL, "d18", delay=False, figure="Fig. 9 dashed"),
-            RiceCase("bare, payload gains", P, "d18", figure="Sec. 8 reference")]
+    out += [
+        RiceCase("optimal", R.OPTIMAL, "d18", figure="Fig. 9"),
+        RiceCase("optimal tau=0", R.OPTIMAL, "d18", delay=False, figure="Fig. 9 dashed"),
+        RiceCase("bare, payload gains", P, "d18", figure="Sec. 8 reference"),
+    ]
     out += [RiceCase(f"rigid {m} kg", P, "pr", f"rice_rigid_{m}", figure="Fig. 11") for m in (68, 204, 408)]
-    out += [RiceCase(f"rigid {m} kg, 52 Hz clamp", P, "pfr", f"rice_rigid_{m}_clamp", figure="Fig. 12")
-            for m in (68, 204, 408)]
+    out += [
+        RiceCase(f"rigid {m} kg, 52 Hz clamp", P, "pfr", f"rice_rigid_{m}_clamp", figure="Fig. 12")
+        for m in (68, 204, 408)
+    ]
     out += [RiceCase(f"frame {m} kg", P, "pf", f"frame_3storey_{m}", figure="Fig. 13") for m in (297, 501)]
     return out
 
@@ -172,8 +204,9 @@ def _smooth(y, n=5):
 def rice_metrics(f, mag, modes=None) -> dict:
     """Peaks of a |T| curve in the bands the paper discusses (f Hz, |T|); with payload
     modes, the spike nearest each modal frequency (within +/-1.5 Hz)."""
-    spikes = [R.peak_in(f, mag, (m.f_hz - 1.5, m.f_hz + 1.5)) for m in (modes or []) if math.isfinite(m.f_hz)
-              and m.f_hz < 45]
+    spikes = [
+        R.peak_in(f, mag, (m.f_hz - 1.5, m.f_hz + 1.5)) for m in (modes or []) if math.isfinite(m.f_hz) and m.f_hz < 45
+    ]
     return {
         "spikes": spikes,
         "foundation_notch": R.notch_in(f, mag, (25.5, 32.0)),
@@ -189,18 +222,34 @@ def rice_metrics(f, mag, modes=None) -> dict:
 
 def run_rice_case(case: RiceCase, n_segments: int = RICE_SEGMENTS, rms_m_s2: float = 0.5, seed: int = 1) -> dict:
     """Model FRF and analytical T(s) of one case, with their peak metrics and the error."""
-    run = rice_simulation(case.gains, case.parameter_set, payload=case.payload, delay=case.delay,
-                          n_segments=n_segments, rms_m_s2=rms_m_s2, seed=seed)
+    run = rice_simulation(
+        case.gains,
+        case.parameter_set,
+        payload=case.payload,
+        delay=case.delay,
+        n_segments=n_segments,
+        rms_m_s2=rms_m_s2,
+        seed=seed,
+    )
     f = run.frf.f
     modes = R.payload_from_file(case.payload) if case.payload else None
     T = R.transfer(f, None, case.gains, case.parameter_set, modes, delay=case.delay).T
     Hm = np.abs(run.frf.H)
     band = (f > 0) & (f <= 100.0)
     err = np.abs(Hm / np.abs(T) - 1)[band]
-    return {"case": case, "f": f, "model": run.frf.H, "analytical": T, "coherence": run.frf.coherence,
-            "model_metrics": rice_metrics(f, _smooth(Hm), modes), "analytical_metrics": rice_metrics(f, np.abs(T), modes),
-            "max_error_0_100": float(err.max()), "f_max_error": float(f[band][err.argmax()]),
-            "rms_error_0_100": float(np.sqrt((err ** 2).mean())), "wall_s": run.wall_s}
+    return {
+        "case": case,
+        "f": f,
+        "model": run.frf.H,
+        "analytical": T,
+        "coherence": run.frf.coherence,
+        "model_metrics": rice_metrics(f, _smooth(Hm), modes),
+        "analytical_metrics": rice_metrics(f, np.abs(T), modes),
+        "max_error_0_100": float(err.max()),
+        "f_max_error": float(f[band][err.argmax()]),
+        "rms_error_0_100": float(np.sqrt((err**2).mean())),
+        "wall_s": run.wall_s,
+    }
 
 
 def run_rice_programme(cases=None, workers: int = 2, progress=None, **kw) -> list[dict]:
@@ -228,14 +277,36 @@ PAPER_PARAMS = {"M_e_kg": 144.0e3, "K_e_N_per_m": 1.263e6, "C_e": 45.9e3, "F_mu_
 UCSD_FILE = R.ROOT / "scenarios" / "tables" / "ucsd.toml"
 #: Hold-down nitrogen pressure (MPa) -> K_e (seed 002 Table 4 averages) and the vertical
 #: bearing force F_z (seed 002, Fig. 5); F_mu = 4.1 kN + 0.39 % F_z (seed 002).
-UCSD_HOLD_DOWN = {13.8: {"K_e": 1.263e6, "F_z": 5.783e6}, 6.9: {"K_e": 0.635e6, "F_z": 3.698e6},
-                  0.0: {"K_e": 0.0, "F_z": 1.613e6}}
+UCSD_HOLD_DOWN = {
+    13.8: {"K_e": 1.263e6, "F_z": 5.783e6},
+    6.9: {"K_e": 0.635e6, "F_z": 3.698e6},
+    0.0: {"K_e": 0.0, "F_z": 1.613e6},
+}
 #: Table 1: triangular (D cm, V cm/s) and sinusoidal (D cm, f Hz) tests (11, 12 unusable).
-UCSD_TRIANGLES = {"T1": (5.00, 1.00), "T2": (7.50, 1.50), "T3": (12.50, 2.50), "T4": (50.00, 10.00),
-                  "T5": (25.00, 10.00), "T6": (62.50, 25.00), "T7": (37.50, 25.00), "T8": (75.00, 50.00),
-                  "T9": (46.88, 75.00), "T10": (62.50, 100.00)}
-UCSD_SINES = {"S1": (4, 0.04), "S2": (4, 0.06), "S3": (4, 0.10), "S4": (4, 0.40), "S5": (4, 1.00),
-              "S6": (10, 0.40), "S7": (10, 0.80), "S8": (10, 1.20), "S9": (20, 0.60), "S10": (20, 0.80)}
+UCSD_TRIANGLES = {
+    "T1": (5.00, 1.00),
+    "T2": (7.50, 1.50),
+    "T3": (12.50, 2.50),
+    "T4": (50.00, 10.00),
+    "T5": (25.00, 10.00),
+    "T6": (62.50, 25.00),
+    "T7": (37.50, 25.00),
+    "T8": (75.00, 50.00),
+    "T9": (46.88, 75.00),
+    "T10": (62.50, 100.00),
+}
+UCSD_SINES = {
+    "S1": (4, 0.04),
+    "S2": (4, 0.06),
+    "S3": (4, 0.10),
+    "S4": (4, 0.40),
+    "S5": (4, 1.00),
+    "S6": (10, 0.40),
+    "S7": (10, 0.80),
+    "S8": (10, 1.20),
+    "S9": (20, 0.60),
+    "S10": (20, 0.80),
+}
 #: Table 2: El Centro scaling and white-noise RMS (g).
 UCSD_EL_CENTRO = {"EC20": 0.2, "EC100": 1.0, "EC300": 3.0}
 UCSD_WHITE_NOISE = {"WN3": 0.03, "WN5": 0.05, "WN7": 0.07, "WN10": 0.10, "WN13": 0.13}
@@ -267,29 +338,41 @@ def ucsd_description(pressure_mpa: float = 13.8, path=UCSD_FILE, *, presliding_m
 def ucsd_motion(name: str, fs: float = 1024.0, *, cycles: float = 2.0, wn_duration_s: float = 30.0, seed: int = 0):
     """The reference Motion of one test of seed 002's programme."""
     from sim.scenario import motions as Mo
+
     if name in UCSD_TRIANGLES:
         D, V = UCSD_TRIANGLES[name]
-        return Mo.triangle(peak_displacement=D / 100, peak_velocity=V / 100, sample_rate_hz=fs, n_cycles=cycles,
-                           name=name)
+        return Mo.triangle(
+            peak_displacement=D / 100, peak_velocity=V / 100, sample_rate_hz=fs, n_cycles=cycles, name=name
+        )
     if name in UCSD_SINES:
         D, f = UCSD_SINES[name]
         n = cycles + 1.0
-        return Mo.tapered_sine(amplitude=D / 100, frequency_hz=f, duration_s=n / f, sample_rate_hz=fs,
-                               taper_cycles=0.5, name=name)
+        return Mo.tapered_sine(
+            amplitude=D / 100, frequency_hz=f, duration_s=n / f, sample_rate_hz=fs, taper_cycles=0.5, name=name
+        )
     if name in UCSD_EL_CENTRO:
         from sim.scenario.records import el_centro_motions
 
         return el_centro_motions(sample_rate_hz=fs, amplitude_factor=UCSD_EL_CENTRO[name])["x"]
     if name in UCSD_WHITE_NOISE:
-        return Mo.white_noise(duration_s=wn_duration_s, sample_rate_hz=fs, band_hz=(0.5, 25.0),
-                              seed=(seed, list(UCSD_WHITE_NOISE).index(name)),
-                              rms_acceleration=UCSD_WHITE_NOISE[name] * G0, name=name)
+        return Mo.white_noise(
+            duration_s=wn_duration_s,
+            sample_rate_hz=fs,
+            band_hz=(0.5, 25.0),
+            seed=(seed, list(UCSD_WHITE_NOISE).index(name)),
+            rms_acceleration=UCSD_WHITE_NOISE[name] * G0,
+            name=name,
+        )
     raise KeyError(f"unknown test {name!r}")
 
 
 def ucsd_tests(kind: str = "all") -> list[str]:
-    groups = {"triangular": list(UCSD_TRIANGLES), "sinusoidal": list(UCSD_SINES), "elcentro": list(UCSD_EL_CENTRO),
-              "whitenoise": list(UCSD_WHITE_NOISE)}
+    groups = {
+        "triangular": list(UCSD_TRIANGLES),
+        "sinusoidal": list(UCSD_SINES),
+        "elcentro": list(UCSD_EL_CENTRO),
+        "whitenoise": list(UCSD_WHITE_NOISE),
+    }
     if kind == "all":
         return sum(groups.values(), [])
     return groups[kind]
@@ -358,12 +441,20 @@ def _instant_channels(res, steps_per_sample: int | None = None) -> dict:
         out[:-1] = (1 - f) * p[:-1] + f * p[1:]
         return out
 
-    return {"disp": dm, "vel": vm, "acc_steps": acc, "pressure_a": at_step_end(ch["pressure_a"]),
-            "pressure_b": at_step_end(ch["pressure_b"]), "steps": s, "fs": 1.0 / T}
+    return {
+        "disp": dm,
+        "vel": vm,
+        "acc_steps": acc,
+        "pressure_a": at_step_end(ch["pressure_a"]),
+        "pressure_b": at_step_end(ch["pressure_b"]),
+        "steps": s,
+        "fs": 1.0 / T,
+    }
 
 
-def ucsd_measure(res, desc, sensors: SensorModel | None = None, seed: int = 0, *,
-                 steps_per_sample: int | None = None) -> dict:
+def ucsd_measure(
+    res, desc, sensors: SensorModel | None = None, seed: int = 0, *, steps_per_sample: int | None = None
+) -> dict:
     """Apply the DAQ to a simulation result (1024 Hz): returns 512 Hz channels.
 
     Sampling instants: :func:`_instant_channels`. Accelerometers: the 100 Hz
@@ -399,7 +490,7 @@ def ucsd_measure(res, desc, sensors: SensorModel | None = None, seed: int = 0, *
     F = (pres(ic["pressure_a"]) * areas_a - pres(ic["pressure_b"]) * areas_b).sum(axis=1)
     # the static part removed, as the paper's high-pass: the force at rest before the test
     # (zero in the model; the sample at t_0 + h/2 has already moved)
-    F -= ((ch["pressure_a"][0] * areas_a).sum() - (ch["pressure_b"][0] * areas_b).sum())
+    F -= (ch["pressure_a"][0] * areas_a).sum() - (ch["pressure_b"][0] * areas_b).sum()
     # complementary velocity V = (w s D + A) / (s + w) by Tustin: with c = w T / 2,
     # v_k+1 = ((1 - c) v_k + w (d_k+1 - d_k) + T/2 (a_k + a_k+1)) / (1 + c)
     w = 2 * math.pi * s.crossover_hz
@@ -411,12 +502,27 @@ def ucsd_measure(res, desc, sensors: SensorModel | None = None, seed: int = 0, *
         v[k + 1] = ((1 - c) * v[k] + w * (d[k + 1] - d[k]) + dt / 2 * (a[k] + a[k + 1])) / (1 + c)
     step = int(round(fs / s.recorder_hz))
     dec = lambda x: sig.decimate(x, step, ftype="fir", zero_phase=False) if step > 1 else x  # noqa: E731
-    return {"t": res.t[::step][:len(dec(d))], "force": dec(F), "disp": dec(d), "vel": dec(v), "acc": dec(a),
-            "fs": fs / step, "true_force": ch["actuator_force"].sum(axis=1)}
+    return {
+        "t": res.t[::step][: len(dec(d))],
+        "force": dec(F),
+        "disp": dec(d),
+        "vel": dec(v),
+        "acc": dec(a),
+        "fs": fs / step,
+        "true_force": ch["actuator_force"].sum(axis=1),
+    }
 
 
-def ucsd_run_test(name: str, pressure_mpa: float = 13.8, *, seed: int = 0, sensors: SensorModel | None = None,
-                  cycles: float = 2.0, out_dir=None, presliding_m: float | None = None) -> dict:
+def ucsd_run_test(
+    name: str,
+    pressure_mpa: float = 13.8,
+    *,
+    seed: int = 0,
+    sensors: SensorModel | None = None,
+    cycles: float = 2.0,
+    out_dir=None,
+    presliding_m: float | None = None,
+) -> dict:
     """Simulate one test on the LHPOST model and measure it (optionally write a run file)."""
     from sim.loop.simulation import Simulation
     from sim.scenario.reference import Reference
@@ -435,10 +541,15 @@ def ucsd_run_test(name: str, pressure_mpa: float = 13.8, *, seed: int = 0, senso
         raise RuntimeError(f"{name}: {res.incomplete_reason}")
     meas = ucsd_measure(res, desc, sensors, seed=seed + 1000 * (1 + ucsd_tests().index(name)))
     step = int(round(len(res.t) / max(len(meas["t"]), 1)))
-    meas["reference"] = mo.d[:len(res.t):step][:len(meas["t"])]
-    out = {"name": name, "pressure_mpa": pressure_mpa, "measured": meas, "wall_s": res.wall_s,
-           "peak_velocity": float(np.abs(res.channels["table_velocity"][:, 0]).max()),
-           "peak_force": float(np.abs(res.channels["actuator_force"].sum(axis=1)).max())}
+    meas["reference"] = mo.d[: len(res.t) : step][: len(meas["t"])]
+    out = {
+        "name": name,
+        "pressure_mpa": pressure_mpa,
+        "measured": meas,
+        "wall_s": res.wall_s,
+        "peak_velocity": float(np.abs(res.channels["table_velocity"][:, 0]).max()),
+        "peak_force": float(np.abs(res.channels["actuator_force"].sum(axis=1)).max()),
+    }
     if out_dir is not None:
         out["path"] = str(write_measured_run(meas, desc, name, out_dir))
     return out
@@ -455,29 +566,50 @@ def write_measured_run(meas: dict, desc, name: str, out_dir):
     na = len(desc.actuators)
     force = np.zeros((n, na))
     force[:, 0] = meas["force"]  # the measured total force (pressures x areas of both actuators)
-    meta = {"format": FORMAT, "table": desc.name, "sample_rate_hz": float(meas["fs"]),
-            "actuators": list(desc.actuator_names), "dofs": list(DOFS6),
-            "source": "simulated",
-            "description": f"{name}: seed 002 test on the ucsd model (sim.papers.uniaxial), measured with the LHPOST DAQ "
-                           "model; actuator_force holds the total measured "
-                           "force in column E (W zero)"}
+    meta = {
+        "format": FORMAT,
+        "table": desc.name,
+        "sample_rate_hz": float(meas["fs"]),
+        "actuators": list(desc.actuator_names),
+        "dofs": list(DOFS6),
+        "source": "simulated",
+        "description": f"{name}: seed 002 test on the ucsd model (sim.papers.uniaxial), measured with the LHPOST DAQ "
+        "model; actuator_force holds the total measured "
+        "force in column E (W zero)",
+    }
     meta.update(description_meta("table", desc.source, desc.raw))  # the hold-down pressure's K_e and F_mu
-    run = RunFile(t=np.arange(n) / meas["fs"], meta=meta, actuator_force=force, table_displacement=z6(meas["disp"]),
-                  table_velocity=z6(meas["vel"]), table_acceleration=z6(meas["acc"]),
-                  reference=z6(meas.get("reference", meas["disp"])))
+    run = RunFile(
+        t=np.arange(n) / meas["fs"],
+        meta=meta,
+        actuator_force=force,
+        table_displacement=z6(meas["disp"]),
+        table_velocity=z6(meas["vel"]),
+        table_acceleration=z6(meas["acc"]),
+        reference=z6(meas.get("reference", meas["disp"])),
+    )
     p = Path(out_dir)
     p.mkdir(parents=True, exist_ok=True)
     return write_run(p / f"ucsd_{name}.run.npz", run)
 
 
-def ucsd_programme(names=None, pressure_mpa: float = 13.8, *, workers: int = 2, seed: int = 0, out_dir=None,
-                   cycles: float = 2.0, presliding_m: float | None = None, progress=None) -> list[dict]:
+def ucsd_programme(
+    names=None,
+    pressure_mpa: float = 13.8,
+    *,
+    workers: int = 2,
+    seed: int = 0,
+    out_dir=None,
+    cycles: float = 2.0,
+    presliding_m: float | None = None,
+    progress=None,
+) -> list[dict]:
     from functools import partial
 
     from sim.parallel import map_jobs
 
-    fn = partial(ucsd_run_test, pressure_mpa=pressure_mpa, seed=seed, out_dir=out_dir, cycles=cycles,
-                 presliding_m=presliding_m)
+    fn = partial(
+        ucsd_run_test, pressure_mpa=pressure_mpa, seed=seed, out_dir=out_dir, cycles=cycles, presliding_m=presliding_m
+    )
     return map_jobs(fn, names or ucsd_tests(), workers=workers, progress=progress)
 
 
@@ -487,8 +619,9 @@ def ucsd_records(results) -> list:
     out = []
     for r in results:
         m = r["measured"]
-        out.append(Record(name=r["name"], dt=1.0 / m["fs"], force=m["force"], acc=m["acc"], vel=m["vel"],
-                          disp=m["disp"]))
+        out.append(
+            Record(name=r["name"], dt=1.0 / m["fs"], force=m["force"], acc=m["acc"], vel=m["vel"], disp=m["disp"])
+        )
     return out
 
 
@@ -500,16 +633,29 @@ def _fmt(x, nd=2):
 def rice_report(results: list[dict]) -> list[str]:
     """Markdown: every Rice case, analytical Eq. 1-8 vs model FRF, with the paper's statements."""
     tb = R.load()
-    lines = ["# Rice table (seed 001): paper vs analytical T(s) vs model FRF", "",
-             "Model FRF: white-noise acceleration command, Bartlett average of 11 x 2^14 samples at 4000 Hz, "
-             "3-term Blackman-Harris (sim/papers/uniaxial.py). Peaks as (Hz, |T|); model peaks on a 5-bin running mean.", "",
-             "## Oil column from the known parameters (Eq. 11, no fitting)", "",
-             "| set | beta MPa | Eq. 11 Hz |", "|---|---|---|"]
+    lines = [
+        "# Rice table (seed 001): paper vs analytical T(s) vs model FRF",
+        "",
+        "Model FRF: white-noise acceleration command, Bartlett average of 11 x 2^14 samples at 4000 Hz, "
+        "3-term Blackman-Harris (sim/papers/uniaxial.py). Peaks as (Hz, |T|); model peaks on a 5-bin running mean.",
+        "",
+        "## Oil column from the known parameters (Eq. 11, no fitting)",
+        "",
+        "| set | beta MPa | Eq. 11 Hz |",
+        "|---|---|---|",
+    ]
     for n, s in tb.sets.items():
-        lines.append(f"| {n} | {s.beta_pa / 1e6:.1f} | {R.oil_column_hz(tb.area_m2, tb.volume_m3, tb.m_t, s.beta_pa):.2f} |")
-    lines += ["", "## Cases", "",
-              "| case | figure | set | max err 0-100 Hz | low peak (model / Eq.) | foundation peak | notch | "
-              "central peak | oil-column peak | payload spikes (model / Eq.) |", "|---|---|---|---|---|---|---|---|---|---|"]
+        lines.append(
+            f"| {n} | {s.beta_pa / 1e6:.1f} | {R.oil_column_hz(tb.area_m2, tb.volume_m3, tb.m_t, s.beta_pa):.2f} |"
+        )
+    lines += [
+        "",
+        "## Cases",
+        "",
+        "| case | figure | set | max err 0-100 Hz | low peak (model / Eq.) | foundation peak | notch | "
+        "central peak | oil-column peak | payload spikes (model / Eq.) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
 
     def pk(m, a, k):
         return f"{_fmt(m[k][0], 1)}/{_fmt(m[k][1])} ; {_fmt(a[k][0], 1)}/{_fmt(a[k][1])}"
@@ -517,10 +663,12 @@ def rice_report(results: list[dict]) -> list[str]:
     for r in results:
         c, mm, am = r["case"], r["model_metrics"], r["analytical_metrics"]
         sp = " ".join(f"{_fmt(x[0], 1)}/{_fmt(y[0], 1)}" for x, y in zip(mm["spikes"], am["spikes"])) or "-"
-        lines.append(f"| {c.name} | {c.figure} | {c.parameter_set}{'' if c.delay else ', tau=0'} | "
-                     f"{100 * r['max_error_0_100']:.1f} % @ {r['f_max_error']:.1f} Hz | {pk(mm, am, 'low_peak')} | "
-                     f"{pk(mm, am, 'foundation_peak')} | {pk(mm, am, 'foundation_notch')} | {pk(mm, am, 'central_peak')} | "
-                     f"{pk(mm, am, 'oil_peak')} | {sp} |")
+        lines.append(
+            f"| {c.name} | {c.figure} | {c.parameter_set}{'' if c.delay else ', tau=0'} | "
+            f"{100 * r['max_error_0_100']:.1f} % @ {r['f_max_error']:.1f} Hz | {pk(mm, am, 'low_peak')} | "
+            f"{pk(mm, am, 'foundation_peak')} | {pk(mm, am, 'foundation_notch')} | {pk(mm, am, 'central_peak')} | "
+            f"{pk(mm, am, 'oil_peak')} | {sp} |"
+        )
     return lines
 
 
@@ -530,23 +678,34 @@ def rice_report(results: list[dict]) -> list[str]:
 UCSD_DEADBAND_M_S = 1e-3
 
 
-def ucsd_identification(results, *, accel_lowpass_hz: float = 100.0, deadband_m_s: float = UCSD_DEADBAND_M_S,
-                        weights: str = "force") -> dict:
+def ucsd_identification(
+    results, *, accel_lowpass_hz: float = 100.0, deadband_m_s: float = UCSD_DEADBAND_M_S, weights: str = "force"
+) -> dict:
     """The paper's pooled sets identified from the measured records (unconstrained and C_e = 45.9)."""
     from sim.identify import least_squares as I
-    recs = {r.name: I.prepare(r, accel_lowpass_hz=accel_lowpass_hz, deadband_m_s=deadband_m_s)
-            for r in ucsd_records(results)}
-    sets = {"triangular": ucsd_tests("triangular"), "sinusoidal": ucsd_tests("sinusoidal"),
-            "periodic": ucsd_tests("triangular") + ucsd_tests("sinusoidal"), "El Centro": ucsd_tests("elcentro"),
-            "WN 3-7 % g": ["WN3", "WN5", "WN7"], "WN 10-13 % g": ["WN10", "WN13"]}
+
+    recs = {
+        r.name: I.prepare(r, accel_lowpass_hz=accel_lowpass_hz, deadband_m_s=deadband_m_s)
+        for r in ucsd_records(results)
+    }
+    sets = {
+        "triangular": ucsd_tests("triangular"),
+        "sinusoidal": ucsd_tests("sinusoidal"),
+        "periodic": ucsd_tests("triangular") + ucsd_tests("sinusoidal"),
+        "El Centro": ucsd_tests("elcentro"),
+        "WN 3-7 % g": ["WN3", "WN5", "WN7"],
+        "WN 10-13 % g": ["WN10", "WN13"],
+    }
     out = {}
     for k, names in sets.items():
         names = [n for n in names if n in recs]
         if not names:
             continue
         rr = [recs[n] for n in names]
-        out[k] = {"unconstrained": I.identify(rr, 0.5, weights=weights),
-                  "constrained": I.identify(rr, 0.5, weights=weights, ce_fixed=PAPER_PARAMS["C_e"])}
+        out[k] = {
+            "unconstrained": I.identify(rr, 0.5, weights=weights),
+            "constrained": I.identify(rr, 0.5, weights=weights, ce_fixed=PAPER_PARAMS["C_e"]),
+        }
     if "periodic" in out:
         rr = [recs[n] for n in sets["periodic"] if n in recs]
         out["alpha_scan"] = I.scan_alpha(rr, weights=weights)
@@ -555,41 +714,65 @@ def ucsd_identification(results, *, accel_lowpass_hz: float = 100.0, deadband_m_
 
 def ucsd_report(results, ident: dict | None = None) -> list[str]:
     from sim.identify import least_squares as I
+
     ident = ident or ucsd_identification(results)
-    paper = {"triangular": (143.9, 1.261), "sinusoidal": (143.9, 1.246), "periodic": (144.0, 1.263),
-             "El Centro": (146.0, 1.238), "WN 3-7 % g": (143.6, 2.024), "WN 10-13 % g": (144.0, 1.405)}
+    paper = {
+        "triangular": (143.9, 1.261),
+        "sinusoidal": (143.9, 1.246),
+        "periodic": (144.0, 1.263),
+        "El Centro": (146.0, 1.238),
+        "WN 3-7 % g": (143.6, 2.024),
+        "WN 10-13 % g": (144.0, 1.405),
+    }
     paper_fmu = {"periodic": 26.5, "El Centro": 28.3, "WN 3-7 % g": 26.1, "WN 10-13 % g": 24.4}
-    lines = ["# NEES-UCSD LHPOST (seed 002): least-squares identification of simulated tests", "",
-             "Model truth (scenarios/tables/ucsd.toml, 13.8 MPa): M_e 144 t, K_e 1.263 MN/m, C_e 45.9 kN (s/m)^0.5, "
-             "F_mu 26.65 kN (4.1 kN + 0.39 % x 5.783 MN), alpha 0.5. Records: 512 Hz, accelerometers low-passed at "
-             "100 Hz, seeded sensor noise (sim/uniaxial.SensorModel); force and the other regressors low-passed "
-             "alike before the fit; records trimmed to the motion, samples with |u'| < 1 mm/s (and the filter's "
-             "memory after them) left out; weights 1/int F^2 dt.", "",
-             "| test set | M_e t (paper) | K_e MN/m (paper) | C_e kN (s/m)^0.5 unconstr. | F_mu kN unconstr. | "
-             "F_mu kN constr. (paper) | eps |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "# NEES-UCSD LHPOST (seed 002): least-squares identification of simulated tests",
+        "",
+        "Model truth (scenarios/tables/ucsd.toml, 13.8 MPa): M_e 144 t, K_e 1.263 MN/m, C_e 45.9 kN (s/m)^0.5, "
+        "F_mu 26.65 kN (4.1 kN + 0.39 % x 5.783 MN), alpha 0.5. Records: 512 Hz, accelerometers low-passed at "
+        "100 Hz, seeded sensor noise (sim/uniaxial.SensorModel); force and the other regressors low-passed "
+        "alike before the fit; records trimmed to the motion, samples with |u'| < 1 mm/s (and the filter's "
+        "memory after them) left out; weights 1/int F^2 dt.",
+        "",
+        "| test set | M_e t (paper) | K_e MN/m (paper) | C_e kN (s/m)^0.5 unconstr. | F_mu kN unconstr. | "
+        "F_mu kN constr. (paper) | eps |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for k, v in ident.items():
         if k == "alpha_scan":
             continue
         u, c = v["unconstrained"], v["constrained"]
         pm, pk = paper.get(k, (None, None))
-        lines.append(f"| {k} | {u.M_e_kg / 1e3:.1f} ({_fmt(pm, 1)}) | {u.K_e_N_per_m / 1e6:.3f} ({_fmt(pk, 3)}) | "
-                     f"{u.C_e / 1e3:.1f} | {u.F_mu_N / 1e3:.2f} | {c.F_mu_N / 1e3:.2f} ({_fmt(paper_fmu.get(k), 1)}) | "
-                     f"{u.error:.3f} |")
+        lines.append(
+            f"| {k} | {u.M_e_kg / 1e3:.1f} ({_fmt(pm, 1)}) | {u.K_e_N_per_m / 1e6:.3f} ({_fmt(pk, 3)}) | "
+            f"{u.C_e / 1e3:.1f} | {u.F_mu_N / 1e3:.2f} | {c.F_mu_N / 1e3:.2f} ({_fmt(paper_fmu.get(k), 1)}) | "
+            f"{u.error:.3f} |"
+        )
     if "alpha_scan" in ident:
-        lines += ["", "alpha scan (periodic tests): " + ", ".join(f"{x.alpha:.1f}: {x.error:.4f}"
-                                                                    for x in ident["alpha_scan"])]
+        lines += [
+            "",
+            "alpha scan (periodic tests): " + ", ".join(f"{x.alpha:.1f}: {x.error:.4f}" for x in ident["alpha_scan"]),
+        ]
     per = ident.get("periodic", {}).get("constrained")
     if per is not None:
-        lines += ["", "## Table 8 from the identified parameters (periodic, C_e constrained)", "",
-                  "| v cm/s | xi_e % (paper) | f_m Hz (paper) | A_m (paper) | u_max cm (paper) | F_0 kN (paper) | "
-                  "max rel. diff | nonlinear Eq. 1 under F_0 sin: f_peak Hz, R_peak |", "|---|---|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            "## Table 8 from the identified parameters (periodic, C_e constrained)",
+            "",
+            "| v cm/s | xi_e % (paper) | f_m Hz (paper) | A_m (paper) | u_max cm (paper) | F_0 kN (paper) | "
+            "max rel. diff | nonlinear Eq. 1 under F_0 sin: f_peak Hz, R_peak |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
         rows = I.table8([p[0] / 100 for p in PAPER_TABLE8], per.M_e_kg, per.K_e_N_per_m, per.C_e, per.F_mu_N)
         for row, p in zip(rows, PAPER_TABLE8):
             vals = [row["xi_pct"], row["f_m_hz"], row["A_m"], row["u_max_cm"], row["F0_kN"]]
             rel = max(abs(a / b - 1) for a, b in zip(vals, p[1:]))
-            h = I.harmonic_amplification(row["F0_kN"] * 1e3, per.M_e_kg, per.K_e_N_per_m, per.C_e, per.F_mu_N,
-                                         cycles=20, steps_per_cycle=1000)
-            lines.append(f"| {p[0]:.2f} | {vals[0]:.2f} ({p[1]}) | {vals[1]:.3f} ({p[2]}) | {vals[2]:.2f} ({p[3]}) | "
-                         f"{vals[3]:.2f} ({p[4]}) | {vals[4]:.1f} ({p[5]}) | {100 * rel:.2f} % | "
-                         f"{h['f_peak_hz']:.3f}, {h['R_peak']:.2f} ({100 * (h['R_peak'] / vals[2] - 1):+.0f} % vs A_m) |")
+            h = I.harmonic_amplification(
+                row["F0_kN"] * 1e3, per.M_e_kg, per.K_e_N_per_m, per.C_e, per.F_mu_N, cycles=20, steps_per_cycle=1000
+            )
+            lines.append(
+                f"| {p[0]:.2f} | {vals[0]:.2f} ({p[1]}) | {vals[1]:.3f} ({p[2]}) | {vals[2]:.2f} ({p[3]}) | "
+                f"{vals[3]:.2f} ({p[4]}) | {vals[4]:.1f} ({p[5]}) | {100 * rel:.2f} % | "
+                f"{h['f_peak_hz']:.3f}, {h['R_peak']:.2f} ({100 * (h['R_peak'] / vals[2] - 1):+.0f} % vs A_m) |"
+            )
     return lines

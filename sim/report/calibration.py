@@ -76,8 +76,9 @@ def figures(res, out: Path) -> list[str]:
     # 4. residual force vs displacement and velocity (fit runs, before/after)
     fit = res.series["fit"]
     fig, ax = plt.subplots(k, 4, figsize=(16, 3.2 * k), squeeze=False)
-    for c0, (lab, E) in enumerate((("declared model", res.series["fit_before"]),
-                                   ("calibrated", res.series["fit_after"]))):
+    for c0, (lab, E) in enumerate(
+        (("declared model", res.series["fit_before"]), ("calibrated", res.series["fit_after"]))
+    ):
         for j in range(k):
             a_d, a_v = ax[j, 2 * c0], ax[j, 2 * c0 + 1]
             for mr, e in zip(fit, E):
@@ -114,37 +115,60 @@ def figures(res, out: Path) -> list[str]:
 
 def report_md(res, figs: list[str], toml_name: str) -> str:
     L = [f"# Calibration of `{res.table}`", ""]
-    L.append(f"Residual path: **{res.residual_path}**. Fit runs: "
-             + ", ".join(f"`{Path(r).name}`" for r in res.runs if r not in res.holdout) + ". "
-             + f"Held-out: {res.holdout_note}.")
-    L += ["", f"Held-out force NRMSE: **{100 * res.error_before:.2f} %** (declared model) -> "
-          f"**{100 * res.error_after:.2f} %** (calibrated).", ""]
+    L.append(
+        f"Residual path: **{res.residual_path}**. Fit runs: "
+        + ", ".join(f"`{Path(r).name}`" for r in res.runs if r not in res.holdout)
+        + ". "
+        + f"Held-out: {res.holdout_note}."
+    )
+    L += [
+        "",
+        f"Held-out force NRMSE: **{100 * res.error_before:.2f} %** (declared model) -> "
+        f"**{100 * res.error_after:.2f} %** (calibrated).",
+        "",
+    ]
     L += ["## Effects added", ""]
     if res.effects_added:
         L += ["| effect | where | parameter | value | 95 % interval |", "|---|---|---|---|---|"]
         for e in res.effects_added:
             for p, v in e["parameters"].items():
-                L.append(f"| {e['name']} | {e['where']} | {p} | {v:.6g} {e['units'][p]} | "
-                         f"+/-{e['uncertainty'][p]:.3g} |")
+                L.append(
+                    f"| {e['name']} | {e['where']} | {p} | {v:.6g} {e['units'][p]} | +/-{e['uncertainty'][p]:.3g} |"
+                )
     else:
         L.append("None: no candidate passed the acceptance tests.")
-    L += ["", f"Written to `{toml_name}` (the original description, comments kept).", "", "## Candidates", "",
-          "| round | effect | where | explains | held-out NRMSE | accepted | why not |", "|---|---|---|---|---|---|---|"]
+    L += [
+        "",
+        f"Written to `{toml_name}` (the original description, comments kept).",
+        "",
+        "## Candidates",
+        "",
+        "| round | effect | where | explains | held-out NRMSE | accepted | why not |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for c in res.candidates:
-        L.append(f"| {c['round']} | {c['name']} | {c['where']} | {100 * c['explained_fraction']:.2f} % | "
-                 f"{100 * c['holdout_error']:.2f} % | {'yes' if c['accepted'] else 'no'} | {c['reason']} |")
+        L.append(
+            f"| {c['round']} | {c['name']} | {c['where']} | {100 * c['explained_fraction']:.2f} % | "
+            f"{100 * c['holdout_error']:.2f} % | {'yes' if c['accepted'] else 'no'} | {c['reason']} |"
+        )
     L += ["", "## Unexplained", ""]
     u = res.unexplained
     if u:
-        L.append(f"A spectral line at **{u['peak_hz']:.2f} Hz** in `{u['channel']}` ({u['where']}) holds "
-                 f"{100 * u['fraction_of_residual']:.1f} % of the residual left (coherence with the motion "
-                 f"{u['coherence_with_motion']:.2f}); no effect of the library explains it.")
+        L.append(
+            f"A spectral line at **{u['peak_hz']:.2f} Hz** in `{u['channel']}` ({u['where']}) holds "
+            f"{100 * u['fraction_of_residual']:.1f} % of the residual left (coherence with the motion "
+            f"{u['coherence_with_motion']:.2f}); no effect of the library explains it."
+        )
     else:
         L.append("No spectral line holds a notable share of the residual left.")
     L += ["", "## Figures", ""] + [f"![{f}]({f})" for f in figs]
     tm = res.timing
-    L += ["", f"Time: {tm['total_s']:.1f} s (reading {tm['read_s']:.1f} s, residuals {tm['residuals_s']:.1f} s, "
-          f"search {tm['search_s']:.1f} s, {tm['least_squares_fits']} candidate fits).", ""]
+    L += [
+        "",
+        f"Time: {tm['total_s']:.1f} s (reading {tm['read_s']:.1f} s, residuals {tm['residuals_s']:.1f} s, "
+        f"search {tm['search_s']:.1f} s, {tm['least_squares_fits']} candidate fits).",
+        "",
+    ]
     return "\n".join(L)
 
 

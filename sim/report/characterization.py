@@ -42,7 +42,9 @@ def figures(results: list[dict], summary: dict, out: Path) -> list[str]:
             a.axvline(r["peak"]["f_hz"], color="k", ls=":", lw=1, label="model peak")
             a.grid(True, which="both", alpha=0.3)
         unit = "N" if k < 3 else "N m"
-        ax[0, k].set_title(f"{d}: {r['peak']['f_hz']:.2f} Hz" + (f" (published {oil_pub[d]:g})" if d in oil_pub else ""))
+        ax[0, k].set_title(
+            f"{d}: {r['peak']['f_hz']:.2f} Hz" + (f" (published {oil_pub[d]:g})" if d in oil_pub else "")
+        )
         ax[0, k].set_ylabel(f"|F/spool| ({unit} per unit opening)")
         ax[1, k].set_ylabel("phase (deg)")
         ax[1, k].set_xlabel("frequency (Hz)")
@@ -63,7 +65,9 @@ def figures(results: list[dict], summary: dict, out: Path) -> list[str]:
             sel = (f >= 0.5) & (f <= 50)
             ax[k].plot(f[sel], np.abs(H[sel]) / 1e3, c, lw=1, label=f"{lv}: {r['effective_mass'] / 1e3:.1f}")
         if d in mass_pub:
-            ax[k].axhline(mass_pub[d] / 1e3, color="r", ls="--", lw=1, label=f"published ({lab.get('effective_mass', '')})")
+            ax[k].axhline(
+                mass_pub[d] / 1e3, color="r", ls="--", lw=1, label=f"published ({lab.get('effective_mass', '')})"
+            )
         ax[k].axvspan(*MASS_BAND_HZ, color="0.9", zorder=-1)
         if d in mass_pub:
             ax[k].set_ylim(0.7 * mass_pub[d] / 1e3, 1.4 * mass_pub[d] / 1e3)
@@ -90,8 +94,7 @@ def figures(results: list[dict], summary: dict, out: Path) -> list[str]:
             ax[k].plot(r["trace"]["d"] * sc, r["trace"]["F"] / 1e3, lw=0.8)
             ax[k].set_xlabel("displacement (mm)" if k < 3 else "rotation (deg)")
             ax[k].set_ylabel("force (kN)" if k < 3 else "moment (kN m)")
-            ax[k].set_title(f"{d}: Fc {r['fit']['coulomb'] / 1e3:.1f} k, "
-                            f"{100 * summary['friction_fraction'][d]:.2f} %")
+            ax[k].set_title(f"{d}: Fc {r['fit']['coulomb'] / 1e3:.1f} k, {100 * summary['friction_fraction'][d]:.2f} %")
             ax[k].grid(True, alpha=0.3)
         fig.suptitle("Friction tests, 0.05 Hz tapered sine: actuator wrench (mean removed) vs displacement")
         fig.tight_layout()
@@ -110,10 +113,14 @@ def figures(results: list[dict], summary: dict, out: Path) -> list[str]:
             ax[1].semilogx(f[sel], np.angle(H[sel], deg=True), lw=1)
         sv = summary["servovalve"]
         for lab, Hm, st in (
-                (f"1st order fit tau {sv['tau_s'] * 1e3:.2f} ms", E.first_order(ff, sv["K_first"], sv["tau_s"]), "--"),
-                (f"2nd order fit {sv['wn_hz']:.1f} Hz / {sv['zeta']:.2f}",
-                 E.second_order(ff, sv["K_second"], sv["wn_hz"], sv["zeta"]), "-."),
-                ("paper 2nd order 41.5 Hz / 0.75", E.second_order(ff, 1.0, 41.5, 0.75), ":")):
+            (f"1st order fit tau {sv['tau_s'] * 1e3:.2f} ms", E.first_order(ff, sv["K_first"], sv["tau_s"]), "--"),
+            (
+                f"2nd order fit {sv['wn_hz']:.1f} Hz / {sv['zeta']:.2f}",
+                E.second_order(ff, sv["K_second"], sv["wn_hz"], sv["zeta"]),
+                "-.",
+            ),
+            ("paper 2nd order 41.5 Hz / 0.75", E.second_order(ff, 1.0, 41.5, 0.75), ":"),
+        ):
             ax[0].semilogx(ff, 20 * np.log10(np.abs(Hm)), st, color="k" if st != ":" else "r", label=lab)
             ax[1].semilogx(ff, np.angle(Hm, deg=True), st, color="k" if st != ":" else "r")
         ax[0].set_ylabel("|spool/command| (dB)")
@@ -149,20 +156,31 @@ def figures(results: list[dict], summary: dict, out: Path) -> list[str]:
 
 
 def write_report(out: Path, summary: dict, rows: list[dict], figures: list[str]) -> None:
-    L = [f"# Characterisation of `{summary['table']}`" + (f" with payload `{summary['payload']}`" if summary["payload"]
-                                                         else " (bare table)"), ""]
-    L.append(f"Programme of seed 000 run on the model ({summary.get('mode', 'full')} records), "
-             f"{summary.get('wall_s', float('nan')):.0f} s wall time, {summary.get('sim_s', float('nan')):.0f} s "
-             "simulated.")
+    L = [
+        f"# Characterisation of `{summary['table']}`"
+        + (f" with payload `{summary['payload']}`" if summary["payload"] else " (bare table)"),
+        "",
+    ]
+    L.append(
+        f"Programme of seed 000 run on the model ({summary.get('mode', 'full')} records), "
+        f"{summary.get('wall_s', float('nan')):.0f} s wall time, {summary.get('sim_s', float('nan')):.0f} s "
+        "simulated."
+    )
     L.append("")
     if summary["failed_tests"]:
         L += ["**Tests that did not complete:**", ""] + [f"- {x}" for x in summary["failed_tests"]] + [""]
-    L += ["## Paper vs model", "", "| quantity | DOF | paper | model | unit | error | within tolerance |",
-          "|---|---|---|---|---|---|---|"]
+    L += [
+        "## Paper vs model",
+        "",
+        "| quantity | DOF | paper | model | unit | error | within tolerance |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         w = "" if r["within"] is None else ("yes" if r["within"] else f"**no** (tol {100 * r['tolerance']:.0f} %)")
-        L.append(f"| {r['quantity']} | {r['dof']} | {r['paper']:.4g} | {r['model']:.4g} | {r['unit']} | "
-                 f"{100 * r['error']:+.2f} % | {w} |")
+        L.append(
+            f"| {r['quantity']} | {r['dof']} | {r['paper']:.4g} | {r['model']:.4g} | {r['unit']} | "
+            f"{100 * r['error']:+.2f} % | {w} |"
+        )
     L.append("")
     if summary.get("payload"):
         L += ["With a payload the paper values are the bare table's: the oil-column column shows the drop.", ""]
@@ -172,43 +190,68 @@ def write_report(out: Path, summary: dict, rows: list[dict], figures: list[str])
             L.append(f"| {d} | {summary['oil_column_hz'][d]:.2f} | {100 * z:.1f} % |")
         L.append("")
     if summary.get("linear_oil_column_hz"):
-        L += ["Linearised oil columns (locked valves, mid-stroke volumes): "
-              + ", ".join(f"{d} {v:.2f}" for d, v in summary["linear_oil_column_hz"].items()) + " Hz.", ""]
+        L += [
+            "Linearised oil columns (locked valves, mid-stroke volumes): "
+            + ", ".join(f"{d} {v:.2f}" for d, v in summary["linear_oil_column_hz"].items())
+            + " Hz.",
+            "",
+        ]
     if summary.get("friction_fraction"):
-        L += ["## Friction", "",
-              "Capability per DOF = supply pressure x sum_i A_i |J_ik| (every actuator at full pressure).", "",
-              "Fraction: the least-squares Coulomb term (F = m a + k d + c v + F0 + Fc sign(v)); mid-stroke: "
-              "the loop's half-height where |d| < 0.4 of the amplitude, for comparison.", "",
-              "| DOF | friction | capability | fraction | mid-stroke half-height | outer/inner loop half-width |",
-              "|---|---|---|---|---|---|"]
+        L += [
+            "## Friction",
+            "",
+            "Capability per DOF = supply pressure x sum_i A_i |J_ik| (every actuator at full pressure).",
+            "",
+            "Fraction: the least-squares Coulomb term (F = m a + k d + c v + F0 + Fc sign(v)); mid-stroke: "
+            "the loop's half-height where |d| < 0.4 of the amplitude, for comparison.",
+            "",
+            "| DOF | friction | capability | fraction | mid-stroke half-height | outer/inner loop half-width |",
+            "|---|---|---|---|---|---|",
+        ]
         for d, v in summary["friction_fraction"].items():
             u = "kN" if d in ("x", "y", "z") else "kN m"
-            L.append(f"| {d} | {summary['friction_force'][d] / 1e3:.2f} {u} | {summary['capability'][d] / 1e3:.0f} {u} "
-                     f"| {100 * v:.2f} % | {100 * summary['friction_midstroke_fraction'][d]:.2f} % "
-                     f"| {summary['friction_outer_over_inner'][d]:.3f} |")
+            L.append(
+                f"| {d} | {summary['friction_force'][d] / 1e3:.2f} {u} | {summary['capability'][d] / 1e3:.0f} {u} "
+                f"| {100 * v:.2f} % | {100 * summary['friction_midstroke_fraction'][d]:.2f} % "
+                f"| {summary['friction_outer_over_inner'][d]:.3f} |"
+            )
         L.append("")
     if summary.get("servovalve"):
         sv = summary["servovalve"]
-        L += ["## Servovalve fits per axis", "",
-              "tau: complex first-order fit over 0.5-20 Hz (the graded figure); tau, magnitude fit: the same model fitted to the "
-              "magnitude alone over the whole 0.5-125 Hz test band, another reading of the paper's unstated fit.", "",
-              "| axis | tau (ms) | tau, magnitude fit (ms) | K (1st) | w (Hz) | xi | K (2nd) |",
-              "|---|---|---|---|---|---|---|"]
+        L += [
+            "## Servovalve fits per axis",
+            "",
+            "tau: complex first-order fit over 0.5-20 Hz (the graded figure); tau, magnitude fit: the same model fitted to the "
+            "magnitude alone over the whole 0.5-125 Hz test band, another reading of the paper's unstated fit.",
+            "",
+            "| axis | tau (ms) | tau, magnitude fit (ms) | K (1st) | w (Hz) | xi | K (2nd) |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for d, p in sv["per_axis"].items():
-            L.append(f"| {d} | {1e3 * p['tau_s']:.3f} | {1e3 * p['tau_s_magnitude_fit']:.3f} "
-                     f"| {p['K_first']:.3f} | {p['wn_hz']:.2f} | {p['zeta']:.3f} | {p['K_second']:.3f} |")
+            L.append(
+                f"| {d} | {1e3 * p['tau_s']:.3f} | {1e3 * p['tau_s_magnitude_fit']:.3f} "
+                f"| {p['K_first']:.3f} | {p['wn_hz']:.2f} | {p['zeta']:.3f} | {p['K_second']:.3f} |"
+            )
         L.append("")
     if summary.get("harmonic"):
         h = summary["harmonic"]
-        L += ["## Harmonic validation (0.25 Hz)", "", "| axis | peak (mm) | NRMSE closed loop | NRMSE replay vs closed loop |",
-              "|---|---|---|---|"]
+        L += [
+            "## Harmonic validation (0.25 Hz)",
+            "",
+            "| axis | peak (mm) | NRMSE closed loop | NRMSE replay vs closed loop |",
+            "|---|---|---|---|",
+        ]
         for d in ("x", "y", "z"):
             rp = h["nrmse_replay_vs_closed_loop"][d] if h["nrmse_replay_vs_closed_loop"] else float("nan")
             L.append(f"| {d} | {h['peak_mm'][d]:.1f} | {h['nrmse_closed_loop'][d]:.4f} | {rp:.2e} |")
         L.append("")
     if summary.get("random_tracking_rms"):
-        L += ["## Random tests: RMS acceleration, reference vs achieved", "", "| test | reference | achieved |",
-              "|---|---|---|"]
+        L += [
+            "## Random tests: RMS acceleration, reference vs achieved",
+            "",
+            "| test | reference | achieved |",
+            "|---|---|---|",
+        ]
         for k, v in summary["random_tracking_rms"].items():
             L.append(f"| {k} | {v['reference']:.4g} | {v['achieved']:.4g} |")
         L.append("")

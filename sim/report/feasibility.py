@@ -95,7 +95,9 @@ def histories_chart(res: dict, outcome, path: Path) -> str | None:
     name = outcome.tm.actuator_names[a]
     fig, ax = plt.subplots(4, 1, figsize=(8, 8), sharex=True)
     ax[0].plot(r.t, r.channels["actuator_force"][:, a] / 1e3, label=f"{name} force")
-    ax[0].plot(r.t, cap[:, a] / 1e3 * np.sign(r.channels["actuator_force"][:, a]), "r--", lw=1, label="capacity A p_s(t)")
+    ax[0].plot(
+        r.t, cap[:, a] / 1e3 * np.sign(r.channels["actuator_force"][:, a]), "r--", lw=1, label="capacity A p_s(t)"
+    )
     ax[0].set_ylabel("kN")
     ax[0].legend(fontsize=7, loc="upper right")
     ax[1].plot(r.t, 1e3 * r.channels["actuator_displacement"])
@@ -132,7 +134,7 @@ def spectrum_chart(res: dict, outcome, path: Path) -> str | None:
         ref_a = np.gradient(np.gradient(run.reference[:, i], dt), dt)
         if np.max(np.abs(ref_a)) == 0:
             continue
-        ach = np.nan_to_num(r.channels["table_acceleration"][:len(ref_a), i])
+        ach = np.nan_to_num(r.channels["table_acceleration"][: len(ref_a), i])
         ax.loglog(f, response_spectrum(ref_a, dt, freqs=f, damping=0.05) / 9.81, "--", label=f"{d} target")
         ax.loglog(f, response_spectrum(ach, dt, freqs=f, damping=0.05) / 9.81, label=f"{d} achieved")
     ax.set_xlabel("frequency, Hz")
@@ -147,37 +149,54 @@ def write_report(out: Path, res: dict, outcome=None) -> Path:
     from sim.runs.files import write_text_atomic
 
     out = Path(out)
-    figs = [("Utilisation of every check", utilisation_chart(res, out / "utilisation.png")),
-            ("Limiting quantities over time", histories_chart(res, outcome, out / "histories.png")),
-            ("Rated envelope and demand", envelope_chart(res, outcome, out / "envelope.png")),
-            ("Response spectrum, achieved against target", spectrum_chart(res, outcome, out / "spectrum.png"))]
-    lines = [f"# Feasibility: {res.get('motion')} x {res.get('scale', 1.0):g} on {res.get('table')}"
-             f" with {res.get('payload') or 'the bare table'}", "",
-             f"**{'Feasible' if res['feasible'] else 'Not feasible'}**; limiting check: `{res['limiting']}` at "
-             f"{100 * res['limiting_utilisation']:.0f} %."]
+    figs = [
+        ("Utilisation of every check", utilisation_chart(res, out / "utilisation.png")),
+        ("Limiting quantities over time", histories_chart(res, outcome, out / "histories.png")),
+        ("Rated envelope and demand", envelope_chart(res, outcome, out / "envelope.png")),
+        ("Response spectrum, achieved against target", spectrum_chart(res, outcome, out / "spectrum.png")),
+    ]
+    lines = [
+        f"# Feasibility: {res.get('motion')} x {res.get('scale', 1.0):g} on {res.get('table')}"
+        f" with {res.get('payload') or 'the bare table'}",
+        "",
+        f"**{'Feasible' if res['feasible'] else 'Not feasible'}**; limiting check: `{res['limiting']}` at "
+        f"{100 * res['limiting_utilisation']:.0f} %.",
+    ]
     if res.get("failed"):
         lines.append(f"Failed: {', '.join('`' + f + '`' for f in res['failed'])}.")
     if "max_scale" in res:
-        lines.append(f"Largest scale: {res['max_scale']}" + (f" (limited by `{res['limiting_above']}`)"
-                                                            if res.get("limiting_above") else ""))
+        lines.append(
+            f"Largest scale: {res['max_scale']}"
+            + (f" (limited by `{res['limiting_above']}`)" if res.get("limiting_above") else "")
+        )
     if res.get("figures_scale") is not None:
         lines.append(f"The figures show the run at the largest scale, {res['figures_scale']:.3f}.")
     if res.get("note"):
         lines.append(res["note"])
     lines += ["", "| check | demand | capacity | unit | utilisation | pass |", "|---|---|---|---|---|---|"]
     for c in sorted(res["checks"], key=lambda c: -c["utilisation"] if np.isfinite(c["utilisation"]) else -1e9):
-        lines.append(f"| {c['name']} | {c['demand']:.4g} | {c['capacity']:.4g} | {c['unit']} | "
-                     f"{100 * c['utilisation']:.1f} % | {'yes' if c['pass'] else 'no (tracking)' if c['name'].startswith(('pga_error_', 'spectrum_')) else 'NO'} |")
+        lines.append(
+            f"| {c['name']} | {c['demand']:.4g} | {c['capacity']:.4g} | {c['unit']} | "
+            f"{100 * c['utilisation']:.1f} % | {'yes' if c['pass'] else 'no (tracking)' if c['name'].startswith(('pga_error_', 'spectrum_')) else 'NO'} |"
+        )
     for w in res.get("warnings", []):
         lines.append(f"\nWarning: {w}")
     inter = res.get("interaction")
     if inter:
-        lines += ["", "## Table-specimen interaction", "",
-                  "Oil columns with the specimen: " + ", ".join(f"{d} {f:.1f} Hz" for d, f in inter["oil_columns_hz"].items()),
-                  "Specimen modes: " + (", ".join(f"{m['frequency_hz']:.2f} Hz ({m['direction']})"
-                                                  for m in inter["specimen_modes"]) or "none (rigid)"),
-                  "Inertia ratio (specimen / table effective mass): "
-                  + ", ".join(f"{d} {r:.2f}" for d, r in inter["inertia_ratio"].items())]
+        lines += [
+            "",
+            "## Table-specimen interaction",
+            "",
+            "Oil columns with the specimen: "
+            + ", ".join(f"{d} {f:.1f} Hz" for d, f in inter["oil_columns_hz"].items()),
+            "Specimen modes: "
+            + (
+                ", ".join(f"{m['frequency_hz']:.2f} Hz ({m['direction']})" for m in inter["specimen_modes"])
+                or "none (rigid)"
+            ),
+            "Inertia ratio (specimen / table effective mass): "
+            + ", ".join(f"{d} {r:.2f}" for d, r in inter["inertia_ratio"].items()),
+        ]
     spec = res.get("figures", {}).get("specimen")
     if spec:
         lines += ["", "## Specimen response", ""] + [f"- {k}: {v:.4g}" for k, v in spec.items() if k != "kind"]

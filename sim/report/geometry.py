@@ -23,8 +23,10 @@ def figures(r: dict, out: Path) -> list[str]:
     if mp:
         x, y = np.array(mp["x_m"]) * 1e3, np.array(mp["y_m"]) * 1e3
         fig, ax = plt.subplots(1, 2, figsize=(12, 4.5))
-        for a, key, lab in ((ax[0], "max_length_error_m", "largest actuator length error of J(0) (mm)"),
-                            (ax[1], "x_oil_column_hz", "x oil-column frequency (Hz)")):
+        for a, key, lab in (
+            (ax[0], "max_length_error_m", "largest actuator length error of J(0) (mm)"),
+            (ax[1], "x_oil_column_hz", "x oil-column frequency (Hz)"),
+        ):
             z = np.array(mp[key], dtype=float) * (1e3 if key.endswith("_m") else 1.0)
             c = a.contourf(x, y, z, levels=15)
             fig.colorbar(c, ax=a, label=lab)
@@ -63,9 +65,11 @@ def when_it_matters(r: dict) -> str:
     le = r["max_length_error_m"]
     worst = max(le, key=le.get)
     sfe = r.get("stroke_for_length_error_m", {})
-    parts = [f"Over the rated envelope ({r['n_poses']} poses) the home-pose (linearised) transformation "
-             f"misses actuator lengths by up to {1e3 * le[worst]:.1f} mm ({worst}); the miss grows with the "
-             "square of the offset (d^2/(2L) for a linkage of length L moved across its axis)."]
+    parts = [
+        f"Over the rated envelope ({r['n_poses']} poses) the home-pose (linearised) transformation "
+        f"misses actuator lengths by up to {1e3 * le[worst]:.1f} mm ({worst}); the miss grows with the "
+        "square of the offset (d^2/(2L) for a linkage of length L moved across its axis)."
+    ]
     for d, v in sfe.items():
         txt = ", ".join(f"{k} at {1e3 * s:.0f} mm" for k, s in v.items() if s is not None)
         if txt:
@@ -73,28 +77,36 @@ def when_it_matters(r: dict) -> str:
     fc = r.get("force_coupling")
     if fc:
         o = fc["overturning_to_actuator_n_per_n_m"]
-        parts.append(f"At the envelope's corners a vertical actuator's force leaks into the horizontal DOFs by up to "
-                     f"{100 * fc['vertical_tilt_into_horizontal']:.1f} % (its tilt); one N m of payload overturning "
-                     f"asks up to {o['home']:.3f} N of an actuator at home and {o['envelope_max']:.3f} N at the "
-                     "worst corner.")
+        parts.append(
+            f"At the envelope's corners a vertical actuator's force leaks into the horizontal DOFs by up to "
+            f"{100 * fc['vertical_tilt_into_horizontal']:.1f} % (its tilt); one N m of payload overturning "
+            f"asks up to {o['home']:.3f} N of an actuator at home and {o['envelope_max']:.3f} N at the "
+            "worst corner."
+        )
     ct = r.get("crosstalk", {})
     for name, row in ct.items():
         big = [(d, v) for d, v in row.items() if v["ratio"] is not None]
         if big:
             d, v = max(big, key=lambda kv: kv[1]["linearised_peak"])
             unit, sc = ("mm", 1e3) if d in ("x", "y", "z") else ("mrad", 1e3)
-            parts.append(f"{name}: with the linearised map the platen moves up to {sc * v['linearised_peak']:.2f} "
-                         f"{unit} in {d} that nobody asked for; the exact map leaves {sc * v['exact_peak']:.3f} "
-                         f"{unit} ({v['ratio']:.0f} x less).")
+            parts.append(
+                f"{name}: with the linearised map the platen moves up to {sc * v['linearised_peak']:.2f} "
+                f"{unit} in {d} that nobody asked for; the exact map leaves {sc * v['exact_peak']:.3f} "
+                f"{unit} ({v['ratio']:.0f} x less)."
+            )
     oc = r.get("oil_column_max_relative_change")
     if oc is not None:
-        parts.append(f"The oil-column frequencies move by up to {100 * oc:.0f} % across the envelope, as the "
-                     "chamber volumes change with the offset.")
-    parts.append("So geometric nonlinearity matters for large-stroke tests (long-period records, near-rated "
-                 "displacement, vertical or rocking response measured beside a large horizontal stroke) and for "
-                 "any controller that uses the home-pose transformation; it does not matter for small-amplitude "
-                 "tests (characterisation at about 1 cm, where the miss is below a few hundredths of a mm), "
-                 "nor for a controller with the exact transformation, which removes most of the crosstalk.")
+        parts.append(
+            f"The oil-column frequencies move by up to {100 * oc:.0f} % across the envelope, as the "
+            "chamber volumes change with the offset."
+        )
+    parts.append(
+        "So geometric nonlinearity matters for large-stroke tests (long-period records, near-rated "
+        "displacement, vertical or rocking response measured beside a large horizontal stroke) and for "
+        "any controller that uses the home-pose transformation; it does not matter for small-amplitude "
+        "tests (characterisation at about 1 cm, where the miss is below a few hundredths of a mm), "
+        "nor for a controller with the exact transformation, which removes most of the crosstalk."
+    )
     return " ".join(parts)
 
 
@@ -104,23 +116,40 @@ def write_geometry(out, r: dict, *, draw: bool = True) -> list[str]:
     names = figures(r, outp) if draw else []
     data = {k: v for k, v in r.items() if not k.startswith("_")}
     write_json_atomic(outp / "geometry.json", data)
-    L = [f"# Geometric nonlinearity of `{r['table']}`", "", when_it_matters(r), "",
-         "## Linearised map: largest length error over the rated envelope", "",
-         "| actuator | length error (mm) | largest tilt (deg) |", "|---|---|---|"]
+    L = [
+        f"# Geometric nonlinearity of `{r['table']}`",
+        "",
+        when_it_matters(r),
+        "",
+        "## Linearised map: largest length error over the rated envelope",
+        "",
+        "| actuator | length error (mm) | largest tilt (deg) |",
+        "|---|---|---|",
+    ]
     for n, v in r["max_length_error_m"].items():
         L.append(f"| {n} | {1e3 * v:.2f} | {np.degrees(r['max_tilt_rad'][n]):.2f} |")
     jc = r["jacobian_condition"]
-    L += ["", f"Condition number of the actuator Jacobian: {jc['home']:.2f} at home, "
-              f"{jc['min']:.2f} to {jc['max']:.2f} over the envelope.", ""]
+    L += [
+        "",
+        f"Condition number of the actuator Jacobian: {jc['home']:.2f} at home, "
+        f"{jc['min']:.2f} to {jc['max']:.2f} over the envelope.",
+        "",
+    ]
     if r.get("crosstalk"):
-        L += ["## Closed-loop crosstalk", "", "| motion | DOF | linearised peak | exact peak | ratio |",
-              "|---|---|---|---|---|"]
+        L += [
+            "## Closed-loop crosstalk",
+            "",
+            "| motion | DOF | linearised peak | exact peak | ratio |",
+            "|---|---|---|---|---|",
+        ]
         for name, row in r["crosstalk"].items():
             for d, v in row.items():
                 sc, unit = (1e3, "mm") if d in ("x", "y", "z") else (1e3, "mrad")
                 ratio = "-" if v["ratio"] is None else f"{v['ratio']:.1f}"
-                L.append(f"| {name} | {d} | {sc * v['linearised_peak']:.3f} {unit} | "
-                         f"{sc * v['exact_peak']:.4f} {unit} | {ratio} |")
+                L.append(
+                    f"| {name} | {d} | {sc * v['linearised_peak']:.3f} {unit} | "
+                    f"{sc * v['exact_peak']:.4f} {unit} | {ratio} |"
+                )
         L.append("")
     L += ["## Figures", ""] + [f"![{n}]({n})" for n in names] + [""]
     write_text_atomic(outp / "report.md", "\n".join(L))

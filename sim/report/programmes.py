@@ -82,8 +82,12 @@ def identification_figures(results: list[dict], summary: dict, out: Path) -> lis
     sets = summary.get("identification_sets") or {}
     paper = summary.get("paper") or {}
     if sets:
-        keys = [("M_e_kg", 1e3, "M_e (t)"), ("K_e_N_per_m", 1e6, "K_e (MN/m)"), ("C_e", 1e3, "C_e (kN (s/m)^a)"),
-                ("F_mu_N", 1e3, "F_mu (kN)")]
+        keys = [
+            ("M_e_kg", 1e3, "M_e (t)"),
+            ("K_e_N_per_m", 1e6, "K_e (MN/m)"),
+            ("C_e", 1e3, "C_e (kN (s/m)^a)"),
+            ("F_mu_N", 1e3, "F_mu (kN)"),
+        ]
         fig, ax = plt.subplots(1, 4, figsize=(16, 3.6))
         x = np.arange(len(sets))
         for a, (k, scale, label) in zip(ax, keys):
@@ -103,12 +107,22 @@ def identification_figures(results: list[dict], summary: dict, out: Path) -> lis
 
 
 #: what draws each paper programme's figures
-FIGURES = {"frf_random": lambda s, out: frf_figures(s["_results"], out),
-           "ls_identification": lambda s, out: identification_figures(s["_results"], s, out)}
+FIGURES = {
+    "frf_random": lambda s, out: frf_figures(s["_results"], out),
+    "ls_identification": lambda s, out: identification_figures(s["_results"], s, out),
+}
 
 
-def characterize_table(table: str, payload: str | None = None, *, out, quick: bool = False,
-                       workers: int | None = None, progress=None, stage=None) -> dict:
+def characterize_table(
+    table: str,
+    payload: str | None = None,
+    *,
+    out,
+    quick: bool = False,
+    workers: int | None = None,
+    progress=None,
+    stage=None,
+) -> dict:
     """Run the programme ``table`` declares and write its outputs into folder ``out``:
     ``characterization.json``, ``report.md`` and the figures. Returns the summary as
     written to the JSON (with ``figures`` and ``programme``). ``progress(done, total)``
@@ -119,11 +133,14 @@ def characterize_table(table: str, payload: str | None = None, *, out, quick: bo
     desc, _ = C.load_inputs(table, payload)
     prog = declared_programme(desc)
     if prog != DEFAULT_PROGRAMME and prog not in PROGRAMMES:
-        raise C.CharacterizeError(f"{desc.source}: [published] programme '{prog}' is unknown; use one of "
-                                  f"{', '.join([DEFAULT_PROGRAMME, *PROGRAMMES])}")
+        raise C.CharacterizeError(
+            f"{desc.source}: [published] programme '{prog}' is unknown; use one of "
+            f"{', '.join([DEFAULT_PROGRAMME, *PROGRAMMES])}"
+        )
     if payload and prog != DEFAULT_PROGRAMME:
-        raise C.CharacterizeError(f"{desc.source} declares the '{prog}' programme, which runs on the bare table; "
-                                  "leave out --payload")
+        raise C.CharacterizeError(
+            f"{desc.source} declares the '{prog}' programme, which runs on the bare table; leave out --payload"
+        )
     outp = out_dir(out)  # checked before the work starts
     if stage:
         stage(f"characterising {desc.name} with the {prog} programme" + (" (quick)" if quick else ""))

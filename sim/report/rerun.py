@@ -55,7 +55,6 @@ from __future__ import annotations
 import os
 import tempfile
 import uuid
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -86,6 +85,17 @@ from sim.report.rerun_series import (  # noqa: F401
     _role_colors,
     series_stride,
 )
+from sim.report.rerun_worker import (  # noqa: F401
+    ViewerTimeout,
+    _escape,
+    _execute,
+    _Lazy,
+    _one_line,
+    _Ops,
+    _run_in_worker,
+    _start_worker,
+    _stop_worker,
+)
 
 TIMELINE = "time"
 DEFAULT_RATE_HZ = 50.0
@@ -95,13 +105,15 @@ SUFFIX = ".rrd"
 DEFAULT_URL = "rerun+http://127.0.0.1:9876/proxy"
 
 # series colours (RGB)
-_FORCE_MAP = np.array([  # fraction of capacity -> colour
-    [0.0, 60, 100, 170],
-    [0.25, 60, 170, 200],
-    [0.5, 230, 200, 40],
-    [0.75, 240, 120, 30],
-    [1.0, 215, 25, 28],
-])
+_FORCE_MAP = np.array(
+    [  # fraction of capacity -> colour
+        [0.0, 60, 100, 170],
+        [0.25, 60, 170, 200],
+        [0.5, 230, 200, 40],
+        [0.75, 240, 120, 30],
+        [1.0, 215, 25, 28],
+    ]
+)
 
 
 _PRELOAD = None
@@ -151,10 +163,6 @@ class RecordingError(UserError):
     """A recording that cannot be written (bad name, missing or unwritable folder)."""
 
 
-def _one_line(text) -> str:
-    return " ".join(str(text).split())
-
-
 def force_colors(fraction: np.ndarray) -> np.ndarray:
     """(n,) force fractions of capacity (|F| / (A_a p_supply)) -> (n, 4) uint8 RGBA.
 
@@ -189,15 +197,17 @@ def check_path(path) -> Path:
     while not probe_dir.exists() and probe_dir != probe_dir.parent:
         probe_dir = probe_dir.parent
     if not probe_dir.is_dir():
-        raise RecordingError(f"recording {name} cannot be written: {probe_dir} is a file, not a folder; "
-                             "choose another path")
+        raise RecordingError(
+            f"recording {name} cannot be written: {probe_dir} is a file, not a folder; choose another path"
+        )
     try:
         fd, probe = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".probe", dir=probe_dir)
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:
-        raise RecordingError(f"recording {name} cannot be written ({_one_line(exc.strerror or exc)}); "
-                             "choose a folder you can write to") from None
+        raise RecordingError(
+            f"recording {name} cannot be written ({_one_line(exc.strerror or exc)}); choose a folder you can write to"
+        ) from None
     return p
 
 
@@ -230,25 +240,35 @@ def blueprint(run, compare=None, *, tm=None):
         rrb.Grid(*[ts(f"{d} acceleration", f"dof/{d}/acceleration") for d in dofs], name="DOF acceleration"),
         rrb.Grid(*[ts(f"{a} valve", f"actuators/{a}/valve") for a in acts], name="valves"),
         rrb.Grid(*[ts(f"{a} pressure", f"actuators/{a}/pressure") for a in acts], name="pressures"),
-        rrb.Vertical(ts("actuator force", "actuators/force", compare_too=False),
-                     ts("actuator stroke", "actuators/stroke", compare_too=False),
-                     name="forces"),
-        rrb.Vertical(ts("supply pressure", "hydraulics/supply_pressure"),
-                     ts("accumulator gas volume", "hydraulics/accumulator_gas_volume"),
-                     ts("loop-closure gap", "model/loop_gap", compare_too=False),
-                     name="hydraulics"),
+        rrb.Vertical(
+            ts("actuator force", "actuators/force", compare_too=False),
+            ts("actuator stroke", "actuators/stroke", compare_too=False),
+            name="forces",
+        ),
+        rrb.Vertical(
+            ts("supply pressure", "hydraulics/supply_pressure"),
+            ts("accumulator gas volume", "hydraulics/accumulator_gas_volume"),
+            ts("loop-closure gap", "model/loop_gap", compare_too=False),
+            name="hydraulics",
+        ),
     ]
     if run.accelerometers is not None:
         tabs.append(rrb.Grid(ts("accelerometers", "accelerometers", compare_too=False), name="accelerometers"))
     if compare is not None:
-        tabs.append(rrb.Grid(
-            *[ts(f"{d} residual", f"residual/dof/{d}", compare_too=False) for d in dofs],
-            ts("force residual", "residual/actuators/force", compare_too=False),
-            name="residuals"))
+        tabs.append(
+            rrb.Grid(
+                *[ts(f"{d} residual", f"residual/dof/{d}", compare_too=False) for d in dofs],
+                ts("force residual", "residual/actuators/force", compare_too=False),
+                name="residuals",
+            )
+        )
     view3d = rrb.Spatial3DView(
-        name="table", origin="/", contents=["table/**", "compare/**"],
-        eye_controls=rrb.EyeControls3D(position=[11.0, -13.0, 7.0], look_target=[0.0, 0.0, 0.5],
-                                       eye_up=[0.0, 0.0, 1.0]),
+        name="table",
+        origin="/",
+        contents=["table/**", "compare/**"],
+        eye_controls=rrb.EyeControls3D(
+            position=[11.0, -13.0, 7.0], look_target=[0.0, 0.0, 0.5], eye_up=[0.0, 0.0, 1.0]
+        ),
     )
     return rrb.Blueprint(
         rrb.Horizontal(view3d, rrb.Tabs(*tabs, active_tab=0), column_shares=[0.45, 0.55]),
@@ -257,202 +277,6 @@ def blueprint(run, compare=None, *, tm=None):
         rrb.TimePanel(state="collapsed"),
         auto_views=False,
     )
-
-
-# ---------------------------------------------------------------------- series
-class _Lazy:
-    """Stand-in for the ``rerun`` module: notes attribute chains and calls (``rr.Boxes3D(...)``,
-    ``rr.components.FillMode.Solid``) as plain data, for :func:`_resolve` to replay."""
-
-    def __init__(self, path: tuple = ()):
-        self._path = path
-
-    def __getattr__(self, name):
-        if name.startswith("__"):
-            raise AttributeError(name)
-        return _Lazy(self._path + (name,))
-
-    def __call__(self, *args, **kwargs):
-        return _Call(self._path, args, kwargs)
-
-
-@dataclass
-class _Call:
-    path: tuple
-    args: tuple
-    kwargs: dict
-
-
-class _Ops:
-    """Stand-in for a ``rr.RecordingStream``: notes ``log``, ``send_columns``, ... calls in order."""
-
-    def __init__(self):
-        self.calls = []
-
-    def __getattr__(self, name):
-        if name.startswith("_"):
-            raise AttributeError(name)
-
-        def note(*args, **kwargs):
-            self.calls.append((name, args, kwargs))
-
-        return note
-
-
-def _resolve(rr, x):
-    if isinstance(x, _Lazy):
-        obj = rr
-        for n in x._path:
-            obj = getattr(obj, n)
-        return obj
-    if isinstance(x, _Call):
-        return _resolve(rr, _Lazy(x.path))(*_resolve(rr, x.args), **_resolve(rr, x.kwargs))
-    if isinstance(x, (list, tuple)):
-        return type(x)(_resolve(rr, v) for v in x)
-    if isinstance(x, dict):
-        return {k: _resolve(rr, v) for k, v in x.items()}
-    return x
-
-
-def _escape(part: str) -> str:
-    """An entity path part for ``part`` (as ``rr.escape_entity_path_part``, without importing rerun)."""
-    out = []
-    for c in part:
-        if c.isalnum() or c in "_-.":
-            out.append(c)
-        elif c.isascii() and c.isprintable():
-            out.append("\\" + c)
-        else:
-            out.append(f"\\u{{{ord(c):X}}}")
-    return "".join(out)
-
-
-def _execute(job: dict) -> None:
-    """Replay a recording job (from :meth:`RrdTarget.write_run`) with rerun: sinks, blueprint, calls."""
-    from types import SimpleNamespace
-
-    rr = _rerun()
-    rec = rr.RecordingStream(job["application_id"], recording_id=job["recording_id"])
-    acts, dofs, has_acc, has_cmp = job["blueprint"]
-    bp = blueprint(SimpleNamespace(actuators=acts, dofs=dofs, accelerometers=() if has_acc else None),
-                   True if has_cmp else None)
-    sinks = []
-    if job.get("file"):
-        try:
-            sinks.append(rr.FileSink(job["file"]))
-        except RuntimeError as exc:  # rerun reports the OS error in its message: "(os error 2)"
-            import re
-
-            m = re.search(r"os error (\d+)", str(exc))
-            if m is None:
-                raise
-            raise OSError(int(m.group(1)), os.strerror(int(m.group(1)))) from None
-    if job["spawn"]:
-        rr.spawn(connect=False)
-    if job["spawn"] or job["connect"] is not None:
-        sinks.append(rr.GrpcSink(job["connect"] or DEFAULT_URL))
-    done = False
-    try:
-        rec.set_sinks(*sinks, default_blueprint=bp)
-        for name, args, kwargs in job["ops"]:
-            getattr(rec, name)(*_resolve(rr, args), **_resolve(rr, kwargs))
-        rec.flush()
-        rec.disconnect()
-        done = True
-    finally:
-        if not done:
-            try:
-                rec.disconnect()
-            except Exception:  # noqa: BLE001 - best effort; the caller removes the partial file
-                pass
-
-
-_WORKER_CODE = "import sys; from sim.report.rerun import _worker_main; sys.exit(_worker_main())"
-
-
-def _start_worker():
-    import subprocess
-    import sys
-
-    root = str(Path(__file__).resolve().parents[2])  # the repository (sim/report/rerun.py)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    return subprocess.Popen([sys.executable, "-c", _WORKER_CODE], stdin=subprocess.PIPE,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=root, env=env)
-
-
-class ViewerTimeout(Exception):
-    """No live viewer took the recording within the time allowed."""
-
-    def __init__(self, timeout_s):
-        super().__init__(f"no viewer answered within {timeout_s:g} s")
-        self.timeout_s = timeout_s
-
-
-def _stop_worker(proc) -> None:
-    if proc.poll() is None:
-        proc.kill()
-    try:
-        proc.communicate(timeout=10)
-    except Exception:  # noqa: BLE001 - it was killed; nothing more to do
-        pass
-
-
-def _run_in_worker(proc, job: dict, timeout_s: float | None = None) -> None:
-    """Hand ``job`` to the writer process and wait for it; its failure is raised here
-    (OSError for a file that cannot be written, RuntimeError otherwise). With
-    ``timeout_s`` (a live viewer), a worker still busy after that long is stopped and
-    :class:`ViewerTimeout` raised: rerun waits for a viewer forever and, inside its own
-    code, does not see Ctrl-C."""
-    import pickle
-    import subprocess
-
-    try:
-        _, err = proc.communicate(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL), timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        _stop_worker(proc)
-        raise ViewerTimeout(timeout_s) from None
-    if proc.returncode == 0:
-        return
-    lines = [ln for ln in err.decode("utf-8", "replace").splitlines() if ln.startswith(("OSError\t", "Error\t"))]
-    if lines:
-        kind, errno, msg = (lines[-1].split("\t", 2) + ["", ""])[:3]
-        if kind == "OSError":
-            raise OSError(int(errno or 0), msg)
-        raise RuntimeError(f"the recording's writer process failed: {msg}")
-    tail = _one_line(err.decode("utf-8", "replace")[-500:]) or f"exit code {proc.returncode}"
-    raise RuntimeError(f"the recording's writer process failed: {tail}")
-
-
-def _worker_main() -> int:
-    """The writer process: import rerun at once, then read one pickled job on stdin and run it."""
-    import pickle
-    import sys
-
-    try:
-        import pyarrow as pa
-        import rerun  # noqa: F401
-        import rerun.blueprint  # noqa: F401
-
-        pa.array([0.0]).to_numpy()
-        try:  # pyarrow imports pandas on its first conversion of a NumPy array; do it now
-            import pandas  # noqa: F401
-        except ImportError:
-            pass
-    except Exception:  # noqa: BLE001 - _execute imports again and reports the failure
-        pass
-    data = sys.stdin.buffer.read()
-    if not data:
-        return 0  # the target was never written
-    try:
-        _execute(pickle.loads(data))
-    except OSError as exc:
-        sys.stderr.write(f"OSError\t{exc.errno or 0}\t{_one_line(exc.strerror or exc)}\n")
-        return 1
-    except Exception as exc:  # noqa: BLE001 - reported to the parent in one line
-        sys.stderr.write(f"Error\t0\t{type(exc).__name__}: {_one_line(exc)}\n")
-        return 1
-    return 0
 
 
 # ---------------------------------------------------------------------- target
@@ -465,9 +289,16 @@ class RrdTarget:
     viewer-only target).
     """
 
-    def __init__(self, path: Path | None, *, spawn: bool = False, connect: str | None = None,
-                 rate_hz: float = DEFAULT_RATE_HZ, series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ,
-                 application_id: str = APPLICATION_ID):
+    def __init__(
+        self,
+        path: Path | None,
+        *,
+        spawn: bool = False,
+        connect: str | None = None,
+        rate_hz: float = DEFAULT_RATE_HZ,
+        series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ,
+        application_id: str = APPLICATION_ID,
+    ):
         self.path = path
         self.spawn = spawn
         self.connect = connect
@@ -479,9 +310,17 @@ class RrdTarget:
         self.timeout_s = DEFAULT_VIEWER_TIMEOUT_S  #: how long a live viewer may take to answer
 
     @classmethod
-    def open(cls, path=None, *, spawn: bool = False, connect: str | None = None,
-             rate_hz: float = DEFAULT_RATE_HZ, series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ,
-             application_id: str = APPLICATION_ID, timeout_s: float = None) -> "RrdTarget":
+    def open(
+        cls,
+        path=None,
+        *,
+        spawn: bool = False,
+        connect: str | None = None,
+        rate_hz: float = DEFAULT_RATE_HZ,
+        series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ,
+        application_id: str = APPLICATION_ID,
+        timeout_s: float = None,
+    ) -> "RrdTarget":
         """Check the target now; nothing is written until :meth:`write_run`.
 
         Args:
@@ -505,11 +344,19 @@ class RrdTarget:
         if not (np.isfinite(rate_hz) and rate_hz > 0):
             raise RecordingError(f"display rate {rate_hz!r} Hz is not a positive number; give e.g. 50")
         if series_rate_hz is not None and not (np.isfinite(series_rate_hz) and series_rate_hz > 0):
-            raise RecordingError(f"time-series rate {series_rate_hz!r} Hz is not a positive number; "
-                                 "give e.g. 250, or None for the full rate")
+            raise RecordingError(
+                f"time-series rate {series_rate_hz!r} Hz is not a positive number; "
+                "give e.g. 250, or None for the full rate"
+            )
         p = check_path(path) if path is not None else None
-        target = cls(p, spawn=spawn, connect=connect, rate_hz=rate_hz, series_rate_hz=series_rate_hz,
-                     application_id=application_id)
+        target = cls(
+            p,
+            spawn=spawn,
+            connect=connect,
+            rate_hz=rate_hz,
+            series_rate_hz=series_rate_hz,
+            application_id=application_id,
+        )
         target.timeout_s = float(timeout_s)
         if p is not None and not spawn and connect is None and os.environ.get("SHAKETABLE_RRD_PRELOAD", "1") != "0":
             # a file only: rerun is imported (~1 s) and used in a writer process of its own,
@@ -523,8 +370,17 @@ class RrdTarget:
         return target
 
     # ------------------------------------------------------------------ writing
-    def write_run(self, run, tm, payload_qpos: np.ndarray | None = None, *, compare=None,
-                  rate_hz: float | None = None, series_rate_hz=_TARGET, name: str | None = None) -> Path | None:
+    def write_run(
+        self,
+        run,
+        tm,
+        payload_qpos: np.ndarray | None = None,
+        *,
+        compare=None,
+        rate_hz: float | None = None,
+        series_rate_hz=_TARGET,
+        name: str | None = None,
+    ) -> Path | None:
         """Record ``run`` (a RunFile) with the geometry of ``tm`` (a TableModel).
 
         Args:
@@ -542,16 +398,20 @@ class RrdTarget:
             The recording file written, or None for a viewer-only target.
         """
         if list(run.actuators) != list(tm.actuator_names):
-            raise RunFileError(f"run file {run.name} has actuators {', '.join(run.actuators)} but table "
-                               f"'{tm.desc.name}' has {', '.join(tm.actuator_names)}; give the matching --table")
+            raise RunFileError(
+                f"run file {run.name} has actuators {', '.join(run.actuators)} but table "
+                f"'{tm.desc.name}' has {', '.join(tm.actuator_names)}; give the matching --table"
+            )
         if payload_qpos is not None:
             payload_qpos = np.asarray(payload_qpos, dtype=float)
             nj = len(getattr(tm.info, "payload_joints", []))
             if payload_qpos.shape != (run.n_samples, nj):
                 raise ValueError(f"payload_qpos has shape {payload_qpos.shape}, need ({run.n_samples}, {nj})")
         if compare is not None and list(compare.dofs) != list(run.dofs):
-            raise RunFileError(f"run file {compare.name} has DOFs {', '.join(compare.dofs)} but "
-                               f"{run.name} has {', '.join(run.dofs)}; compare runs of the same table")
+            raise RunFileError(
+                f"run file {compare.name} has DOFs {', '.join(compare.dofs)} but "
+                f"{run.name} has {', '.join(run.dofs)}; compare runs of the same table"
+            )
         rate = float(rate_hz) if rate_hz is not None else self.rate_hz
         series_rate = self.series_rate_hz if series_rate_hz is _TARGET else series_rate_hz
 
@@ -563,17 +423,25 @@ class RrdTarget:
             # rerun itself runs in the writer process started by open() (or here)
             ops = _Ops()
             self._log(ops, _Lazy(), run, tm, payload_qpos, compare, rate, series_rate, name)
-            job = {"application_id": self.application_id, "recording_id": self.recording_id,
-                   "spawn": self.spawn,
-                   "connect": (self.connect or DEFAULT_URL) if self.connect is not None else None,
-                   "blueprint": ([str(a) for a in run.actuators], [str(d) for d in run.dofs],
-                                 run.accelerometers is not None, compare is not None),
-                   "ops": ops.calls}
+            job = {
+                "application_id": self.application_id,
+                "recording_id": self.recording_id,
+                "spawn": self.spawn,
+                "connect": (self.connect or DEFAULT_URL) if self.connect is not None else None,
+                "blueprint": (
+                    [str(a) for a in run.actuators],
+                    [str(d) for d in run.dofs],
+                    run.accelerometers is not None,
+                    compare is not None,
+                ),
+                "ops": ops.calls,
+            }
             if self.path is not None:
                 if str(self.path.parent):
                     self.path.parent.mkdir(parents=True, exist_ok=True)  # as run --out creates its folder
-                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp",
-                                           dir=self.path.parent if str(self.path.parent) else ".")
+                fd, tmp = tempfile.mkstemp(
+                    prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent if str(self.path.parent) else "."
+                )
                 os.close(fd)
             job["file"] = tmp
             live = self.spawn or self.connect is not None
@@ -585,10 +453,14 @@ class RrdTarget:
                 except ViewerTimeout:
                     worker = None
                     where = "the spawned viewer" if self.spawn else f"the viewer at {job['connect']}"
-                    how = ("--spawn needs a screen; write a file with --rrd and open it where there is one"
-                           if self.spawn else "start one (`rerun`) or write a file with --rrd")
-                    raise RecordingError(f"{where} did not take the recording within {self.timeout_s:g} s "
-                                         f"(nothing kept); {how}") from None
+                    how = (
+                        "--spawn needs a screen; write a file with --rrd and open it where there is one"
+                        if self.spawn
+                        else "start one (`rerun`) or write a file with --rrd"
+                    )
+                    raise RecordingError(
+                        f"{where} did not take the recording within {self.timeout_s:g} s (nothing kept); {how}"
+                    ) from None
                 worker = None
             else:
                 _execute(job)
@@ -599,8 +471,10 @@ class RrdTarget:
                 os.replace(tmp, self.path)
                 tmp = None
         except OSError as exc:
-            raise RecordingError(f"recording {self.path} cannot be written ({_one_line(exc.strerror or exc)}); "
-                                 "choose a folder you can write to, with free space") from None
+            raise RecordingError(
+                f"recording {self.path} cannot be written ({_one_line(exc.strerror or exc)}); "
+                "choose a folder you can write to, with free space"
+            ) from None
         finally:
             if worker is not None:
                 _stop_worker(worker)
@@ -630,8 +504,11 @@ class RrdTarget:
 
         title = name or run.meta.get("description") or Path(run.name).name
         rec.send_recording_name(str(title))
-        props = {k: str(run.meta[k]) for k in ("table", "source", "description", "scenario", "payload")
-                 if run.meta.get(k) is not None}
+        props = {
+            k: str(run.meta[k])
+            for k in ("table", "source", "description", "scenario", "payload")
+            if run.meta.get(k) is not None
+        }
         props["run_file"] = run.name
         if compare is not None:
             props["compare_file"] = compare.name
@@ -652,8 +529,12 @@ class RrdTarget:
             arch = _geom_archetype(rr, m, g, color=gent not in colored)
             if arch is None:
                 continue
-            rec.log(gent, rr.Transform3D(translation=m.geom_pos[g], quaternion=_quat_xyzw(m.geom_quat[g])),
-                    arch, static=True)
+            rec.log(
+                gent,
+                rr.Transform3D(translation=m.geom_pos[g], quaternion=_quat_xyzw(m.geom_quat[g])),
+                arch,
+                static=True,
+            )
         # accelerometers, in the frame of the body that carries them
         acc_by_body: dict[int, list] = {}
         for a, s in zip(tm.desc.accelerometers, tm.acc_sites):
@@ -663,10 +544,14 @@ class RrdTarget:
         for b, items in acc_by_body.items():
             ent = ents.get(b, "table/foundation") + "/accelerometers"
             p = np.array([m.site_pos[s] for _, s in items])
-            rec.log(ent, rr.Points3D(p, radii=0.05, colors=(255, 215, 0), labels=[a.name for a, _ in items],
-                                     show_labels=False),
-                    rr.Arrows3D(origins=p, vectors=np.array([0.5 * a.direction for a, _ in items]),
-                                colors=(255, 215, 0), radii=0.02), static=True)
+            rec.log(
+                ent,
+                rr.Points3D(p, radii=0.05, colors=(255, 215, 0), labels=[a.name for a, _ in items], show_labels=False),
+                rr.Arrows3D(
+                    origins=p, vectors=np.array([0.5 * a.direction for a, _ in items]), colors=(255, 215, 0), radii=0.02
+                ),
+                static=True,
+            )
 
         # display frames
         pose_src = run.table_displacement if run.table_displacement is not None else run.reference
@@ -681,8 +566,11 @@ class RrdTarget:
         pq = payload_qpos[idx] if payload_qpos is not None else None
         pos, quat = _body_poses(tm, pose_src[idx], pq, sc.bodies)
         for k, (_, ent) in enumerate(sc.bodies):
-            rec.send_columns(ent, indexes=[times],
-                             columns=rr.Transform3D.columns(translation=pos[:, k], quaternion=_quat_xyzw(quat[:, k])))
+            rec.send_columns(
+                ent,
+                indexes=[times],
+                columns=rr.Transform3D.columns(translation=pos[:, k], quaternion=_quat_xyzw(quat[:, k])),
+            )
         if colored:
             cap = np.array([a.cls.area_a_m2 for a in tm.desc.actuators]) * float(tm.desc.raw["supply"]["pressure_pa"])
             frac = np.abs(run.actuator_force[idx]) / cap
@@ -691,9 +579,11 @@ class RrdTarget:
                 for gent in gents:
                     arch = rr.Cylinders3D if gent.endswith(("cylinder", "rod")) else None
                     g = next(gg for gg, e, _ in sc.geoms if e == gent)
-                    arch = {int(mujoco.mjtGeom.mjGEOM_BOX): rr.Boxes3D,
-                            int(mujoco.mjtGeom.mjGEOM_CYLINDER): rr.Cylinders3D,
-                            int(mujoco.mjtGeom.mjGEOM_CAPSULE): rr.Capsules3D}.get(int(m.geom_type[g]), arch)
+                    arch = {
+                        int(mujoco.mjtGeom.mjGEOM_BOX): rr.Boxes3D,
+                        int(mujoco.mjtGeom.mjGEOM_CYLINDER): rr.Cylinders3D,
+                        int(mujoco.mjtGeom.mjGEOM_CAPSULE): rr.Capsules3D,
+                    }.get(int(m.geom_type[g]), arch)
                     if arch is not None:
                         rec.send_columns(gent, indexes=[times], columns=arch.columns(colors=cols))
         # the compare run's platen, translucent
@@ -707,9 +597,12 @@ class RrdTarget:
                 for g in range(int(m.body_geomadr[pb]), int(m.body_geomadr[pb]) + int(m.body_geomnum[pb])):
                     arch = _geom_archetype(rr, m, g, alpha=0.35)
                     if arch is not None:
-                        rec.log(f"compare/platen/g{g}", rr.Transform3D(translation=m.geom_pos[g],
-                                                                        quaternion=_quat_xyzw(m.geom_quat[g])),
-                                arch, static=True)
+                        rec.log(
+                            f"compare/platen/g{g}",
+                            rr.Transform3D(translation=m.geom_pos[g], quaternion=_quat_xyzw(m.geom_quat[g])),
+                            arch,
+                            static=True,
+                        )
                 # platen body frame relative to the reference point pose (home offset)
                 d = tm.new_data()
                 tm.set_platen_pose(d, np.zeros(6))
@@ -723,8 +616,11 @@ class RrdTarget:
                     mujoco.mju_quat2Mat(R, q)
                     tr[k] = o[:3] + R.reshape(3, 3) @ off_p
                     mujoco.mju_mulQuat(qq[k], q, off_q)
-                rec.send_columns("compare/platen", indexes=[rr.TimeColumn(TIMELINE, duration=run.t[idx][ok])],
-                                 columns=rr.Transform3D.columns(translation=tr, quaternion=_quat_xyzw(qq)))
+                rec.send_columns(
+                    "compare/platen",
+                    indexes=[rr.TimeColumn(TIMELINE, duration=run.t[idx][ok])],
+                    columns=rr.Transform3D.columns(translation=tr, quaternion=_quat_xyzw(qq)),
+                )
 
     def _log_series(self, rec, rr, run, compare, series_rate_hz) -> None:
         stride = series_stride(run.sample_rate_hz, series_rate_hz)
@@ -737,8 +633,9 @@ class RrdTarget:
                     if role != "reference":
                         theirs[(g.sub, lab)] = g.values[:, j]
         for g in _channel_groups(run):
-            self._send_group(rr, rec, t, f"plots/{g.sub}", g.labels, g.unit, _role_colors(g.roles, "run"),
-                             g.values[idx])
+            self._send_group(
+                rr, rec, t, f"plots/{g.sub}", g.labels, g.unit, _role_colors(g.roles, "run"), g.values[idx]
+            )
             pick = [j for j, lab in enumerate(g.labels) if (g.sub, lab) in theirs]
             if not pick:
                 continue
@@ -746,10 +643,26 @@ class RrdTarget:
             other = _aligned(run, compare.t, np.column_stack([theirs[(g.sub, g.labels[j])] for j in pick]))[idx]
             labels = [g.labels[j] for j in pick]
             roles = [g.roles[j] for j in pick]
-            self._send_group(rr, rec, t, f"plots/compare/{g.sub}", [f"{lab} (compare)" for lab in labels], g.unit,
-                             _role_colors(roles, "compare"), other)
-            self._send_group(rr, rec, t, f"plots/residual/{g.sub}", [f"{lab}: run - compare" for lab in labels],
-                             g.unit, _role_colors(roles, "residual"), g.values[idx][:, pick] - other)
+            self._send_group(
+                rr,
+                rec,
+                t,
+                f"plots/compare/{g.sub}",
+                [f"{lab} (compare)" for lab in labels],
+                g.unit,
+                _role_colors(roles, "compare"),
+                other,
+            )
+            self._send_group(
+                rr,
+                rec,
+                t,
+                f"plots/residual/{g.sub}",
+                [f"{lab}: run - compare" for lab in labels],
+                g.unit,
+                _role_colors(roles, "residual"),
+                g.values[idx][:, pick] - other,
+            )
 
     @staticmethod
     def _send_group(rr, rec, t, ent, labels, unit, colors, values) -> None:
@@ -769,12 +682,19 @@ class RrdTarget:
         widths = 1.5
 
         def send(path, cols, keep):
-            rec.log(path, rr.SeriesLines(names=[names[j] for j in cols],
-                                         colors=[colors[j] for j in cols] if colors else None,
-                                         widths=[widths] * len(cols)), static=True)
+            rec.log(
+                path,
+                rr.SeriesLines(
+                    names=[names[j] for j in cols],
+                    colors=[colors[j] for j in cols] if colors else None,
+                    widths=[widths] * len(cols),
+                ),
+                static=True,
+            )
             v = values[np.ix_(keep, cols)] if len(cols) > 1 else values[keep, cols[0]]
-            rec.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=t[keep])],
-                             columns=rr.Scalars.columns(scalars=v))
+            rec.send_columns(
+                path, indexes=[rr.TimeColumn(TIMELINE, duration=t[keep])], columns=rr.Scalars.columns(scalars=v)
+            )
 
         cols = np.flatnonzero(together)
         if len(cols):
@@ -785,14 +705,34 @@ class RrdTarget:
                 send(f"{ent}/{_escape(str(labels[j]))}", [j], keep)
 
 
-def record_run(path, run, tm, *, compare=None, payload_qpos=None, rate_hz: float = DEFAULT_RATE_HZ,
-               series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ, spawn: bool = False,
-               connect: str | None = None) -> Path | None:
+def record_run(
+    path,
+    run,
+    tm,
+    *,
+    compare=None,
+    payload_qpos=None,
+    rate_hz: float = DEFAULT_RATE_HZ,
+    series_rate_hz: float | None = DEFAULT_SERIES_RATE_HZ,
+    spawn: bool = False,
+    connect: str | None = None,
+) -> Path | None:
     """Convenience: ``RrdTarget.open(path, ...).write_run(run, tm, ...)``."""
-    return RrdTarget.open(path, spawn=spawn, connect=connect, rate_hz=rate_hz,
-                          series_rate_hz=series_rate_hz).write_run(
-        run, tm, payload_qpos, compare=compare)
+    return RrdTarget.open(path, spawn=spawn, connect=connect, rate_hz=rate_hz, series_rate_hz=series_rate_hz).write_run(
+        run, tm, payload_qpos, compare=compare
+    )
 
 
-__all__ = ["DEFAULT_RATE_HZ", "DEFAULT_SERIES_RATE_HZ", "TIMELINE", "RecordingError", "RrdTarget", "blueprint", "body_entity",
-           "check_path", "force_colors", "record_run", "series_stride"]
+__all__ = [
+    "DEFAULT_RATE_HZ",
+    "DEFAULT_SERIES_RATE_HZ",
+    "TIMELINE",
+    "RecordingError",
+    "RrdTarget",
+    "blueprint",
+    "body_entity",
+    "check_path",
+    "force_colors",
+    "record_run",
+    "series_stride",
+]

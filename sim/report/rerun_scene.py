@@ -67,8 +67,11 @@ def _geom_archetype(rr, m, g: int, *, color=True, alpha=None):
         k = int(m.geom_dataid[g])
         v0, nv = int(m.mesh_vertadr[k]), int(m.mesh_vertnum[k])
         f0, nf = int(m.mesh_faceadr[k]), int(m.mesh_facenum[k])
-        return rr.Mesh3D(vertex_positions=m.mesh_vert[v0:v0 + nv], triangle_indices=m.mesh_face[f0:f0 + nf],
-                         albedo_factor=col[0] if col else None)
+        return rr.Mesh3D(
+            vertex_positions=m.mesh_vert[v0 : v0 + nv],
+            triangle_indices=m.mesh_face[f0 : f0 + nf],
+            albedo_factor=col[0] if col else None,
+        )
     return None
 
 
@@ -152,8 +155,11 @@ class _LoopSolver:
             return None
         J = mujoco.mjtJoint
         sv = cls()
-        eq_ok = [e for e in range(m.neq) if m.eq_type[e] == mujoco.mjtEq.mjEQ_CONNECT
-                 and m.eq_objtype[e] == mujoco.mjtObj.mjOBJ_BODY]
+        eq_ok = [
+            e
+            for e in range(m.neq)
+            if m.eq_type[e] == mujoco.mjtEq.mjEQ_CONNECT and m.eq_objtype[e] == mujoco.mjtObj.mjOBJ_BODY
+        ]
         if len(eq_ok) != m.neq:
             return None
         for e in eq_ok:
@@ -173,18 +179,35 @@ class _LoopSolver:
             if types == [J.mjJNT_HINGE, J.mjJNT_HINGE, J.mjJNT_SLIDE]:
                 ju, jv, js = chain
                 cyl = int(m.jnt_bodyid[ju])
-                if (m.jnt_bodyid[jv] != cyl or m.jnt_bodyid[js] != b1 or m.body_parentid[b1] != cyl
-                        or not np.allclose(m.jnt_axis[ju], [1, 0, 0]) or not np.allclose(m.jnt_axis[jv], [0, 1, 0])
-                        or not np.allclose(m.jnt_axis[js], [0, 0, 1]) or np.any(m.jnt_pos[[ju, jv]])
-                        or np.any(m.body_pos[b1][:2]) or not np.allclose(m.body_quat[b1], [1, 0, 0, 0])
-                        or np.any(a1[:2])):
+                if (
+                    m.jnt_bodyid[jv] != cyl
+                    or m.jnt_bodyid[js] != b1
+                    or m.body_parentid[b1] != cyl
+                    or not np.allclose(m.jnt_axis[ju], [1, 0, 0])
+                    or not np.allclose(m.jnt_axis[jv], [0, 1, 0])
+                    or not np.allclose(m.jnt_axis[js], [0, 0, 1])
+                    or np.any(m.jnt_pos[[ju, jv]])
+                    or np.any(m.body_pos[b1][:2])
+                    or not np.allclose(m.body_quat[b1], [1, 0, 0, 0])
+                    or np.any(a1[:2])
+                ):
                     return None
                 R0 = np.zeros(9)
                 mujoco.mju_quat2Mat(R0, m.body_quat[cyl])
                 R0 = d.xmat[m.body_parentid[cyl]].reshape(3, 3) @ R0.reshape(3, 3)
                 off = float(m.body_pos[b1][2] + a1[2])
-                sv.links.append((a2, d.xanchor[ju].copy(), R0, m.jnt_qposadr[ju], m.jnt_qposadr[jv],
-                                 m.jnt_qposadr[js], off, float(m.qpos0[m.jnt_qposadr[js]])))
+                sv.links.append(
+                    (
+                        a2,
+                        d.xanchor[ju].copy(),
+                        R0,
+                        m.jnt_qposadr[ju],
+                        m.jnt_qposadr[jv],
+                        m.jnt_qposadr[js],
+                        off,
+                        float(m.qpos0[m.jnt_qposadr[js]]),
+                    )
+                )
             elif types == [J.mjJNT_SLIDE] * 3:
                 # slides only: no rotation, the anchor moves linearly with the three coordinates
                 A = np.array([d.xaxis[j] for j in chain]).T
@@ -215,8 +238,9 @@ class _LoopSolver:
         return np.array(adr, dtype=int), np.column_stack(cols) if cols else np.zeros((len(pos), 0))
 
 
-def _body_poses(tm, poses: np.ndarray, payload_qpos: np.ndarray | None, bodies: list,
-                exact: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def _body_poses(
+    tm, poses: np.ndarray, payload_qpos: np.ndarray | None, bodies: list, exact: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """World positions (F, nb, 3) and quaternions (F, nb, 4, wxyz) of ``bodies`` per platen pose.
 
     The linkages are closed in closed form (:class:`_LoopSolver`) and the result is checked
@@ -253,8 +277,8 @@ def _body_poses(tm, poses: np.ndarray, payload_qpos: np.ndarray | None, bodies: 
         d.qpos[:] = solver.home
 
         def fast_pose(k):
-            d.qpos[pa:pa + 3] = poses[k, :3]
-            d.qpos[pa + 3:pa + 7] = qp[k]
+            d.qpos[pa : pa + 3] = poses[k, :3]
+            d.qpos[pa + 3 : pa + 7] = qp[k]
             if pq_adr is not None:
                 d.qpos[pq_adr] = payload_qpos[k]
             d.qpos[qadr] = Q[k]

@@ -60,15 +60,18 @@ def _channel_groups(run) -> list[_Group]:
 
     ref_acc = _reference_acceleration(run)
     for j, d in enumerate(dofs):
-        for q, unit, ref, ach in (("displacement", "m or rad", run.reference, run.table_displacement),
-                                  ("acceleration", "m/s² or rad/s²", ref_acc, run.table_acceleration)):
+        for q, unit, ref, ach in (
+            ("displacement", "m or rad", run.reference, run.table_displacement),
+            ("acceleration", "m/s² or rad/s²", ref_acc, run.table_acceleration),
+        ):
             roles, arrs = cols(("reference", ref), ("achieved", ach))
             if roles:
                 out.append(_Group(f"dof/{d}/{q}", unit, roles, roles, np.column_stack([a[:, j] for a in arrs])))
     for j, a in enumerate(acts):
-        for q, unit, pairs in (("valve", "fraction of rated opening",
-                                (("command", run.valve_command), ("spool", run.spool_position))),
-                               ("pressure", "Pa", (("a", run.pressure_a), ("b", run.pressure_b)))):
+        for q, unit, pairs in (
+            ("valve", "fraction of rated opening", (("command", run.valve_command), ("spool", run.spool_position))),
+            ("pressure", "Pa", (("a", run.pressure_a), ("b", run.pressure_b))),
+        ):
             roles, arrs = cols(*pairs)
             if roles:
                 out.append(_Group(f"actuators/{a}/{q}", unit, roles, roles, np.column_stack([x[:, j] for x in arrs])))
@@ -77,13 +80,21 @@ def _channel_groups(run) -> list[_Group]:
             out.append(_Group(f"actuators/{q}", unit, list(acts), [None] * len(acts), np.asarray(arr, dtype=float)))
     if run.accelerometers is not None:
         names = run.column_names("accelerometers")
-        out.append(_Group("accelerometers", "m/s²", list(names), [None] * len(names),
-                          np.asarray(run.accelerometers, dtype=float)))
-    for key, where, unit in (("supply_pressure", "hydraulics", "Pa"), ("accumulator_gas_volume", "hydraulics", "m³"),
-                             ("loop_gap", "model", "m")):
+        out.append(
+            _Group(
+                "accelerometers", "m/s²", list(names), [None] * len(names), np.asarray(run.accelerometers, dtype=float)
+            )
+        )
+    for key, where, unit in (
+        ("supply_pressure", "hydraulics", "Pa"),
+        ("accumulator_gas_volume", "hydraulics", "m³"),
+        ("loop_gap", "model", "m"),
+    ):
         if key in run.extras:
             arr = np.asarray(run.extras[key], dtype=float)
-            out.append(_Group(f"{where}/{key}", unit, [key], ["achieved"], (arr if arr.ndim == 1 else arr[:, 0])[:, None]))
+            out.append(
+                _Group(f"{where}/{key}", unit, [key], ["achieved"], (arr if arr.ndim == 1 else arr[:, 0])[:, None])
+            )
     return out
 
 

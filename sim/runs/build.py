@@ -20,8 +20,10 @@ def build_runfile(res, tm, *, source="simulated", description="", payload_name=N
         "source": source,
         "description": description,
         "payload": payload_name,
-        "accelerometers": [{"name": a.name, "position": a.position_m.tolist(), "direction": a.direction.tolist()}
-                           for a in desc.accelerometers],
+        "accelerometers": [
+            {"name": a.name, "position": a.position_m.tolist(), "direction": a.direction.tolist()}
+            for a in desc.accelerometers
+        ],
         "accelerometer_convention": "kinematic acceleration along the sensor direction, gravity removed",
         "angle_convention": "intrinsic x-y-z rotation of the platen from home",
     }
@@ -35,13 +37,22 @@ def build_runfile(res, tm, *, source="simulated", description="", payload_name=N
     ch = dict(res.channels)
     for e in getattr(tm, "effects", []):  # sensor effects: what the table's sensors report
         ch = e.measure(res.t, ch, None)
-    run = RunFile(t=res.t, meta=meta, valve_command=ch["valve_command"], spool_position=ch["spool_position"],
-                  actuator_displacement=ch["actuator_displacement"], actuator_force=ch["actuator_force"],
-                  pressure_a=ch["pressure_a"], pressure_b=ch["pressure_b"],
-                  table_displacement=ch["table_displacement"], table_velocity=ch["table_velocity"],
-                  table_acceleration=ch["table_acceleration"], accelerometers=ch["accelerometers"],
-                  reference=None if reference is None else reference.d[:n].copy(),
-                  extras=dict(res.extras))
+    run = RunFile(
+        t=res.t,
+        meta=meta,
+        valve_command=ch["valve_command"],
+        spool_position=ch["spool_position"],
+        actuator_displacement=ch["actuator_displacement"],
+        actuator_force=ch["actuator_force"],
+        pressure_a=ch["pressure_a"],
+        pressure_b=ch["pressure_b"],
+        table_displacement=ch["table_displacement"],
+        table_velocity=ch["table_velocity"],
+        table_acceleration=ch["table_acceleration"],
+        accelerometers=ch["accelerometers"],
+        reference=None if reference is None else reference.d[:n].copy(),
+        extras=dict(res.extras),
+    )
     if res.incomplete_reason:
         run.mark_incomplete(res.incomplete_reason)
     return run

@@ -37,21 +37,54 @@ UNITS = {
 }
 ACTUATOR = ("valve_command", "spool_position", "actuator_displacement", "actuator_force", "pressure_a", "pressure_b")
 DOF = ("reference", "table_displacement", "table_velocity", "table_acceleration")
-DIMENSION = {"valve_command": ("valve",), "spool_position": ("valve",), "actuator_displacement": ("length",),
-             "actuator_force": ("force", "pressure"), "pressure_a": ("pressure",), "pressure_b": ("pressure",),
-             "reference": ("length", "rotation"), "table_displacement": ("length", "rotation"),
-             "table_velocity": ("velocity",), "table_acceleration": ("acceleration",),
-             "accelerometers": ("acceleration",)}
-COLUMN_KEYS = {"name", "channel", "actuator", "dof", "accelerometer", "unit", "scale", "offset", "sign",
-               "full_scale", "area_m2", "position_m", "direction", "note"}
-SOURCE_KEYS = {"table", "time_column", "time_unit", "sample_rate_hz", "delimiter", "skip_rows", "payload",
-               "description", "command_hold", "derive_velocity"}
+DIMENSION = {
+    "valve_command": ("valve",),
+    "spool_position": ("valve",),
+    "actuator_displacement": ("length",),
+    "actuator_force": ("force", "pressure"),
+    "pressure_a": ("pressure",),
+    "pressure_b": ("pressure",),
+    "reference": ("length", "rotation"),
+    "table_displacement": ("length", "rotation"),
+    "table_velocity": ("velocity",),
+    "table_acceleration": ("acceleration",),
+    "accelerometers": ("acceleration",),
+}
+COLUMN_KEYS = {
+    "name",
+    "channel",
+    "actuator",
+    "dof",
+    "accelerometer",
+    "unit",
+    "scale",
+    "offset",
+    "sign",
+    "full_scale",
+    "area_m2",
+    "position_m",
+    "direction",
+    "note",
+}
+SOURCE_KEYS = {
+    "table",
+    "time_column",
+    "time_unit",
+    "sample_rate_hz",
+    "delimiter",
+    "skip_rows",
+    "payload",
+    "description",
+    "command_hold",
+    "derive_velocity",
+}
 #: calibration paths and the channels each needs (any one of a tuple)
 PATHS = {
-    "replay (open loop)": (("valve_command",), ("table_displacement", "table_velocity", "table_acceleration",
-                                                "actuator_displacement", "accelerometers")),
-    "mechanical (least squares)": (("actuator_force",), ("table_displacement", "table_acceleration",
-                                                         "accelerometers")),
+    "replay (open loop)": (
+        ("valve_command",),
+        ("table_displacement", "table_velocity", "table_acceleration", "actuator_displacement", "accelerometers"),
+    ),
+    "mechanical (least squares)": (("actuator_force",), ("table_displacement", "table_acceleration", "accelerometers")),
     "closed loop": (("reference",),),
 }
 
@@ -104,22 +137,28 @@ def load_map(path, table: str | None = None) -> ImportMap:
         raise _err(str(p), "[source] must be a table", "see docs/import.md")
     bad = sorted(set(src) - SOURCE_KEYS) or sorted(set(data) - {"source", "column"})
     if bad:
-        raise _err(str(p), f"unknown key '{bad[0]}'", f"[source] keys are {', '.join(sorted(SOURCE_KEYS))}; "
-                                                      "columns go in [[column]]")
+        raise _err(
+            str(p),
+            f"unknown key '{bad[0]}'",
+            f"[source] keys are {', '.join(sorted(SOURCE_KEYS))}; columns go in [[column]]",
+        )
     table = table or src.get("table")
     if not isinstance(table, str) or not table:
-        raise _err(str(p), "names no table", "add [source] table = \"NAME\" (a file in scenarios/tables) or give --table")
+        raise _err(str(p), "names no table", 'add [source] table = "NAME" (a file in scenarios/tables) or give --table')
     desc = mjcf.load_table(table)
     tcol, fs = src.get("time_column"), src.get("sample_rate_hz")
     if (tcol is None) == (fs is None):
-        raise _err(str(p), "needs exactly one of [source] time_column and sample_rate_hz",
-                   "name the time column, or give the recorder's rate in Hz")
+        raise _err(
+            str(p),
+            "needs exactly one of [source] time_column and sample_rate_hz",
+            "name the time column, or give the recorder's rate in Hz",
+        )
     if fs is not None and (isinstance(fs, bool) or not isinstance(fs, (int, float)) or not fs > 0):
         raise _err(str(p), f"[source] sample_rate_hz must be a positive number (got {fs!r})", "give the rate in Hz")
     tunit = src.get("time_unit", "s")
     tfac = {"s": 1.0, "ms": 1e-3}.get(tunit)
     if tfac is None:
-        raise _err(str(p), f"[source] time_unit {tunit!r} is not known", "use \"s\" or \"ms\"")
+        raise _err(str(p), f"[source] time_unit {tunit!r} is not known", 'use "s" or "ms"')
     cols_raw = data.get("column")
     if not isinstance(cols_raw, list) or not cols_raw:
         raise _err(str(p), "has no [[column]] entries", "add one [[column]] per exported column (docs/import.md)")
@@ -143,12 +182,18 @@ def load_map(path, table: str | None = None) -> ImportMap:
         else:
             target, kind, known = c.get("accelerometer"), "accelerometer", None
         if not isinstance(target, str) or (known is not None and target not in known):
-            raise _err(where, f"{kind} {target!r} is not one of table '{desc.name}' ({desc.source}): "
-                              f"{', '.join(known) if known else 'any name'}",
-                       f"set {kind} = one of them, or describe the table's {kind}s in its description")
+            raise _err(
+                where,
+                f"{kind} {target!r} is not one of table '{desc.name}' ({desc.source}): "
+                f"{', '.join(known) if known else 'any name'}",
+                f"set {kind} = one of them, or describe the table's {kind}s in its description",
+            )
         if (ch, target) in seen:
-            raise _err(where, f"maps {ch} {target} again (also column '{seen[(ch, target)]}')",
-                       "keep one column per channel and target")
+            raise _err(
+                where,
+                f"maps {ch} {target} again (also column '{seen[(ch, target)]}')",
+                "keep one column per channel and target",
+            )
         seen[(ch, target)] = name
         dims = DIMENSION[ch]
         dim = next((d for d in dims if unit in UNITS[d]), None)
@@ -159,21 +204,31 @@ def load_map(path, table: str | None = None) -> ImportMap:
         if factor is None:  # volts or mA over full scale
             fsv = c.get("full_scale")
             if isinstance(fsv, bool) or not isinstance(fsv, (int, float)) or fsv == 0:
-                raise _err(where, f"unit {unit} needs full_scale (the {unit} at full rated opening)",
-                           f"add full_scale = 10.0 (e.g. +/-10 {unit} = +/-100 %)")
+                raise _err(
+                    where,
+                    f"unit {unit} needs full_scale (the {unit} at full rated opening)",
+                    f"add full_scale = 10.0 (e.g. +/-10 {unit} = +/-100 %)",
+                )
             factor = 1.0 / float(fsv)
         if ch == "actuator_force" and dim == "pressure":
             area = c.get("area_m2")
             if area == "table":
                 a = desc.actuators[list(desc.actuator_names).index(target)]
                 if a.cls.area_a_m2 != a.cls.area_b_m2:
-                    raise _err(where, f"table '{desc.name}' actuator {target} has unequal areas "
-                                      f"({a.cls.area_a_m2:g}, {a.cls.area_b_m2:g} m^2): one differential pressure "
-                                      "is not its force", "export both chamber pressures (pressure_a, pressure_b)")
+                    raise _err(
+                        where,
+                        f"table '{desc.name}' actuator {target} has unequal areas "
+                        f"({a.cls.area_a_m2:g}, {a.cls.area_b_m2:g} m^2): one differential pressure "
+                        "is not its force",
+                        "export both chamber pressures (pressure_a, pressure_b)",
+                    )
                 area = a.cls.area_a_m2
             if isinstance(area, bool) or not isinstance(area, (int, float)) or not area > 0:
-                raise _err(where, f"a differential pressure ({unit}) as actuator_force needs the piston area",
-                           "add area_m2 = the piston area in m^2, or area_m2 = \"table\" (from the description)")
+                raise _err(
+                    where,
+                    f"a differential pressure ({unit}) as actuator_force needs the piston area",
+                    'add area_m2 = the piston area in m^2, or area_m2 = "table" (from the description)',
+                )
             factor *= float(area)
         nums = {}
         for key, default in (("scale", 1.0), ("offset", 0.0), ("sign", 1.0)):
@@ -183,28 +238,50 @@ def load_map(path, table: str | None = None) -> ImportMap:
             nums[key] = float(v)
         if nums["sign"] not in (1.0, -1.0):
             raise _err(where, f"sign must be 1 or -1 (got {nums['sign']:g})", "set sign = 1 or -1")
-        cm = ColumnMap(name=name, channel=ch, target=target, factor=nums["sign"] * nums["scale"] * factor,
-                       offset=nums["offset"], unit=unit)
+        cm = ColumnMap(
+            name=name,
+            channel=ch,
+            target=target,
+            factor=nums["sign"] * nums["scale"] * factor,
+            offset=nums["offset"],
+            unit=unit,
+        )
         if ch == "accelerometers":
             for key in ("position_m", "direction"):
                 v = c.get(key, getattr(cm, key.split("_")[0] if key == "position_m" else key))
                 if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) for x in v)):
-                    raise _err(where, f"{key} must be 3 numbers (got {v!r})", f"set {key} = [x, y, z] in the table frame")
+                    raise _err(
+                        where, f"{key} must be 3 numbers (got {v!r})", f"set {key} = [x, y, z] in the table frame"
+                    )
                 setattr(cm, "position" if key == "position_m" else "direction", [float(x) for x in v])
         cols.append(cm)
     delim = src.get("delimiter")
     hold = src.get("command_hold", "zoh")
     if hold not in ("zoh", "linear"):
-        raise _err(str(p), f"[source] command_hold {hold!r} is not known",
-                   "use \"zoh\" (the record is the controller's own rate) or \"linear\" (a slower recorder "
-                   "sampled the drive)")
+        raise _err(
+            str(p),
+            f"[source] command_hold {hold!r} is not known",
+            'use "zoh" (the record is the controller\'s own rate) or "linear" (a slower recorder sampled the drive)',
+        )
     skip = src.get("skip_rows", 0)
     if not isinstance(skip, int) or skip < 0:
-        raise _err(str(p), f"[source] skip_rows must be a whole number >= 0 (got {skip!r})", "count the lines above the header")
-    return ImportMap(path=str(p), table=table, columns=cols, time_column=tcol, time_factor=tfac,
-                     sample_rate_hz=None if fs is None else float(fs), delimiter=delim, skip_rows=skip,
-                     payload=src.get("payload"), description=str(src.get("description", "")),
-                     command_hold=hold, derive_velocity=_bool(src, "derive_velocity", str(p)))
+        raise _err(
+            str(p), f"[source] skip_rows must be a whole number >= 0 (got {skip!r})", "count the lines above the header"
+        )
+    return ImportMap(
+        path=str(p),
+        table=table,
+        columns=cols,
+        time_column=tcol,
+        time_factor=tfac,
+        sample_rate_hz=None if fs is None else float(fs),
+        delimiter=delim,
+        skip_rows=skip,
+        payload=src.get("payload"),
+        description=str(src.get("description", "")),
+        command_hold=hold,
+        derive_velocity=_bool(src, "derive_velocity", str(p)),
+    )
 
 
 def _bool(src: dict, key: str, where: str) -> bool:
@@ -222,7 +299,7 @@ def _read_csv(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
         raise _err(str(path), f"cannot be read ({e.strerror})", "give an existing export file") from None
     except UnicodeDecodeError:
         raise _err(str(path), "is not a text file", "export as CSV text (or give a .mat file)") from None
-    lines = text.splitlines()[mp.skip_rows:]
+    lines = text.splitlines()[mp.skip_rows :]
     if not lines:
         raise _err(str(path), "is empty", "export with a header line and the samples")
     delim = mp.delimiter
@@ -232,16 +309,22 @@ def _read_csv(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
     header = [h.strip() for h in next(rows)]
     missing = [w for w in wanted if w not in header]
     if missing:
-        raise _err(f"{path} (map {mp.path})", f"has no column '{missing[0]}' (header: {', '.join(header)})",
-                   "fix the column's name in the map or export that column")
+        raise _err(
+            f"{path} (map {mp.path})",
+            f"has no column '{missing[0]}' (header: {', '.join(header)})",
+            "fix the column's name in the map or export that column",
+        )
     idx = {w: header.index(w) for w in wanted}
     out = {w: [] for w in wanted}
     for ln, row in enumerate(rows, start=mp.skip_rows + 2):
         if not row or all(not x.strip() for x in row):
             continue
         if len(row) != len(header):
-            raise _err(str(path), f"line {ln} has {len(row)} fields but the header has {len(header)}",
-                       "fix or cut the ragged line (a truncated export?)")
+            raise _err(
+                str(path),
+                f"line {ln} has {len(row)} fields but the header has {len(header)}",
+                "fix or cut the ragged line (a truncated export?)",
+            )
         for w, j in idx.items():
             cell = row[j].strip()
             if cell == "":
@@ -250,8 +333,11 @@ def _read_csv(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
             try:
                 out[w].append(float(cell))
             except ValueError:
-                raise _err(str(path), f"line {ln} column '{w}' holds {cell!r}, not a number",
-                           "fix the cell, or skip_rows the lines above the header in the map") from None
+                raise _err(
+                    str(path),
+                    f"line {ln} column '{w}' holds {cell!r}, not a number",
+                    "fix the cell, or skip_rows the lines above the header in the map",
+                ) from None
     if not out[wanted[0]]:
         raise _err(str(path), "has a header but no samples", "export the samples too")
     return {w: np.asarray(v, float) for w, v in out.items()}
@@ -263,18 +349,27 @@ def _read_mat(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
     try:
         data = loadmat(str(path), squeeze_me=True)
     except (OSError, ValueError, NotImplementedError) as e:
-        raise _err(str(path), f"cannot be read as a MAT-file ({' '.join(str(e).split())})",
-                   "save it with MATLAB's save -v7 (or export CSV)") from None
+        raise _err(
+            str(path),
+            f"cannot be read as a MAT-file ({' '.join(str(e).split())})",
+            "save it with MATLAB's save -v7 (or export CSV)",
+        ) from None
     out = {}
     for w in wanted:
         if w not in data:
             have = ", ".join(k for k in data if not k.startswith("__"))
-            raise _err(f"{path} (map {mp.path})", f"has no variable '{w}' (variables: {have})",
-                       "fix the column's name in the map or save that variable")
+            raise _err(
+                f"{path} (map {mp.path})",
+                f"has no variable '{w}' (variables: {have})",
+                "fix the column's name in the map or save that variable",
+            )
         a = np.asarray(data[w])
         if a.ndim != 1 or not np.issubdtype(a.dtype, np.number):
-            raise _err(str(path), f"variable '{w}' has shape {a.shape} and type {a.dtype}",
-                       "save each channel as a numeric vector")
+            raise _err(
+                str(path),
+                f"variable '{w}' has shape {a.shape} and type {a.dtype}",
+                "save each channel as a numeric vector",
+            )
         out[w] = a.astype(float)
     n = {len(v) for v in out.values()}
     if len(n) != 1:
@@ -293,8 +388,11 @@ def uniform_time(t: np.ndarray, where: str) -> tuple[float, float]:
     d = np.diff(t)
     if np.any(d <= 0):
         i = int(np.flatnonzero(d <= 0)[0]) + 1
-        raise _err(where, f"time is not increasing at sample {i} (t = {t[i]:.6g} s after {t[i - 1]:.6g} s)",
-                   "export one continuous record per file, sorted in time")
+        raise _err(
+            where,
+            f"time is not increasing at sample {i} (t = {t[i]:.6g} s after {t[i - 1]:.6g} s)",
+            "export one continuous record per file, sorted in time",
+        )
     n = len(t)
     k = np.arange(n)
     slope, t0 = np.polyfit(k, t, 1)
@@ -302,8 +400,11 @@ def uniform_time(t: np.ndarray, where: str) -> tuple[float, float]:
     tol = 0.02 * slope + 1e-5
     if dev.max() > tol:
         i = int(np.argmax(dev))
-        raise _err(where, f"time step is not uniform (sample {i} is {dev[i] * 1e3:.3g} ms off the "
-                          f"{slope * 1e3:.6g} ms grid)", "export at a fixed sample rate, without gaps")
+        raise _err(
+            where,
+            f"time step is not uniform (sample {i} is {dev[i] * 1e3:.3g} ms off the {slope * 1e3:.6g} ms grid)",
+            "export at a fixed sample rate, without gaps",
+        )
     fs = 1.0 / slope
     nice = round(fs, 3)
     if abs(nice - fs) <= 1e-6 * fs + 2e-5 / (slope * n) * fs:
@@ -352,23 +453,40 @@ def import_file(path, mp: ImportMap) -> Imported:
     derived = {}
     if mp.derive_velocity and "table_velocity" not in chans:
         if "table_displacement" not in chans:
-            raise _err(mp.path, "[source] derive_velocity needs a table_displacement column",
-                       "map the table's displacement, or drop derive_velocity")
+            raise _err(
+                mp.path,
+                "[source] derive_velocity needs a table_displacement column",
+                "map the table's displacement, or drop derive_velocity",
+            )
         chans["table_velocity"] = np.gradient(chans["table_displacement"], 1.0 / fs, axis=0)
         derived["table_velocity"] = "central difference of table_displacement (map derive_velocity)"
     acc_meta = []
     for a in accs:
         c = next(c for c in mp.columns if c.channel == "accelerometers" and c.target == a)
         acc_meta.append({"name": a, "position": c.position, "direction": c.direction})
-    meta = {"format": FORMAT, "table": desc.name, "sample_rate_hz": fs, "actuators": acts, "dofs": dofs,
-            "source": "measured", "description": mp.description or f"imported from {path.name}",
-            "payload": mp.payload, "accelerometers": acc_meta,
-            "imported_from": str(path), "import_map": mp.path, "time_origin_s": t0,
-            "command_hold": mp.command_hold, "derived_channels": derived}
+    meta = {
+        "format": FORMAT,
+        "table": desc.name,
+        "sample_rate_hz": fs,
+        "actuators": acts,
+        "dofs": dofs,
+        "source": "measured",
+        "description": mp.description or f"imported from {path.name}",
+        "payload": mp.payload,
+        "accelerometers": acc_meta,
+        "imported_from": str(path),
+        "import_map": mp.path,
+        "time_origin_s": t0,
+        "command_hold": mp.command_hold,
+        "derived_channels": derived,
+    }
     run = RunFile(t=t, meta=meta, **chans)
     if run.valve_command is None and run.reference is None:
-        raise _err(f"{path} (map {mp.path})", "maps neither valve_command nor reference",
-                   "map the valve drive (replay) or the displacement command (closed loop)")
+        raise _err(
+            f"{path} (map {mp.path})",
+            "maps neither valve_command nor reference",
+            "map the valve drive (replay) or the displacement command (closed loop)",
+        )
     run.validate()
     return Imported(run=run, source=str(path), report=_report(run, mp, path))
 
@@ -383,18 +501,31 @@ def _report(run, mp: ImportMap, path: Path) -> dict:
             col = arr[:, j]
             ok = np.isfinite(col)
             if ok.any():
-                ranges[ch][nm] = {"min": float(col[ok].min()), "max": float(col[ok].max()),
-                                  "missing_samples": int((~ok).sum())}
+                ranges[ch][nm] = {
+                    "min": float(col[ok].min()),
+                    "max": float(col[ok].max()),
+                    "missing_samples": int((~ok).sum()),
+                }
     paths = {}
     for pth, needs in PATHS.items():
-        lacking = [" or ".join(alt) for alt in needs if not any(
-            getattr(run, a) is not None and np.isfinite(getattr(run, a)).all(axis=0).any() for a in alt)]
+        lacking = [
+            " or ".join(alt)
+            for alt in needs
+            if not any(getattr(run, a) is not None and np.isfinite(getattr(run, a)).all(axis=0).any() for a in alt)
+        ]
         paths[pth] = {"ready": not lacking, "missing": lacking}
-    return {"file": str(path), "samples": run.n_samples, "sample_rate_hz": run.sample_rate_hz,
-            "rate_from": f"time column '{mp.time_column}'" if mp.time_column else "map sample_rate_hz",
-            "duration_s": run.duration_s, "time_origin_s": run.meta["time_origin_s"], "table": run.meta["table"],
-            "derived_channels": run.meta["derived_channels"],
-            "ranges_si": ranges, "paths": paths}
+    return {
+        "file": str(path),
+        "samples": run.n_samples,
+        "sample_rate_hz": run.sample_rate_hz,
+        "rate_from": f"time column '{mp.time_column}'" if mp.time_column else "map sample_rate_hz",
+        "duration_s": run.duration_s,
+        "time_origin_s": run.meta["time_origin_s"],
+        "table": run.meta["table"],
+        "derived_channels": run.meta["derived_channels"],
+        "ranges_si": ranges,
+        "paths": paths,
+    }
 
 
 def import_files(files, map_path, *, table: str | None = None, out=None) -> list[Imported]:
@@ -407,8 +538,11 @@ def import_files(files, map_path, *, table: str | None = None, out=None) -> list
     done = [import_file(f, mp) for f in files]
     stems = [Path(d.source).stem for d in done]
     if len(set(stems)) != len(stems):
-        raise _err(", ".join(d.source for d in done), "two exports share a file name",
-                   "rename them (each becomes <name>.run.npz)")
+        raise _err(
+            ", ".join(d.source for d in done),
+            "two exports share a file name",
+            "rename them (each becomes <name>.run.npz)",
+        )
     if out is not None:
         folder = out_dir(out)
         for d, stem in zip(done, stems):
@@ -431,12 +565,18 @@ def export_csv(run, map_path, path) -> Path:
     for c in mp.columns:
         arr = getattr(run, c.channel)
         if arr is None:
-            raise _err(mp.path, f"column '{c.name}' maps {c.channel}, which run {run.name} lacks",
-                       "drop that column from the map")
+            raise _err(
+                mp.path,
+                f"column '{c.name}' maps {c.channel}, which run {run.name} lacks",
+                "drop that column from the map",
+            )
         names = run.column_names(c.channel)
         if c.target not in names:
-            raise _err(mp.path, f"column '{c.name}' maps {c.channel} {c.target}, not in run {run.name} "
-                                f"({', '.join(names)})", "fix the map's target")
+            raise _err(
+                mp.path,
+                f"column '{c.name}' maps {c.channel} {c.target}, not in run {run.name} ({', '.join(names)})",
+                "fix the map's target",
+            )
         data.append(arr[:, names.index(c.target)] / c.factor + c.offset)
     delim = mp.delimiter or ","
     lines = [delim.join(cols)]

@@ -36,8 +36,14 @@ ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_SENSORS = ROOT / "scenarios" / "sensors" / "recorder_1024hz.toml"
 
 RECORDER_KEYS = {"rate_hz": "Hz", "anti_alias_hz": "Hz", "anti_alias_order": "1", "digital": "channel names"}
-CHANNEL_KEYS = {"gain": "1", "offset": "channel units", "noise_rms": "channel units", "range": "channel units",
-                "bits": "1", "skew_s": "s"}
+CHANNEL_KEYS = {
+    "gain": "1",
+    "offset": "channel units",
+    "noise_rms": "channel units",
+    "range": "channel units",
+    "bits": "1",
+    "skew_s": "s",
+}
 
 
 class SensorsError(UserError):
@@ -58,8 +64,10 @@ def load_sensors(path=None, sample_rate_hz: float | None = None) -> dict:
         with open(path, "rb") as f:
             data = tomllib.load(f)
     except FileNotFoundError:
-        raise SensorsError(f"sensor model {path} not found; give an existing SENSORS.toml "
-                           f"(or none for the built-in {DEFAULT_SENSORS.name})") from None
+        raise SensorsError(
+            f"sensor model {path} not found; give an existing SENSORS.toml "
+            f"(or none for the built-in {DEFAULT_SENSORS.name})"
+        ) from None
     except tomllib.TOMLDecodeError as e:
         raise SensorsError(f"sensor model {path} is not valid TOML ({e}); fix the syntax") from None
     check_sensors(data, str(path))
@@ -77,12 +85,16 @@ def decimation(sensors: dict, fs: float, source: str = "sensor model") -> int:
     q = fs / rate
     step = int(round(q))
     if step < 1 or abs(q - step) > 1e-6 * q:
-        raise SensorsError(f"{source}: recorder.rate_hz = {rate:g} Hz does not divide the run's {fs:g} Hz; "
-                           f"use {fs:g} Hz divided by a whole number (e.g. {fs / max(step, 1):g})")
+        raise SensorsError(
+            f"{source}: recorder.rate_hz = {rate:g} Hz does not divide the run's {fs:g} Hz; "
+            f"use {fs:g} Hz divided by a whole number (e.g. {fs / max(step, 1):g})"
+        )
     fc = rec.get("anti_alias_hz")
     if fc is not None and not fc < 0.5 * fs:
-        raise SensorsError(f"{source}: recorder.anti_alias_hz = {fc:g} Hz is not below the run's Nyquist "
-                           f"frequency {0.5 * fs:g} Hz; use a lower cutoff")
+        raise SensorsError(
+            f"{source}: recorder.anti_alias_hz = {fc:g} Hz is not below the run's Nyquist "
+            f"frequency {0.5 * fs:g} Hz; use a lower cutoff"
+        )
     return step
 
 
@@ -126,11 +138,13 @@ def check_sensors(sensors: dict, source: str = "sensor model") -> None:
             if k == "range" and v == "auto":
                 continue
             vals = v if isinstance(v, list) else [v]
-            if not vals or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
-                               for x in vals):
-                raise SensorsError(f"{source}: {where} must be a number or a list of numbers (one per column) "
-                                   f"in {CHANNEL_KEYS[k]}" + (" or \"auto\"" if k == "range" else "")
-                                   + f" (got {v!r})")
+            if not vals or any(
+                isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in vals
+            ):
+                raise SensorsError(
+                    f"{source}: {where} must be a number or a list of numbers (one per column) "
+                    f"in {CHANNEL_KEYS[k]}" + (' or "auto"' if k == "range" else "") + f" (got {v!r})"
+                )
             if k in ("noise_rms", "range") and any(x < 0 for x in vals) or k == "range" and 0 in vals:
                 raise SensorsError(f"{source}: {where} must be {'> 0' if k == 'range' else '>= 0'} (got {v!r})")
 
@@ -138,8 +152,9 @@ def check_sensors(sensors: dict, source: str = "sensor model") -> None:
 def _columns(value, n: int, where: str) -> np.ndarray:
     if isinstance(value, list):
         if len(value) != n:
-            raise SensorsError(f"{where} has {len(value)} values but the channel has {n} columns; "
-                               "give one number or one per column")
+            raise SensorsError(
+                f"{where} has {len(value)} values but the channel has {n} columns; give one number or one per column"
+            )
         return np.asarray(value, dtype=np.float64)
     return np.full(n, float(value))
 
@@ -172,8 +187,9 @@ def measure_run(run, sensors: dict, seed: int = 0):
         spec = chans.get(name, {})
         ncol = x.shape[1]
         where = f"channel.{name}"
-        x = x * _columns(spec.get("gain", 1.0), ncol, f"{where}.gain") + _columns(spec.get("offset", 0.0), ncol,
-                                                                               f"{where}.offset")
+        x = x * _columns(spec.get("gain", 1.0), ncol, f"{where}.gain") + _columns(
+            spec.get("offset", 0.0), ncol, f"{where}.offset"
+        )
         if fc is not None and name not in digital and n > 1:
             x = sensing.lowpass(x, fc, order, fs)
         skew = _columns(spec.get("skew_s", 0.0), ncol, f"{where}.skew_s")
@@ -197,8 +213,12 @@ def measure_run(run, sensors: dict, seed: int = 0):
         out[name] = x
     extras = {k: (np.asarray(v)[::step] if np.shape(v)[:1] == (n,) else np.asarray(v)) for k, v in run.extras.items()}
     meta = copy.deepcopy(run.meta)
-    meta["measurement"] = {"of": meta.get("source"), "seed": int(seed), "model": copy.deepcopy(sensors),
-                           "chain": "gain, offset, anti-alias, skew, sampling, noise, quantisation"}
+    meta["measurement"] = {
+        "of": meta.get("source"),
+        "seed": int(seed),
+        "model": copy.deepcopy(sensors),
+        "chain": "gain, offset, anti-alias, skew, sampling, noise, quantisation",
+    }
     meta["source"] = "measured"
     meta["sample_rate_hz"] = rate
     return RunFile(t=np.asarray(run.t)[::step].copy(), meta=meta, extras=extras, **out)
@@ -215,6 +235,14 @@ def write_measured(run, out, stem: str, sensors: dict, seed: int = 0, model_file
     return write_run(out_dir(out) / f"{stem}.measured.run.npz", meas)
 
 
-__all__ = ["CHANNEL_KEYS", "DEFAULT_SENSORS", "RECORDER_KEYS", "SensorsError", "check_sensors", "decimation",
-           "load_sensors",
-           "measure_run", "write_measured"]
+__all__ = [
+    "CHANNEL_KEYS",
+    "DEFAULT_SENSORS",
+    "RECORDER_KEYS",
+    "SensorsError",
+    "check_sensors",
+    "decimation",
+    "load_sensors",
+    "measure_run",
+    "write_measured",
+]

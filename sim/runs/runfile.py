@@ -150,8 +150,7 @@ class RunFile:
         acc = self.meta.get("accelerometers")
         if acc is None:
             return None
-        return [str(a.get("name", f"acc{i}")) if isinstance(a, dict) else str(a)
-                for i, a in enumerate(acc)]
+        return [str(a.get("name", f"acc{i}")) if isinstance(a, dict) else str(a) for i, a in enumerate(acc)]
 
     @property
     def source(self) -> str:
@@ -180,13 +179,15 @@ class RunFile:
     def channel(self, name: str) -> np.ndarray:
         """The (N, n_columns) array of a channel; RunFileError if absent."""
         if name not in CHANNELS:
-            raise _error(self.name, f"has no channel kind {name!r}",
-                         f"channels are {', '.join(CHANNELS)}")
+            raise _error(self.name, f"has no channel kind {name!r}", f"channels are {', '.join(CHANNELS)}")
         arr = getattr(self, name)
         if arr is None:
             have = ", ".join(self.present_channels()) or "none"
-            raise _error(self.name, f"has no channel {name!r}",
-                         f"record or convert it into the run file (channels present: {have})")
+            raise _error(
+                self.name,
+                f"has no channel {name!r}",
+                f"record or convert it into the run file (channels present: {have})",
+            )
         return arr
 
     def column_names(self, channel: str) -> list[str]:
@@ -201,16 +202,16 @@ class RunFile:
                 arr = self.channel(channel)
                 return [f"acc{i}" for i in range(arr.shape[1])]
             return names
-        raise _error(self.name, f"has no channel kind {channel!r}",
-                     f"channels are {', '.join(CHANNELS)}")
+        raise _error(self.name, f"has no channel kind {channel!r}", f"channels are {', '.join(CHANNELS)}")
 
     def column(self, channel: str, column_name: str) -> np.ndarray:
         """One column of a channel by name, shape (N,), e.g. column("actuator_force", "Z3")."""
         arr = self.channel(channel)
         names = self.column_names(channel)
         if column_name not in names:
-            raise _error(self.name, f"channel {channel!r} has no column {column_name!r}",
-                         f"columns are {', '.join(names)}")
+            raise _error(
+                self.name, f"channel {channel!r} has no column {column_name!r}", f"columns are {', '.join(names)}"
+            )
         return arr[:, names.index(column_name)]
 
     def validate(self, require: Iterable[str] = ()) -> None:
@@ -221,76 +222,100 @@ class RunFile:
 # -- validation --------------------------------------------------------------------
 def _validate_meta(meta: Any, name: str) -> None:
     if not isinstance(meta, dict):
-        raise _error(name, "has a meta that is not a JSON object",
-                     "store meta as a JSON object with keys " + ", ".join(REQUIRED_META))
+        raise _error(
+            name,
+            "has a meta that is not a JSON object",
+            "store meta as a JSON object with keys " + ", ".join(REQUIRED_META),
+        )
     missing = [k for k in REQUIRED_META if k not in meta]
     if missing:
-        raise _error(name, f"meta lacks required key(s) {', '.join(missing)}",
-                     "add them (see docs/run-file.md, section meta)")
+        raise _error(
+            name, f"meta lacks required key(s) {', '.join(missing)}", "add them (see docs/run-file.md, section meta)"
+        )
     if meta["format"] != FORMAT:
-        raise _error(name, f"has format {meta['format']!r}, not {FORMAT!r}",
-                     f"convert it to {FORMAT} (docs/run-file.md) and set meta format to {FORMAT!r}")
+        raise _error(
+            name,
+            f"has format {meta['format']!r}, not {FORMAT!r}",
+            f"convert it to {FORMAT} (docs/run-file.md) and set meta format to {FORMAT!r}",
+        )
     if not isinstance(meta["table"], str) or not meta["table"]:
-        raise _error(name, f"meta table {meta['table']!r} is not a table name",
-                     "set it to the name of a table description in scenarios/ (e.g. 'cgs')")
+        raise _error(
+            name,
+            f"meta table {meta['table']!r} is not a table name",
+            "set it to the name of a table description in scenarios/ (e.g. 'cgs')",
+        )
     fs = meta["sample_rate_hz"]
     if isinstance(fs, bool) or not isinstance(fs, (int, float)) or not math.isfinite(fs) or fs <= 0:
-        raise _error(name, f"meta sample_rate_hz {fs!r} is not a positive number",
-                     "set it to 1 / (t[1] - t[0]) in Hz")
+        raise _error(name, f"meta sample_rate_hz {fs!r} is not a positive number", "set it to 1 / (t[1] - t[0]) in Hz")
     for key in ("actuators", "dofs"):
         cols = meta[key]
         if not isinstance(cols, list) or not all(isinstance(c, str) and c for c in cols):
-            raise _error(name, f"meta {key} is not a list of names",
-                         f"set meta {key} to the column names in order, e.g. "
-                         + ('["X1", "X2"]' if key == "actuators" else '["x", "y", "z", "rx", "ry", "rz"]'))
+            raise _error(
+                name,
+                f"meta {key} is not a list of names",
+                f"set meta {key} to the column names in order, e.g. "
+                + ('["X1", "X2"]' if key == "actuators" else '["x", "y", "z", "rx", "ry", "rz"]'),
+            )
         dup = sorted({c for c in cols if cols.count(c) > 1})
         if dup:
-            raise _error(name, f"meta {key} repeats {', '.join(dup)}",
-                         f"give every {key[:-1]} column a unique name")
+            raise _error(name, f"meta {key} repeats {', '.join(dup)}", f"give every {key[:-1]} column a unique name")
     if not meta["dofs"]:
         raise _error(name, "meta dofs is empty", 'list the table DOFs, e.g. ["x"] for a uni-axial table')
     if meta["source"] not in SOURCES:
-        raise _error(name, f"meta source {meta['source']!r} is not 'measured' or 'simulated'",
-                     "set meta source to 'measured' or 'simulated'")
+        raise _error(
+            name,
+            f"meta source {meta['source']!r} is not 'measured' or 'simulated'",
+            "set meta source to 'measured' or 'simulated'",
+        )
     acc = meta.get("accelerometers")
     if acc is not None and not isinstance(acc, list):
-        raise _error(name, "meta accelerometers is not a list",
-                     "make it a list of {name, position, direction} objects")
+        raise _error(name, "meta accelerometers is not a list", "make it a list of {name, position, direction} objects")
     inc = meta.get("incomplete", False)
     if not isinstance(inc, bool):
         raise _error(name, f"meta incomplete {inc!r} is not true/false", "set it to true or false")
     if inc and not isinstance(meta.get("incomplete_reason"), str):
-        raise _error(name, "is marked incomplete without an incomplete_reason",
-                     "add meta incomplete_reason with why the run stopped")
+        raise _error(
+            name,
+            "is marked incomplete without an incomplete_reason",
+            "add meta incomplete_reason with why the run stopped",
+        )
 
 
 def _validate_time(t: Any, fs: float, name: str) -> None:
     t = np.asarray(t)
     if t.ndim != 1 or t.shape[0] < 2:
-        raise _error(name, f"has t of shape {t.shape}, need (N,) with N >= 2",
-                     "store t as a 1-D array of sample times in s")
+        raise _error(
+            name, f"has t of shape {t.shape}, need (N,) with N >= 2", "store t as a 1-D array of sample times in s"
+        )
     if not np.issubdtype(t.dtype, np.number):
         raise _error(name, f"has t of type {t.dtype}", "store t as float64 seconds")
     if not np.all(np.isfinite(t)):
         i = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise _error(name, f"has a non-finite time at sample {i}",
-                     "store t as t0 + arange(N) / sample_rate_hz")
+        raise _error(name, f"has a non-finite time at sample {i}", "store t as t0 + arange(N) / sample_rate_hz")
     dt = np.diff(t.astype(np.float64))
     if np.any(dt <= 0):
         i = int(np.flatnonzero(dt <= 0)[0])
-        raise _error(name, f"has t not strictly increasing at sample {i + 1} (t = {t[i + 1]:.6g} s)",
-                     "sort the samples and drop duplicates, or regenerate t as t0 + arange(N) / sample_rate_hz")
+        raise _error(
+            name,
+            f"has t not strictly increasing at sample {i + 1} (t = {t[i + 1]:.6g} s)",
+            "sort the samples and drop duplicates, or regenerate t as t0 + arange(N) / sample_rate_hz",
+        )
     step = float(np.median(dt))
     tol = 1e-6 * step + 8 * np.finfo(np.float64).eps * float(np.max(np.abs(t)))
     bad = np.abs(dt - step) > tol
     if np.any(bad):
         i = int(np.flatnonzero(bad)[0])
-        raise _error(name, f"has a non-uniform time step at sample {i + 1} "
-                           f"(step {dt[i]:.6g} s, usual step {step:.6g} s)",
-                     "resample to a uniform rate or fill gaps with NaN samples")
+        raise _error(
+            name,
+            f"has a non-uniform time step at sample {i + 1} (step {dt[i]:.6g} s, usual step {step:.6g} s)",
+            "resample to a uniform rate or fill gaps with NaN samples",
+        )
     if abs(fs * step - 1.0) > 1e-6:
-        raise _error(name, f"meta sample_rate_hz {fs:g} disagrees with t (1/step = {1.0 / step:.9g} Hz)",
-                     "set meta sample_rate_hz to 1 / (t[1] - t[0])")
+        raise _error(
+            name,
+            f"meta sample_rate_hz {fs:g} disagrees with t (1/step = {1.0 / step:.9g} Hz)",
+            "set meta sample_rate_hz to 1 / (t[1] - t[0])",
+        )
 
 
 def _expected_columns(channel: str, meta: dict, arr: np.ndarray) -> tuple[int | None, str]:
@@ -307,8 +332,7 @@ def _validate(run: RunFile, name: str, require: tuple[str, ...]) -> None:
     _validate_time(run.t, float(run.meta["sample_rate_hz"]), name)
     n = int(np.shape(run.t)[0])
     for unknown in [c for c in require if c not in CHANNELS]:
-        raise _error(name, f"was asked for unknown channel {unknown!r}",
-                     f"channels are {', '.join(CHANNELS)}")
+        raise _error(name, f"was asked for unknown channel {unknown!r}", f"channels are {', '.join(CHANNELS)}")
     for channel in CHANNELS:
         arr = getattr(run, channel)
         if arr is None:
@@ -317,39 +341,62 @@ def _validate(run: RunFile, name: str, require: tuple[str, ...]) -> None:
         if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
             raise _error(name, f"channel {channel!r} has type {arr.dtype}", "store it as float64")
         if arr.ndim != 2:
-            raise _error(name, f"channel {channel!r} has shape {arr.shape}, need (N, n_columns)",
-                         "store one column per actuator/DOF/accelerometer (a[:, None] for one column)")
+            raise _error(
+                name,
+                f"channel {channel!r} has shape {arr.shape}, need (N, n_columns)",
+                "store one column per actuator/DOF/accelerometer (a[:, None] for one column)",
+            )
         if arr.shape[0] != n:
-            raise _error(name, f"channel {channel!r} has {arr.shape[0]} samples but t has {n}",
-                         "give every channel one row per sample time (NaN for missing samples)")
+            raise _error(
+                name,
+                f"channel {channel!r} has {arr.shape[0]} samples but t has {n}",
+                "give every channel one row per sample time (NaN for missing samples)",
+            )
         ncol, what = _expected_columns(channel, run.meta, arr)
         if ncol is not None and arr.shape[1] != ncol:
-            raise _error(name, f"channel {channel!r} has {arr.shape[1]} columns but there are {ncol} {what}",
-                         f"make the {what} match the channel's columns")
+            raise _error(
+                name,
+                f"channel {channel!r} has {arr.shape[1]} columns but there are {ncol} {what}",
+                f"make the {what} match the channel's columns",
+            )
     for key, arr in run.extras.items():
         arr = np.asarray(arr)
         if not key.replace("_", "").isalnum() or arr.ndim not in (1, 2) or arr.shape[0] != n:
-            raise _error(name, f"extension channel {key!r} has shape {arr.shape}, need ({n},) or ({n}, k)",
-                         "give extension channels one row per sample and a plain name")
+            raise _error(
+                name,
+                f"extension channel {key!r} has shape {arr.shape}, need ({n},) or ({n}, k)",
+                "give extension channels one row per sample and a plain name",
+            )
     if all(getattr(run, c) is None for c in INPUT_CHANNELS):
-        raise _error(name, "has neither valve_command nor reference",
-                     "add the servovalve commands (open-loop replay) or the reference displacement (needs a controller)")
+        raise _error(
+            name,
+            "has neither valve_command nor reference",
+            "add the servovalve commands (open-loop replay) or the reference displacement (needs a controller)",
+        )
     for channel in require:
         arr = getattr(run, channel)
         if arr is None:
             have = ", ".join(c for c in CHANNELS if getattr(run, c) is not None)
-            raise _error(name, f"has no channel {channel!r}",
-                         f"record or convert it into the run file (channels present: {have})")
+            raise _error(
+                name,
+                f"has no channel {channel!r}",
+                f"record or convert it into the run file (channels present: {have})",
+            )
         bad = ~np.isfinite(np.asarray(arr, dtype=np.float64))
         if np.any(bad):
             i, j = (int(k) for k in np.argwhere(bad)[0])
-            cols = run.meta["actuators"] if channel in ACTUATOR_CHANNELS else (
-                run.meta["dofs"] if channel in DOF_CHANNELS else None)
+            cols = (
+                run.meta["actuators"]
+                if channel in ACTUATOR_CHANNELS
+                else (run.meta["dofs"] if channel in DOF_CHANNELS else None)
+            )
             col = f" column {cols[j]!r}" if cols and j < len(cols) else f" column {j}"
             kind = "NaN" if np.isnan(arr[i, j]) else "an infinite value"
-            raise _error(name, f"has {kind} in channel {channel!r}{col} at sample {i} "
-                               f"(t = {float(run.t[i]):.6g} s)",
-                         "fill or cut the missing samples, or use a run where this channel is complete")
+            raise _error(
+                name,
+                f"has {kind} in channel {channel!r}{col} at sample {i} (t = {float(run.t[i]):.6g} s)",
+                "fill or cut the missing samples, or use a run where this channel is complete",
+            )
 
 
 # -- writing -----------------------------------------------------------------------
@@ -368,8 +415,11 @@ def write_run(path: str | os.PathLike, run: RunFile) -> Path:
     try:
         meta_text = json.dumps(run.meta, allow_nan=False)
     except (TypeError, ValueError) as exc:
-        raise _error(name, f"has meta that cannot be written as JSON ({_one_line(exc)})",
-                     "keep meta to strings, finite numbers, lists and dicts") from None
+        raise _error(
+            name,
+            f"has meta that cannot be written as JSON ({_one_line(exc)})",
+            "keep meta to strings, finite numbers, lists and dicts",
+        ) from None
     arrays: dict[str, np.ndarray] = {"t": np.asarray(run.t, dtype=np.float64), "meta": np.array(meta_text)}
     for channel in CHANNELS:
         arr = getattr(run, channel)
@@ -383,9 +433,15 @@ def write_run(path: str | os.PathLike, run: RunFile) -> Path:
         raise _error(name, f"cannot be written: folder {folder} does not exist", "create the folder first")
     from sim.runs.files import atomic_write
 
-    atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays),
-                 error=lambda exc: _error(name, f"cannot be written ({_one_line(exc.strerror or exc)})",
-                                          "choose a folder you can write to, with free space"))
+    atomic_write(
+        path,
+        lambda fh: np.savez_compressed(fh, **arrays),
+        error=lambda exc: _error(
+            name,
+            f"cannot be written ({_one_line(exc.strerror or exc)})",
+            "choose a folder you can write to, with free space",
+        ),
+    )
     run.path = name
     return path
 
@@ -411,31 +467,46 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
     if path.is_dir():
         raise _error(name, "is a folder", f"give the path of a {SUFFIX} file")
     if not zipfile.is_zipfile(path):
-        raise _error(name, "is not a NumPy .npz archive",
-                     f"write it with shaketable (sim.runs.runfile.write_run) or numpy.savez_compressed as {FORMAT}")
+        raise _error(
+            name,
+            "is not a NumPy .npz archive",
+            f"write it with shaketable (sim.runs.runfile.write_run) or numpy.savez_compressed as {FORMAT}",
+        )
     known = set(CHANNELS) | {"t", "meta"}
     try:
         with np.load(path, allow_pickle=False) as npz:
             keys = list(npz.files)
             unknown = sorted(k for k in set(keys) - known if not k.startswith(EXTRA_PREFIX))
             if unknown:
-                raise _error(name, f"has unknown array(s) {', '.join(unknown)}",
-                             f"rename them to format keys ({', '.join(CHANNELS)}) or drop them")
+                raise _error(
+                    name,
+                    f"has unknown array(s) {', '.join(unknown)}",
+                    f"rename them to format keys ({', '.join(CHANNELS)}) or drop them",
+                )
             for key in ("t", "meta"):
                 if key not in keys:
-                    raise _error(name, f"has no {key!r} array",
-                                 "add it (t: sample times in s; meta: JSON text), see docs/run-file.md")
+                    raise _error(
+                        name,
+                        f"has no {key!r} array",
+                        "add it (t: sample times in s; meta: JSON text), see docs/run-file.md",
+                    )
             data = {k: npz[k] for k in keys}
     except RunFileError:
         raise
     except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
-        raise _error(name, f"is a damaged or unreadable archive ({_one_line(exc)})",
-                     "write it again, or restore it from the recorder export") from None
+        raise _error(
+            name,
+            f"is a damaged or unreadable archive ({_one_line(exc)})",
+            "write it again, or restore it from the recorder export",
+        ) from None
 
     if not all(isinstance(a, np.ndarray) for a in data.values()):
         bad = sorted(k for k, a in data.items() if not isinstance(a, np.ndarray))
-        raise _error(name, f"is a damaged archive (member(s) {', '.join(bad)} are not NumPy arrays)",
-                     "write it again, or restore it from the recorder export")
+        raise _error(
+            name,
+            f"is a damaged archive (member(s) {', '.join(bad)} are not NumPy arrays)",
+            "write it again, or restore it from the recorder export",
+        )
     meta_arr = data.pop("meta")
     if meta_arr.shape != () or meta_arr.dtype.kind not in "US":
         raise _error(name, "has a meta that is not a single string", "store meta as np.array(json.dumps(meta))")
@@ -445,8 +516,9 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
     try:
         meta = json.loads(meta_text)
     except json.JSONDecodeError as exc:
-        raise _error(name, f"has meta that is not valid JSON ({exc.msg} at char {exc.pos})",
-                     "store meta as json.dumps(meta)") from None
+        raise _error(
+            name, f"has meta that is not valid JSON ({exc.msg} at char {exc.pos})", "store meta as json.dumps(meta)"
+        ) from None
 
     t = data.pop("t")
     channels: dict[str, np.ndarray] = {}
@@ -454,7 +526,7 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
     for k in [k for k in data if k.startswith(EXTRA_PREFIX)]:
         if data[k].dtype.kind not in "fiu":
             raise _error(name, f"extension channel {k!r} has type {data[k].dtype}", "store it as float64")
-        extras[k[len(EXTRA_PREFIX):]] = data.pop(k).astype(np.float64)
+        extras[k[len(EXTRA_PREFIX) :]] = data.pop(k).astype(np.float64)
     for key, arr in data.items():
         if arr.dtype.kind not in "fiu":
             raise _error(name, f"channel {key!r} has type {arr.dtype}", "store it as float64")
@@ -502,8 +574,11 @@ def _carried(run: RunFile, kind: str):
         raise _error(run.name, f"has meta {kind}_description that is not text", "store the description's TOML text")
     digest = run.meta.get(f"{kind}_sha256")
     if digest is not None and hashlib.sha256(text.encode("utf-8")).hexdigest() != digest:
-        raise _error(run.name, f"has meta {kind}_description that does not match meta {kind}_sha256",
-                     f"restore the text or drop both keys (the stock {kind} file is used then)")
+        raise _error(
+            run.name,
+            f"has meta {kind}_description that does not match meta {kind}_sha256",
+            f"restore the text or drop both keys (the stock {kind} file is used then)",
+        )
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError:
@@ -513,8 +588,11 @@ def _carried(run: RunFile, kind: str):
     except json.JSONDecodeError:
         raw = None
     if not isinstance(raw, dict):
-        raise _error(run.name, f"has meta {kind}_description that is neither TOML nor a JSON object",
-                     f"store the {kind} file's text")
+        raise _error(
+            run.name,
+            f"has meta {kind}_description that is neither TOML nor a JSON object",
+            f"store the {kind} file's text",
+        )
     return raw
 
 

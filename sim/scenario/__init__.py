@@ -3,5 +3,13 @@
 from sim.scenario.files import Scenario, build_motions, build_reference, limit_warnings, list_scenarios, load_scenario
 from sim.scenario.reference import Reference, reference_from_motions
 
-__all__ = ["Reference", "Scenario", "build_motions", "build_reference", "limit_warnings", "list_scenarios",
-           "load_scenario", "reference_from_motions"]
+__all__ = [
+    "Reference",
+    "Scenario",
+    "build_motions",
+    "build_reference",
+    "limit_warnings",
+    "list_scenarios",
+    "load_scenario",
+    "reference_from_motions",
+]

@@ -52,25 +52,63 @@ _SCEN_KEYS = {"name", "table", "payload", "duration_s", "pad_to_duration", "desc
 #: "nonneg" >= 0, "int" a whole number >= 0, "band" [f_lo, f_hi] in Hz, "text", "table".
 _MOTION_SPEC = {
     "sine": {"type": "text", "amplitude": "num", "frequency_hz": "pos", "phase_rad": "num", "delay_s": "nonneg"},
-    "tapered_sine": {"type": "text", "amplitude": "num", "frequency_hz": "pos", "phase_rad": "num",
-                     "taper_cycles": "nonneg", "delay_s": "nonneg"},
-    "triangle": {"type": "text", "peak_displacement": "pos", "peak_velocity": "pos", "n_cycles": "pos",
-                 "rounding_fraction": "nonneg", "max_acceleration": "pos", "delay_s": "nonneg"},
-    "white_noise": {"type": "text", "band_hz": "band", "seed": "int", "rms_acceleration": "pos",
-                    "rms_displacement": "pos", "taper_s": "nonneg"},
-    "at2": {"type": "text", "file": "text", "amplitude_factor": "num", "target_pga": "pos", "time_factor": "pos",
-            "highpass_hz": "pos", "filter_order": "int", "baseline": "text"},
+    "tapered_sine": {
+        "type": "text",
+        "amplitude": "num",
+        "frequency_hz": "pos",
+        "phase_rad": "num",
+        "taper_cycles": "nonneg",
+        "delay_s": "nonneg",
+    },
+    "triangle": {
+        "type": "text",
+        "peak_displacement": "pos",
+        "peak_velocity": "pos",
+        "n_cycles": "pos",
+        "rounding_fraction": "nonneg",
+        "max_acceleration": "pos",
+        "delay_s": "nonneg",
+    },
+    "white_noise": {
+        "type": "text",
+        "band_hz": "band",
+        "seed": "int",
+        "rms_acceleration": "pos",
+        "rms_displacement": "pos",
+        "taper_s": "nonneg",
+    },
+    "at2": {
+        "type": "text",
+        "file": "text",
+        "amplitude_factor": "num",
+        "target_pga": "pos",
+        "time_factor": "pos",
+        "highpass_hz": "pos",
+        "filter_order": "int",
+        "baseline": "text",
+    },
 }
 _ITERATION_KEYS = {"count", "gain", "band_hz", "h_min", "frf", "noise_level", "seed"}
 _OUTPUT_KEYS = {"sample_rate_hz"}
 _MOTION_KEYS = {k: set(v) for k, v in _MOTION_SPEC.items()}
-_EQ_SPEC = {"type": "text", "amplitude_factor": "num", "time_factor": "pos", "highpass_hz": "pos",
-            "filter_order": "int", "baseline": "text", "mapping": "table"}
+_EQ_SPEC = {
+    "type": "text",
+    "amplitude_factor": "num",
+    "time_factor": "pos",
+    "highpass_hz": "pos",
+    "filter_order": "int",
+    "baseline": "text",
+    "mapping": "table",
+}
 _EQ_KEYS = set(_EQ_SPEC)
 #: The keys a motion cannot do without.
-_MOTION_REQUIRED = {"sine": ("amplitude", "frequency_hz"), "tapered_sine": ("amplitude", "frequency_hz"),
-                    "triangle": ("peak_displacement", "peak_velocity"), "white_noise": ("band_hz",),
-                    "at2": ("file",)}
+_MOTION_REQUIRED = {
+    "sine": ("amplitude", "frequency_hz"),
+    "tapered_sine": ("amplitude", "frequency_hz"),
+    "triangle": ("peak_displacement", "peak_velocity"),
+    "white_noise": ("band_hz",),
+    "at2": ("file",),
+}
 
 
 def _check_values(m: dict, spec: dict, where: str, src: str) -> None:
@@ -135,14 +173,15 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
             raise ScenarioError(f"{src}: [scenario] lacks '{k}'; give it as text")
         V.text(sc[k], f"scenario.{k}", src, ScenarioError)
     if not all(c.isalnum() or c in "-_." for c in sc["name"]):
-        raise ScenarioError(f"{src}: 'scenario.name' {sc['name']!r} names the output files; "
-                            "use letters, digits, '-', '_' and '.' only")
+        raise ScenarioError(
+            f"{src}: 'scenario.name' {sc['name']!r} names the output files; use letters, digits, '-', '_' and '.' only"
+        )
     dur = sc.get("duration_s")
     if dur is not None:
         V.number(dur, "scenario.duration_s", src, ScenarioError, unit="s", positive=True)
     mo = V.require_table(data, "motion", "motion", src, ScenarioError, what="type = ... or one [motion.<dof>] per DOF")
     if not mo:
-        raise ScenarioError(f"{src}: [motion] is empty; give type = \"el_centro_1940\" or one [motion.<dof>] table")
+        raise ScenarioError(f'{src}: [motion] is empty; give type = "el_centro_1940" or one [motion.<dof>] table')
     out = data.get("output", {})
     if not isinstance(out, dict):
         raise ScenarioError(f"{src}: [output] must be a table (sample_rate_hz)")
@@ -158,7 +197,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     if isinstance(cnt, bool) or not isinstance(cnt, int) or not 0 <= cnt <= 10:
         raise ScenarioError(f"{src}: 'iteration.count' must be an integer 0..10 (got {cnt!r})")
     if it.get("frf", "noise") not in ("noise", "record"):
-        raise ScenarioError(f"{src}: 'iteration.frf' must be \"noise\" or \"record\" (got {it['frf']!r})")
+        raise ScenarioError(f'{src}: \'iteration.frf\' must be "noise" or "record" (got {it["frf"]!r})')
     if "band_hz" in it:
         V.numbers(it["band_hz"], "iteration.band_hz", src, ScenarioError, n=2, positive=True, increasing=True)
     for key in ("gain", "noise_level", "h_min"):
@@ -183,9 +222,20 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     pad = sc.get("pad_to_duration", False)
     if not isinstance(pad, bool):
         raise ScenarioError(f"{src}: 'scenario.pad_to_duration' must be true or false")
-    s = Scenario(name=sc["name"], table=table, payload=payload, duration_s=float(dur) if dur else None,
-                 pad_to_duration=pad, description=str(sc.get("description", "")), motion=mo,
-                 controller=ctrl, sample_rate_hz=float(rate), path=path, raw=data, iteration=dict(it))
+    s = Scenario(
+        name=sc["name"],
+        table=table,
+        payload=payload,
+        duration_s=float(dur) if dur else None,
+        pad_to_duration=pad,
+        description=str(sc.get("description", "")),
+        motion=mo,
+        controller=ctrl,
+        sample_rate_hz=float(rate),
+        path=path,
+        raw=data,
+        iteration=dict(it),
+    )
     _check_motion(s)
     return s
 
@@ -193,8 +243,9 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
 def _check_factor(m: dict, where: str, src: str):
     f = m.get("amplitude_factor", 1.0)
     if isinstance(f, bool) or not isinstance(f, (int, float)) or not f > 0:
-        raise ScenarioError(f"{src}: '{where}.amplitude_factor' must be a positive scale (got {f!r}); "
-                            "1.0 is the record as recorded")
+        raise ScenarioError(
+            f"{src}: '{where}.amplitude_factor' must be a positive scale (got {f!r}); 1.0 is the record as recorded"
+        )
 
 
 def _check_motion(s: Scenario):
@@ -202,25 +253,33 @@ def _check_motion(s: Scenario):
     mo = s.motion
     if "type" in mo:
         if mo["type"] != "el_centro_1940":
-            raise ScenarioError(f"{src}: [motion] type {mo['type']!r} is not a multi-DOF motion; "
-                                "use type = \"el_centro_1940\" or one [motion.<dof>] table per DOF")
+            raise ScenarioError(
+                f"{src}: [motion] type {mo['type']!r} is not a multi-DOF motion; "
+                'use type = "el_centro_1940" or one [motion.<dof>] table per DOF'
+            )
         _unknown(mo, _EQ_KEYS, "motion", src)
         _check_values(mo, _EQ_SPEC, "motion", src)
         for dof, comp in mo.get("mapping", {}).items():
             if dof not in DOFS or not isinstance(comp, str):
-                raise ScenarioError(f"{src}: 'motion.mapping' maps DOF names ({', '.join(DOFS)}) to components "
-                                    f"such as \"180\" (got {dof} = {comp!r})")
+                raise ScenarioError(
+                    f"{src}: 'motion.mapping' maps DOF names ({', '.join(DOFS)}) to components "
+                    f'such as "180" (got {dof} = {comp!r})'
+                )
         _check_factor(mo, "motion", src)
         return
     for dof, m in mo.items():
         if dof not in DOFS:
-            raise ScenarioError(f"{src}: [motion.{dof}]: '{dof}' is not a DOF{V.suggest(dof, DOFS)}; "
-                                f"DOFs are {', '.join(DOFS)} (or type = \"el_centro_1940\" in [motion])")
+            raise ScenarioError(
+                f"{src}: [motion.{dof}]: '{dof}' is not a DOF{V.suggest(dof, DOFS)}; "
+                f'DOFs are {", ".join(DOFS)} (or type = "el_centro_1940" in [motion])'
+            )
         if not isinstance(m, dict) or "type" not in m:
             raise ScenarioError(f"{src}: [motion.{dof}] needs a 'type' ({', '.join(_MOTION_KEYS)})")
         if m["type"] not in _MOTION_KEYS:
-            raise ScenarioError(f"{src}: [motion.{dof}] type {m['type']!r} is unknown"
-                                f"{V.suggest(m['type'], _MOTION_KEYS)}; types: {', '.join(_MOTION_KEYS)}")
+            raise ScenarioError(
+                f"{src}: [motion.{dof}] type {m['type']!r} is unknown"
+                f"{V.suggest(m['type'], _MOTION_KEYS)}; types: {', '.join(_MOTION_KEYS)}"
+            )
         _unknown(m, _MOTION_KEYS[m["type"]], f"motion.{dof}", src)
         _check_values(m, _MOTION_SPEC[m["type"]], f"motion.{dof}", src)
         for key in _MOTION_REQUIRED[m["type"]]:
@@ -236,8 +295,9 @@ def _shift(mo: M.Motion, delay_s: float, rate: float) -> M.Motion:
         return mo
     z = np.zeros(n)
     t = np.arange(len(mo.t) + n) / rate
-    return M.Motion(t, np.concatenate([z, mo.d]), np.concatenate([z, mo.v]), np.concatenate([z, mo.a]),
-                    mo.name, mo.info)
+    return M.Motion(
+        t, np.concatenate([z, mo.d]), np.concatenate([z, mo.v]), np.concatenate([z, mo.a]), mo.name, mo.info
+    )
 
 
 def build_motions(s: Scenario) -> dict[str, M.Motion]:
@@ -246,8 +306,12 @@ def build_motions(s: Scenario) -> dict[str, M.Motion]:
     mo = s.motion
     if mo.get("type") == "el_centro_1940":
         kw = {k: v for k, v in mo.items() if k in ("time_factor", "highpass_hz", "filter_order", "baseline")}
-        return R.el_centro_motions(sample_rate_hz=rate, amplitude_factor=float(mo.get("amplitude_factor", 1.0)),
-                                   mapping=mo.get("mapping"), **kw)
+        return R.el_centro_motions(
+            sample_rate_hz=rate,
+            amplitude_factor=float(mo.get("amplitude_factor", 1.0)),
+            mapping=mo.get("mapping"),
+            **kw,
+        )
     out = {}
     for i, (dof, m) in enumerate(mo.items()):
         try:
@@ -266,8 +330,10 @@ def _build_one(s: Scenario, i: int, dof: str, m: dict, rate: float) -> M.Motion:
             raise ScenarioError(f"{s.path}: a {kind} motion needs 'scenario.duration_s'")
         dur = default_dur - delay
         if not dur > 0:
-            raise ScenarioError(f"{s.path}: 'motion.{dof}.delay_s' ({delay:g} s) leaves nothing of "
-                                f"'scenario.duration_s' ({default_dur:g} s); shorten the delay")
+            raise ScenarioError(
+                f"{s.path}: 'motion.{dof}.delay_s' ({delay:g} s) leaves nothing of "
+                f"'scenario.duration_s' ({default_dur:g} s); shorten the delay"
+            )
     if kind == "sine":
         x = M.sine(duration_s=dur, sample_rate_hz=rate, **m)
     elif kind == "tapered_sine":
@@ -299,8 +365,7 @@ def build_reference(s: Scenario, motions: dict[str, M.Motion], duration_s: float
 WINDOW_TAPER_S = 2.0
 
 
-def build_window(s: Scenario, motions: dict[str, M.Motion], duration_s: float | None = None
-                 ) -> tuple[Reference, dict]:
+def build_window(s: Scenario, motions: dict[str, M.Motion], duration_s: float | None = None) -> tuple[Reference, dict]:
     """The 6-DOF reference over the run's duration and the window of the motion it holds.
 
     A duration (``duration_s``, else ``scenario.duration_s``) shorter than an earthquake
@@ -318,31 +383,37 @@ def build_window(s: Scenario, motions: dict[str, M.Motion], duration_s: float | 
     if dur > length + 1.5 / rate and not s.pad_to_duration:
         raise ScenarioError(
             f"{s.path}: duration {dur:g} s is longer than the motion ({length:.2f} s); shorten --duration or set "
-            "'scenario.pad_to_duration = true' to pad with rest")
+            "'scenario.pad_to_duration = true' to pad with rest"
+        )
     record = any(m.info.get("kind") == "record" for m in motions.values())
     n_win = int(round(dur * rate)) + 1
     n_len = max(len(m.t) for m in motions.values())
     if not record or n_win >= n_len:
-        why = ("the whole motion" if n_win >= n_len else
-               f"the first {dur:g} s (the motion is not an earthquake record)")
-        return reference_from_motions(motions, rate, dur), {"start_s": 0.0, "end_s": float(dur),
-                                                            "of_record_s": float(length), "why": why}
+        why = "the whole motion" if n_win >= n_len else f"the first {dur:g} s (the motion is not an earthquake record)"
+        return reference_from_motions(motions, rate, dur), {
+            "start_s": 0.0,
+            "end_s": float(dur),
+            "of_record_s": float(length),
+            "why": why,
+        }
     h = 1.0 / rate
     # Arias intensity of the translations (m/s^2); of the rotations only if there are no translations
     trans = [m for d, m in motions.items() if DOFS.index(d) < 3] or list(motions.values())
     acc = np.zeros((n_len, len(trans)))
     for k, m in enumerate(trans):
-        acc[:len(m.a), k] = m.a
+        acc[: len(m.a), k] = m.a
     t5, t95 = R.arias_interval(acc, h)
     if dur >= t95 - t5:
         i0 = int(round(min(max(0.5 * (t5 + t95) - dur / 2, 0.0), (n_len - n_win) * h) * rate))
         how = f"centred on the record's 5-95 % Arias-intensity interval ({t5:.1f}-{t95:.1f} s)"
     else:
-        cum = np.concatenate([[0.0], np.cumsum((acc ** 2).sum(axis=1))])
+        cum = np.concatenate([[0.0], np.cumsum((acc**2).sum(axis=1))])
         i0 = int(np.argmax(cum[n_win:] - cum[:-n_win]))
         share = (cum[i0 + n_win] - cum[i0]) / cum[-1]
-        how = (f"the {dur:g} s holding the most Arias intensity ({100 * share:.0f} % of the record's; "
-               f"its 5-95 % interval is {t5:.1f}-{t95:.1f} s)")
+        how = (
+            f"the {dur:g} s holding the most Arias intensity ({100 * share:.0f} % of the record's; "
+            f"its 5-95 % interval is {t5:.1f}-{t95:.1f} s)"
+        )
     i1 = i0 + n_win
     taper = min(WINDOW_TAPER_S, 0.2 * dur)
     cut = {}
@@ -350,8 +421,12 @@ def build_window(s: Scenario, motions: dict[str, M.Motion], duration_s: float | 
         if len(m.d) < n_len:  # at rest after its end
             m = R.pad(m, 0.0, (n_len - len(m.d)) * h)
         cut[dof] = R.window_motion(m, i0, i1, taper)
-    window = {"start_s": i0 * h, "end_s": (i1 - 1) * h, "of_record_s": float(length),
-              "why": f"strong motion: {how}; the displacement tapered over {taper:g} s at both ends"}
+    window = {
+        "start_s": i0 * h,
+        "end_s": (i1 - 1) * h,
+        "of_record_s": float(length),
+        "why": f"strong motion: {how}; the displacement tapered over {taper:g} s at both ends",
+    }
     return reference_from_motions(cut, rate, dur), window
 
 
@@ -376,4 +451,13 @@ def list_scenarios() -> list[str]:
     return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
 
 
-__all__ = ["Scenario", "WINDOW_TAPER_S", "build_motions", "build_reference", "build_window", "limit_warnings", "list_scenarios", "load_scenario"]
+__all__ = [
+    "Scenario",
+    "WINDOW_TAPER_S",
+    "build_motions",
+    "build_reference",
+    "build_window",
+    "limit_warnings",
+    "list_scenarios",
+    "load_scenario",
+]

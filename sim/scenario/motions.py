@@ -136,8 +136,15 @@ def time_vector(duration_s: float, sample_rate_hz: float) -> np.ndarray:
 
 
 # -- sines -------------------------------------------------------------------------
-def sine(*, amplitude: float, frequency_hz: float, duration_s: float, sample_rate_hz: float,
-         phase_rad: float = 0.0, name: str = "sine") -> Motion:
+def sine(
+    *,
+    amplitude: float,
+    frequency_hz: float,
+    duration_s: float,
+    sample_rate_hz: float,
+    phase_rad: float = 0.0,
+    name: str = "sine",
+) -> Motion:
     """``d = amplitude sin(2 pi f t + phase)`` with analytic v and a.
 
     Peaks: D = amplitude, V = 2 pi f D, A = (2 pi f)^2 D. It starts at full speed
@@ -148,8 +155,14 @@ def sine(*, amplitude: float, frequency_hz: float, duration_s: float, sample_rat
     t = time_vector(duration_s, sample_rate_hz)
     w = 2 * np.pi * f
     ph = w * t + phase_rad
-    return Motion(t, amp * np.sin(ph), amp * w * np.cos(ph), -amp * w * w * np.sin(ph), name,
-                  dict(kind="sine", amplitude=amp, frequency_hz=f, phase_rad=phase_rad))
+    return Motion(
+        t,
+        amp * np.sin(ph),
+        amp * w * np.cos(ph),
+        -amp * w * w * np.sin(ph),
+        name,
+        dict(kind="sine", amplitude=amp, frequency_hz=f, phase_rad=phase_rad),
+    )
 
 
 def _cosine_envelope(t: np.ndarray, ramp_s: float, total_s: float):
@@ -168,8 +181,16 @@ def _cosine_envelope(t: np.ndarray, ramp_s: float, total_s: float):
     return w, w1, w2
 
 
-def tapered_sine(*, amplitude: float, frequency_hz: float, duration_s: float, sample_rate_hz: float,
-                 taper_cycles: float = 2.0, phase_rad: float = 0.0, name: str = "tapered sine") -> Motion:
+def tapered_sine(
+    *,
+    amplitude: float,
+    frequency_hz: float,
+    duration_s: float,
+    sample_rate_hz: float,
+    taper_cycles: float = 2.0,
+    phase_rad: float = 0.0,
+    name: str = "tapered sine",
+) -> Motion:
     """A sine under an envelope that ramps 0 -> 1 over ``taper_cycles`` cycles at the start
     and 1 -> 0 at the end with a (1 - cos)/2 shape, so the motion starts and ends at rest.
 
@@ -185,14 +206,20 @@ def tapered_sine(*, amplitude: float, frequency_hz: float, duration_s: float, sa
     if 2 * ramp > total:
         raise MotionError(
             f"tapered sine of {total:g} s is shorter than its two {ramp:g} s ramps "
-            f"({cycles:g} cycles at {f:g} Hz); lengthen duration_s or reduce taper_cycles")
+            f"({cycles:g} cycles at {f:g} Hz); lengthen duration_s or reduce taper_cycles"
+        )
     e, e1, e2 = _cosine_envelope(t, ramp, total)
     w = 2 * np.pi * f
     ph = w * t + phase_rad
     s, s1, s2 = np.sin(ph), w * np.cos(ph), -w * w * np.sin(ph)
-    return Motion(t, amp * e * s, amp * (e1 * s + e * s1), amp * (e2 * s + 2 * e1 * s1 + e * s2), name,
-                  dict(kind="tapered_sine", amplitude=amp, frequency_hz=f, taper_cycles=cycles,
-                       phase_rad=phase_rad))
+    return Motion(
+        t,
+        amp * e * s,
+        amp * (e1 * s + e * s1),
+        amp * (e2 * s + 2 * e1 * s1 + e * s2),
+        name,
+        dict(kind="tapered_sine", amplitude=amp, frequency_hz=f, taper_cycles=cycles, phase_rad=phase_rad),
+    )
 
 
 # -- rounded triangle --------------------------------------------------------------
@@ -213,9 +240,16 @@ def _piecewise_linear_velocity(knots_t: np.ndarray, knots_v: np.ndarray, t: np.n
     return d, v, a
 
 
-def triangle(*, peak_displacement: float, peak_velocity: float, sample_rate_hz: float,
-             n_cycles: float = 1, rounding_fraction: float = 0.1, max_acceleration: float = 2 * G,
-             name: str = "triangle") -> Motion:
+def triangle(
+    *,
+    peak_displacement: float,
+    peak_velocity: float,
+    sample_rate_hz: float,
+    n_cycles: float = 1,
+    rounding_fraction: float = 0.1,
+    max_acceleration: float = 2 * G,
+    name: str = "triangle",
+) -> Motion:
     """Triangular displacement (constant-speed ramps) with parabolic rounding at the peaks.
 
     The NEES-UCSD triangular tests (Ozcelik et al. 2008, Table 1) give a peak
@@ -240,7 +274,9 @@ def triangle(*, peak_displacement: float, peak_velocity: float, sample_rate_hz: 
     r = _positive("rounding_fraction", rounding_fraction)
     a_max = _positive("max_acceleration", max_acceleration)
     if r >= 0.5:
-        raise MotionError(f"rounding_fraction {r:g} leaves no constant-speed ramp; use a value below 0.5 (0.1 is usual)")
+        raise MotionError(
+            f"rounding_fraction {r:g} leaves no constant-speed ramp; use a value below 0.5 (0.1 is usual)"
+        )
     cycles = _positive("n_cycles", n_cycles)
     if abs(cycles * 2 - round(cycles * 2)) > 1e-9:
         raise MotionError(f"n_cycles {cycles:g} is not a whole number of half cycles; use e.g. 1, 1.5 or 3")
@@ -253,9 +289,14 @@ def triangle(*, peak_displacement: float, peak_velocity: float, sample_rate_hz: 
         raise MotionError(
             f"triangle with D = {D:g} m cannot reach V = {V:g} m/s with rounding {Tr:.3g} s "
             f"(acceleration <= {a_max:g} m/s^2 needs V^2 <= a D = {a_max * D:.3g} m^2/s^2; "
-            f"rounding_fraction must be <= 1/3); lower peak_velocity or rounding_fraction, or raise max_acceleration")
-    check_samples(n_peaks / 2 * (4 * D / V + Tr) * fs + 1, f"a triangle of {cycles:g} cycles of "
-                  f"{4 * D / V + Tr:.3g} s at {fs:g} Hz", None, MotionError)  # before building its knots
+            f"rounding_fraction must be <= 1/3); lower peak_velocity or rounding_fraction, or raise max_acceleration"
+        )
+    check_samples(
+        n_peaks / 2 * (4 * D / V + Tr) * fs + 1,
+        f"a triangle of {cycles:g} cycles of {4 * D / V + Tr:.3g} s at {fs:g} Hz",
+        None,
+        MotionError,
+    )  # before building its knots
     # knots of the trapezoidal velocity
     kt, kv = [0.0, Tr / 2], [0.0, V]
     t_now, sign = Tr / 2, 1.0
@@ -276,18 +317,35 @@ def triangle(*, peak_displacement: float, peak_velocity: float, sample_rate_hz: 
     t = np.arange(n) / fs
     d, v, a = _piecewise_linear_velocity(knots_t, knots_v, t)
     period = 4 * D / V + Tr
-    info = dict(kind="triangle", peak_displacement=D, peak_velocity=V, n_cycles=cycles,
-                rounding_fraction=r, rounding_s=Tr, period_s=period, frequency_hz=1 / period,
-                sharp_frequency_hz=V / (4 * D), peak_acceleration=2 * V / Tr,
-                acceleration_limited=tr_accel > tr_fraction, end_time_s=t_now)
+    info = dict(
+        kind="triangle",
+        peak_displacement=D,
+        peak_velocity=V,
+        n_cycles=cycles,
+        rounding_fraction=r,
+        rounding_s=Tr,
+        period_s=period,
+        frequency_hz=1 / period,
+        sharp_frequency_hz=V / (4 * D),
+        peak_acceleration=2 * V / Tr,
+        acceleration_limited=tr_accel > tr_fraction,
+        end_time_s=t_now,
+    )
     return Motion(t, d, v, a, name, info)
 
 
 # -- white noise -------------------------------------------------------------------
-def white_noise(*, duration_s: float, sample_rate_hz: float, band_hz: tuple[float, float],
-                seed: int | Sequence[int] | np.random.SeedSequence,
-                rms_acceleration: float | None = None, rms_displacement: float | None = None,
-                taper_s: float | None = None, name: str = "white noise") -> Motion:
+def white_noise(
+    *,
+    duration_s: float,
+    sample_rate_hz: float,
+    band_hz: tuple[float, float],
+    seed: int | Sequence[int] | np.random.SeedSequence,
+    rms_acceleration: float | None = None,
+    rms_displacement: float | None = None,
+    taper_s: float | None = None,
+    name: str = "white noise",
+) -> Motion:
     """Band-limited white-noise acceleration, flat between ``band_hz`` = (f_lo, f_hi).
 
     Random Fourier coefficients (``numpy.random.default_rng(seed)``) fill the band
@@ -314,10 +372,12 @@ def white_noise(*, duration_s: float, sample_rate_hz: float, band_hz: tuple[floa
     if not (0 < f_lo < f_hi <= fs / 2):
         raise MotionError(
             f"white-noise band {f_lo:g}-{f_hi:g} Hz is not within 0 < f_lo < f_hi <= {fs / 2:g} Hz "
-            f"(half the sample rate); change band_hz or sample_rate_hz")
+            f"(half the sample rate); change band_hz or sample_rate_hz"
+        )
     if f_lo * total < 2:
         raise MotionError(
-            f"white noise of {total:g} s is too short for f_lo = {f_lo:g} Hz; make it at least {2 / f_lo:g} s long")
+            f"white noise of {total:g} s is too short for f_lo = {f_lo:g} Hz; make it at least {2 / f_lo:g} s long"
+        )
     if taper_s is None:
         taper_s = min(max(1.0 / f_lo, 0.05 * total), 0.25 * total)
     taper_s = _positive("taper_s", taper_s, allow_zero=True)
@@ -346,10 +406,14 @@ def white_noise(*, duration_s: float, sample_rate_hz: float, band_hz: tuple[floa
     else:
         target = _positive("rms_displacement", rms_displacement, allow_zero=True)
         scale = target / float(np.sqrt(np.mean(d * d)))
-    info = dict(kind="white_noise", band_hz=(f_lo, f_hi), taper_s=taper_s,
-                seed=seed if isinstance(seed, (int, np.integer)) else str(seed),
-                rms_acceleration=float(np.sqrt(np.mean(a * a))) * scale,
-                rms_displacement=float(np.sqrt(np.mean(d * d))) * scale)
+    info = dict(
+        kind="white_noise",
+        band_hz=(f_lo, f_hi),
+        taper_s=taper_s,
+        seed=seed if isinstance(seed, (int, np.integer)) else str(seed),
+        rms_acceleration=float(np.sqrt(np.mean(a * a))) * scale,
+        rms_displacement=float(np.sqrt(np.mean(d * d))) * scale,
+    )
     return Motion(t, d * scale, v * scale, a * scale, name, info)
 
 
@@ -382,12 +446,27 @@ def check_limits(peaks_by_dof: Mapping[str, Peaks | Motion], limits: Mapping) ->
             pk = pk.peaks
         rot = dof in ROTATION_DOFS
         checks = (
-            ("displacement", pk.displacement, "rotation_rad" if rot else "stroke_m",
-             "rad" if rot else "m", "rotation" if rot else "stroke"),
-            ("velocity", pk.velocity, "angular_velocity_rad_s" if rot else "velocity_m_s",
-             "rad/s" if rot else "m/s", "velocity limit"),
-            ("acceleration", pk.acceleration, "angular_acceleration_rad_s2" if rot else "acceleration_m_s2",
-             "rad/s^2" if rot else "m/s^2", "acceleration limit"),
+            (
+                "displacement",
+                pk.displacement,
+                "rotation_rad" if rot else "stroke_m",
+                "rad" if rot else "m",
+                "rotation" if rot else "stroke",
+            ),
+            (
+                "velocity",
+                pk.velocity,
+                "angular_velocity_rad_s" if rot else "velocity_m_s",
+                "rad/s" if rot else "m/s",
+                "velocity limit",
+            ),
+            (
+                "acceleration",
+                pk.acceleration,
+                "angular_acceleration_rad_s2" if rot else "acceleration_m_s2",
+                "rad/s^2" if rot else "m/s^2",
+                "acceleration limit",
+            ),
         )
         for what, value, key, unit, label in checks:
             lim = _limit_for(limits, key, dof)
@@ -395,8 +474,9 @@ def check_limits(peaks_by_dof: Mapping[str, Peaks | Motion], limits: Mapping) ->
                 continue
             over = 100.0 * (value / lim - 1.0)
             extra = f" ({value / G:.2f} g vs {lim / G:.2f} g)" if what == "acceleration" and not rot else ""
-            warnings.append(f"{dof} peak {what} {value:.3g} {unit} exceeds the +/-{lim:.3g} {unit} "
-                            f"{label} by {over:.0f} %{extra}")
+            warnings.append(
+                f"{dof} peak {what} {value:.3g} {unit} exceeds the +/-{lim:.3g} {unit} {label} by {over:.0f} %{extra}"
+            )
     return warnings
 
 
@@ -412,7 +492,7 @@ def _foh_filters(omega: np.ndarray, zeta: float, dt: float):
     m = omega.size
     M = np.zeros((m, 4, 4))
     M[:, 0, 1] = 1.0
-    M[:, 1, 0] = -omega**2
+    M[:, 1, 0] = -(omega**2)
     M[:, 1, 1] = -2 * zeta * omega
     M[:, 1, 2] = -1.0
     M[:, :, :] *= dt
@@ -420,16 +500,26 @@ def _foh_filters(omega: np.ndarray, zeta: float, dt: float):
     E = scipy.linalg.expm(M)
     P, G1, G2 = E[:, :2, :2], E[:, :2, 2], E[:, :2, 3]
     G0 = G1 - G2
-    b = np.stack([G2[:, 0],
-                  G0[:, 0] - P[:, 1, 1] * G2[:, 0] + P[:, 0, 1] * G2[:, 1],
-                  -P[:, 1, 1] * G0[:, 0] + P[:, 0, 1] * G0[:, 1]], axis=1)
-    a = np.stack([np.ones(m), -(P[:, 0, 0] + P[:, 1, 1]),
-                  P[:, 0, 0] * P[:, 1, 1] - P[:, 0, 1] * P[:, 1, 0]], axis=1)
+    b = np.stack(
+        [
+            G2[:, 0],
+            G0[:, 0] - P[:, 1, 1] * G2[:, 0] + P[:, 0, 1] * G2[:, 1],
+            -P[:, 1, 1] * G0[:, 0] + P[:, 0, 1] * G0[:, 1],
+        ],
+        axis=1,
+    )
+    a = np.stack([np.ones(m), -(P[:, 0, 0] + P[:, 1, 1]), P[:, 0, 0] * P[:, 1, 1] - P[:, 0, 1] * P[:, 1, 0]], axis=1)
     return b, a
 
 
-def response_spectrum(acc: np.ndarray, dt: float, periods: np.ndarray | None = None, *,
-                      freqs: np.ndarray | None = None, damping: float = 0.05) -> np.ndarray:
+def response_spectrum(
+    acc: np.ndarray,
+    dt: float,
+    periods: np.ndarray | None = None,
+    *,
+    freqs: np.ndarray | None = None,
+    damping: float = 0.05,
+) -> np.ndarray:
     """Pseudo-acceleration response spectrum PSA = w^2 max|u| of a ground acceleration.
 
     Args:

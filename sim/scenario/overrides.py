@@ -41,8 +41,10 @@ def _targets(data: dict, parts: list[str], key: str, where: str):
         nodes = nxt
     out = [(n, parts[-1]) for n in nodes if parts[-1] in n]
     if not out:
-        raise OverrideError(f"{where}: override '{key}' names no value in the data; give an existing key "
-                            f"(e.g. table.fluid.bulk_modulus_pa, payload.mass_kg, motion.amplitude_factor)")
+        raise OverrideError(
+            f"{where}: override '{key}' names no value in the data; give an existing key "
+            f"(e.g. table.fluid.bulk_modulus_pa, payload.mass_kg, motion.amplitude_factor)"
+        )
     return out
 
 

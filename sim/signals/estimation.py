@@ -69,9 +69,19 @@ def _segments(n: int, nperseg: int | None, n_segments: int | None, overlap: floa
     return int(nperseg)
 
 
-def frf(x, y, fs: float, *, nperseg: int | None = None, n_segments: int | None = None,
-        window="hann", overlap: float = 0.5, estimator: str = "H1", reference=None,
-        detrend="constant") -> FRF:
+def frf(
+    x,
+    y,
+    fs: float,
+    *,
+    nperseg: int | None = None,
+    n_segments: int | None = None,
+    window="hann",
+    overlap: float = 0.5,
+    estimator: str = "H1",
+    reference=None,
+    detrend="constant",
+) -> FRF:
     """FRF of output ``y`` to input ``x`` (same length, sampled at ``fs``).
 
     Give either ``nperseg`` (samples per segment) or ``n_segments`` (default 8); the
@@ -133,7 +143,7 @@ def peak_pick(f, H, band: tuple[float, float]) -> Peak:
     i = sel[np.argmax(mag[sel])]
     fp, mp = f[i], mag[i]
     if 0 < i < len(f) - 1:  # parabola through the three bins (in dB: exact for a Gaussian top)
-        y0, y1, y2 = np.log(mag[i - 1:i + 2])
+        y0, y1, y2 = np.log(mag[i - 1 : i + 2])
         den = y0 - 2 * y1 + y2
         if den < 0:
             p = 0.5 * (y0 - y2) / den
@@ -195,8 +205,14 @@ def friction_fit(d, v, a, force, *, v_min_fraction: float = 0.05) -> FrictionFit
     x, *_ = np.linalg.lstsq(A / sc, F[sel], rcond=None)
     x = x / sc
     res = F[sel] - A @ x
-    return FrictionFit(coulomb=float(x[4]), mass=float(x[0]), stiffness=float(x[1]), viscous=float(x[2]),
-                       offset=float(x[3]), rms_residual=float(np.sqrt(np.mean(res ** 2))))
+    return FrictionFit(
+        coulomb=float(x[4]),
+        mass=float(x[0]),
+        stiffness=float(x[1]),
+        viscous=float(x[2]),
+        offset=float(x[3]),
+        rms_residual=float(np.sqrt(np.mean(res**2))),
+    )
 
 
 def hysteresis_loop(d, v, force, *, n_bins: int = 20, v_min_fraction: float = 0.05) -> dict:
@@ -256,7 +272,7 @@ def _fit(model, f, H, band, x0, fix_gain, magnitude=False):
         return np.concatenate([r.real, r.imag])
 
     sol = scipy.optimize.least_squares(res, x0, method="lm")
-    return sol.x, float(np.sqrt(np.mean(sol.fun ** 2)))
+    return sol.x, float(np.sqrt(np.mean(sol.fun**2)))
 
 
 def fit_first_order(f, H, band: tuple[float, float] = (0.5, 20.0), *, fix_gain: bool = False) -> dict:
@@ -283,6 +299,19 @@ def fit_second_order(f, H, band: tuple[float, float] = (0.5, 50.0), *, fix_gain:
     return {"K": float(K), "wn_hz": float(abs(wn)), "zeta": float(abs(z)), "rms_rel_error": e}
 
 
-__all__ = ["FRF", "Peak", "FrictionFit", "frf", "peak_pick", "band_average", "friction_fit", "hysteresis_loop",
-           "first_order", "second_order", "zero_order_hold", "fit_first_order", "fit_first_order_magnitude",
-           "fit_second_order"]
+__all__ = [
+    "FRF",
+    "Peak",
+    "FrictionFit",
+    "frf",
+    "peak_pick",
+    "band_average",
+    "friction_fit",
+    "hysteresis_loop",
+    "first_order",
+    "second_order",
+    "zero_order_hold",
+    "fit_first_order",
+    "fit_first_order_magnitude",
+    "fit_second_order",
+]

@@ -55,7 +55,7 @@ def quantise(x: np.ndarray, bits: int, full_scale: float) -> np.ndarray:
     """An ADC of ``bits`` over [-full_scale, +full_scale): the step is 2 full_scale / 2^bits,
     values round to the nearest step and clip at the ends (NaN stays NaN)."""
     step = 2.0 * full_scale / 2.0 ** int(bits)
-    lo, hi = -2.0 ** (int(bits) - 1), 2.0 ** (int(bits) - 1) - 1
+    lo, hi = -(2.0 ** (int(bits) - 1)), 2.0 ** (int(bits) - 1) - 1
     return np.clip(np.round(np.asarray(x, dtype=np.float64) / step), lo, hi) * step
 
 

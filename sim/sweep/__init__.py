@@ -4,8 +4,9 @@ local (batched) and Dask executors (:mod:`.run`), the report (:mod:`.report`).""
 from __future__ import annotations
 
 
-def sweep_file(path, *, out=None, workers=None, executor="local", address=None, progress_stream=None,
-               every: int = 10) -> dict:
+def sweep_file(
+    path, *, out=None, workers=None, executor="local", address=None, progress_stream=None, every: int = 10
+) -> dict:
     """Load the sweep file ``path``, run it into ``out`` (default ``out/sweeps/<name>``),
     write the results table and ``report.md``; returns :func:`.run.run_sweep`'s info plus
     ``report``. ``progress_stream``: where the progress bar goes (None: silent)."""

@@ -11,16 +11,28 @@ import numpy as np
 
 def summarize(rows: list) -> dict:
     """Figures of the limiting utilisation over the cases (failed cases apart)."""
-    u = np.array([r["limiting_utilisation"] for r in rows if r.get("error") == "" and
-                  r.get("limiting_utilisation") is not None], float)
+    u = np.array(
+        [r["limiting_utilisation"] for r in rows if r.get("error") == "" and r.get("limiting_utilisation") is not None],
+        float,
+    )
     fin = u[np.isfinite(u)]
     q = (lambda p: float(np.percentile(fin, p))) if len(fin) else (lambda p: float("nan"))
-    return {"cases": len(rows), "simulated": int(len(u)), "errors": sum(1 for r in rows if r.get("error")),
-            "feasible": sum(1 for r in rows if r.get("feasible")),
-            "limiting": dict(Counter(r.get("limiting") for r in rows).most_common()),
-            "utilisation": {"min": q(0), "p5": q(5), "median": q(50), "mean": float(fin.mean()) if len(fin) else
-                            float("nan"), "p95": q(95), "max": q(100)},
-            "values": fin}
+    return {
+        "cases": len(rows),
+        "simulated": int(len(u)),
+        "errors": sum(1 for r in rows if r.get("error")),
+        "feasible": sum(1 for r in rows if r.get("feasible")),
+        "limiting": dict(Counter(r.get("limiting") for r in rows).most_common()),
+        "utilisation": {
+            "min": q(0),
+            "p5": q(5),
+            "median": q(50),
+            "mean": float(fin.mean()) if len(fin) else float("nan"),
+            "p95": q(95),
+            "max": q(100),
+        },
+        "values": fin,
+    }
 
 
 def write_report(out, info: dict, rows: list, title: str = "") -> Path:
@@ -48,18 +60,25 @@ def write_report(out, info: dict, rows: list, title: str = "") -> Path:
     plt.close(fig)
     tmp.replace(png)
     u = s["utilisation"]
-    lines = [f"# Sweep {info['sweep']}" + (f": {title}" if title else ""), "",
-             f"Scenario `{info['scenario']}`, {s['cases']} cases ({info['ran']} run now, {info['skipped']} "
-             f"already done), executor `{info['executor']}` with {info['workers']} workers, wall time of this "
-             f"invocation {info['wall_s']:.1f} s.", "",
-             f"- feasible: {s['feasible']} of {s['cases']}; errors: {s['errors']}",
-             f"- limiting utilisation: min {u['min']:.4g}, 5 % {u['p5']:.4g}, median {u['median']:.4g}, "
-             f"mean {u['mean']:.4g}, 95 % {u['p95']:.4g}, max {u['max']:.4g}",
-             "- limiting check: " + ", ".join(f"{k} {v}" for k, v in s["limiting"].items()), "",
-             "![limiting utilisation](limiting_utilisation.png)", "",
-             "Utilisation of a check: its peak over its limit (stroke, force, valve saturation time, "
-             "overturning moment, loop gap) or the supply-pressure drop over the allowed drop; "
-             "1 is at the limit. Per-case values: `results.csv`.", ""]
+    lines = [
+        f"# Sweep {info['sweep']}" + (f": {title}" if title else ""),
+        "",
+        f"Scenario `{info['scenario']}`, {s['cases']} cases ({info['ran']} run now, {info['skipped']} "
+        f"already done), executor `{info['executor']}` with {info['workers']} workers, wall time of this "
+        f"invocation {info['wall_s']:.1f} s.",
+        "",
+        f"- feasible: {s['feasible']} of {s['cases']}; errors: {s['errors']}",
+        f"- limiting utilisation: min {u['min']:.4g}, 5 % {u['p5']:.4g}, median {u['median']:.4g}, "
+        f"mean {u['mean']:.4g}, 95 % {u['p95']:.4g}, max {u['max']:.4g}",
+        "- limiting check: " + ", ".join(f"{k} {v}" for k, v in s["limiting"].items()),
+        "",
+        "![limiting utilisation](limiting_utilisation.png)",
+        "",
+        "Utilisation of a check: its peak over its limit (stroke, force, valve saturation time, "
+        "overturning moment, loop gap) or the supply-pressure drop over the allowed drop; "
+        "1 is at the limit. Per-case values: `results.csv`.",
+        "",
+    ]
     path = out / "report.md"
     write_text_atomic(path, "\n".join(lines))
     return path

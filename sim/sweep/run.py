@@ -43,27 +43,47 @@ def run_case(scenario, case, *, duration_s=None, iterations=None, run_dir=None) 
 
     t0 = time.perf_counter()
     try:
-        out = run_scenario(scenario, duration_s=duration_s, iterations=iterations, overrides=case.overrides,
-                           engine="callback")
+        out = run_scenario(
+            scenario, duration_s=duration_s, iterations=iterations, overrides=case.overrides, engine="callback"
+        )
     except UserError as e:
         return error_row(case, str(e), time.perf_counter() - t0)
     return outcome_row(case, out, run_dir, time.perf_counter() - t0)
 
 
 def error_row(case, message, wall) -> dict:
-    return {"id": case.id, **case.values, "feasible": False, "limiting": "error", "limiting_utilisation": math.inf,
-            "complete": False, "error": message, "case_wall_s": wall}
+    return {
+        "id": case.id,
+        **case.values,
+        "feasible": False,
+        "limiting": "error",
+        "limiting_utilisation": math.inf,
+        "complete": False,
+        "error": message,
+        "case_wall_s": wall,
+    }
 
 
 def outcome_row(case, out, run_dir, wall) -> dict:
     """The results-table row of a :class:`sim.assess.run.RunOutcome`."""
     s = out.summary
     f = s["feasibility"]
-    row = {"id": case.id, **case.values, "feasible": bool(f["feasible"]), "limiting": f["limiting"],
-           "limiting_utilisation": (float(f["limiting_utilisation"]) if f["limiting_utilisation"] is not None
-                                    else math.nan), "failed": ";".join(f["failed"]),
-           "complete": bool(s["complete"]), "incomplete_reason": s["incomplete_reason"] or "",
-           "duration_s": s["duration_s"], "sim_wall_s": s["wall_s"], "case_wall_s": wall, "error": ""}
+    row = {
+        "id": case.id,
+        **case.values,
+        "feasible": bool(f["feasible"]),
+        "limiting": f["limiting"],
+        "limiting_utilisation": (
+            float(f["limiting_utilisation"]) if f["limiting_utilisation"] is not None else math.nan
+        ),
+        "failed": ";".join(f["failed"]),
+        "complete": bool(s["complete"]),
+        "incomplete_reason": s["incomplete_reason"] or "",
+        "duration_s": s["duration_s"],
+        "sim_wall_s": s["wall_s"],
+        "case_wall_s": wall,
+        "error": "",
+    }
     for c in f["checks"]:  # one column per kind of check ("actuator_force_X3" -> util_actuator_force)
         name = c["name"]
         kind = "_".join(name.split("_")[:2]) if name.startswith("actuator_") else name
@@ -89,12 +109,21 @@ def _local(sweep, todo, out, workers, group, done_cb):
 
     run_dir = out / "runs" if sweep.run_files else None
     for i in range(0, len(todo), group):
-        chunk = todo[i:i + group]
+        chunk = todo[i : i + group]
         plans, rows, t0 = [], {}, time.perf_counter()
         for c in chunk:
             try:
-                plans.append((c, plan_scenario(sweep.scenario, duration_s=sweep.duration_s,
-                                               iterations=sweep.iterations, overrides=c.overrides)))
+                plans.append(
+                    (
+                        c,
+                        plan_scenario(
+                            sweep.scenario,
+                            duration_s=sweep.duration_s,
+                            iterations=sweep.iterations,
+                            overrides=c.overrides,
+                        ),
+                    )
+                )
             except UserError as e:
                 rows[c.id] = error_row(c, str(e), 0.0)
         batchable = [(c, p) for c, p in plans if BatchRunner.accepts(p)]
@@ -132,8 +161,19 @@ def _dask(sweep, todo, out, workers, address, done_cb):
         address = cluster
     client = Client(address)
     try:
-        futs = {client.submit(run_case, sweep.scenario, c, duration_s=sweep.duration_s, iterations=sweep.iterations,
-                              run_dir=run_dir, pure=False, key=f"case-{sweep.name}-{c.id}"): c for c in todo}
+        futs = {
+            client.submit(
+                run_case,
+                sweep.scenario,
+                c,
+                duration_s=sweep.duration_s,
+                iterations=sweep.iterations,
+                run_dir=run_dir,
+                pure=False,
+                key=f"case-{sweep.name}-{c.id}",
+            ): c
+            for c in todo
+        }
         for fut in as_completed(futs):
             done_cb(futs[fut], fut.result())
     finally:
@@ -142,8 +182,16 @@ def _dask(sweep, todo, out, workers, address, done_cb):
             cluster.close()
 
 
-def run_sweep(sweep, out, *, workers: int | None = None, executor: str = "local", address: str | None = None,
-              group: int = 32, progress=None) -> dict:
+def run_sweep(
+    sweep,
+    out,
+    *,
+    workers: int | None = None,
+    executor: str = "local",
+    address: str | None = None,
+    group: int = 32,
+    progress=None,
+) -> dict:
     """Run every case of ``sweep`` not yet in ``out``; write the results table.
 
     ``workers``: threads (local) or worker processes (a Dask ``LocalCluster``); default
@@ -190,8 +238,17 @@ def run_sweep(sweep, out, *, workers: int | None = None, executor: str = "local"
     wall = time.perf_counter() - t0
     rows = [json.loads(_case_path(out, c).read_text()) for c in cases]
     table = write_table(out, rows)
-    info = {"sweep": sweep.name, "scenario": sweep.scenario, "cases": len(cases), "ran": len(todo),
-            "skipped": skipped, "executor": executor, "workers": workers, "wall_s": wall, "table": str(table)}
+    info = {
+        "sweep": sweep.name,
+        "scenario": sweep.scenario,
+        "cases": len(cases),
+        "ran": len(todo),
+        "skipped": skipped,
+        "executor": executor,
+        "workers": workers,
+        "wall_s": wall,
+        "table": str(table),
+    }
     write_json_atomic(out / "sweep.json", info)
     return {**info, "rows": rows}
 

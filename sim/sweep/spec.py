@@ -134,7 +134,7 @@ def load_sweep(path) -> Sweep:
         scen = str(path.parent / scen)
     mode = sw.get("mode", "grid")
     if mode not in ("grid", "random"):
-        raise SweepError(f"{src}: 'sweep.mode' must be \"grid\" or \"random\" (got {mode!r})")
+        raise SweepError(f'{src}: \'sweep.mode\' must be "grid" or "random" (got {mode!r})')
     dur = sw.get("duration_s")
     if dur is not None:
         _number(dur, f"{src}: 'sweep.duration_s'", positive=True)
@@ -187,8 +187,18 @@ def load_sweep(path) -> Sweep:
     names = [v.name for v in vary]
     if len(set(names)) != len(names):
         raise SweepError(f"{src}: two [[vary]] tables have the column name '{names[0]}'; give each a 'name'")
-    return Sweep(name=str(sw.get("name", path.stem)), scenario=scen, duration_s=dur, iterations=it, mode=mode,
-                 n=int(n), seed=int(seed), run_files=run_files, vary=vary, path=path)
+    return Sweep(
+        name=str(sw.get("name", path.stem)),
+        scenario=scen,
+        duration_s=dur,
+        iterations=it,
+        mode=mode,
+        n=int(n),
+        seed=int(seed),
+        run_files=run_files,
+        vary=vary,
+        path=path,
+    )
 
 
 __all__ = ["Case", "Sweep", "SweepError", "Vary", "load_sweep"]

@@ -1,0 +1,314 @@
+"""Property-based fuzzing of the readers a user feeds: scenario files, table and
+payload descriptions, run files. Whatever the input, a reader either accepts it or
+raises a user error (one line); never anything else (a TypeError, a KeyError, an
+IndexError, a MemoryError would reach the user as a traceback).
+
+Inputs are generated as text (TOML) and as npz contents from strategies; the sizes are
+kept small so the whole file runs in well under a minute.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from mjcf.errors import MjcfError  # noqa: E402
+from sim.errors import UserError, user_errors  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+ALLOWED = user_errors()
+FUZZ = settings(
+    max_examples=1000,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
+)
+TMP = Path(tempfile.mkdtemp(prefix="shaketable-fuzz-"))
+
+
+def _one_line(e: BaseException) -> None:
+    assert isinstance(e, ALLOWED), f"{type(e).__name__}: {e}"
+    assert "\n" not in " ".join(str(e).split()) and str(e).strip()
+
+
+# ---------------------------------------------------------------- TOML values
+def _toml_str(s: str) -> str:
+    return json.dumps(s)  # a JSON string is a valid TOML basic string
+
+
+FLOATS = st.one_of(
+    st.sampled_from([0.0, -0.0, 1.0, -1.0, 0.5, 1e-12, 1e12, 1e300, -1e300, 5e-324]),
+    st.floats(allow_nan=False, allow_infinity=False, min_value=-1e6, max_value=1e6),
+)
+SCALARS = st.one_of(
+    FLOATS.map(repr),
+    st.sampled_from(["nan", "inf", "-inf", "true", "false", "0", "-1", "3", "1024", "99999999999"]),
+    st.integers(min_value=-(10**12), max_value=10**12).map(str),
+    st.text(max_size=8).map(_toml_str),
+    st.sampled_from(
+        [
+            "sine",
+            "tapered_sine",
+            "triangle",
+            "white_noise",
+            "at2",
+            "el_centro_1940",
+            "x",
+            "cgs",
+            "ucsd",
+            "rice",
+            "rigid_20t",
+        ]
+    ).map(_toml_str),
+)
+VALUES = st.one_of(
+    SCALARS,
+    st.lists(SCALARS, max_size=4).map(lambda v: "[" + ", ".join(v) + "]"),
+    st.dictionaries(st.sampled_from(["x", "y", "a"]), SCALARS, max_size=2).map(
+        lambda d: "{ " + ", ".join(f"{k} = {v}" for k, v in d.items()) + " }"
+    ),
+)
+
+SCEN_KEYS = {
+    "scenario": ["name", "table", "payload", "duration_s", "pad_to_duration", "description", "nme"],
+    "motion": ["type", "amplitude_factor", "time_factor", "highpass_hz", "filter_order", "baseline", "mapping"],
+    "motion.x": [
+        "type",
+        "amplitude",
+        "frequency_hz",
+        "phase_rad",
+        "taper_cycles",
+        "delay_s",
+        "peak_displacement",
+        "peak_velocity",
+        "n_cycles",
+        "rounding_fraction",
+        "max_acceleration",
+        "band_hz",
+        "seed",
+        "rms_acceleration",
+        "rms_displacement",
+        "taper_s",
+        "file",
+        "target_pga",
+    ],
+    "motion.z": ["type", "amplitude", "frequency_hz", "band_hz", "rms_displacement"],
+    "controller": ["kp_per_s", "kff_velocity", "rate_hz", "kdp", "bogus"],
+    "output": ["sample_rate_hz"],
+    "iteration": ["count", "gain", "band_hz", "frf", "seed", "noise_level"],
+}
+
+
+@st.composite
+def scenario_text(draw):
+    sections = draw(st.lists(st.sampled_from(sorted(SCEN_KEYS)), min_size=1, max_size=4, unique=True))
+    if draw(st.booleans()) and "scenario" not in sections:
+        sections.insert(0, "scenario")
+    lines = []
+    for sec in sections:
+        lines.append(f"[{sec}]")
+        keys = draw(st.lists(st.sampled_from(SCEN_KEYS[sec]), max_size=6, unique=True))
+        for k in keys:
+            lines.append(f"{k} = {draw(VALUES)}")
+    return "\n".join(lines) + "\n"
+
+
+def _scenario_roundtrip(text: str) -> None:
+    from sim.scenario.files import build_motions, build_reference, load_scenario
+
+    path = TMP / "fuzz_scenario.toml"
+    path.write_text(text)
+    try:
+        sc = load_scenario(path)
+        dur = sc.duration_s
+        if dur is not None and dur * sc.sample_rate_hz > 2e5:
+            return  # valid and long: generating it is not what this test is about
+        motions = build_motions(sc)
+        if max(len(m.t) for m in motions.values()) <= 2e5:
+            build_reference(sc, motions)
+    except ALLOWED as e:
+        _one_line(e)
+
+
+@FUZZ
+@given(scenario_text())
+def test_fuzz_scenario_reader(text):
+    _scenario_roundtrip(text)
+
+
+@settings(max_examples=500, deadline=None, derandomize=True)
+@given(st.text(max_size=200))
+def test_fuzz_scenario_reader_any_text(text):
+    _scenario_roundtrip(text)
+
+
+# ---------------------------------------------------------------- table and payload descriptions
+def _mutations(text: str):
+    """(line index, key) of every ``key = value`` line of a TOML text."""
+    out = []
+    for i, ln in enumerate(text.splitlines()):
+        s = ln.strip()
+        if s and not s.startswith(("#", "[")) and "=" in s:
+            out.append((i, s.split("=", 1)[0].strip()))
+    return out
+
+
+TABLE_TEXT = (ROOT / "scenarios" / "tables" / "ucsd.toml").read_text()
+TABLE_LINES = TABLE_TEXT.splitlines()
+TABLE_KEYS = _mutations(TABLE_TEXT)
+PAYLOAD_TEXT = (ROOT / "scenarios" / "payloads" / "tower_6m.toml").read_text()
+PAYLOAD_LINES = PAYLOAD_TEXT.splitlines()
+PAYLOAD_KEYS = _mutations(PAYLOAD_TEXT)
+
+
+@st.composite
+def mutated(draw, lines, keys):
+    out = list(lines)
+    for _ in range(draw(st.integers(1, 3))):
+        i, key = draw(st.sampled_from(keys))
+        how = draw(st.sampled_from(["value", "value", "drop", "rename", "section"]))
+        if how == "value":
+            out[i] = f"{key} = {draw(VALUES)}"
+        elif how == "drop":
+            out[i] = ""
+        elif how == "rename":
+            out[i] = f"{key}{draw(st.sampled_from(['_', 'x', 's']))} = {lines[i].split('=', 1)[1]}"
+        else:
+            out[i] = f"[{draw(st.sampled_from(['fluid', 'supply', 'platen', 'table', 'x']))}]"
+    return "\n".join(out) + "\n"
+
+
+@settings(max_examples=1000, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(mutated(TABLE_LINES, TABLE_KEYS))
+def test_fuzz_table_reader(text):
+    import mjcf
+
+    path = TMP / "fuzz_table.toml"
+    path.write_text(text)
+    try:
+        mjcf.load_table(path)
+    except ALLOWED as e:
+        _one_line(e)
+
+
+@settings(max_examples=1000, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(mutated(PAYLOAD_LINES, PAYLOAD_KEYS))
+def test_fuzz_payload_reader(text):
+    import mjcf
+
+    path = TMP / "fuzz_payload.toml"
+    path.write_text(text)
+    try:
+        mjcf.load_payload(path)
+    except ALLOWED as e:
+        _one_line(e)
+
+
+# ---------------------------------------------------------------- run files
+META_VALUES = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-3, 5000),
+    FLOATS,
+    st.text(max_size=6),
+    st.lists(st.sampled_from(["E", "W", "x", "y", "", "E"]), max_size=7),
+)
+CHANNEL_NAMES = [
+    "valve_command",
+    "reference",
+    "actuator_force",
+    "table_displacement",
+    "table_acceleration",
+    "accelerometers",
+    "x_loop_gap",
+    "bogus",
+]
+
+
+@st.composite
+def run_contents(draw):
+    n = draw(st.integers(0, 12))
+    fs = draw(st.sampled_from([1024.0, 1000.0, 0.0, -5.0]))
+    t = np.arange(n) / (fs if fs > 0 else 1.0)
+    if draw(st.booleans()):
+        t = t.copy()
+        if n > 2:
+            t[draw(st.integers(0, n - 1))] = draw(st.sampled_from([np.nan, np.inf, -1.0, 0.0]))
+    meta = {
+        "format": "shaketable-run/1",
+        "table": "ucsd",
+        "sample_rate_hz": fs,
+        "actuators": ["E", "W"],
+        "dofs": ["x", "y", "z", "rx", "ry", "rz"],
+        "source": "measured",
+    }
+    for _ in range(draw(st.integers(0, 3))):
+        key = draw(st.sampled_from(sorted(meta) + ["incomplete", "incomplete_reason", "accelerometers", "payload"]))
+        if draw(st.booleans()):
+            meta.pop(key, None)
+        else:
+            meta[key] = draw(META_VALUES)
+    arrays = {"t": t}
+    for name in draw(st.lists(st.sampled_from(CHANNEL_NAMES), max_size=4, unique=True)):
+        rows = draw(st.sampled_from([n, n, max(n - 1, 0), n + 1]))
+        cols = draw(st.sampled_from([2, 6, 1, 0]))
+        shape = draw(st.sampled_from([(rows, cols), (rows,), (rows, cols, 1)]))
+        kind = draw(st.sampled_from(["f8", "f8", "i4", "U2", "c16", "bool"]))
+        a = np.zeros(shape, dtype=kind)
+        if kind == "f8" and a.size and draw(st.booleans()):
+            a.flat[draw(st.integers(0, a.size - 1))] = draw(st.sampled_from([np.nan, np.inf, 1e308]))
+        arrays[name] = a
+    meta_obj = draw(st.sampled_from(["json", "json", "json", "text", "array", "missing"]))
+    if meta_obj == "json":
+        arrays["meta"] = np.array(json.dumps(meta, allow_nan=True))
+    elif meta_obj == "text":
+        arrays["meta"] = np.array("{not json")
+    elif meta_obj == "array":
+        arrays["meta"] = np.arange(3)
+    require = tuple(draw(st.lists(st.sampled_from(["valve_command", "actuator_force", "pressure_a"]), max_size=2)))
+    return arrays, require
+
+
+@FUZZ
+@given(run_contents(), st.sampled_from(["whole", "whole", "whole", "cut", "garbage"]))
+def test_fuzz_run_file_reader(contents, damage):
+    from sim.runs.runfile import read_run
+
+    arrays, require = contents
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    data = buf.getvalue()
+    if damage == "cut":
+        data = data[: max(1, len(data) // 2)]
+    elif damage == "garbage":
+        data = data[:30] + bytes(reversed(data[30:60])) + data[60:]
+    path = TMP / "fuzz.run.npz"
+    path.write_bytes(data)
+    try:
+        run = read_run(path, require=require)
+    except ALLOWED as e:
+        _one_line(e)
+        return
+    # accepted: what the format promises holds
+    assert run.n_samples >= 2 and np.all(np.diff(run.t) > 0)
+    assert math.isfinite(run.sample_rate_hz) and run.sample_rate_hz > 0
+    for c in require:
+        assert np.all(np.isfinite(run.channel(c)))
+
+
+def test_fuzz_allows_only_user_errors():
+    """What the fuzz tests accept as an answer is the user errors, nothing wider."""
+    assert UserError in ALLOWED and MjcfError in ALLOWED
+    assert not any(
+        issubclass(c, (TypeError, KeyError, IndexError, MemoryError)) for c in ALLOWED if c not in (MjcfError,)
+    )

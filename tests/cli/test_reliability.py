@@ -1,0 +1,431 @@
+"""Reliability: divergence of the loop (each kind forced), Ctrl-C in a run and in a
+characterisation (what is kept, what is not), a reader that went away (a broken pipe),
+a viewer that never answers, sizes refused before allocating, and bit-identical
+reruns of the same scenario and seed."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+import mjcf
+from sim.cli import main
+from sim.effects import build_model
+from sim.loop import simulation as S
+from sim.runs.runfile import FORMAT, RunFile, read_run, write_run
+from sim.scenario import motions as M
+
+ROOT = Path(__file__).resolve().parents[2]
+
+SINE = """[scenario]
+name = "sine"
+table = "ucsd"
+duration_s = {dur}
+
+[motion.x]
+type = "sine"
+amplitude = 0.002
+frequency_hz = 2.0
+"""
+
+NOISE = """[scenario]
+name = "noise"
+table = "ucsd"
+duration_s = 4.0
+
+[motion.x]
+type = "white_noise"
+band_hz = [0.5, 20.0]
+rms_acceleration = 0.3
+seed = 7
+"""
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return S.Simulation(build_model(mjcf.load_table("ucsd")))
+
+
+@pytest.fixture(scope="module")
+def ref(sim):
+    rate = sim.gains.rate_hz
+    mo = {"x": M.sine(amplitude=0.001, frequency_hz=2.0, duration_s=0.05, sample_rate_hz=rate)}
+    return S.reference_from_motions(mo, rate, 0.05)
+
+
+def _diverged(reason: str, *fragments):
+    assert reason is not None
+    assert reason.startswith("simulation diverged at t = "), reason
+    assert "likely cause" in reason and "\n" not in reason
+    for f in fragments:
+        assert f in reason, (f, reason)
+
+
+# ---------------------------------------------------------------- divergence, each kind
+def test_nan_in_hydraulics(sim, ref):
+    sim.reset()
+    sim.hs.state.p_a[:] = np.nan
+    res = sim.run(reference=ref)
+    _diverged(res.incomplete_reason, "hydraulic state is not finite", "chamber a")
+    assert len(res.t) == 1 and not res.interrupted
+
+
+def test_nan_in_mechanics_reported_not_printed(sim, ref, capfd):
+    sim.reset()
+    sim.d.qvel[:] = np.nan
+    res = sim.run(reference=ref)
+    _diverged(res.incomplete_reason, "not finite")
+    out = capfd.readouterr()
+    assert "WARNING" not in out.out and "WARNING" not in out.err  # MuJoCo's own print is kept off stdout
+    assert not (Path.cwd() / "MUJOCO_LOG.TXT").exists() or "MUJOCO_LOG" in os.environ.get("KEEP", "")
+
+
+def test_mujoco_warning(sim, ref):
+    sim.reset()
+    res = sim.run(reference=ref)
+    assert res.incomplete_reason is None
+    sim.d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number += 1  # MuJoCo reset the state after a bad qacc
+    _diverged(sim._check(0.05, 0.0), "mjWARN_BADQACC", "accelerations were not finite")
+
+
+def test_pressure_above_relief_and_below_vapour(sim, ref):
+    hp = sim.hp
+    try:
+        sim.reset()
+        sim.hp = dataclasses.replace(hp, relief_pressure_pa=1e6)  # the chambers sit near 10 MPa
+        _diverged(sim.run(reference=ref).incomplete_reason, "above the relief pressure 1 MPa")
+        sim.reset()
+        sim.hp = dataclasses.replace(hp, vapour_pressure_pa=30e6)
+        _diverged(sim.run(reference=ref).incomplete_reason, "below the vapour pressure 30 MPa")
+    finally:
+        sim.hp = hp
+
+
+def test_loop_gap(sim, ref, monkeypatch):
+    sim.reset()
+    monkeypatch.setattr(sim, "loop_gap", lambda: 2e-3)
+    _diverged(sim.run(reference=ref).incomplete_reason, "swivel opened by 2 mm", "loop closure failed")
+
+
+def _fail_after(monkeypatch, calls: int, what):
+    """Make the loop's gap check misbehave from its ``calls``-th call on."""
+    n = {"k": 0}
+    real = S.Simulation.loop_gap
+
+    def gap(self):
+        n["k"] += 1
+        if n["k"] >= calls:
+            if what == "interrupt":
+                raise KeyboardInterrupt
+            return 5e-3
+        return real(self)
+
+    monkeypatch.setattr(S.Simulation, "loop_gap", gap)
+
+
+def test_run_command_keeps_a_diverged_run(tmp_path, capsys, monkeypatch):
+    scen = tmp_path / "sine.toml"
+    scen.write_text(SINE.format(dur=0.5))
+    _fail_after(monkeypatch, 6, "gap")
+    rc = main(["run", str(scen), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert rc == 3
+    assert "simulation diverged at t = 0.0391 s" in err and "kept 0.040 s" in err and "marked incomplete" in err
+    run = read_run(tmp_path / "out" / "sine.run.npz")
+    assert run.incomplete and "swivel opened by 5 mm" in run.incomplete_reason and run.n_samples == 41
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["complete"] is False and not summary["interrupted"]
+
+
+# ---------------------------------------------------------------- Ctrl-C
+def test_ctrl_c_in_run_keeps_what_was_computed(tmp_path, capsys, monkeypatch):
+    scen = tmp_path / "sine.toml"
+    scen.write_text(SINE.format(dur=0.5))
+    _fail_after(monkeypatch, 4, "interrupt")
+    rc = main(["run", str(scen), "--out", str(tmp_path / "out"), "--rrd", str(tmp_path / "out" / "r.rrd")])
+    err = capsys.readouterr().err
+    assert rc == 130 and "interrupted: kept" in err and "marked incomplete" in err
+    run = read_run(tmp_path / "out" / "sine.run.npz")
+    assert run.incomplete and run.incomplete_reason.startswith("interrupted (Ctrl-C) at t = ")
+    assert run.n_samples == 25  # checks after ticks 0, 8, 16, 24: the 4th was interrupted, tick 24 complete
+    assert np.all(np.isfinite(run.table_acceleration)) and np.all(np.isfinite(run.pressure_a))
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["sine.run.npz", "summary.json"]
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [
+            int(c)
+            for t in os.listdir(f"/proc/{pid}/task")
+            for c in open(f"/proc/{pid}/task/{t}/children").read().split()
+        ]
+    except OSError:
+        return []
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def _sigint_after(argv, cwd, wait_for: str | None, delay_s: float, workers: int = 0):
+    """Start ``python -m sim ARGV``; once ``wait_for`` appears on its stderr (or, with
+    ``workers``, once it has that many child processes) wait ``delay_s`` and send SIGINT.
+    Returns (exit code, stderr, seconds from SIGINT to exit, child pids at SIGINT)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.Popen(
+        [sys.executable, "-m", "sim", *argv],
+        cwd=cwd,
+        env=env,
+        stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    seen = ""
+    deadline = time.time() + 240
+    if wait_for is not None:
+        while wait_for not in seen and time.time() < deadline:
+            line = p.stderr.readline()
+            if not line:
+                break
+            seen += line
+        assert wait_for in seen, seen
+    while len(_children(p.pid)) < workers and time.time() < deadline and p.poll() is None:
+        time.sleep(0.1)
+    assert len(_children(p.pid)) >= workers, "the workers never started"
+    time.sleep(delay_s)
+    kids = _children(p.pid)
+    t0 = time.time()
+    p.send_signal(signal.SIGINT)
+    err = p.stderr.read()
+    rc = p.wait(timeout=120)
+    return rc, seen + err, time.time() - t0, kids
+
+
+@pytest.mark.slow
+def test_sigint_during_run(tmp_path):
+    """Ctrl-C at a terminal once the loop runs (its progress bar is on the screen)."""
+    import pty
+
+    scen = tmp_path / "sine.toml"
+    scen.write_text(SINE.format(dur=60.0))
+    out = tmp_path / "out"
+    master, slave = pty.openpty()  # stderr a terminal: the loop draws its progress bar
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.Popen(
+        [sys.executable, "-m", "sim", "run", str(scen), "--out", str(out)],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=slave,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    os.close(slave)
+    seen = b""
+    deadline = time.time() + 240
+    while b"%  t =" not in seen and time.time() < deadline:
+        try:
+            seen += os.read(master, 4096)
+        except OSError:
+            break
+    assert b"%  t =" in seen, seen
+    time.sleep(0.5)
+    t0 = time.time()
+    p.send_signal(signal.SIGINT)
+    rc = p.wait(timeout=120)
+    took = time.time() - t0
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:
+            break
+        if not chunk:
+            break
+        seen += chunk
+    os.close(master)
+    err = seen.decode("utf-8", "replace")
+    assert rc == 130, err
+    assert "Traceback" not in err and "interrupted: kept" in err
+    assert sorted(p.name for p in out.iterdir()) == ["sine.run.npz", "summary.json"]  # no temporary file left
+    run = read_run(out / "sine.run.npz")
+    assert run.incomplete and "interrupted" in run.incomplete_reason and 1 < run.n_samples < 60 * 1024
+    assert took < 30
+
+
+@pytest.mark.slow
+def test_sigint_during_characterization(tmp_path):
+    out = tmp_path / "char"
+    rc, err, took, kids = _sigint_after(
+        ["characterize", "ucsd", "--quick", "--workers", "2", "--out", str(out)], tmp_path, None, 1.0, workers=2
+    )
+    assert rc == 130, err
+    assert len(kids) >= 2
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err and "interrupted" in err
+    assert took < 10
+    assert not any(p.name.endswith(".tmp") or p.name.startswith(".") for p in tmp_path.rglob("*"))
+    time.sleep(0.5)
+    assert not [k for k in kids if _alive(k)], "worker processes left running"
+
+
+# ---------------------------------------------------------------- a reader that went away
+class _ClosedPipe(io.TextIOBase):
+    def write(self, s):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    def fileno(self):
+        raise io.UnsupportedOperation("no descriptor")
+
+
+def test_broken_pipe_in_process(monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stdout", _ClosedPipe())
+    rc = main(["model", "ucsd", "--json"])
+    assert rc == 141 and "Traceback" not in capsys.readouterr().err
+
+
+def test_broken_pipe_real(tmp_path):
+    """``shaketable model ucsd --json | head -0``: the reader is gone before the output."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r, w = os.pipe()
+    os.close(r)
+    p = subprocess.run(
+        [sys.executable, "-m", "sim", "model", "ucsd", "--json"],
+        cwd=tmp_path,
+        env=env,
+        stdout=w,
+        stderr=subprocess.PIPE,
+        text=True,
+        timeout=120,
+    )
+    os.close(w)
+    assert p.returncode == 141 and p.stderr == "", p.stderr
+
+
+# ---------------------------------------------------------------- a viewer that never answers
+def _tiny_run(path: Path) -> Path:
+    n, fs = 64, 1024.0
+    t = np.arange(n) / fs
+    z = np.zeros((n, 6))
+    meta = {
+        "format": FORMAT,
+        "table": "ucsd",
+        "sample_rate_hz": fs,
+        "actuators": ["E", "W"],
+        "dofs": ["x", "y", "z", "rx", "ry", "rz"],
+        "source": "measured",
+    }
+    return write_run(path, RunFile(t=t, meta=meta, valve_command=np.zeros((n, 2)), table_displacement=z))
+
+
+def test_connect_gives_up_after_timeout(tmp_path, capsys):
+    import socket
+
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()  # nothing listens there
+    run = _tiny_run(tmp_path / "t.run.npz")
+    t0 = time.time()
+    rc = main(["view", str(run), "--connect", f"rerun+http://127.0.0.1:{port}/proxy", "--timeout", "2"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "did not take the recording within 2 s" in err and err.count("\n") == 1
+    assert time.time() - t0 < 30
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.run.npz"]
+
+
+# ---------------------------------------------------------------- sizes refused before allocating
+def test_huge_duration_refused_even_with_short_window(tmp_path, capsys):
+    scen = tmp_path / "long.toml"
+    scen.write_text(SINE.format(dur="1e7"))
+    rc = main(["run", str(scen), "--duration", "5", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "'scenario.duration_s' = 1e+07 s" in err and "maximum" in err and err.count("\n") == 1
+
+
+def test_huge_triangle_refused():
+    from sim.errors import MotionError
+
+    with pytest.raises(MotionError, match="maximum"):
+        M.triangle(peak_displacement=0.1, peak_velocity=0.1, n_cycles=1e9, sample_rate_hz=1024.0)
+
+
+# ---------------------------------------------------------------- reproducibility
+def test_same_scenario_and_seed_give_identical_run_files(tmp_path, capsys):
+    scen = tmp_path / "noise.toml"
+    scen.write_text(NOISE)
+    runs = []
+    for k in range(2):
+        assert main(["run", str(scen), "--duration", "0.25", "--out", str(tmp_path / f"o{k}"), "--json"]) == 0
+        runs.append(read_run(tmp_path / f"o{k}" / "noise.run.npz"))
+    capsys.readouterr()
+    a, b = runs
+    assert a.meta == b.meta
+    assert not any("wall" in k or "time" in k.lower() or "date" in k for k in a.meta)  # nothing of the clock
+    for name in ("t",) + tuple(c for c in a.present_channels()):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.tobytes() == y.tobytes(), name  # bit-identical
+    assert a.extras.keys() == b.extras.keys()
+    for k in a.extras:
+        assert np.array_equal(a.extras[k], b.extras[k], equal_nan=True), k
+    assert np.std(a.table_acceleration[:, 0]) > 0  # the noise moved the table
+
+
+# ---------------------------------------------------------------- strict JSON everywhere
+def test_replay_summary_is_strict_json(tmp_path, capsys):
+    """A replay of a run whose channels are constant has NaN residuals: null in the file."""
+    run = _tiny_run(tmp_path / "t.run.npz")
+    assert main(["replay", str(run), "--out", str(tmp_path / "out"), "--json"]) == 0
+    printed = capsys.readouterr().out
+
+    def refuse(name):
+        raise AssertionError(f"bare {name} in JSON")
+
+    for text in (printed, (tmp_path / "out" / "replay_summary.json").read_text()):
+        doc = json.loads(text, parse_constant=refuse)
+        assert doc["residual_nrmse"]["table_displacement"]["x"] is None  # 0/0: no motion to compare
+
+
+def test_atomic_writers_leave_old_file_on_failure(tmp_path):
+    from sim.runs.files import save_figure_atomic, write_json_atomic, write_text_atomic
+
+    target = tmp_path / "a.json"
+    write_json_atomic(target, {"x": float("nan"), "y": [1.0, float("inf")]})
+    assert json.loads(target.read_text()) == {"x": None, "y": [1.0, None]}
+
+    class Boom:
+        def savefig(self, fh, **kw):
+            fh.write(b"half a png")
+            raise KeyboardInterrupt
+
+    (tmp_path / "f.png").write_bytes(b"the good figure")
+    with pytest.raises(KeyboardInterrupt):
+        save_figure_atomic(Boom(), tmp_path / "f.png", dpi=90)
+    assert (tmp_path / "f.png").read_bytes() == b"the good figure"
+    write_text_atomic(tmp_path / "r.md", "report\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "f.png", "r.md"]  # no temporary left
+
+
+def test_ctrl_c_in_drive_iteration_identification_keeps_nothing(tmp_path, capsys, monkeypatch):
+    """Ctrl-C in the white-noise run that identifies the FRF: that run is not the
+    scenario's, so nothing is written (and no traceback)."""
+    scen = tmp_path / "sine.toml"
+    scen.write_text(SINE.format(dur=0.5) + "\n[iteration]\ncount = 1\n")
+    _fail_after(monkeypatch, 3, "interrupt")
+    rc = main(["run", str(scen), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert rc == 130 and "interrupted" in err and "Traceback" not in err
+    assert list((tmp_path / "out").iterdir()) == []

@@ -1,0 +1,287 @@
+"""The coupled simulation: closed valves hold, replay reproduces, tracking, bad input."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import mjcf
+from sim.cli import main
+from sim.control.tvc import ControllerGains
+from sim.effects import build_model
+from sim.loop.simulation import Simulation
+from sim.scenario.files import build_motions, build_reference, load_scenario
+
+
+@pytest.fixture(scope="module")
+def loaded_no_supports():
+    """CGS + 20 t block with the static supports removed: the vertical actuators carry
+    the whole dead weight, so a force applied in the wrong place would make it sag."""
+    d = mjcf.load_table("cgs")
+    raw = json.loads(json.dumps(d.raw))
+    raw["servovalve"]["null_leakage_m3_s"] = 0.0  # creep only through the piston leakage
+    for cls in raw["actuator_class"].values():  # and no seal friction sharing the load
+        cls["seal_friction_n"] = 0.0
+    d2 = dataclasses.replace(mjcf.description.parse_table(raw, src="<no friction>"), supports=None)
+    return build_model(d2, mjcf.load_payload("rigid_20t"))
+
+
+def test_closed_valves_hold_the_loaded_table(loaded_no_supports):
+    tm = loaded_no_supports
+    sim = Simulation(tm)
+    F = sim.static_forces()
+    assert np.all(F[8:] > 1.5e5)  # Z1..Z4 carry ~700 kN together
+    assert np.allclose(F[:8], 0, atol=1e-3)
+    sim.reset(forces=F)
+    secs = 4.0
+    res = sim.run(valve_command=np.zeros((int(secs * 1024), tm.n_act)))
+    assert res.incomplete_reason is None
+    pose = res.channels["table_displacement"]
+    # the table creeps down only through the cross-piston leakage: v = k_c * F / A^2
+    hp = sim.hp
+    A = hp.area_a_m2[8]
+    v_creep = hp.leakage_cross_m3_s_pa[8] * F[8] / A**2
+    dz = pose[-1, 2] - pose[0, 2]
+    assert dz < 0
+    assert abs(dz / (-v_creep * res.t[-1]) - 1) < 0.05, (dz, v_creep)
+    assert np.abs(pose[:, [0, 1, 3, 4, 5]]).max() < 1e-6
+    # and the sag stays far below the oil-column compliance a misplaced force would show
+    assert abs(dz) < 1e-3
+
+
+def test_closed_valves_hold_with_supports():
+    tm = build_model(mjcf.load_table("cgs"), mjcf.load_payload("rigid_20t"))
+    sim = Simulation(tm)
+    res = sim.run(valve_command=np.zeros((3 * 1024, tm.n_act)))
+    pose = res.channels["table_displacement"]
+    assert np.abs(pose - pose[0]).max() < 1e-4
+
+
+@pytest.fixture(scope="module")
+def harmonic():
+    sc = load_scenario("harmonic_bare")
+    desc = mjcf.load_table(sc.table)
+    tm = build_model(desc)
+    ref = build_reference(sc, build_motions(sc))
+    return tm, ref
+
+
+def test_harmonic_test_tracks_within_2_percent(harmonic):
+    tm, ref = harmonic
+    sim = Simulation(tm)
+    res = sim.run(reference=ref)
+    assert res.incomplete_reason is None
+    d = res.channels["table_displacement"]
+    for i in range(3):
+        e = d[:, i] - ref.d[: len(d), i]
+        nrmse = np.sqrt(np.mean(e**2)) / np.sqrt(np.mean(ref.d[:, i] ** 2))
+        assert nrmse < 0.02, (i, nrmse)
+    assert np.nanmax(res.extras["loop_gap"]) < 1e-5
+
+
+def test_replay_of_valve_commands_reproduces_the_run(harmonic):
+    tm, ref = harmonic
+    sim = Simulation(tm)
+    short = dataclasses.replace(ref)
+    res = sim.run(reference=short, duration_s=3.0)
+    sim2 = Simulation(tm)
+    rep = sim2.run(valve_command=res.channels["valve_command"])
+    for ch in ("table_displacement", "table_acceleration", "actuator_force", "pressure_a", "accelerometers"):
+        assert np.array_equal(res.channels[ch], rep.channels[ch]), ch
+
+
+def test_compiled_and_numpy_paths_agree(harmonic):
+    tm, ref = harmonic
+    a = Simulation(tm).run(reference=ref, duration_s=1.0, fast=True)
+    b = Simulation(tm, backend="numpy").run(reference=ref, duration_s=1.0, fast=False)
+    for ch in ("table_displacement", "valve_command", "actuator_force"):
+        scale = np.abs(a.channels[ch]).max() + 1e-12
+        assert np.abs(a.channels[ch] - b.channels[ch]).max() / scale < 1e-7, ch
+
+
+def test_fused_tick_gives_the_same_run_bit_for_bit(harmonic):
+    """The default loop fuses recorder, controller and hydraulics into one compiled call
+    per physics step; the per-stage calls (fuse=False) must give exactly the same run."""
+    tm, ref = harmonic
+    assert len(tm.friction_dofs)  # the fused call carries the pre-sliding friction too
+    a = Simulation(tm).run(reference=ref, duration_s=1.0)
+    b = Simulation(tm).run(reference=ref, duration_s=1.0, fuse=False)
+    assert a.timing["fused_s"] > 0 and b.timing["fused_s"] == 0
+    for ch in a.channels:
+        assert np.array_equal(a.channels[ch], b.channels[ch], equal_nan=True), ch
+    for key in a.extras:
+        assert np.array_equal(a.extras[key], b.extras[key], equal_nan=True), key
+
+
+def test_divergence_stops_and_keeps_the_partial_run(harmonic, monkeypatch):
+    tm, ref = harmonic
+    sim = Simulation(tm)
+    calls = {"n": 0}
+    orig = sim.loop_gap
+
+    def bad_gap():
+        calls["n"] += 1
+        return 5e-3 if calls["n"] > 40 else orig()
+
+    monkeypatch.setattr(sim, "loop_gap", bad_gap)
+    res = sim.run(reference=ref, duration_s=2.0)
+    assert res.incomplete_reason and "swivel opened by 5 mm" in res.incomplete_reason
+    assert "t = " in res.incomplete_reason
+    assert 0 < len(res.t) < 2.0 * 1024
+    assert all(len(v) == len(res.t) for v in res.channels.values())
+
+
+def test_run_cli_writes_run_file_and_summary(tmp_path, capsys):
+    rc = main(["run", "harmonic_bare", "--out", str(tmp_path), "--duration", "2", "--json"])
+    assert rc == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["realtime_factor"] > 0
+    assert set(s["tracking"]) == {"x", "y", "z"}
+    for e in s["tracking"].values():
+        assert {"nrmse_displacement", "nrmse_acceleration", "pga_ratio"} <= set(e)
+    from sim.runs.runfile import CHANNELS, read_run
+
+    run = read_run(tmp_path / "harmonic_bare.run.npz", require=CHANNELS)
+    assert run.sample_rate_hz == 1024.0 and run.n_samples == 2 * 1024 + 1
+    assert run.accelerometers.shape[1] == 11
+    assert json.loads((tmp_path / "summary.json").read_text())["scenario"] == "harmonic_bare"
+    # the replay command reproduces it to round-off
+    rc = main(["replay", str(tmp_path / "harmonic_bare.run.npz"), "--out", str(tmp_path), "--json"])
+    rep = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert max(rep["residual_nrmse"]["table_displacement"][k] for k in "xyz") < 1e-12
+
+
+@pytest.mark.parametrize(
+    "text,expect",
+    [
+        (
+            '[scenario]\nname = "s"\ntable = "cgs"\ncolour = 1\n[motion]\ntype = "el_centro_1940"\n',
+            "unknown key 'colour'",
+        ),
+        (
+            '[scenario]\nname = "s"\ntable = "cgs"\nduration_s = 500.0\n[motion]\ntype = "el_centro_1940"\n',
+            "longer than the motion",
+        ),
+        ('[scenario]\nname = "s"\ntable = "cgs"\n[motion.x]\ntype = "at2"\nfile = "rec.AT2"\n', "AT2"),
+        ('[scenario]\nname = "s"\ntable = "cgs"\n[motion.q]\ntype = "sine"\n', "'q' is not a DOF"),
+        (
+            '[scenario]\nname = "s"\ntable = "cgs"\n[motion]\ntype = "el_centro_1940"\n[controller]\nkq = 1\n',
+            "unknown controller key 'kq'",
+        ),
+    ],
+)
+def test_bad_scenarios_are_refused_in_one_line(tmp_path, capsys, text, expect):
+    (tmp_path / "rec.AT2").write_text("this is not a PEER record\n1 2 3\n")
+    p = tmp_path / "s.toml"
+    p.write_text(text)
+    rc = main(["run", str(p), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2, err
+    assert expect in err, err
+    assert len(err.splitlines()) == 1
+    assert not list((tmp_path / "out").glob("*.run.npz")) if (tmp_path / "out").exists() else True
+
+
+def test_limits_warn_and_unwritable_output_refused(tmp_path, capsys):
+    p = tmp_path / "big.toml"
+    p.write_text(
+        '[scenario]\nname = "big"\ntable = "cgs"\nduration_s = 5.0\n'
+        '[motion.x]\ntype = "sine"\namplitude = 0.3\nfrequency_hz = 0.1\n'
+    )
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    rc = main(["run", str(p), "--out", str(blocker / "sub")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "cannot write to output folder" in err
+    assert "x peak displacement 0.3 m exceeds the +/-0.25 m stroke by 20 %" in err
+
+
+def test_scenario_gains_override_table_defaults():
+    d = mjcf.load_table("cgs")
+    g = ControllerGains.for_table(d, {"kp_per_s": 12.0})
+    assert np.all(g.kp_per_s == 12.0)
+    assert g.kdp == d.raw["controller"]["kdp"]
+
+
+def test_feasibility_verdict_flags_a_motion_beyond_the_stroke(tmp_path, capsys):
+    p = tmp_path / "far.toml"
+    p.write_text(
+        '[scenario]\nname = "far"\ntable = "cgs"\nduration_s = 5.0\n'
+        '[motion.x]\ntype = "sine"\namplitude = 0.31\nfrequency_hz = 0.1\n'
+    )
+    rc = main(["run", str(p), "--out", str(tmp_path), "--json"])
+    out = capsys.readouterr()
+    s = json.loads(out.out)
+    assert rc == 0
+    fe = s["feasibility"]
+    checks = {c["name"]: c for c in fe["checks"]}
+    assert not fe["feasible"] and "stroke_x" in fe["failed"]
+    assert checks["stroke_x"]["demand"] == pytest.approx(0.31, rel=1e-3) and checks["stroke_x"]["capacity"] == 0.25
+    assert all(c["pass"] for n, c in checks.items() if n.startswith("actuator_force"))
+    ok = json.loads((tmp_path / "summary.json").read_text())
+    assert ok["feasibility"]["failed"] == fe["failed"]
+
+
+def test_diverged_run_is_kept_and_marked_incomplete(tmp_path, capsys, monkeypatch):
+    import sim.loop.simulation
+
+    monkeypatch.setattr(sim.loop.simulation, "GAP_LIMIT_M", 1.5e-7)  # a 0.15 um gap now counts as a failed loop closure
+    rc = main(["run", "harmonic_bare", "--out", str(tmp_path), "--duration", "1"])
+    err = capsys.readouterr().err
+    assert rc == 3
+    assert "diverged at t = " in err and "swivel opened" in err and "marked incomplete" in err
+    from sim.runs.runfile import read_run
+
+    run = read_run(tmp_path / "harmonic_bare.run.npz")
+    assert run.incomplete and "swivel" in run.incomplete_reason
+    assert 2 <= run.n_samples < 1025
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["complete"] is False
+
+
+def test_presliding_friction_model_compiled_matches_numpy(harmonic):
+    """The pre-sliding friction option: compiled and numpy paths agree, friction is active
+    (force reverses within ~the pre-sliding travel) and MuJoCo's frictionloss is off."""
+    import tomllib
+
+    from mjcf.description import TABLES_DIR, parse_table
+
+    raw = tomllib.loads((TABLES_DIR / "cgs.toml").read_text())
+    raw["friction"]["model"] = "presliding"
+    tm = build_model(parse_table(raw, src="<presliding>"))
+    assert len(tm.friction_dofs) == 24 and tm.model.dof_frictionloss.max() == 0.0
+    _, ref = harmonic
+    a = Simulation(tm).run(reference=ref, duration_s=2.0, fast=True)
+    b = Simulation(tm, backend="numpy").run(reference=ref, duration_s=2.0, fast=False)
+    for ch in ("table_displacement", "actuator_force"):
+        scale = np.abs(a.channels[ch]).max()
+        assert np.abs(a.channels[ch] - b.channels[ch]).max() / scale < 1e-7, ch
+    # the exact pre-sliding update: 1 mm of travel (10 zss) from z = 0 gives
+    # z = zss (1 - e^-10), force -Fc (1 - e^-10)
+    from sim.loop import _kernels as FL
+
+    z = np.zeros(1)
+    q = np.zeros(1)
+    FL.presliding_friction(np.array([0.1]), q, np.array([0]), np.array([1000.0]), z, 1e-4, 0.01)
+    assert abs(z[0] - 1e-4 * (1 - np.exp(-10))) < 1e-18
+    assert abs(q[0] + 1000.0 * (1 - np.exp(-10))) < 1e-9
+
+
+def test_air_spring_kernel_matches_the_polytropic_law():
+    """MuJoCo's joint spring plus sim.loop._kernels.air_springs = F0 (V0 / (V0 + A q))^n."""
+    from sim.loop import _kernels as FL
+    from sim.loop.simulation import Simulation
+
+    F0, c, n = np.array([1.4e5, 1.2e5]), 0.2827 / 0.4, 1.4
+    for q in (-0.1, -0.02, 0.0, 0.03, 0.1):
+        qpos = np.array([q, -q])
+        qfa = np.zeros(2)
+        FL.air_springs(qpos, qfa, np.array([0, 1], dtype=np.int64), np.array([0, 1], dtype=np.int64), F0, c, n)
+        qfa_np = np.zeros(2)
+        Simulation._air_numpy(qpos, qfa_np, np.array([0, 1]), np.array([0, 1]), F0, c, n)
+        linear = F0 - n * F0 * c * qpos
+        exact = F0 * (1 + c * qpos) ** (-n)
+        assert np.allclose(linear + qfa, exact, rtol=1e-12, atol=1e-9)
+        assert np.array_equal(qfa, qfa_np) or np.allclose(qfa, qfa_np, rtol=1e-15, atol=1e-12)

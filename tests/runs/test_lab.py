@@ -1,0 +1,352 @@
+"""A lab's own table and records (issue #14): table new, import, replay at the record's
+rate, valve null bias, the worked example, and the one-line errors of bad input."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mjcf
+from sim.assess.metrics import nrmse
+from sim.cli import main
+from sim.runs.importer import export_csv, import_file, load_map
+from sim.runs.runfile import read_run
+from sim.signals.resample import interpolate
+
+ROOT = Path(__file__).resolve().parents[2]
+EX = ROOT / "scenarios" / "lab_example"
+MAP = EX / "lab_map.toml"
+DURATION_S = 6.0  # short: the example's physics in a few seconds of wall time
+
+
+def _example():
+    spec = importlib.util.spec_from_file_location("lab_make_export", EX / "make_export.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def example(tmp_path_factory):
+    """The worked example from scratch: simulate the lab (undeclared friction, 1 % valve
+    null bias), export CSVs at 204.8, 200 and 1024 Hz, import them."""
+    mod = _example()
+    folder = tmp_path_factory.mktemp("lab_example")
+    sim_run, _ = mod.simulate(folder, DURATION_S)
+    csvs = {}
+    for r in (204.8, 200.0, 1024.0):
+        csvs[r] = export_csv(mod.lab_record(sim_run, rate_hz=r), MAP, folder / f"export_{int(r * 10)}.csv")
+    runs_dir = folder / "runs"
+    assert main(["import", *map(str, csvs.values()), "--map", str(MAP), "--out", str(runs_dir)]) == 0
+    runs = {r: read_run(runs_dir / f"export_{int(r * 10)}.run.npz") for r in csvs}
+    return {"mod": mod, "folder": folder, "sim_run": sim_run, "csvs": csvs, "runs": runs, "runs_dir": runs_dir}
+
+
+# ------------------------------------------------------------------ table new
+def test_table_new_reproduces_the_committed_lab_table(tmp_path, monkeypatch):
+    monkeypatch.chdir(ROOT)  # the sources name the input file as given
+    out = tmp_path / "lab.toml"
+    assert main(["table", "new", "lab", "--from", "scenarios/lab_example/lab_table.toml", "--out", str(out)]) == 0
+    assert out.read_text() == (ROOT / "scenarios" / "tables" / "lab.toml").read_text()
+    desc = mjcf.load_table(out)
+    assert desc.dofs == ("x",) and list(desc.actuator_names) == ["A"]
+    # every numeric line has its source
+    for line in out.read_text().splitlines():
+        if "=" in line and not line.startswith("#") and any(c.isdigit() for c in line.split("=", 1)[1].split("#")[0]):
+            key = line.split("=")[0].strip()
+            if key not in ("gravity_m_s2", "rotation_rad", "kfb", "name", "title"):
+                assert "#" in line, line
+
+
+def test_table_new_derives_dead_volume_from_the_oil_column(tmp_path):
+    from sim.scenario.tablegen import BULK_MODULUS_PA
+
+    out = tmp_path / "t.toml"
+    args = [
+        "table",
+        "new",
+        "t2",
+        "--moving-mass",
+        "3000",
+        "--piston-area",
+        "0.01",
+        "--half-stroke",
+        "0.15",
+        "--supply-pressure",
+        "21e6",
+        "--valve-flow",
+        "0.004",
+        "--valve-bandwidth",
+        "40",
+        "--actuators",
+        "2",
+        "--oil-column",
+        "20",
+        "--out",
+        str(out),
+    ]
+    assert main(args) == 0
+    raw = tomllib.loads(out.read_text())
+    c = raw["actuator_class"]["main"]
+    V = c["dead_volume_a_m3"] + c["area_a_m2"] * c["half_stroke_m"]
+    f = np.sqrt(2 * 2 * BULK_MODULUS_PA * c["area_a_m2"] ** 2 / V / 3000.0) / (2 * np.pi)
+    assert f == pytest.approx(20.0, rel=1e-4)
+    assert len(mjcf.load_table(out).actuators) == 2
+
+
+def test_table_new_errors_are_one_line(tmp_path, capsys):
+    out = tmp_path / "t.toml"
+    assert main(["table", "new", "t3", "--moving-mass", "3000", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "piston_area_m2" in err and not out.exists()
+
+
+# ------------------------------------------------------------------ import
+def test_import_round_trip_within_unit_rounding(example):
+    rec = example["mod"].lab_record(example["sim_run"], rate_hz=204.8)
+    back = example["runs"][204.8]
+    assert back.sample_rate_hz == 204.8 and back.n_samples == rec.n_samples
+    np.testing.assert_allclose(back.t, rec.t, atol=1e-12)
+    for ch in (
+        "valve_command",
+        "reference",
+        "table_displacement",
+        "table_acceleration",
+        "accelerometers",
+        "actuator_force",
+    ):
+        a, b = getattr(rec, ch), getattr(back, ch)
+        # 7 significant digits in lab units, plus the offset's own digits (0.5 mm)
+        tol = 1e-6 * np.abs(a).max() + (1e-9 if ch == "table_displacement" else 0.0)
+        assert np.abs(a - b).max() <= tol, ch
+    assert back.meta["accelerometers"][0]["name"] == "F1"
+
+
+def test_import_report_names_paths_and_ranges(example):
+    rep = json.loads((example["runs_dir"] / "import_report.json").read_text())["runs"][0]
+    assert rep["sample_rate_hz"] == 204.8 and rep["duration_s"] == pytest.approx(DURATION_S, abs=5e-3)
+    assert all(p["ready"] for p in rep["paths"].values())
+    assert rep["ranges_si"]["valve_command"]["A"]["min"] < -0.005  # the bias is visible in the drive
+
+
+def test_import_says_which_path_lacks_what(tmp_path, example):
+    text = (
+        MAP.read_text().replace('channel = "actuator_force"', 'channel = "pressure_a"').replace('area_m2 = "table"', "")
+    )
+    mp = tmp_path / "map.toml"
+    mp.write_text(text)
+    rep = import_file(example["csvs"][204.8], load_map(mp)).report
+    assert rep["paths"]["mechanical (least squares)"] == {"ready": False, "missing": ["actuator_force"]}
+    assert rep["paths"]["replay (open loop)"]["ready"]
+
+
+def test_import_mat_file(tmp_path, example):
+    import csv
+
+    from scipy.io import savemat
+
+    rows = list(csv.reader(Path(example["csvs"][204.8]).read_text().splitlines()))
+    cols = {h: np.array([float(r[i]) for r in rows[1:]]) for i, h in enumerate(rows[0])}
+    savemat(tmp_path / "rec.mat", cols)
+    run = import_file(tmp_path / "rec.mat", load_map(MAP)).run
+    np.testing.assert_allclose(run.valve_command, example["runs"][204.8].valve_command)
+
+
+# ------------------------------------------------------------------ bad input
+def _bad_csv(tmp_path, example, edit):
+    lines = Path(example["csvs"][204.8]).read_text().splitlines()
+    lines = edit(lines)
+    p = tmp_path / "bad.csv"
+    p.write_text("\n".join(lines) + "\n")
+    return p
+
+
+@pytest.mark.parametrize(
+    "case, needle",
+    [
+        ("missing_column", "no column 'dp'"),
+        ("unknown_unit", "unit 'furlong'"),
+        ("non_monotonic", "time is not increasing at sample 11"),
+        ("ragged", "line 6 has 7 fields"),
+        ("text", "line 9 column 'disp' holds 'n/a'"),
+        ("table_lacks_actuator", "actuator 'B' is not one of table 'lab'"),
+        ("table_unknown", "no table named 'no_such_lab_table'"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, example, capsys, case, needle):
+    csv_path = Path(example["csvs"][204.8])
+    mp = MAP
+    text = MAP.read_text()
+
+    def with_map(t):
+        p = tmp_path / "map.toml"
+        p.write_text(t)
+        return p
+
+    if case == "missing_column":
+        csv_path = _bad_csv(
+            tmp_path,
+            example,
+            lambda ls: [",".join(ls[0].split(",")[:-1])] + [",".join(r.split(",")[:-1]) for r in ls[1:]],
+        )
+    elif case == "unknown_unit":
+        mp = with_map(text.replace('unit = "mm/s^2"\n', 'unit = "furlong"\n', 1))
+    elif case == "non_monotonic":
+
+        def swap(ls):
+            ls[11], ls[12] = ls[12], ls[11]  # samples 10 and 11 (line 1 is the header)
+            return ls
+
+        csv_path = _bad_csv(tmp_path, example, swap)
+    elif case == "ragged":
+        csv_path = _bad_csv(tmp_path, example, lambda ls: ls[:5] + [ls[5].rsplit(",", 1)[0]] + ls[6:])
+    elif case == "text":
+
+        def text_cell(ls):
+            f = ls[8].split(",")
+            f[3] = "n/a"
+            ls[8] = ",".join(f)
+            return ls
+
+        csv_path = _bad_csv(tmp_path, example, text_cell)
+    elif case == "table_lacks_actuator":
+        mp = with_map(text.replace('actuator = "A"\nunit = "bar"', 'actuator = "B"\nunit = "bar"'))
+    elif case == "table_unknown":
+        mp = with_map(text.replace('table = "lab"', 'table = "no_such_lab_table"'))
+    out = tmp_path / "out"
+    rc = main(["import", str(csv_path), "--map", str(mp), "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert err.startswith("error: ") and "\n" not in err, err
+    assert needle in err, err
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------ replay
+def test_replay_at_204_8_and_1024_hz_agree(example, tmp_path):
+    from sim.calibrate.replay import replay
+
+    r1024 = replay(example["runs"][1024.0])
+    for rate in (204.8, 200.0):
+        r = replay(example["runs"][rate], hold="linear")
+        assert r.complete and r.run.n_samples == example["runs"][rate].n_samples
+        np.testing.assert_allclose(r.run.t, example["runs"][rate].t)  # the record's own instants
+        for ch in ("table_velocity", "table_acceleration", "actuator_force"):
+            ref = interpolate(r1024.run.t, getattr(r1024.run, ch), r.run.t)
+            assert nrmse(getattr(r.run, ch)[:, 0], ref[:, 0]) < 0.05, (rate, ch)
+        assert r.valve_null["offset"]["A"] == pytest.approx(r1024.valve_null["offset"]["A"], rel=0.05)
+    # a held command at the recorder's rate (what a 204.8 Hz DAC would give) still replays on its instants
+    z = replay(example["runs"][200.0])
+    assert z.complete and z.tick_hz == 1024.0 and z.run.n_samples == example["runs"][200.0].n_samples
+
+
+def test_valve_null_bias_recovered_and_replay_stays_in_stroke(example):
+    from sim.calibrate.replay import replay
+
+    run = example["runs"][204.8]
+    bias = example["mod"].BIAS
+    fixed = replay(run, hold="linear")
+    raw = replay(run, hold="linear", bias="none")
+    assert fixed.valve_null["offset"]["A"] == pytest.approx(bias, rel=0.10)
+    assert fixed.complete and fixed.stroke_fraction["A"] < 0.8
+    assert raw.stroke_fraction["A"] > fixed.stroke_fraction["A"] + 0.1  # uncorrected, it walks away
+    bp = fixed.residual_nrmse["table_displacement_bandpassed"]["x"]
+    assert bp < 0.05 and bp < raw.residual_nrmse["table_displacement"]["x"]
+
+
+def test_replay_cli_writes_a_uniaxial_run_with_reference_and_every_channel(example, tmp_path, capsys):
+    src = example["runs_dir"] / "export_2048.run.npz"
+    out = tmp_path / "rep"
+    assert main(["replay", str(src), "--out", str(out), "--hold", "linear"]) == 0
+    rep = read_run(out / "export_2048.replay.run.npz")
+    assert rep.dofs == ["x"] and rep.reference is not None and rep.sample_rate_hz == 204.8
+    s = json.loads((out / "replay_summary.json").read_text())
+    assert {"table_displacement", "table_acceleration", "actuator_force", "table_displacement_bandpassed"} <= set(
+        s["residual_nrmse"]
+    )
+    assert set(s["not_compared"]) == {"valve_command", "reference", "accelerometers"}
+    assert any("band-passed" in n for n in s["notes"])
+
+
+# ------------------------------------------------------------------ identify
+def test_identify_warns_on_unphysical_parameters():
+    from sim.identify.least_squares import Identified
+
+    ok = Identified(M_e_kg=1e3, K_e_N_per_m=1e5, C_e=1e3, F_mu_N=100.0, alpha=0.5, error=0.1)
+    bad = Identified(M_e_kg=1e3, K_e_N_per_m=1e5, C_e=-2e3, F_mu_N=100.0, alpha=0.5, error=0.1)
+    assert ok.warnings() == []
+    w = bad.warnings()
+    assert len(w) == 1 and "C_e" in w[0] and "negative" in w[0] and "\n" not in w[0]
+    assert bad.as_dict()["warnings"] == w
+
+
+# ------------------------------------------------------------------ calibrate (branch calib)
+def test_bare_table_calibrates_to_the_same_friction_at_204_8_and_1024_hz(example, tmp_path):
+    """The bare-table test at both record rates: calibrate finds the undeclared bearing
+    friction, the same within 5 % from either record."""
+    mod, folder = example["mod"], example["folder"]
+    bare, _ = mod.simulate(folder, 15.0, bare=True)  # 6 s is too short to tell friction from viscous damping
+    bare_map = EX / "lab_map_bare.toml"
+    found = {}
+    for r in (204.8, 1024.0):
+        csv_path = export_csv(
+            mod.lab_record(bare, rate_hz=r, bare=True), bare_map, tmp_path / f"bare_{int(r * 10)}.csv"
+        )
+        assert main(["import", str(csv_path), "--map", str(bare_map), "--out", str(tmp_path / "runs")]) == 0
+        out = tmp_path / f"cal_{int(r * 10)}"
+        assert main(["calibrate", str(tmp_path / "runs" / f"bare_{int(r * 10)}.run.npz"), "--out", str(out)]) == 0
+        added = json.loads((out / "calibration.json").read_text())["effects_added"]
+        fr = [e for e in added if e["name"] == "coulomb_friction"]
+        assert fr, added
+        found[r] = fr[0]["parameters"]["force_n"]
+    assert found[204.8] == pytest.approx(found[1024.0], rel=0.05)
+    assert found[1024.0] == pytest.approx(mod.FRICTION_N, rel=0.15)  # 436-438 N for 400 N on 20 s (lab-example.md)
+
+
+def test_valve_null_drift_is_estimated(example):
+    """A null that drifts linearly over the record (oil warming up): offset and drift."""
+    import copy
+
+    from sim.calibrate.valve_null import estimate
+
+    run = copy.deepcopy(example["runs"][1024.0])
+    t = run.t
+    run.valve_command = run.valve_command - 0.002 * (t - t.mean())[:, None]  # +0.2 %/s more null over time
+    est = estimate(run, mjcf.load_table("lab"), drift=True)
+    assert est.drift_per_s[0] == pytest.approx(0.002, rel=0.10)
+    assert est.offset[0] == pytest.approx(example["mod"].BIAS, rel=0.10)
+
+
+def test_a_renamed_six_dof_description_builds_and_runs_with_no_code_of_its_own(tmp_path):
+    """Generic code dispatches on declared fields: a 6-DOF description under a lab's name
+    builds and runs open loop (the closed valves hold it)."""
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+
+    text = (ROOT / "scenarios" / "tables" / "cgs.toml").read_text().replace('name = "cgs"', 'name = "mylab6"', 1)
+    p = tmp_path / "mylab6.toml"
+    p.write_text(text)
+    desc = mjcf.load_table(p)
+    assert desc.name == "mylab6" and len(desc.dofs) == 6
+    sim = Simulation(build_model(desc, None))
+    res = sim.run(valve_command=np.zeros((64, len(desc.actuators))))
+    assert res.incomplete_reason is None
+    assert np.abs(res.channels["table_displacement"]).max() < 1e-3
+
+
+def test_fit_replays_a_204_8_hz_record_over_its_own_duration(example):
+    """`fit` once replayed a 204.8 Hz record at 1024 Hz (30 s became 6 s)."""
+    from sim.calibrate import fit as F
+
+    run = example["runs"][204.8]
+    desc = mjcf.load_table("lab")
+    out = F._replay(desc.raw, mjcf.load_payload("lab_2storey"), run, desc.source)
+    assert out["t"][-1] == pytest.approx(run.duration_s, abs=1e-9)
+    assert out["table_acceleration"].shape == (run.n_samples, 1)
+    # the model follows the record in time: acceleration residual as replay's (same hold, no null estimate)
+    assert nrmse(out["table_acceleration"][:, 0], run.table_acceleration[:, 0]) < 0.3
