@@ -18,14 +18,8 @@ FLAGS = {  # flag -> key of sim.scenario.tablegen.LAB_KEYS
 
 
 def cmd_table_new(args) -> int:
-    from sim.errors import UserError
     from sim.scenario import tablegen
 
-    if args.kind != "uniaxial":
-        raise UserError(
-            "table new --kind 6dof is not generated (a 6-DOF layout is a drawing): copy "
-            "scenarios/tables/cgs.toml and change its [[actuator]] positions and classes"
-        )
     inputs, src = {}, "the command line"
     if args.from_file:
         inputs = dict(tablegen.read_lab_inputs(args.from_file))
@@ -35,10 +29,14 @@ def cmd_table_new(args) -> int:
         if v is not None:
             inputs[key] = int(v) if key == "n_actuators" else v
     out = args.out or f"scenarios/tables/{args.name}.toml"
-    path = tablegen.write_uniaxial(args.name, inputs, out, src=src)
+    path = tablegen.write_uniaxial(args.name, inputs, out, src=src, kind=args.kind)
+    what = (
+        f"6-DOF, {inputs.get('layout')} layout"
+        if args.kind == "6dof"
+        else f"uni-axial, {inputs.get('n_actuators', 1)} actuator(s)"
+    )
     print(
-        f"wrote {path} (uni-axial, {inputs.get('n_actuators', 1)} actuator(s)); "
-        "every number not given is marked assumed: or derived: in the file",
+        f"wrote {path} ({what}); every number not given is marked assumed: or derived: in the file",
         file=sys.stderr,
     )
     print(path)
@@ -50,7 +48,12 @@ def add_parsers(sub) -> None:
     tsub = t.add_subparsers(dest="table_command", required=True)
     n = tsub.add_parser("new", help="write a table description from a few numbers (the rest assumed, marked so)")
     n.add_argument("name", help="table name (letters, digits, - or _)")
-    n.add_argument("--kind", choices=["uniaxial", "6dof"], default="uniaxial")
+    n.add_argument(
+        "--kind",
+        choices=["uniaxial", "6dof"],
+        default="uniaxial",
+        help="6dof: give the layout (4h4v, hexapod or explicit attachment points) in the --from file's [lab]",
+    )
     n.add_argument("--from", dest="from_file", metavar="FILE.toml", help="the lab's numbers under [lab] (SI units)")
     n.add_argument("--out", help="output .toml (default scenarios/tables/NAME.toml)")
     n.add_argument("--moving-mass", dest="moving_mass", type=float, metavar="KG")

@@ -8,8 +8,9 @@ here with a physically reasonable default, marked ``assumed:`` with the reason, 
 scenario and replays a record with no code of its own. The lab's numbers carry the
 source it gives (``lab: ...``).
 
-Only the uni-axial kind is generated (one or more actuators side by side on one DOF, as
-the Rice and LHPOST tables); a 6-DOF layout is a drawing, not a few numbers.
+The uni-axial kind is written here (one or more actuators side by side on one DOF, as
+the Rice and LHPOST tables); the 6-DOF kind by :mod:`sim.scenario.tablegen6` (a named
+standard layout with a few dimensions, or every actuator's attachment points).
 """
 
 from __future__ import annotations
@@ -281,17 +282,25 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
     return "\n".join(out)
 
 
-def write_uniaxial(name: str, inputs: dict, out: str | Path, *, src: str = "the command line") -> Path:
-    """Write :func:`uniaxial`'s description to ``out`` (atomically) after checking that
-    it loads; returns the path."""
+def write_uniaxial(name: str, inputs: dict, out: str | Path, *, src: str = "the command line", kind="uniaxial") -> Path:
+    """Write :func:`uniaxial`'s description (``kind="6dof"``: :func:`sim.scenario.tablegen6.sixdof`'s)
+    to ``out`` (atomically) after checking that it loads; returns the path."""
     import os
 
     import mjcf
-    from mjcf.description import parse_table
+    from mjcf.description import DescriptionError, parse_table
 
-    text = uniaxial(name, inputs, src=src)
+    if kind == "6dof":
+        from sim.scenario.tablegen6 import sixdof
+
+        text = sixdof(name, inputs, src=src)
+    else:
+        text = uniaxial(name, inputs, src=src)
     out = Path(out)
-    parse_table(tomllib.loads(text), src=str(out))  # must load before it is written
+    try:
+        parse_table(tomllib.loads(text), src=str(out))  # must load before it is written
+    except DescriptionError as e:  # a generated file that does not load: the lab's numbers do not fit together
+        raise ScenarioError(f"{src}: the generated description does not load ({e}); check the numbers given") from None
     if out.suffix != ".toml":
         raise ScenarioError(f"{out}: a table description ends in .toml; give --out NAME.toml")
     try:
