@@ -1,4 +1,4 @@
-"""A lab's recorder export (CSV, MAT-file) to run files, through a column map.
+"""A lab's recorder export (CSV, MAT-file, NI TDMS) to run files, through a column map.
 
 The map (a TOML file, documented in ``docs/import.md``) names, for every column the
 lab exports, the run-file channel and its actuator / DOF / accelerometer, the unit and
@@ -377,6 +377,48 @@ def _read_mat(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
     return out
 
 
+def _read_tdms(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
+    """Channels of an NI TDMS file (npTDMS) by name: ``"channel"`` when the name is
+    unique over the file's groups, else ``"group/channel"``."""
+    try:
+        from nptdms import TdmsFile
+    except ImportError:
+        raise _err(
+            str(path), "is a TDMS file and npTDMS is not installed", "pip install nptdms (or export CSV)"
+        ) from None
+    try:
+        f = TdmsFile.read(str(path))
+    except Exception as e:  # npTDMS raises ValueError, KeyError, struct.error ... on a damaged file
+        raise _err(
+            str(path), f"cannot be read as a TDMS file ({' '.join(str(e).split())[:120]})", "export it again (or CSV)"
+        ) from None
+    by_name: dict[str, list] = {}
+    for g in f.groups():
+        for c in g.channels():
+            by_name.setdefault(f"{g.name}/{c.name}", []).append(c)
+            by_name.setdefault(c.name, []).append(c)
+    if not by_name:  # npTDMS reads a file without TDMS segments as an empty one
+        raise _err(str(path), "cannot be read as a TDMS file (no channels in it)", "export it again (or CSV)")
+    out = {}
+    for w in wanted:
+        found = by_name.get(w, [])
+        if len(found) != 1:
+            have = ", ".join(k for k in by_name if "/" in k)
+            problem = (
+                f"has no channel '{w}' (channels: {have})"
+                if not found
+                else f"has {len(found)} channels named '{w}' (in different groups)"
+            )
+            raise _err(f"{path} (map {mp.path})", problem, "name the column 'group/channel' in the map")
+        a = np.asarray(found[0][:])
+        if a.ndim != 1 or not np.issubdtype(a.dtype, np.number):
+            raise _err(str(path), f"channel '{w}' holds {a.dtype} data", "record each channel as numbers")
+        out[w] = a.astype(float)
+    if len({len(v) for v in out.values()}) != 1:
+        raise _err(str(path), "channels of different lengths", "record every channel over the same samples")
+    return out
+
+
 def uniform_time(t: np.ndarray, where: str) -> tuple[float, float]:
     """(t0, sample rate) of a time column that is a uniform grid up to its rounding;
     one-line error naming the first bad sample otherwise."""
@@ -423,14 +465,15 @@ class Imported:
 
 
 def import_file(path, mp: ImportMap) -> Imported:
-    """Convert one export (``.csv``/``.txt`` or ``.mat``) through the map ``mp``."""
+    """Convert one export (``.csv``/``.txt``, ``.mat`` or ``.tdms``) through the map ``mp``."""
     import mjcf
     from sim.runs.runfile import FORMAT, RunFile
 
     path = Path(path)
     wanted = [c.name for c in mp.columns] + ([mp.time_column] if mp.time_column else [])
     wanted = list(dict.fromkeys(wanted))
-    raw = _read_mat(path, mp, wanted) if path.suffix.lower() == ".mat" else _read_csv(path, mp, wanted)
+    reader = {".mat": _read_mat, ".tdms": _read_tdms}.get(path.suffix.lower(), _read_csv)
+    raw = reader(path, mp, wanted)
     n = len(next(iter(raw.values())))
     if mp.time_column:
         t0, fs = uniform_time(raw[mp.time_column] * mp.time_factor, f"{path} column '{mp.time_column}'")
