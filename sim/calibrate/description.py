@@ -159,16 +159,20 @@ class TomlText:
 
     def set_effect(self, entry: dict, *, comments: dict | None = None) -> str:
         """Add ``entry`` as an ``[[effect]]`` (after the last one, or at the end), or rewrite
-        the entry with the same ``type`` and ``where`` in place (its comments kept).
+        the entry with the same ``type``, ``where`` and ``name`` in place (its comments kept).
         ``comments``: key -> source comment. Returns ``"added"`` or ``"replaced"``."""
         if "type" not in entry or "where" not in entry:
             raise DescriptionWriteError(f"{self.source}: an [[effect]] entry needs 'type' and 'where'")
         comments = comments or {}
         blocks = self.effect_blocks()
         for i, end, old in blocks:
-            if old.get("type") == entry["type"] and old.get("where") == entry["where"]:
+            if (old.get("type"), old.get("where"), old.get("name")) == (
+                entry["type"],
+                entry["where"],
+                entry.get("name"),
+            ):
                 for k, v in entry.items():
-                    if k in ("type", "where"):
+                    if k in ("type", "where", "name"):
                         continue
                     j = next(
                         (n for n in range(i + 1, end) if re.match(rf"^\s*{re.escape(k)}\s*=", self.lines[n])), None

@@ -34,7 +34,9 @@ class Law:
     the name of the coefficient; ``shape``: name -> grid of values scanned (nonlinear
     parameters); ``inertial``: the basis is the acceleration (not passed through the
     sensor prefilter, which the recorded acceleration already went through);
-    ``places``: the place kinds it can act at.
+    ``places``: the place kinds it can act at; ``dofs``: the DOFs a ``dof:`` place may
+    name (empty: any); ``repeats``: how many terms of this law one place may hold (the
+    modes of a specimen: one ``payload_mode`` each); ``when``: see the field.
     """
 
     type: str
@@ -45,6 +47,11 @@ class Law:
     shape: dict = field(default_factory=dict)
     inertial: bool = False
     what: str = ""
+    dofs: tuple = ()
+    repeats: int = 1
+    #: "always" a candidate, or only when named (``--effects``) or, for "undeclared_specimen",
+    #: when the calibration is told a specimen stands on the table undeclared (``--payload none``)
+    when: str = "always"
 
 
 DEADBAND = 1e-3  #: m/s (rad/s): below it the sign of a velocity is the sensor noise's
@@ -130,6 +137,45 @@ add_law(
         lambda u, v, a, s: a,
         inertial=True,
         what="mass moving with the place m a",
+    )
+)
+
+
+def _mode(u, v, a, s):
+    """Absolute acceleration of a mode (``frequency_hz``, ``damping_ratio``) standing on
+    the place and shaken by its acceleration ``a``: H(s) = (2 z w s + w^2) / (s^2 + 2 z w s
+    + w^2), the force it puts on the place per unit modal mass (Newton on the mode's
+    mass). Bilinear transform with the frequency pre-warped, so that the resonance sits at
+    ``frequency_hz`` at any record rate; from rest at the record's start. A mode at or
+    above 0.45 x the record rate moves with the place (``a``)."""
+    import scipy.signal as sig
+
+    dt, f, z = s["_dt"], s["frequency_hz"], s["damping_ratio"]
+    if f >= 0.45 / dt:
+        return np.asarray(a, float)
+    w = 2.0 / dt * np.tan(np.pi * f * dt)
+    b, den = sig.bilinear([2 * z * w, w * w], [1.0, 2 * z * w, w * w], 1.0 / dt)
+    return sig.lfilter(b, den, np.asarray(a, float), axis=0)
+
+
+add_law(
+    Law(
+        "payload_mode",
+        {"mass_kg": ("kg", 0.0, np.inf), "frequency_hz": ("Hz", 0.0, np.inf), "damping_ratio": ("1", 0.0, 10.0)},
+        "mass_kg",
+        _mode,
+        places=("dof",),
+        dofs=("x", "y", "z"),
+        # scanned: 0.3-60 Hz (a specimen's modes below the oil column), 0.3-40 % damping; the
+        # bounded search refines between grid points
+        shape={
+            "frequency_hz": tuple(np.round(np.geomspace(0.3, 60.0, 36), 4)),
+            "damping_ratio": (0.003, 0.007, 0.015, 0.03, 0.06, 0.12, 0.25, 0.4),
+        },
+        inertial=True,
+        what="a mode of what stands on the platen: modal mass m, frequency f, damping z (m H(s) a)",
+        repeats=3,
+        when="undeclared_specimen",
     )
 )
 

@@ -22,10 +22,11 @@ class Term:
     law: object
     where: str
     shape: dict = field(default_factory=dict)
+    index: int = 0  #: the n-th term of a law that repeats at one place (a specimen's modes)
 
     @property
     def key(self) -> tuple:
-        return (self.law.type, self.where)
+        return (self.law.type, self.where) + ((self.index,) if self.index else ())
 
 
 @dataclass
@@ -57,7 +58,7 @@ def _weights(mr) -> np.ndarray:
 
 
 def _key(t) -> tuple:
-    return (t.law.type, t.where, tuple(sorted(t.shape.items())))
+    return (t.law.type, t.where, tuple(sorted(t.shape.items())))  # no index: equal terms share a column
 
 
 def _stack(mruns, terms):
@@ -93,21 +94,27 @@ def _solve(y, X):
 
 
 def _shape_jacobian(mruns, term, coef, h=1e-3):
-    """Column d(model)/d(shape parameter) (stacked, weighted), central differences."""
-    ((name, val),) = term.shape.items()
-    up = Term(term.law, term.where, {name: val + h})
-    dn = Term(term.law, term.where, {name: val - h})
-    _, Xu = _stack(mruns, [up])
-    _, Xd = _stack(mruns, [dn])
-    return coef * (Xu[:, 0] - Xd[:, 0]) / (2 * h)
+    """Columns d(model)/d(shape parameter), one per shape parameter (stacked, weighted),
+    central differences (step ``h`` relative to the value for a parameter above 1)."""
+    cols = []
+    for name, val in term.shape.items():
+        hh = h * max(1.0, abs(val))
+        up = Term(term.law, term.where, {**term.shape, name: val + hh})
+        dn = Term(term.law, term.where, {**term.shape, name: val - hh})
+        _, Xu = _stack(mruns, [up])
+        _, Xd = _stack(mruns, [dn])
+        cols.append(coef * (Xu[:, 0] - Xd[:, 0]) / (2 * hh))
+    return np.stack(cols, axis=1)
 
 
 def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
     """Fit ``terms`` jointly on ``mruns`` (shape parameters chosen in turn on their grid,
     then refined: ``refine`` "all" terms, the "last" one only (a candidate added to an
     accepted set), or "none"); returns the :class:`Fit`."""
+    given = [set(t.shape) for t in terms]
     terms = [
-        Term(t.law, t.where, {**{k: float(np.median(g)) for k, g in t.law.shape.items()}, **t.shape}) for t in terms
+        Term(t.law, t.where, {**{k: float(np.median(g)) for k, g in t.law.shape.items()}, **t.shape}, t.index)
+        for t in terms
     ]
     todo = {"all": range(len(terms)), "last": range(len(terms) - 1, len(terms)), "none": ()}[refine]
     for i, t in enumerate(terms):
@@ -117,10 +124,17 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
 
             def rss_at(val, i=i, name=name, t=t):
                 trial = list(terms)
-                trial[i] = Term(t.law, t.where, {**t.shape, name: float(val)})
+                trial[i] = Term(t.law, t.where, {**t.shape, name: float(val)}, t.index)
                 return _solve(*_stack(mruns, trial))[1]
 
             grid = list(grid)
+            if name in given[i]:
+                # a value found before is refined near it (between its neighbouring grid
+                # points): rescanning the whole grid lets one of several terms of a law (a
+                # specimen's modes) jump onto another's peak
+                val = t.shape[name]
+                k = int(np.searchsorted(grid, val))
+                grid = sorted({grid[max(k - 1, 0)], val, grid[min(k, len(grid) - 1)]})
             vals = [rss_at(g) for g in grid]
             k = int(np.argmin(vals))
             lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
@@ -131,14 +145,14 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
                 r = minimize_scalar(rss_at, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3})
                 if r.fun <= vals[k]:
                     best = float(r.x)
-            terms[i] = Term(t.law, t.where, {**t.shape, name: float(best)})
+            terms[i] = t = Term(t.law, t.where, {**t.shape, name: float(best)}, t.index)
     y, X = _stack(mruns, terms)
     theta, rss = _solve(y, X)
     # the Jacobian of the fit: coefficient columns and each shape parameter's column
     Jcols = [X]
     for i, t in enumerate(terms):
         if t.shape:
-            Jcols.append(_shape_jacobian(mruns, t, theta[i])[:, None])
+            Jcols.append(_shape_jacobian(mruns, t, theta[i]))
     Jm = np.concatenate(Jcols, axis=1) if Jcols else X
     n, p = len(y), Jm.shape[1]
     s2 = rss / max(n - p, 1)

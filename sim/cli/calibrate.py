@@ -109,7 +109,11 @@ def add_parsers(sub) -> None:
     )
     c.add_argument("inputs", nargs="+", metavar="RUN", help="run files (.run.npz); or one table name for --masses")
     c.add_argument("--table", help="the table description to calibrate (default: the runs' table)")
-    c.add_argument("--payload", help="payload on the table (default: the runs' payload)")
+    c.add_argument(
+        "--payload",
+        help="payload on the table (default: the runs' payload; 'none': no specimen declared, "
+        "calibration adds what stands on the table, e.g. its modes)",
+    )
     c.add_argument(
         "--holdout", nargs="+", metavar="RUN", help="runs held out to prove the effects (default: every third run)"
     )

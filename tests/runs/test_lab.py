@@ -285,15 +285,18 @@ def test_identify_warns_on_unphysical_parameters():
     assert bad.as_dict()["warnings"] == w
 
 
-# ------------------------------------------------------------------ calibrate (branch calib)
-def test_bare_table_calibrates_to_the_same_friction_at_204_8_and_1024_hz(example, tmp_path):
-    """The bare-table test at both record rates: calibrate finds the undeclared bearing
-    friction, the same within 5 % from either record."""
+# ------------------------------------------------------------------ calibrate
+def test_bare_table_calibrates_to_the_same_friction_at_200_and_1024_hz(example, tmp_path):
+    """The bare-table test recorded at 200 Hz (not a divisor of the model's rate) and at
+    1024 Hz: calibrate finds the undeclared bearing friction, the same within 5 % from
+    either record and within 10 % of the planted 400 N (docs/lab-example.md: 397.5 N and
+    399.7 N on 20 s; the model's force channel is read at the motion's instant,
+    make_export.FORCE_SKEW_S)."""
     mod, folder = example["mod"], example["folder"]
     bare, _ = mod.simulate(folder, 15.0, bare=True)  # 6 s is too short to tell friction from viscous damping
     bare_map = EX / "lab_map_bare.toml"
     found = {}
-    for r in (204.8, 1024.0):
+    for r in (200.0, 1024.0):
         csv_path = export_csv(
             mod.lab_record(bare, rate_hz=r, bare=True), bare_map, tmp_path / f"bare_{int(r * 10)}.csv"
         )
@@ -301,11 +304,60 @@ def test_bare_table_calibrates_to_the_same_friction_at_204_8_and_1024_hz(example
         out = tmp_path / f"cal_{int(r * 10)}"
         assert main(["calibrate", str(tmp_path / "runs" / f"bare_{int(r * 10)}.run.npz"), "--out", str(out)]) == 0
         added = json.loads((out / "calibration.json").read_text())["effects_added"]
-        fr = [e for e in added if e["name"] == "coulomb_friction"]
-        assert fr, added
-        found[r] = fr[0]["parameters"]["force_n"]
-    assert found[204.8] == pytest.approx(found[1024.0], rel=0.05)
-    assert found[1024.0] == pytest.approx(mod.FRICTION_N, rel=0.15)  # 436-438 N for 400 N on 20 s (lab-example.md)
+        assert [e["name"] for e in added] == ["coulomb_friction"], added
+        found[r] = added[0]["parameters"]["force_n"]
+    assert found[200.0] == pytest.approx(found[1024.0], rel=0.05)
+    for r in found:
+        assert found[r] == pytest.approx(mod.FRICTION_N, rel=0.10), found
+
+
+def _frame_modes(name="lab_2storey"):
+    """(frequency Hz, effective modal mass kg, damping ratio) of the example's shear frame,
+    from its description (the truth the calibration must name)."""
+    from scipy.linalg import eigh
+
+    pl = mjcf.load_payload(name)
+    M, K = np.diag(pl.mass_kg), np.asarray(pl.stiffness_n_m)
+    w2, phi = eigh(K, M)
+    ones = np.ones(len(M))
+    meff = [(p @ M @ ones) ** 2 / (p @ M @ p) for p in phi.T]
+    return [(float(np.sqrt(x) / (2 * np.pi)), float(m), pl.damping_ratio) for x, m in zip(w2, meff)]
+
+
+@pytest.mark.slow
+def test_specimen_calibration_names_two_modes_and_the_friction(example, tmp_path):
+    """The issue's "must show": on the specimen tests (frame on the table, friction and a
+    1 % valve null undeclared), calibration told that a specimen stands there undeclared
+    (--payload none) adds the frame's two modes and the bearing friction; the held-out
+    test (another noise seed) falls from the bare model's error to a few per cent."""
+    mod, folder = example["mod"], example["folder"]
+    dur = 10.0
+    paths = []
+    for kind, seed in (("fit", None), ("held", mod.SECOND_SEED)):
+        run, _ = mod.simulate(folder, dur, noise_seed=seed)
+        paths.append(export_csv(mod.lab_record(run, rate_hz=204.8), MAP, tmp_path / f"{kind}.csv"))
+    runs = tmp_path / "runs"
+    assert main(["import", *map(str, paths), "--map", str(MAP), "--out", str(runs)]) == 0
+    out = tmp_path / "cal"
+    args = ["calibrate", str(runs / "fit.run.npz"), "--holdout", str(runs / "held.run.npz")]
+    assert main([*args, "--payload", "none", "--out", str(out)]) == 0
+    js = json.loads((out / "calibration.json").read_text())
+    added = js["effects_added"]
+    modes = sorted((e["parameters"] for e in added if e["name"] == "payload_mode"), key=lambda p: p["frequency_hz"])
+    assert len(modes) == 2, added
+    for got, (f, m, z) in zip(modes, _frame_modes()):
+        assert got["frequency_hz"] == pytest.approx(f, rel=0.03)
+        assert got["mass_kg"] == pytest.approx(m, rel=0.15)
+        assert got["damping_ratio"] == pytest.approx(z, rel=0.3)
+    fr = [e["parameters"]["force_n"] for e in added if e["name"] == "coulomb_friction"]
+    assert len(fr) == 1 and fr[0] == pytest.approx(mod.FRICTION_N, rel=0.10), added
+    assert js["error_after"] < 0.1 * js["error_before"]
+    # the description it writes loads and carries both modes under their own names
+    desc = mjcf.load_table(out / "lab_calibrated.toml")
+    assert sorted(e.get("name", "") for e in desc.effects if e["type"] == "payload_mode") == [
+        "payload_mode 1",
+        "payload_mode 2",
+    ]
 
 
 def test_valve_null_drift_is_estimated(example):
