@@ -128,7 +128,6 @@ def cmd_replay(args) -> int:
     from sim.runs.runfile import write_run
 
     prog = _progress(args)
-    out = out_dir(args.out)
     prog.stage(f"replaying {args.run} open loop")
     bias = "none" if args.no_bias else args.bias  # None: estimated for a measured run
     rep = replay(
@@ -141,6 +140,7 @@ def cmd_replay(args) -> int:
         hold=args.hold,
     )
     res = rep.result
+    out = out_dir(args.out)  # after the replay: a run or description it refuses leaves nothing behind
     stem = Path(args.run).name[: -len(".run.npz")] if args.run.endswith(".run.npz") else Path(args.run).stem
     path = out / f"{stem}.replay.run.npz"
     write_run(path, rep.run)

@@ -227,6 +227,52 @@ def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, example, capsys,
     assert not out.exists()
 
 
+def _lab_variant(tmp_path, name, edit):
+    text = edit((ROOT / "scenarios" / "tables" / "lab.toml").read_text())
+    p = tmp_path / f"{name}.toml"
+    p.write_text(text)
+    return p
+
+
+def _without(section):
+    def cut(text):
+        a = text.index(f"[{section}]")
+        b = text.index("\n[", a + 1)
+        return text[:a] + text[b + 1 :]
+
+    return cut
+
+
+@pytest.mark.parametrize(
+    "command, table_edit, needle",
+    [
+        # the map turns a differential pressure into force through the description's area
+        ("import", lambda t: t.replace("area_b_m2 = 0.005", "area_b_m2 = 0.004"), "has unequal areas"),
+        # the replay path needs the servovalve
+        ("replay", _without("servovalve"), "missing field 'servovalve'"),
+        # the mechanical path needs the record's actuators in the description
+        ("calibrate", lambda t: t.replace('name = "A"', 'name = "B"'), "do not match table 'lab' (['B'])"),
+        # every path needs the hydraulics the description declares
+        ("calibrate", _without("supply"), "missing field 'supply'"),
+    ],
+)
+def test_a_description_missing_what_the_path_needs_is_one_line(tmp_path, example, capsys, command, table_edit, needle):
+    """The issue's last bad input: the table description lacks what the chosen path needs:
+    one line naming the file and the field, exit 2, nothing written."""
+    table = _lab_variant(tmp_path, "lab_bad", table_edit)
+    out = tmp_path / "out"
+    if command == "import":
+        mp = tmp_path / "map.toml"
+        mp.write_text(MAP.read_text().replace('table = "lab"', f'table = "{table}"'))
+        args = ["import", str(example["csvs"][204.8]), "--map", str(mp), "--out", str(out)]
+    else:
+        args = [command, str(example["runs_dir"] / "export_2048.run.npz"), "--table", str(table), "--out", str(out)]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("error: ") and needle in err, err
+    assert not out.exists()
+
+
 # ------------------------------------------------------------------ replay
 def test_replay_at_204_8_and_1024_hz_agree(example, tmp_path):
     from sim.calibrate.replay import replay
