@@ -50,9 +50,11 @@ FORCE_SKEW_S = 1.0 / 2048
 def truth_table(folder: Path) -> Path:
     """The lab table as it really is: its description plus the undeclared friction."""
     text = (ROOT / "scenarios" / "tables" / "lab.toml").read_text()
-    text += ("\n# The worked example's truth: bearing friction the lab's description does not declare.\n"
-             "[[effect]]\ntype = \"platen_coulomb\"\ndof = \"x\"\n"
-             f"force_n = {FRICTION_N!r}   # assumed: the example's undeclared effect\n")
+    text += (
+        "\n# The worked example's truth: bearing friction the lab's description does not declare.\n"
+        '[[effect]]\ntype = "platen_coulomb"\ndof = "x"\n'
+        f"force_n = {FRICTION_N!r}   # assumed: the example's undeclared effect\n"
+    )
     tomllib.loads(text)
     p = folder / "lab_truth.toml"
     p.write_text(text)
@@ -99,13 +101,23 @@ def lab_record(run, *, rate_hz: float = 204.8, bias: float = BIAS, seed: int = S
     tr = np.arange(n) / rate_hz
     rng = np.random.default_rng(seed)
     meas = lambda a: interpolate(t, a, tr)
-    meta = {"format": FORMAT, "table": "lab", "sample_rate_hz": rate_hz, "actuators": ["A"], "dofs": ["x"],
-            "source": "measured", "description": "synthetic lab export (worked example)",
-            "payload": None if bare else "lab_2storey",
-            "accelerometers": [{"name": "F1", "position": [0.0, 0.0, 0.8], "direction": [1.0, 0.0, 0.0]},
-                               {"name": "F2", "position": [0.0, 0.0, 1.6], "direction": [1.0, 0.0, 0.0]}]}
+    meta = {
+        "format": FORMAT,
+        "table": "lab",
+        "sample_rate_hz": rate_hz,
+        "actuators": ["A"],
+        "dofs": ["x"],
+        "source": "measured",
+        "description": "synthetic lab export (worked example)",
+        "payload": None if bare else "lab_2storey",
+        "accelerometers": [
+            {"name": "F1", "position": [0.0, 0.0, 0.8], "direction": [1.0, 0.0, 0.0]},
+            {"name": "F2", "position": [0.0, 0.0, 1.6], "direction": [1.0, 0.0, 0.0]},
+        ],
+    }
     return RunFile(
-        t=tr, meta=meta,
+        t=tr,
+        meta=meta,
         # the drive the controller put out, as the recorder's input saw it: the DAC's staircase
         # after its reconstruction filter (assumed smooth: interpolated between the ticks; at
         # 204.8 Hz every sample is a tick's own value)
@@ -115,11 +127,13 @@ def lab_record(run, *, rate_hz: float = 204.8, bias: float = BIAS, seed: int = S
         table_acceleration=meas(acc_t[:, None]) + ACC_NOISE_M_S2 * rng.standard_normal((n, 1)),
         accelerometers=meas(floors) + ACC_NOISE_M_S2 * rng.standard_normal((n, 2)),
         # the force at the motion's instant (FORCE_SKEW_S above)
-        actuator_force=interpolate(t, run.actuator_force, tr + FORCE_SKEW_S))
+        actuator_force=interpolate(t, run.actuator_force, tr + FORCE_SKEW_S),
+    )
 
 
-def make_export(out, *, duration_s: float = 20.0, rates=(204.8,), bias: float = BIAS, bare: bool = True,
-                second: bool = True) -> dict:
+def make_export(
+    out, *, duration_s: float = 20.0, rates=(204.8,), bias: float = BIAS, bare: bool = True, second: bool = True
+) -> dict:
     """Simulate once, write ``export_<rate>hz.csv`` per rate into ``out`` (with ``bare``,
     ``bare_<rate>hz.csv``: the same test on the bare table; with ``second``,
     ``second_<rate>hz.csv``: a second specimen test, another noise seed, that calibration
@@ -139,10 +153,19 @@ def make_export(out, *, duration_s: float = 20.0, rates=(204.8,), bias: float = 
             name = f"{kind}_{r:g}hz".replace(".", "p")  # export_204p8hz
             mp = HERE / ("lab_map_bare.toml" if kind == "bare" else "lab_map.toml")
             paths[name] = export_csv(rec, mp, folder / f"{name}.csv")
-    (folder / "truth.json").write_text(json.dumps({"valve_null_bias": bias, "bearing_friction_n": FRICTION_N,
-                                                   "accelerometer_noise_m_s2": ACC_NOISE_M_S2, "seed": SEED,
-                                                   "second_test_noise_seed": SECOND_SEED if second else None,
-                                                   "duration_s": duration_s}, indent=2))
+    (folder / "truth.json").write_text(
+        json.dumps(
+            {
+                "valve_null_bias": bias,
+                "bearing_friction_n": FRICTION_N,
+                "accelerometer_noise_m_s2": ACC_NOISE_M_S2,
+                "seed": SEED,
+                "second_test_noise_seed": SECOND_SEED if second else None,
+                "duration_s": duration_s,
+            },
+            indent=2,
+        )
+    )
     return paths
 
 
@@ -154,8 +177,9 @@ def main(argv=None) -> int:
     p.add_argument("--no-bare", action="store_true", help="skip the bare-table test")
     p.add_argument("--no-second", action="store_true", help="skip the second specimen test (the held-out one)")
     a = p.parse_args(argv)
-    for name, path in make_export(a.out, duration_s=a.duration, rates=tuple(a.rate or (204.8,)),
-                                  bare=not a.no_bare, second=not a.no_second).items():
+    for name, path in make_export(
+        a.out, duration_s=a.duration, rates=tuple(a.rate or (204.8,)), bare=not a.no_bare, second=not a.no_second
+    ).items():
         print(f"{name} -> {path}")
     return 0
 
