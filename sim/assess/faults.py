@@ -4,7 +4,9 @@
 (:mod:`sim.effects.faults`: each keeps when it took effect, the interlock its trip) and
 the recorded channels, and returns ``summary["faults"]``:
 
-* ``events``: each fault (what, where, declared start, when it took effect);
+* ``events``: each fault (what, where, declared start, when it took effect); a run with
+  no fault that drives an actuator into its end cushion has that as its event (a
+  summary without faults and cushions has no ``faults`` at all);
 * ``interlock``: its limits and its trip (what tripped, where, when, value and limit),
   or None when the run had no interlock;
 * ``after``: the peak demands on the table and the specimen from the first event on:
@@ -30,29 +32,43 @@ def _peak(a) -> float | None:
 
 
 def fault_summary(res, tm, hp, payload=None) -> dict | None:
-    """``summary["faults"]`` of run ``res`` of table model ``tm`` (None: no faults)."""
+    """``summary["faults"]`` of run ``res`` of table model ``tm`` (None: no fault and no
+    end cushion reached)."""
     from sim.assess.feasibility import specimen_response
     from sim.effects.faults import Interlock, is_fault
 
     faults = [e for e in tm.effects if is_fault(e)]
-    if not faults:
+    t = np.asarray(res.t, float)
+    names = list(hp.names)
+    usable = np.asarray(hp.half_stroke_m - hp.cushion_length_m, float)
+    whole = np.abs(res.channels["actuator_displacement"]) > usable
+    hit = None
+    if whole.any():  # an end cushion reached (a fault or a drive beyond the stroke)
+        k, i = np.argwhere(whole)[0]
+        hit = {
+            "type": "end_cushion",
+            "what": "end cushion reached",
+            "where": f"actuator:{names[i]}",
+            "start_s": None,
+            "t_s": float(t[k]),
+        }
+    if not faults and hit is None:
         return None
     events = [e.event() for e in faults if not isinstance(e, Interlock)]
+    if not events and hit is not None:
+        events = [hit]
     locks = [e for e in faults if isinstance(e, Interlock)]
     lock = locks[0].event() if locks else None
     times = [ev["t_s"] for ev in events if ev["t_s"] is not None]
     if lock and lock["trip"] and not times:
         times = [lock["trip"]["t_s"]]
-    t = np.asarray(res.t, float)
     t0 = min(times) if times else None
     out = {"events": events, "interlock": lock, "from_s": t0, "after": None, "interlock_before_end_stops": None}
     if t0 is None or not len(t):
         return out
     sel = t >= t0 - 1e-9
     ch = res.channels
-    names = list(hp.names)
     s = ch["actuator_displacement"][sel]
-    usable = np.asarray(hp.half_stroke_m - hp.cushion_length_m, float)
     peak_s = np.nanmax(np.abs(s), axis=0) if len(s) else np.zeros(len(names))
     into = np.abs(s) > usable
     cushion = None
@@ -125,7 +141,10 @@ def fault_lines(f: dict) -> list[str]:
         )
         if acc:
             lines.append(
-                "  peak table acceleration " + ", ".join(f"{d} {v:.2f}" for d, v in acc.items()) + " m/s^2 (rad/s^2)"
+                "  peak table acceleration "
+                + ", ".join(f"{d} {v:.2f}" for d, v in acc.items())
+                + " m/s^2"
+                + (" (rotations in rad/s^2)" if any(d.startswith("r") for d in acc) else "")
             )
         c = a["end_cushion_reached"]
         lines.append(

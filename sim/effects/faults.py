@@ -37,7 +37,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from sim.effects.base import Effect, register
+from sim.effects.base import EFFECTS, Effect, create, register
 from sim.errors import ScenarioError
 
 START = ("s", 0.0, 1e6, 0.0)  #: every fault's start time (s of the run; 0: from the start)
@@ -251,7 +251,8 @@ class SupportPressureLoss(Fault):
         data.qfrc_applied[self.dadr] -= frac * lift
 
     def details(self) -> dict:
-        return {"support": self.options["support"], "lift_lost_n": getattr(self, "lost_n", None)}
+        s = self.options["support"]
+        return {"where": f"support:{s}", "support": s, "lift_lost_n": getattr(self, "lost_n", None)}
 
 
 #: The interlock's limits: key -> (unit, lower, upper, default, why the default).
@@ -402,8 +403,6 @@ def scenario_entries(
     scenario's ``[interlock]`` on top; ``enabled = false`` leaves it out)."""
     out = []
     for i, entry in enumerate(faults):
-        from sim.effects.base import create
-
         src = f"{source}: [[fault]] #{i + 1}"
         if not isinstance(entry, dict) or "type" not in entry:
             raise ScenarioError(f"{src} needs a 'type' (pump_trip, valve_stuck, support_pressure_loss, sensor_loss)")
@@ -426,8 +425,6 @@ def scenario_entries(
 
 
 def _probe(entry: dict):
-    from sim.effects.base import EFFECTS
-
     return EFFECTS.get(entry.get("type"), Effect)
 
 
