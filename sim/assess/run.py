@@ -173,7 +173,7 @@ class ScenarioPlan:
             description=sc.description or sc.name,
             payload_name=self.payload.name if self.payload else None,
             reference=ref,
-            extra_meta={"scenario": sc.name, "controller": gains_json(self.gains)},
+            extra_meta={"scenario": sc.name, "controller": gains_json(self.gains), **_fault_meta(self.tm)},
         )
         summary = {
             "schema": SCHEMA,
@@ -240,6 +240,15 @@ def _with_overrides(sc, overrides: dict):
     payload = parse_payload({"payload": data["payload"]}, src=f"{ppath} (with overrides)") if ppath else None
     sc = dataclasses.replace(sc, motion=data["motion"], controller=data["controller"], iteration=data["iteration"])
     return desc, payload, sc
+
+
+def _fault_meta(tm) -> dict:
+    """``{"faults": [...]}``: the fault entries of a run with faults (the run file says
+    what was done to the table; its table description is the file's, without them)."""
+    from sim.effects.faults import is_fault
+
+    faults = [e.entry() for e in tm.effects if is_fault(e)]
+    return {"faults": faults} if faults else {}
 
 
 def _with_faults(desc, sc, iterations: int):

@@ -175,3 +175,17 @@ def test_run_command_prints_and_writes_the_event(tmp_path, capsys):
     doc = json.loads((tmp_path / "o" / "summary.json").read_text(), parse_constant=lambda c: pytest.fail(c))
     assert doc["faults"]["events"][0]["t_s"] == pytest.approx(0.1, abs=1e-3)
     assert doc["faults"]["interlock"]["limits"]["error_limit_m"] == 0.02
+
+
+def test_a_fault_run_is_reproducible_and_its_run_file_names_the_faults(tmp_path):
+    from sim.runs.runfile import read_run
+
+    path = scenario(tmp_path, "again", '[[fault]]\ntype = "sensor_loss"\nwhere = "actuator:A"\nstart_s = 0.2\n')
+    for k in range(2):
+        assert main(["run", str(path), "--out", str(tmp_path / f"o{k}"), "--json"]) == 0
+    a, b = (read_run(tmp_path / f"o{k}" / "again.run.npz") for k in range(2))
+    for name in ("t",) + tuple(a.present_channels()):
+        assert getattr(a, name).tobytes() == getattr(b, name).tobytes(), name
+    assert a.meta["faults"] == b.meta["faults"]
+    assert [f["type"] for f in a.meta["faults"]] == ["sensor_loss", "interlock"]
+    assert a.meta["faults"][0]["where"] == "actuator:A" and a.meta["faults"][0]["start_s"] == 0.2
