@@ -285,6 +285,13 @@ INTERLOCK_LIMITS = {
         0.7,
         "assumed: supply pressure below 70 % of its set pressure (the accumulators nearly at precharge)",
     ),
+    "ramp_down_s": (
+        "s",
+        0.0,
+        10.0,
+        0.0,
+        "assumed: 0, the valve commands to null at once (a hard interlock); > 0 scales them down over that time",
+    ),
 }
 
 
@@ -299,8 +306,8 @@ class Interlock(Fault):
     * the supply pressure below ``supply_low_fraction`` of its set pressure.
 
     The first that trips stops the test: every valve command to null from that tick on
-    and the pumps off (a stuck valve stays where it is stuck); the run goes on to its end
-    (the ramp-down is recorded). Limits: the scenario's ``[interlock]``, else the table's
+    (or scaled down to null over ``ramp_down_s``) and the pumps off (a stuck valve stays
+    where it is stuck); the run goes on to its end (what follows the trip is recorded). Limits: the scenario's ``[interlock]``, else the table's
     ``[interlock]``, else the defaults of :data:`INTERLOCK_LIMITS` (each with its reason).
     """
 
@@ -372,14 +379,17 @@ class Interlock(Fault):
             "value": value,
             "limit": limit,
             "unit": unit,
-            "action": "valve commands to null, pumps off",
+            "action": "valve commands to null"
+            + (f" over {v['ramp_down_s']:g} s" if v["ramp_down_s"] > 0 else "")
+            + ", pumps off",
         }
         if self.hs is not None:
             self.hs._G[_g_qmax()] = 0.0
 
     def command(self, t: float, cmd: np.ndarray) -> None:
         if self.trip is not None:
-            cmd[:] = 0.0
+            ramp = self.values["ramp_down_s"]
+            cmd *= max(0.0, 1.0 - (t - self.trip["t_s"]) / ramp) if ramp > 0 else 0.0
 
     def event(self) -> dict:
         return {"type": "interlock", "limits": dict(self.values), "trip": self.trip}

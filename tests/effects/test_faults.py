@@ -189,3 +189,19 @@ def test_a_fault_run_is_reproducible_and_its_run_file_names_the_faults(tmp_path)
     assert a.meta["faults"] == b.meta["faults"]
     assert [f["type"] for f in a.meta["faults"]] == ["sensor_loss", "interlock"]
     assert a.meta["faults"][0]["where"] == "actuator:A" and a.meta["faults"][0]["start_s"] == 0.2
+
+
+def test_interlock_ramp_down(tmp_path):
+    """``ramp_down_s``: after the trip the valve commands shrink to null over that time
+    (0: at once), and the pumps are off."""
+    extra = (
+        '[[fault]]\ntype = "sensor_loss"\nwhere = "actuator:A"\nmode = "zero"\nstart_s = 0.3\n'
+        "[interlock]\nramp_down_s = 0.1\n"
+    )
+    plan, out = run(scenario(tmp_path, "ramp", extra))
+    tr = out.summary["faults"]["interlock"]["trip"]
+    assert tr["action"] == "valve commands to null over 0.1 s, pumps off"
+    t, u = out.result.t, out.result.channels["valve_command"][:, 0]
+    during = (t > tr["t_s"] + 1e-9) & (t < tr["t_s"] + 0.1 - 1e-9)
+    assert np.any(u[during] != 0.0) and np.all(u[t >= tr["t_s"] + 0.1 + 1e-9] == 0.0)
+    assert plan.sim.hs.state.q_pump[0] == 0.0
