@@ -205,3 +205,13 @@ def test_interlock_ramp_down(tmp_path):
     during = (t > tr["t_s"] + 1e-9) & (t < tr["t_s"] + 0.1 - 1e-9)
     assert np.any(u[during] != 0.0) and np.all(u[t >= tr["t_s"] + 0.1 + 1e-9] == 0.0)
     assert plan.sim.hs.state.q_pump[0] == 0.0
+
+
+def test_a_run_without_faults_keeps_the_fused_tick(tmp_path):
+    """No fault declared: no hooks, the compiled fused tick runs as before (the fault
+    machinery costs a healthy run nothing)."""
+    from sim.effects.faults import hooks_for
+
+    plan = plan_scenario(scenario(tmp_path, "plain", table="cgs", amp=0.001), duration_s=0.05)
+    assert hooks_for(plan.sim) is None and "faults" not in plan.run().summary
+    assert plan.sim.run(reference=plan.reference).timing["fused_s"] > 0
