@@ -460,6 +460,8 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         top.raw(k)
     if top.has("controller"):
         top.raw("controller")
+    if top.has("interlock"):
+        top.raw("interlock")  # the controller's limit detectors (read by sim/effects/faults.py, checked there)
     if top.has("calibration"):
         top.raw("calibration")  # read by mjcf/calibrate.py (validated there)
     if top.has("published"):

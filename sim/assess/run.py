@@ -173,7 +173,7 @@ class ScenarioPlan:
             description=sc.description or sc.name,
             payload_name=self.payload.name if self.payload else None,
             reference=ref,
-            extra_meta={"scenario": sc.name, "controller": gains_json(self.gains)},
+            extra_meta={"scenario": sc.name, "controller": gains_json(self.gains), **_fault_meta(self.tm)},
         )
         summary = {
             "schema": SCHEMA,
@@ -212,6 +212,11 @@ class ScenarioPlan:
                 warnings=self.warnings,
             )
         )
+        from sim.assess.faults import fault_summary
+
+        faults = fault_summary(res, self.tm, sim.hp, self.payload)
+        if faults is not None:
+            summary["faults"] = faults
         return RunOutcome(run=run, result=res, summary=summary, tm=self.tm, warnings=self.warnings)
 
 
@@ -235,6 +240,42 @@ def _with_overrides(sc, overrides: dict):
     payload = parse_payload({"payload": data["payload"]}, src=f"{ppath} (with overrides)") if ppath else None
     sc = dataclasses.replace(sc, motion=data["motion"], controller=data["controller"], iteration=data["iteration"])
     return desc, payload, sc
+
+
+def _fault_meta(tm) -> dict:
+    """``{"faults": [...]}``: the fault entries of a run with faults (the run file says
+    what was done to the table; its table description is the file's, without them)."""
+    from sim.effects.faults import is_fault
+
+    faults = [e.entry() for e in tm.effects if is_fault(e)]
+    return {"faults": faults} if faults else {}
+
+
+def _with_faults(desc, sc, iterations: int):
+    """``desc`` with the scenario's ``[[fault]]``/``[[effect]]`` entries and its interlock
+    added to the table's effects (:func:`sim.effects.faults.scenario_entries`)."""
+    import dataclasses
+
+    from sim.effects.base import create
+    from sim.effects.faults import is_fault, scenario_entries, tick_faults
+    from sim.loop.analog import is_rice
+
+    src = str(sc.path or sc.name)
+    extra = scenario_entries(list(sc.faults), sc.interlock, desc, src, interlock_ok=not is_rice(desc))
+    if not extra:
+        return desc
+    objs = [create(e, source=src) for e in extra]
+    if iterations and any(is_fault(e) for e in objs):
+        raise ScenarioError(f"{src}: a scenario with faults runs with the plain controller; set iteration.count = 0")
+    if is_rice(desc) and tick_faults(objs):
+        kinds = sorted({e.type for e in tick_faults(objs)})
+        raise ScenarioError(
+            f"{src}: the analog (uni-axial) loop runs no controller-tick faults ({', '.join(kinds)}); "
+            "use pump_trip, or a large drive for the end cushions"
+        )
+    raw = dict(desc.raw)  # the raw data too: the analog loop parses its table again from it
+    raw["effect"] = list(raw.get("effect", [])) + extra
+    return dataclasses.replace(desc, raw=raw, effects=tuple(desc.effects) + tuple(extra))
 
 
 def check_overrides(scenario, overrides: dict) -> None:
@@ -287,6 +328,7 @@ def plan_scenario(
     if payload is ...:
         payload = mjcf.load_payload(sc.payload) if sc.payload else None
     it = dict(sc.iteration)
+    desc = _with_faults(desc, sc, iterations if iterations is not None else it.get("count", 0))
     if iterations is not None:
         if iterations < 0 or iterations > 10:
             raise ScenarioError(f"--iterations must be 0..10 (got {iterations})")

@@ -114,6 +114,11 @@ def _print_summary(s: dict, command_wall_s: float | None = None) -> None:
         f"  peak force {100 * ff:.0f} % of capacity, peak stroke {100 * sf:.0f} % of half-stroke, "
         f"min supply {s['min_supply_pressure_pa'] / 1e6:.1f} MPa, max swivel gap {s['max_loop_gap_m'] * 1e6:.2f} um"
     )
+    if s.get("faults"):
+        from sim.assess.faults import fault_lines
+
+        for line in fault_lines(s["faults"]):
+            print("  " + line)
     di = s.get("drive_iterations", {})
     if di.get("count"):
         hist = ", ".join(f"{100 * h['mean_nrmse_acceleration']:.1f}%" for h in di["history"])

@@ -223,7 +223,7 @@ def register(cls: type[Effect]) -> type[Effect]:
 def create(entry: dict, *, source: str = "effect") -> Effect:
     """The :class:`Effect` of one ``[[effect]]`` entry (one-line error for an unknown type)."""
     kind = entry.get("type")
-    if kind not in EFFECTS:
+    if not isinstance(kind, str) or kind not in EFFECTS:  # (a list or a table is no type name either)
         import difflib
 
         close = difflib.get_close_matches(str(kind), sorted(EFFECTS), n=1)

@@ -543,6 +543,8 @@ def accepts(sim) -> str | None:
         return "the platen is not free (bearing-guided table)"
     if tm.step_effects:
         return "the table has per-step effects"
+    if any(getattr(e, "fault", False) for e in tm.effects):  # faults: their hooks run in the Python loop only
+        return "the run has fault effects (valve_stuck, sensor_loss, interlock: controller-tick hooks)"
     if hs.delay_steps != 0 or hs.backend != "numba":
         return "the hydraulics have a valve delay or the numpy backend"
     if sim.steps_per_tick < 2:

@@ -39,6 +39,7 @@ from hydraulics import HydraulicParams, HydraulicSystem
 from mjcf.description import actuator_strokes
 from mjcf.model import TableModel
 from sim.control.tvc import ControllerGains, TableController
+from sim.effects.faults import hooks_for  # faults:
 from sim.effects.registry import dahl_step
 from sim.errors import RunInterrupted, ScenarioError, is_interrupt
 from sim.scenario.reference import Reference, reference_from_motions
@@ -291,8 +292,14 @@ class Simulation:
         slide_d, pdi, n_pd = tm.platen_slide_dadr, tm.platen_dof_index, len(tm.platen_dof_index)
         xmat = d.xmat
         step = mujoco.mj_step
+        hooks = hooks_for(self)  # faults: controller-tick hooks of fault effects (sim/effects/faults.py), or None
+        if hooks is not None:
+            if reference is None:
+                raise ScenarioError("fault effects act on closed-loop runs; this is an open-loop replay")
+            hooks.start(d)
         fuse_tick = (
-            fast
+            hooks is None  # faults: the fused tick has no hooks
+            and fast
             and fuse
             and fused
             and free
@@ -420,7 +427,9 @@ class Simulation:
                     t1 = clock()
                     t_out += t1 - t0
                     # ---- controller tick (valve commands held until the next tick)
-                    if reference is not None:
+                    if hooks is not None:  # faults: the tick with feedback faults, interlock, stuck valves
+                        hooks.tick(k, k / rate, s_ref_all, v_ref_all, vff_all, d, force, psup[0], cmd)
+                    elif reference is not None:
                         if not free:
                             xk[:] = qpos[qa]
                             vel6[:] = 0.0

@@ -147,6 +147,8 @@ class Scenario:
     path: Path | None = None
     iteration: dict = field(default_factory=dict)
     raw: dict = field(default_factory=dict, repr=False)
+    faults: list = field(default_factory=list)  #: [[fault]] and [[effect]] entries (sim.effects.faults)
+    interlock: dict = field(default_factory=dict)  #: [interlock] limits over the table's
 
 
 def _load(path: Path) -> dict:
@@ -165,7 +167,12 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         raise ScenarioError(str(e)) from None
     data = _load(path)
     src = str(path)
-    _unknown(data, {"scenario", "motion", "controller", "output", "iteration"}, "top level", src)
+    _unknown(
+        data,
+        {"scenario", "motion", "controller", "output", "iteration", "fault", "effect", "interlock"},
+        "top level",
+        src,
+    )
     sc = V.require_table(data, "scenario", "scenario", src, ScenarioError, what="name, table, ...")
     _unknown(sc, _SCEN_KEYS, "scenario", src)
     for k in ("name", "table"):
@@ -219,6 +226,15 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         table = str(base / table)
     if payload and payload.endswith(".toml") and not Path(payload).is_absolute():
         payload = str(base / payload)
+    faults = []  # [[fault]] / [[effect]]: effects the scenario adds to the table (docs/faults.md)
+    for key in ("fault", "effect"):
+        got = data.get(key, [])
+        if not isinstance(got, list) or not all(isinstance(e, dict) and "type" in e for e in got):
+            raise ScenarioError(f"{src}: [[{key}]] entries must be tables with a 'type' (see docs/faults.md)")
+        faults += got
+    interlock = data.get("interlock", {})
+    if not isinstance(interlock, dict):
+        raise ScenarioError(f"{src}: [interlock] must be a table of limits (see docs/faults.md)")
     pad = sc.get("pad_to_duration", False)
     if not isinstance(pad, bool):
         raise ScenarioError(f"{src}: 'scenario.pad_to_duration' must be true or false")
@@ -235,6 +251,8 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         path=path,
         raw=data,
         iteration=dict(it),
+        faults=faults,
+        interlock=dict(interlock),
     )
     _check_motion(s)
     return s

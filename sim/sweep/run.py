@@ -65,7 +65,10 @@ def error_row(case, message, wall) -> dict:
 
 
 def outcome_row(case, out, run_dir, wall) -> dict:
-    """The results-table row of a :class:`sim.assess.run.RunOutcome`."""
+    """The results-table row of a :class:`sim.assess.run.RunOutcome` (a run stopped by
+    Ctrl-C is no case result: the interrupt goes on up, nothing is written for it)."""
+    if getattr(out.result, "interrupted", False):
+        raise KeyboardInterrupt
     s = out.summary
     f = s["feasibility"]
     row = {

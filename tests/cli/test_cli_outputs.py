@@ -303,6 +303,11 @@ def test_scenario_file_doc_covers_every_key():
         | {f"iteration.{k}" for k in F._ITERATION_KEYS}
         | {f"output.{k}" for k in F._OUTPUT_KEYS}
     )
+    from sim.effects import faults as FA  # [[fault]] entries and [interlock] (docs/faults.md)
+
+    kinds = (FA.PumpTrip, FA.ValveStuck, FA.SupportPressureLoss, FA.SensorLoss)
+    accepted |= {"fault[].type", "fault[].where"} | {f"fault[].{k}" for c in kinds for k in (*c.SPEC, *c.OPTIONS)}
+    accepted |= {f"interlock.{k}" for k in (*FA.Interlock.SPEC, *FA.Interlock.OPTIONS)}
     doc = _documented("scenario-file.md")
     assert not sorted(accepted - doc), f"docs/scenario-file.md lacks {sorted(accepted - doc)}"
     assert not sorted(doc - accepted), (

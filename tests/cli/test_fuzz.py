@@ -1,10 +1,12 @@
-"""Property-based fuzzing of the readers a user feeds: scenario files, table and
-payload descriptions, run files. Whatever the input, a reader either accepts it or
-raises a user error (one line); never anything else (a TypeError, a KeyError, an
-IndexError, a MemoryError would reach the user as a traceback).
+"""Property-based fuzzing of the readers a user feeds: scenario files (with their
+faults), table and payload descriptions, run files, recorder exports (CSV import).
+Whatever the input, a reader either accepts it or raises a user error (one line); never
+anything else (a TypeError, a KeyError, an IndexError, a MemoryError would reach the
+user as a traceback).
 
-Inputs are generated as text (TOML) and as npz contents from strategies; the sizes are
-kept small so the whole file runs in well under a minute.
+Inputs are generated as text (TOML, CSV) and as npz contents from strategies; the sizes
+are kept small. 1000 cases per reader in the suite (about 3 min for the file on a
+loaded 2-core machine); ``SHAKETABLE_FUZZ_EXAMPLES=3000`` runs a few thousand each.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
 import tempfile
 from pathlib import Path
 
@@ -27,8 +30,10 @@ from sim.errors import UserError, user_errors  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 ALLOWED = user_errors()
+#: cases per reader: 1000 in the suite (CI time); SHAKETABLE_FUZZ_EXAMPLES=3000 for a longer hunt
+N = int(os.environ.get("SHAKETABLE_FUZZ_EXAMPLES", "1000"))
 FUZZ = settings(
-    max_examples=1000,
+    max_examples=N,
     deadline=None,
     derandomize=True,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
@@ -106,7 +111,11 @@ SCEN_KEYS = {
     "controller": ["kp_per_s", "kff_velocity", "rate_hz", "kdp", "bogus"],
     "output": ["sample_rate_hz"],
     "iteration": ["count", "gain", "band_hz", "frf", "seed", "noise_level"],
+    "interlock": ["enabled", "stroke_fraction", "error_limit_m", "force_fraction", "supply_low_fraction", "bogus"],
+    "[fault]": ["type", "where", "start_s", "opening", "support", "ramp_s", "mode", "bogus"],
 }
+FAULT_TYPES = ["pump_trip", "valve_stuck", "sensor_loss", "support_pressure_loss", "interlock", "leakage", "pump"]
+FAULT_WHERE = ["supply", "table", "actuator:X1", "actuator:Z4", "actuator:Q", "class:vertical", "dof:x", "S1", ""]
 
 
 @st.composite
@@ -119,8 +128,22 @@ def scenario_text(draw):
         lines.append(f"[{sec}]")
         keys = draw(st.lists(st.sampled_from(SCEN_KEYS[sec]), max_size=6, unique=True))
         for k in keys:
-            lines.append(f"{k} = {draw(VALUES)}")
+            if sec == "[fault]" and k in ("type", "where") and draw(st.booleans()):
+                lines.append(f"{k} = {_toml_str(draw(st.sampled_from(FAULT_TYPES if k == 'type' else FAULT_WHERE)))}")
+            else:
+                lines.append(f"{k} = {draw(VALUES)}")
     return "\n".join(lines) + "\n"
+
+
+_CGS = []
+
+
+def _cgs():
+    if not _CGS:
+        import mjcf
+
+        _CGS.append(mjcf.load_table("cgs"))
+    return _CGS[0]
 
 
 def _scenario_roundtrip(text: str) -> None:
@@ -133,6 +156,10 @@ def _scenario_roundtrip(text: str) -> None:
         dur = sc.duration_s
         if dur is not None and dur * sc.sample_rate_hz > 2e5:
             return  # valid and long: generating it is not what this test is about
+        if sc.faults or sc.interlock:  # the faults as the run would take them (sim/effects/faults.py)
+            from sim.effects.faults import scenario_entries
+
+            scenario_entries(sc.faults, sc.interlock, _cgs(), str(path))
         motions = build_motions(sc)
         if max(len(m.t) for m in motions.values()) <= 2e5:
             build_reference(sc, motions)
@@ -146,10 +173,55 @@ def test_fuzz_scenario_reader(text):
     _scenario_roundtrip(text)
 
 
-@settings(max_examples=500, deadline=None, derandomize=True)
+@settings(max_examples=N // 2, deadline=None, derandomize=True)
 @given(st.text(max_size=200))
 def test_fuzz_scenario_reader_any_text(text):
     _scenario_roundtrip(text)
+
+
+@st.composite
+def fault_tables(draw):
+    """[[fault]] entries and an [interlock] table as TOML text, keys and values mixed."""
+    lines = []
+    for _ in range(draw(st.integers(0, 3))):
+        lines.append("[[fault]]")
+        for k in draw(st.lists(st.sampled_from(SCEN_KEYS["[fault]"]), max_size=5, unique=True)):
+            if k in ("type", "where") and draw(st.integers(0, 3)):
+                lines.append(f"{k} = {_toml_str(draw(st.sampled_from(FAULT_TYPES if k == 'type' else FAULT_WHERE)))}")
+            elif k == "support" and draw(st.booleans()):
+                lines.append(f"support = {_toml_str(draw(st.sampled_from(['S1', 'S4', 'S5', 's1'])))}")
+            else:
+                lines.append(f"{k} = {draw(VALUES)}")
+    if draw(st.booleans()):
+        lines.append("[interlock]")
+        for k in draw(st.lists(st.sampled_from(SCEN_KEYS["interlock"]), max_size=3, unique=True)):
+            lines.append(f"{k} = {draw(VALUES)}")
+    return "\n".join(lines) + "\n"
+
+
+@FUZZ
+@given(fault_tables())
+def test_fuzz_scenario_faults(text):
+    """The scenario's faults as a run takes them (checked against the CGS table)."""
+    import tomllib
+
+    from sim.effects.faults import scenario_entries
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        return  # not TOML: the reader's own error (test_fuzz_scenario_reader)
+    try:
+        faults, lock = data.get("fault", []), data.get("interlock", {})
+        if not isinstance(faults, list) or not isinstance(lock, dict):
+            return
+        entries = scenario_entries(faults, lock, _cgs(), "fuzz.toml")
+    except ALLOWED as e:
+        _one_line(e)
+        hypothesis.event("refused")
+        return
+    hypothesis.event("accepted")
+    assert len(entries) >= len(faults)
 
 
 # ---------------------------------------------------------------- table and payload descriptions
@@ -188,7 +260,7 @@ def mutated(draw, lines, keys):
     return "\n".join(out) + "\n"
 
 
-@settings(max_examples=1000, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=N, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(mutated(TABLE_LINES, TABLE_KEYS))
 def test_fuzz_table_reader(text):
     import mjcf
@@ -201,7 +273,7 @@ def test_fuzz_table_reader(text):
         _one_line(e)
 
 
-@settings(max_examples=1000, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=N, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(mutated(PAYLOAD_LINES, PAYLOAD_KEYS))
 def test_fuzz_payload_reader(text):
     import mjcf
@@ -304,6 +376,74 @@ def test_fuzz_run_file_reader(contents, damage):
     assert math.isfinite(run.sample_rate_hz) and run.sample_rate_hz > 0
     for c in require:
         assert np.all(np.isfinite(run.channel(c)))
+
+
+# ---------------------------------------------------------------- CSV import (sim/runs/importer.py)
+LAB_MAP = ROOT / "scenarios" / "lab_example" / "lab_map.toml"
+CSV_COLUMNS = ["time", "drive", "disp_cmd", "disp", "acc_table", "acc_floor1", "acc_floor2", "dp"]
+CELLS = st.one_of(
+    FLOATS.map(repr),
+    st.sampled_from(["", " ", "nan", "NaN", "inf", "-inf", "n/a", "1e999", "0x10", "1,5", '"3"', "--1"]),
+    st.text(alphabet="0123456789.-+eE ", max_size=6),
+)
+
+
+@st.composite
+def csv_text(draw):
+    """A recorder export as the example map expects it, damaged: columns dropped,
+    renamed or repeated, another delimiter, ragged or empty lines, text cells, time
+    steps uneven, repeated or backwards, too few samples."""
+    header = list(CSV_COLUMNS)
+    for _ in range(draw(st.integers(0, 2))):
+        op = draw(st.sampled_from(["drop", "rename", "repeat", "shuffle"]))
+        if op == "drop" and len(header) > 1:
+            header.pop(draw(st.integers(0, len(header) - 1)))
+        elif op == "rename":
+            header[draw(st.integers(0, len(header) - 1))] = draw(st.sampled_from(["Time", "disp ", "", "x"]))
+        elif op == "repeat":
+            header.append(draw(st.sampled_from(header)))
+        else:
+            header = draw(st.permutations(header))
+    delim = draw(st.sampled_from([",", ",", ",", ";", "\t", " "]))
+    n = draw(st.sampled_from([0, 1, 2, 3, 40, 40, 40]))
+    dt = draw(st.sampled_from([1 / 204.8, 1 / 204.8, 1 / 1024, 0.0, -0.01, 1e-9]))
+    rows = []
+    for i in range(n):
+        row = [repr(round(i * dt, 5)) if h == "time" else repr(0.001 * i) for h in header]
+        rows.append(row)
+    for _ in range(draw(st.integers(0, 4)) if rows else 0):
+        i = draw(st.integers(0, len(rows) - 1))
+        op = draw(st.sampled_from(["cell", "cell", "ragged", "blank", "swap"]))
+        if op == "cell" and rows[i]:
+            rows[i][draw(st.integers(0, len(rows[i]) - 1))] = draw(CELLS)
+        elif op == "ragged":
+            rows[i] = rows[i][: draw(st.integers(0, len(header)))]
+        elif op == "blank":
+            rows[i] = []
+        elif i + 1 < len(rows):
+            rows[i], rows[i + 1] = rows[i + 1], rows[i]
+    lines = [delim.join(header)] + [delim.join(r) for r in rows]
+    return "\n".join(lines) + draw(st.sampled_from(["\n", "", "\n\n"]))
+
+
+@FUZZ
+@given(csv_text())
+def test_fuzz_csv_import(text):
+    from sim.runs.importer import import_file, load_map
+
+    path = TMP / "fuzz_export.csv"
+    path.write_text(text)
+    try:
+        imp = import_file(path, load_map(LAB_MAP))
+    except ALLOWED as e:
+        _one_line(e)
+        hypothesis.event("refused: " + str(e).split(": ", 2)[-1][:30])
+        return
+    hypothesis.event("accepted")
+    # accepted: a run file that reads back, on a uniform increasing time base
+    run = imp.run
+    assert run.n_samples >= 2 and np.all(np.diff(run.t) > 0)
+    assert math.isfinite(run.sample_rate_hz) and run.sample_rate_hz > 0
 
 
 def test_fuzz_allows_only_user_errors():

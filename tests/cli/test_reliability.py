@@ -429,3 +429,142 @@ def test_ctrl_c_in_drive_iteration_identification_keeps_nothing(tmp_path, capsys
     err = capsys.readouterr().err
     assert rc == 130 and "interrupted" in err and "Traceback" not in err
     assert list((tmp_path / "out").iterdir()) == []
+
+
+# ---------------------------------------------------------------- Ctrl-C in a calibration and a sweep
+def _interrupt_when(argv, cwd, ready, delay_s: float = 0.0, timeout_s: float = 300.0):
+    """Start ``python -m sim ARGV`` (stdout and stderr together); once ``ready(text so
+    far)`` is true, wait ``delay_s`` and send SIGINT. Returns (exit code, the whole
+    output, seconds from SIGINT to exit, whether the process was still running when the
+    signal went)."""
+    import threading
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.Popen(
+        [sys.executable, "-u", "-m", "sim", *argv],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(p.stdout.readline, "")), daemon=True)
+    reader.start()
+    deadline = time.time() + timeout_s
+    while not ready("".join(lines)) and p.poll() is None and time.time() < deadline:
+        time.sleep(0.05)
+    time.sleep(delay_s)
+    running = p.poll() is None
+    t0 = time.time()
+    p.send_signal(signal.SIGINT)
+    rc = p.wait(timeout=120)
+    took = time.time() - t0
+    reader.join(timeout=10)
+    return rc, "".join(lines), took, running
+
+
+def _no_partial_files(folder: Path) -> list[Path]:
+    """Every file under ``folder``; none a temporary (the atomic writers' ``.*.tmp``)."""
+    files = [p for p in folder.rglob("*") if p.is_file()]
+    assert not [p for p in files if p.name.startswith(".") or p.name.endswith((".tmp", ".part"))], files
+    return files
+
+
+@pytest.fixture(scope="module")
+def ucsd_run_files(tmp_path_factory):
+    """Two short simulated UCSD runs (a sine and a triangle) to calibrate against."""
+    out = tmp_path_factory.mktemp("cal_runs")
+    for name in ("ucsd_s10", "ucsd_t8"):
+        assert main(["run", name, "--duration", "2.0", "--out", str(out), "--json"]) == 0
+    return [str(out / "ucsd_s10.run.npz"), str(out / "ucsd_t8.run.npz")]
+
+
+@pytest.mark.slow  # ~30 s on a loaded 2-core machine: a calibration's start-up
+def test_sigint_during_calibration_leaves_no_partial_output(tmp_path, ucsd_run_files, capsys):
+    """Ctrl-C once the calibration search is under way (its first candidate printed):
+    exit 130, one line, no traceback; the outputs are written at the end, each
+    atomically: whichever exist are whole (strict JSON, TOML that loads), no temporary."""
+    out = tmp_path / "cal"
+    rc, text, took, running = _interrupt_when(
+        ["calibrate", *ucsd_run_files, "--out", str(out)], tmp_path, lambda s: "explains" in s, 0.2
+    )
+    assert running, "the calibration ended before the signal: nothing was interrupted"
+    assert rc == 130, text
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text and "interrupted" in text
+    assert took < 10
+    import tomllib
+
+    files = _no_partial_files(tmp_path)
+    for p in files:
+        if p.suffix == ".json":
+            json.loads(p.read_text(), parse_constant=lambda c: pytest.fail(c))
+        elif p.suffix == ".toml":
+            assert tomllib.loads(p.read_text())["table"]["name"] == "ucsd"
+    assert not (out / "report.md").exists() or (out / "report.md").read_text().endswith("\n")
+
+
+@pytest.mark.slow  # ~30 s on a loaded 2-core machine: six short runs of the analog uni-axial loop
+def test_sigint_during_sweep_keeps_complete_cases_only(tmp_path, capsys):
+    """Ctrl-C while a sweep runs its cases: the sweep stops (the case under way is not
+    written as a result, the cases after it are not run), every case file kept is whole
+    JSON, no results table or report is written, no temporary is left; a second sweep
+    resumes and completes."""
+    (tmp_path / "rice.toml").write_text(
+        '[scenario]\nname = "rice_short"\ntable = "rice"\nduration_s = 0.6\n'
+        '[motion.x]\ntype = "sine"\namplitude = 0.005\nfrequency_hz = 2.0\n'
+        "[output]\nsample_rate_hz = 4000.0\n"
+    )
+    (tmp_path / "sw.toml").write_text(
+        '[sweep]\nname = "interrupt"\nscenario = "rice.toml"\niterations = 0\nmode = "grid"\n'
+        '[[vary]]\nname = "bulk_modulus_pa"\nkey = "table.fluid.bulk_modulus_pa"\n'
+        "values = [4.0e8, 4.5e8, 5.0e8, 5.5e8, 6.0e8, 6.5e8]\n"
+    )
+    out = tmp_path / "out"
+    rc, text, took, running = _interrupt_when(
+        ["sweep", str(tmp_path / "sw.toml"), "--out", str(out), "--workers", "1"],
+        tmp_path,
+        lambda s: "0/6 cases" in s,
+        1.5,
+    )
+    assert running, "the sweep ended before the signal: nothing was interrupted"
+    assert rc == 130, text
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text and "interrupted" in text
+    assert took < 10
+    files = _no_partial_files(out)
+    cases = sorted((out / "cases").glob("*.json"))
+    assert len(cases) < 6, files
+    for c in cases:
+        row = json.loads(c.read_text(), parse_constant=lambda x: pytest.fail(x))
+        assert row["complete"] is True and row["error"] == "" and row["duration_s"] == pytest.approx(0.6, abs=1e-3)
+    assert not (out / "results.csv").exists() and not (out / "sweep.json").exists() and not (out / "report.md").exists()
+    assert main(["sweep", str(tmp_path / "sw.toml"), "--out", str(out), "--workers", "1"]) == 0
+    table = (out / "results.csv").read_text().splitlines()
+    assert len(table) == 7  # the header and the six cases
+    assert "interrupted" not in "\n".join(table)
+
+
+def test_ctrl_c_in_a_sweep_case_stops_the_sweep(tmp_path, capsys, monkeypatch):
+    """Ctrl-C inside a case's simulation (a loop that keeps the part it computed, for
+    ``run``): the sweep does not book that part as the case's result and go on; it stops,
+    writes no case, no table (deterministic: the interrupt is raised from the loop)."""
+    (tmp_path / "sine.toml").write_text(SINE.format(dur=0.2))
+    (tmp_path / "sw.toml").write_text(
+        '[sweep]\nname = "stop"\nscenario = "sine.toml"\niterations = 0\nmode = "grid"\n'
+        '[[vary]]\nname = "bulk_modulus_pa"\nkey = "table.fluid.bulk_modulus_pa"\nvalues = [0.8e9, 1.0e9, 1.2e9]\n'
+    )
+    n, real = {"k": 0}, S.Simulation.loop_gap
+
+    def once(self):  # one Ctrl-C, in the first case's loop (26 gap checks a case)
+        n["k"] += 1
+        if n["k"] == 20:
+            raise KeyboardInterrupt
+        return real(self)
+
+    monkeypatch.setattr(S.Simulation, "loop_gap", once)
+    out = tmp_path / "out"
+    rc = main(["sweep", str(tmp_path / "sw.toml"), "--out", str(out), "--workers", "1"])
+    err = capsys.readouterr().err
+    assert rc == 130 and "interrupted" in err and "Traceback" not in err
+    assert list((out / "cases").iterdir()) == [] and not (out / "results.csv").exists()
