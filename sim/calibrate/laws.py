@@ -45,6 +45,10 @@ class Law:
     shape: dict = field(default_factory=dict)
     inertial: bool = False
     what: str = ""
+    #: shape parameter -> (value, simpler law): at that value this law IS the simpler one
+    #: (power-law damping at exponent 1 is viscous damping); a fit whose 95 % interval
+    #: holds the value is refused for the simpler law (fewer parameters, same force)
+    nested: dict = field(default_factory=dict)
 
 
 DEADBAND = 1e-3  #: m/s (rad/s): below it the sign of a velocity is the sensor noise's
@@ -111,6 +115,7 @@ add_law(
         lambda u, v, a, s: np.abs(v) ** s["exponent"] * _sign(v),
         shape={"exponent": tuple(np.round(np.arange(0.2, 1.51, 0.1), 3))},
         what="power-law damping C |v|^alpha sign(v)",
+        nested={"exponent": (1.0, "viscous_damping")},
     )
 )
 add_law(
