@@ -308,7 +308,11 @@ def calibrate(
     e_ho = e_ho0
     flat = flatness(mfit, cur.residuals)
     say(f"{path} path: {len(fit_runs)} fit runs, {len(ho_runs)} held out; held-out NRMSE {e_ho0:.4f}")
-    cands = [(law, w) for law in laws for w in distinct_places(mfit[0], places(desc, law.places))]
+    cands = [
+        (law, w)
+        for law in laws
+        for w in distinct_places(mfit[0], [p for p in places(desc, law.places) if law.acts_at(p)])
+    ]
     tried, added = [], []
     n_fits = 0
     for rnd in range(MAX_ROUNDS):
