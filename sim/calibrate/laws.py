@@ -47,11 +47,21 @@ class Law:
     shape: dict = field(default_factory=dict)
     inertial: bool = False
     what: str = ""
-    dofs: tuple = ()
+    #: shape parameter -> (value, simpler law): at that value this law IS the simpler one
+    #: (power-law damping at exponent 1 is viscous damping); a fit whose 95 % interval
+    #: holds the value is refused for the simpler law (fewer parameters, same force)
+    nested: dict = field(default_factory=dict)
+    #: the DOFs a ``dof:`` place may be (None: every DOF of the table)
+    dofs: tuple | None = None
+    #: how many terms of this law one place may hold (a specimen's modes: several)
     repeats: int = 1
     #: "always" a candidate, or only when named (``--effects``) or, for "undeclared_specimen",
     #: when the calibration is told a specimen stands on the table undeclared (``--payload none``)
     when: str = "always"
+
+    def acts_at(self, where: str) -> bool:
+        kind, _, name = where.partition(":")
+        return kind != "dof" or self.dofs is None or name in self.dofs
 
 
 DEADBAND = 1e-3  #: m/s (rad/s): below it the sign of a velocity is the sensor noise's
@@ -118,6 +128,7 @@ add_law(
         lambda u, v, a, s: np.abs(v) ** s["exponent"] * _sign(v),
         shape={"exponent": tuple(np.round(np.arange(0.2, 1.51, 0.1), 3))},
         what="power-law damping C |v|^alpha sign(v)",
+        nested={"exponent": (1.0, "viscous_damping")},
     )
 )
 add_law(
@@ -174,8 +185,7 @@ add_law(
         },
         inertial=True,
         what="a mode of what stands on the platen: modal mass m, frequency f, damping z (m H(s) a)",
-        repeats=3,
-        when="undeclared_specimen",
+        repeats=3,  # a specimen's modes: up to three at one place
     )
 )
 

@@ -217,7 +217,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         u = r.table_displacement[:, cols]
         v = r.table_velocity[:, cols]
         a = r.table_acceleration[:, cols]
-        f = r.actuator_force
+        f = _force_at_acceleration_instant(r)
         pre = None
         if accel_lowpass_hz:
             from sim.identify.least_squares import analog_lowpass
@@ -252,6 +252,24 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         mr.rows = _still_rows(v, pre, r.dt)
         out.append(mr)
     return out
+
+
+def _force_at_acceleration_instant(r) -> np.ndarray:
+    """The recorded actuator force at the instants of the force that produced the recorded
+    acceleration. A simulated run declares ``meta.force_lag_s`` (the loop records the
+    pressures at t_k and the acceleration of the physics step leaving t_k, computed from
+    the pressures at t_k + h); its force is read at t + lag (cubic spline). Without this
+    the force lags the acceleration by 0.49 ms on CGS, a 28 Hz line at the oil-column modes
+    holding > 90 % of a clean run's residual (NRMSE 6.9 % instead of 0.7 %). Measured runs
+    sample every channel at one instant: no key, no shift."""
+    f = r.actuator_force
+    lag = float((r.meta or {}).get("force_lag_s") or 0.0)
+    if not lag or len(f) < 4:
+        return f
+    from scipy.interpolate import CubicSpline
+
+    t = np.asarray(r.t, float)
+    return CubicSpline(t, f, axis=0)(np.minimum(t + lag, t[-1]))
 
 
 def _raw_column(mr, law, where, shape):

@@ -188,6 +188,9 @@ def param_report(term, values: dict, sigma: dict) -> tuple[bool, str, dict]:
                 return False, f"{name} = {v:.4g} at the edge of its scanned range", unc
         elif abs(v) <= Z95 * s:
             return False, f"{name} = {v:.4g} {unit}: its 95 % interval +/-{Z95 * s:.3g} includes zero", unc
+    for name, (at, simpler) in getattr(term.law, "nested", {}).items():
+        if abs(values[name] - at) <= Z95 * sigma.get(name, math.inf):
+            return False, f"{name} = {values[name]:.4g} +/-{unc[name]:.3g} holds {at:g}: that is {simpler}", unc
     return True, "", unc
 
 
@@ -309,8 +312,7 @@ def calibrate(
     cands = [
         (law, w)
         for law in laws
-        for w in distinct_places(mfit[0], places(desc, law.places))
-        if not (getattr(law, "dofs", ()) and w.startswith("dof:") and w[4:] not in law.dofs)
+        for w in distinct_places(mfit[0], [p for p in places(desc, law.places) if law.acts_at(p)])
     ]
     tried, added = [], []
     n_fits = 0

@@ -107,6 +107,32 @@ def _shape_jacobian(mruns, term, coef, h=1e-3):
     return np.stack(cols, axis=1)
 
 
+def _joint_shape(mruns, terms, i) -> Term:
+    """Term ``i``'s shape parameters refined together (Nelder-Mead from the coordinate
+    scan's point, inside the grids' range): one pass per parameter stops short when they
+    trade off (a payload mode 5 % low in frequency and 34 % high in damping)."""
+    from scipy.optimize import minimize
+
+    t = terms[i]
+    names = list(t.law.shape)
+    lo = np.array([min(t.law.shape[n]) for n in names], float)
+    hi = np.array([max(t.law.shape[n]) for n in names], float)
+
+    def rss(x):
+        trial = list(terms)
+        trial[i] = Term(
+            t.law, t.where, {**t.shape, **{n: float(v) for n, v in zip(names, np.clip(x, lo, hi))}}, t.index
+        )
+        return _solve(*_stack(mruns, trial))[1]
+
+    x0 = np.array([t.shape[n] for n in names], float)
+    r0 = rss(x0)
+    r = minimize(rss, x0, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-9 * r0, "maxiter": 200})
+    if not r.fun < r0:
+        return t
+    return Term(t.law, t.where, {**t.shape, **{n: float(v) for n, v in zip(names, np.clip(r.x, lo, hi))}}, t.index)
+
+
 def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
     """Fit ``terms`` jointly on ``mruns`` (shape parameters chosen in turn on their grid,
     then refined: ``refine`` "all" terms, the "last" one only (a candidate added to an
@@ -146,6 +172,8 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
                 if r.fun <= vals[k]:
                     best = float(r.x)
             terms[i] = t = Term(t.law, t.where, {**t.shape, name: float(best)}, t.index)
+        if len(t.law.shape) > 1:  # correlated shape parameters (a mode's frequency and damping): jointly
+            terms[i] = _joint_shape(mruns, terms, i)
     y, X = _stack(mruns, terms)
     theta, rss = _solve(y, X)
     # the Jacobian of the fit: coefficient columns and each shape parameter's column

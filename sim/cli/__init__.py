@@ -121,8 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
     from sim.cli import table as table_cli
     from sim.cli import view as view_cli
 
-    run_cli.add_parsers(sub)  # run, replay, fit
-    calibrate_cli.add_parsers(sub)  # calibrate RUN... (effects) or calibrate TABLE (masses)
+    run_cli.add_parsers(sub)  # run, replay
+    calibrate_cli.add_parsers(sub)  # calibrate RUN... (--strategy search|scale), calibrate TABLE (masses), fit (alias)
     feasibility_cli.add_parsers(sub)  # will it work on this table, and the largest scale
     geometry_cli.add_parsers(sub)  # geometric nonlinearity
     view_cli.add_parsers(sub)  # rerun recordings of run files

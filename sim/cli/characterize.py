@@ -79,6 +79,10 @@ def _calibrate(args, prog) -> int:
     cal = P.calibrate(args.table, quick=args.quick, workers=args.workers, progress=prog.count_callback())
     prog.close()
     P.write_calibration(desc.source, cal)
+    from sim.runs.files import out_dir, write_json_atomic
+
+    # the report shape of `shaketable calibrate` (calibration.json)
+    write_json_atomic(out_dir(args.out) / "calibration.json", P.calibration_report(cal, desc, str(desc.source)))
     out = {
         "dead_volume_m3": cal["dead_volume_m3"],
         "seal_friction_n": cal["seal_friction_n"],

@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 
 from sim.assess.run import SCHEMA
-from sim.errors import RunFileError, UserError
 from sim.runs.files import json_text, out_dir, write_json_atomic
 
 
@@ -173,68 +172,7 @@ def cmd_replay(args) -> int:
     return 0 if rep.complete else 3
 
 
-def cmd_fit(args) -> int:
-    from sim.calibrate import fit as F
-    from sim.runs.runfile import payload_of, read_run, table_of
-
-    run = read_run(args.run, require=("valve_command",))
-    desc = table_of(run, args.table)  # --table, else the description the run carries, else the stock file
-    if list(run.actuators) != list(desc.actuator_names):
-        raise RunFileError(f"{args.run}: actuators {run.actuators} do not match table '{desc.name}'; give --table")
-    payload = payload_of(run, args.payload)
-    cands = F.CANDIDATES
-    if args.effects:
-        names = [x.strip() for x in args.effects.split(",") if x.strip()]
-        known = {c.name: c for c in F.CANDIDATES}
-        bad = [n for n in names if n not in known]
-        if bad:
-            raise UserError(f"unknown effect '{bad[0]}'; candidates: {', '.join(known)}")
-        cands = tuple(known[n] for n in names)
-    out = out_dir(args.out)
-    prog = _progress(args)
-    prog.stage(f"fitting {args.run}: replays per candidate effect, {args.rounds} round(s) at most")
-    rep = F.fit(
-        run,
-        desc.raw,
-        payload,
-        candidates=cands,
-        rounds=args.rounds,
-        log=(lambda m: prog.stage(m.strip())) if prog.enabled else None,
-    )
-    toml_path = out / f"{desc.name}_calibrated.toml"
-    note = (
-        "calibrated: shaketable fit of "
-        + Path(args.run).name
-        + "; effects added: "
-        + (", ".join(f"{e['effect']} = {e['value']:.6g} {e['unit']}" for e in rep["effects_added"]) or "none")
-    )
-    F.write_table_toml(rep.pop("calibrated_table"), toml_path, note, original=desc.source)
-    rep["calibrated_table_file"] = str(toml_path)
-    write_json_atomic(out / "fit.json", rep)
-    if args.json:
-        print(json_text(rep, indent=2))
-    else:
-        print(
-            f"residual (mean NRMSE of force/acceleration/displacement): "
-            f"{100 * rep['baseline_residual']:.2f} % -> {100 * rep['final_residual']:.2f} %"
-        )
-        for e in rep["effects_added"]:
-            print(f"  added {e['effect']} = {e['value']:.6g} {e['unit']} ({e['what']})")
-        print(f"  wrote {toml_path} and {out / 'fit.json'} ({prog.elapsed_s:.0f} s)")
-    return 0
-
-
 def add_parsers(sub) -> None:
-    f = sub.add_parser("fit", help="replay a measured run, find the residual and add the effect the model lacks")
-    f.add_argument("run", help="a measured .run.npz with valve_command")
-    f.add_argument("--table", help="table (default: the description the run carries, else its meta.table)")
-    f.add_argument("--payload", help="payload (default: the description the run carries; 'none' for a bare table)")
-    f.add_argument("--effects", help="comma-separated candidate effects (default: all)")
-    f.add_argument("--rounds", type=int, default=2, help="effects to add at most (default 2)")
-    f.add_argument("--out", default="out", help="output folder")
-    f.add_argument("--json", action="store_true")
-    f.set_defaults(func=cmd_fit)
-
     r = sub.add_parser("run", help="simulate a scenario and write its run file and summary")
     r.add_argument("scenario", help="scenario name in scenarios/ or a .toml path")
     r.add_argument("--out", default="out", help="output folder (default: out)")

@@ -695,6 +695,7 @@ class Context:
             sim_s=n_done / rate,
             timing={"callback_s": wall_s, "output_s": post, "steps": n_done * spt},
             incomplete_reason=reason,
+            force_lag_s=sim.dt,
         )
 
 

@@ -87,6 +87,11 @@ class RunResult:
     timing: dict = field(default_factory=dict)
     incomplete_reason: str | None = None
     interrupted: bool = False  #: stopped by Ctrl-C (``incomplete_reason`` says when)
+    #: how long the recorded actuator force (and pressures) lag the force that produced the
+    #: recorded acceleration: the recorder takes the pressures at t_k and the acceleration of
+    #: the physics step leaving t_k, which MuJoCo computed from the pressures of the
+    #: hydraulic step before it, at t_k + h (h the physics step). 0 when they agree.
+    force_lag_s: float = 0.0
 
     @property
     def realtime_factor(self) -> float:
@@ -581,6 +586,7 @@ class Simulation:
             },
             incomplete_reason=reason,
             interrupted=interrupted,
+            force_lag_s=self.dt,
         )
         if interrupted:
             raise RunInterrupted(result)

@@ -32,6 +32,9 @@ def build_runfile(res, tm, *, source="simulated", description="", payload_name=N
     payload = getattr(tm, "payload", None)
     if payload is not None and getattr(payload, "raw", None):
         meta.update(description_meta("payload", payload.source, payload.raw))
+    lag = float(getattr(res, "force_lag_s", 0.0) or 0.0)
+    if lag:  # the loop's recorder: docs/run-file.md, meta force_lag_s
+        meta["force_lag_s"] = lag
     if extra_meta:
         meta.update(extra_meta)
     ch = dict(res.channels)
