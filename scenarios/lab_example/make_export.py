@@ -36,15 +36,14 @@ FRICTION_N = 400.0  #: the undeclared bearing friction, N (example's choice: ~5 
 BIAS = 0.01  #: the planted valve null bias, fraction of rated opening (1 %)
 ACC_NOISE_M_S2 = 0.005  #: accelerometer noise RMS, m/s^2 (example's choice)
 SEED = 14  #: seed of the accelerometer noise
-#: The model's recorder stores, at each tick, the position and the acceleration of the
-#: tick's first physics step but the actuator force of the step before (sim/loop/simulation.py
-#: records ``force`` before the tick's hydraulic step): the force channel is one physics step
-#: (1/2048 s) late. A lab's recorder samples force and motion at one instant, so the example
-#: reads the force one step later. Measured on the bare-table test (docs/lab-example.md, "The
-#: 9 % friction gap"): the model's own 1024 Hz force regressed on [sign v, v, a] gives 388 N,
-#: 557 N s/m, 1198 kg as recorded and 393 N, 51 N s/m, 1200 kg shifted by this step: the
-#: 0.49 ms reads as a drag M w^2 dt on this white noise, which sign(v) partly absorbs (+36 N).
-FORCE_SKEW_S = 1.0 / 2048
+#: The model's recorder takes the actuator force at t_k but the acceleration of the physics
+#: step leaving t_k, which the force at t_k + h produced; the run file says by how much in
+#: ``meta.force_lag_s`` (docs/run-file.md). A lab's recorder samples force and motion at one
+#: instant, so the export reads the force that much later. Measured on the bare-table test
+#: (docs/lab-example.md, "The 9 % friction gap"): the model's own 1024 Hz force regressed on
+#: [sign v, v, a] gives 388 N, 557 N s/m, 1198 kg as recorded and 393 N, 51 N s/m, 1200 kg
+#: shifted by the lag: 0.49 ms reads as a drag M w^2 dt on this white noise, which sign(v)
+#: partly absorbs (+36 N).
 
 
 def truth_table(folder: Path) -> Path:
@@ -126,8 +125,8 @@ def lab_record(run, *, rate_hz: float = 204.8, bias: float = BIAS, seed: int = S
         table_displacement=meas(run.table_displacement[:, [x]]),
         table_acceleration=meas(acc_t[:, None]) + ACC_NOISE_M_S2 * rng.standard_normal((n, 1)),
         accelerometers=meas(floors) + ACC_NOISE_M_S2 * rng.standard_normal((n, 2)),
-        # the force at the motion's instant (FORCE_SKEW_S above)
-        actuator_force=interpolate(t, run.actuator_force, tr + FORCE_SKEW_S),
+        # the force at the motion's instant (meta.force_lag_s: see above)
+        actuator_force=interpolate(t, run.actuator_force, tr + float(run.meta.get("force_lag_s") or 0.0)),
     )
 
 
