@@ -269,9 +269,7 @@ def plan_scenario(
     same run with the coupled step inside MuJoCo, :mod:`sim.loop.callback`; used where the
     table allows it: closed loop, no drive iterations)."""
     import mjcf
-    from sim.control.tvc import ControllerGains
-    from sim.effects import build_model
-    from sim.loop.analog import RiceGains, RiceSimulation, is_rice
+    from sim.control.base import controller_settings, controller_type
     from sim.loop.simulation import Simulation
     from sim.scenario.files import build_motions, build_window, limit_warnings, load_scenario
 
@@ -291,18 +289,13 @@ def plan_scenario(
         if iterations < 0 or iterations > 10:
             raise ScenarioError(f"--iterations must be 0..10 (got {iterations})")
         it["count"] = iterations
-    rice = None
     try:  # the [controller] overrides: errors name the scenario file
-        if is_rice(desc):  # an analog controller acting at every physics step
-            if it.get("count", 0):
-                raise ScenarioError("drive iterations are not available with the rice controller")
-            gains = RiceGains.for_table(desc, sc.controller)
-        else:
-            gains = ControllerGains.for_table(desc, sc.controller)
+        analog = controller_type(desc) == "analog"  # an analog controller acting at every physics step
+        if analog and it.get("count", 0):
+            raise ScenarioError("drive iterations are not available with the analog controller")
+        gains = controller_settings(desc, sc.controller)  # by [controller] type
     except ScenarioError as e:
         raise ScenarioError(f"{sc.path}: {e}") from None
-    if rice is None and is_rice(desc):
-        rice = RiceSimulation(desc, payload, gains)
     if abs(gains.rate_hz - sc.sample_rate_hz) > 1e-9:
         raise ScenarioError(
             f"{sc.path}: output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
@@ -318,14 +311,14 @@ def plan_scenario(
             )
     ref, window = build_window(sc, motions, duration_s)
     warns = limit_warnings(desc, motions)
-    tm = rice.tm if rice else build_model(desc, payload)
-    sim = rice or Simulation(tm, gains=gains)
+    sim = Simulation.for_table(desc, payload, gains)
+    tm = sim.tm
     if engine not in ("loop", "callback"):
         raise ScenarioError(f'engine must be "loop" or "callback" (got {engine!r})')
     if engine == "callback":
         from sim.loop.callback import accepts
 
-        if rice or it.get("count", 0) or accepts(sim):
+        if it.get("count", 0) or accepts(sim):
             engine = "loop"  # the callback runs the fused closed loop only
     return ScenarioPlan(
         scenario=sc,
