@@ -333,7 +333,7 @@ class Simulation:
         zfr = self._zfr
         qfa = d.qfrc_applied
         fused = fast and hs.delay_steps == 0 and hs.backend == "numba"  # one compiled call per step
-        slide_d, n_pd = tm.platen_slide_dadr, len(tm.platen_dof_index)
+        slide_d, n_pd = np.asarray(tm.platen_slide_dadr, dtype=np.int64), len(tm.platen_dof_index)
         fnd_d = self._fnd_d  # a spring-mounted foundation's slides: absolute table acceleration
         xmat = d.xmat
         step = mujoco.mj_step
@@ -533,10 +533,10 @@ class Simulation:
                                 hs._G,
                             )
                         else:
-                            x2[0] = qpos[qa]
-                            v2[0] = qvel[da]
+                            x2[0] = qpos[qa64]  # (int64 indices: a fancy index with MuJoCo's int32 ones is slower)
+                            v2[0] = qvel[da64]
                             f = hs.step(cmd2, x2, v2)
-                            dctrl[ids] = f[0]
+                            dctrl[ids64] = f[0]
                         if not (fused and nq) and (effects or nq):
                             qfa[:] = 0.0
                             if nfr:
