@@ -401,6 +401,8 @@ class Simulation:
                 + hyd_args[3:]
             )
             later_args = (qpos, qvel, qacc, dctrl, qfa, ACC, pd) + hyd_args
+        one = na == 1
+        q0, d0, i0 = int(qa64[0]), int(da64[0]), int(ids64[0])
         closed = reference is not None
         tick = ctrl.tick
         sub_ticks = tps > 1  # controller ticks between recorded samples
@@ -532,6 +534,11 @@ class Simulation:
                                 hs._P,
                                 hs._G,
                             )
+                        elif one:  # one actuator (a uni-axial table): scalar copies, ~10x cheaper than a fancy index
+                            x2[0, 0] = qpos[q0]
+                            v2[0, 0] = qvel[d0]
+                            f = hs.step(cmd2, x2, v2)
+                            dctrl[i0] = f[0, 0]
                         else:
                             x2[0] = qpos[qa64]  # (int64 indices: a fancy index with MuJoCo's int32 ones is slower)
                             v2[0] = qvel[da64]
