@@ -354,3 +354,20 @@ def test_analog_run_stops_when_the_actuator_leaves_its_stroke(rice_sim):
     res = rice_sim.run(reference=_rice_ref(4000.0, 100, slope=0.0))
     assert res.incomplete_reason.startswith("simulation diverged at t = 0.0000 s: an actuator left its stroke")
     assert len(res.t) == 1
+
+
+def test_the_recorder_can_sample_every_physics_step(rice_sim):
+    """Recorder period 1 (records at the 8000 Hz physics rate) against period 2 on the
+    same per-step command: the same run, every second record."""
+    from sim.control.analog import AnalogGains
+
+    g = rice_sim.gains
+    every = Simulation.for_table(mjcf.load_table("rice"), gains=dataclasses.replace(g, rate_hz=8000.0))
+    assert (every.steps_per_tick, every.steps_per_sample) == (1, 1) and isinstance(every.gains, AnalogGains)
+    ref = _rice_ref(8000.0, 400, slope=0.02)
+    rice_sim.reset()
+    half = rice_sim.run(reference=ref)
+    full = every.run(reference=ref)
+    assert len(full.t) == 400 and len(half.t) == 200 and full.t[1] == 1 / 8000.0
+    for ch in half.channels:
+        assert np.array_equal(full.channels[ch][::2], half.channels[ch]), ch
