@@ -405,7 +405,7 @@ class Simulation:
         q0, d0, i0 = int(qa64[0]), int(da64[0]), int(ids64[0])
         closed = reference is not None
         tick = ctrl.tick
-        sub_ticks = tps > 1  # controller ticks between recorded samples
+        sub_ticks = closed and tps > 1  # controller ticks between recorded samples (open loop: commands held)
         healthy, glim, lims, widx = self._fl_healthy, GAP_LIMIT_M, self._pressure_limits(), self._warn_idx
         slim = math.inf if ctrl.stroke_limit_m is None else float(ctrl.stroke_limit_m)
         t_ctrl = t_hyd = t_phys = t_out = t_fused = 0.0

@@ -371,3 +371,14 @@ def test_the_recorder_can_sample_every_physics_step(rice_sim):
     assert len(full.t) == 400 and len(half.t) == 200 and full.t[1] == 1 / 8000.0
     for ch in half.channels:
         assert np.array_equal(full.channels[ch][::2], half.channels[ch]), ch
+
+
+def test_open_loop_on_the_analog_table_holds_the_recorded_commands(rice_sim):
+    """Open loop (recorded valve commands at the recorder rate) on a table whose controller
+    ticks between records: the commands are held for the whole sample, no tick runs."""
+    rice_sim.reset()
+    res = rice_sim.run(valve_command=np.full((200, 1), 0.01))  # 50 ms: past the valve's delay (set d18's tau)
+    assert res.incomplete_reason is None and len(res.t) == 200
+    assert np.all(res.channels["valve_command"] == 0.01)
+    assert np.all(res.channels["spool_position"][100:] == 0.01)  # the delayed spool follows the held command exactly
+    assert res.channels["actuator_displacement"][-1, 0] > res.channels["actuator_displacement"][0, 0]
