@@ -380,5 +380,6 @@ def test_open_loop_on_the_analog_table_holds_the_recorded_commands(rice_sim):
     res = rice_sim.run(valve_command=np.full((200, 1), 0.01))  # 50 ms: past the valve's delay (set d18's tau)
     assert res.incomplete_reason is None and len(res.t) == 200
     assert np.all(res.channels["valve_command"] == 0.01)
-    assert np.all(res.channels["spool_position"][100:] == 0.01)  # the delayed spool follows the held command exactly
+    # the delayed spool settles on the held command (a tick would have moved it)
+    assert np.allclose(res.channels["spool_position"][150:], 0.01, rtol=1e-6, atol=0)
     assert res.channels["actuator_displacement"][-1, 0] > res.channels["actuator_displacement"][0, 0]
