@@ -256,21 +256,22 @@ def _with_faults(desc, sc, iterations: int):
     added to the table's effects (:func:`sim.effects.faults.scenario_entries`)."""
     import dataclasses
 
+    from sim.control.base import controller_type
     from sim.effects.base import create
     from sim.effects.faults import is_fault, scenario_entries, tick_faults
-    from sim.loop.analog import is_rice
 
     src = str(sc.path or sc.name)
-    extra = scenario_entries(list(sc.faults), sc.interlock, desc, src, interlock_ok=not is_rice(desc))
+    analog = controller_type(desc) == "analog"
+    extra = scenario_entries(list(sc.faults), sc.interlock, desc, src, interlock_ok=not analog)
     if not extra:
         return desc
     objs = [create(e, source=src) for e in extra]
     if iterations and any(is_fault(e) for e in objs):
         raise ScenarioError(f"{src}: a scenario with faults runs with the plain controller; set iteration.count = 0")
-    if is_rice(desc) and tick_faults(objs):
+    if analog and tick_faults(objs):
         kinds = sorted({e.type for e in tick_faults(objs)})
         raise ScenarioError(
-            f"{src}: the analog (uni-axial) loop runs no controller-tick faults ({', '.join(kinds)}); "
+            f"{src}: the analog controller runs no controller-tick faults ({', '.join(kinds)}); "
             "use pump_trip, or a large drive for the end cushions"
         )
     raw = dict(desc.raw)  # the raw data too: the analog loop parses its table again from it
@@ -310,9 +311,7 @@ def plan_scenario(
     same run with the coupled step inside MuJoCo, :mod:`sim.loop.callback`; used where the
     table allows it: closed loop, no drive iterations)."""
     import mjcf
-    from sim.control.tvc import ControllerGains
-    from sim.effects import build_model
-    from sim.loop.analog import RiceGains, RiceSimulation, is_rice
+    from sim.control.base import controller_settings, controller_type
     from sim.loop.simulation import Simulation
     from sim.scenario.files import build_motions, build_window, limit_warnings, load_scenario
 
@@ -333,18 +332,13 @@ def plan_scenario(
         if iterations < 0 or iterations > 10:
             raise ScenarioError(f"--iterations must be 0..10 (got {iterations})")
         it["count"] = iterations
-    rice = None
     try:  # the [controller] overrides: errors name the scenario file
-        if is_rice(desc):  # an analog controller acting at every physics step
-            if it.get("count", 0):
-                raise ScenarioError("drive iterations are not available with the rice controller")
-            gains = RiceGains.for_table(desc, sc.controller)
-        else:
-            gains = ControllerGains.for_table(desc, sc.controller)
+        analog = controller_type(desc) == "analog"  # an analog controller acting at every physics step
+        if analog and it.get("count", 0):
+            raise ScenarioError("drive iterations are not available with the analog controller")
+        gains = controller_settings(desc, sc.controller)  # by [controller] type
     except ScenarioError as e:
         raise ScenarioError(f"{sc.path}: {e}") from None
-    if rice is None and is_rice(desc):
-        rice = RiceSimulation(desc, payload, gains)
     if abs(gains.rate_hz - sc.sample_rate_hz) > 1e-9:
         raise ScenarioError(
             f"{sc.path}: output.sample_rate_hz ({sc.sample_rate_hz:g}) must equal controller.rate_hz "
@@ -360,14 +354,14 @@ def plan_scenario(
             )
     ref, window = build_window(sc, motions, duration_s)
     warns = limit_warnings(desc, motions)
-    tm = rice.tm if rice else build_model(desc, payload)
-    sim = rice or Simulation(tm, gains=gains)
+    sim = Simulation.for_table(desc, payload, gains)
+    tm = sim.tm
     if engine not in ("loop", "callback"):
         raise ScenarioError(f'engine must be "loop" or "callback" (got {engine!r})')
     if engine == "callback":
         from sim.loop.callback import accepts
 
-        if rice or it.get("count", 0) or accepts(sim):
+        if it.get("count", 0) or accepts(sim):
             engine = "loop"  # the callback runs the fused closed loop only
     return ScenarioPlan(
         scenario=sc,

@@ -189,10 +189,9 @@ def _scenario_for(case: Case, desc):
 
     if case.scenario is not None:
         return case.scenario
-    from sim.control.tvc import ControllerGains
-    from sim.loop.analog import RiceGains, is_rice
+    from sim.control.base import controller_settings
 
-    gains = RiceGains.for_table(desc, {}) if is_rice(desc) else ControllerGains.for_table(desc, {})
+    gains = controller_settings(desc, {})
     return Scenario(
         name=case.name,
         table=case.table,

@@ -1,1 +1,1 @@
-"""CONTROLLERS: the MTS-469D-style three-variable controller (``tvc``), the analog PIDF+dP controller (``analog``) and off-line drive-signal iteration (``iteration``)."""
+"""CONTROLLERS: the protocol the loop ticks and the factory by ``[controller] type`` (``base``), the MTS-469D-style three-variable controller (``tvc``), the analog PIDF+dP controller (``analog``) and off-line drive-signal iteration (``iteration``)."""

@@ -85,7 +85,32 @@ class ControllerGains:
         """The table's default gains (its [controller] section) with ``overrides`` on top."""
         base = dict(desc.raw.get("controller", {}) or {})
         base.update(overrides or {})
+        if base.get("type", "digital") == "digital":  # the controller's type (sim.control.base), not a gain
+            base.pop("type", None)
         return cls.from_dict(base)
+
+    # ---- the settings protocol of sim.control.base: one tick per recorded sample
+    @property
+    def controller_rate_hz(self) -> float:
+        """The controller's tick rate: the recorder's (one recorded sample per tick)."""
+        return self.rate_hz
+
+    timestep_s = None  #: the table's own physics step
+
+    def table(self, desc: TableDescription) -> TableDescription:
+        """The description this controller runs on: the table's own."""
+        return desc
+
+    def build(self, desc: TableDescription, *, hp, full_flow_m3_s: float, dt: float) -> "TableController":
+        """The controller of one simulation (``hp``: its hydraulic parameters)."""
+        return TableController(
+            desc,
+            self,
+            area_m2=hp.area_a_m2,
+            full_flow_m3_s=full_flow_m3_s,
+            supply_pressure_pa=hp.supply_pressure_pa,
+            return_pressure_pa=hp.return_pressure_pa,
+        )
 
     @classmethod
     def from_dict(cls, d: dict | None) -> "ControllerGains":
@@ -192,6 +217,68 @@ class TableController:
             )
         )
         self.reset()
+
+    stroke_limit_m = None  #: the loop does not stop at the stroke ends (the feasibility verdict reports them)
+
+    @property
+    def rate_hz(self) -> float:
+        return self.g.rate_hz
+
+    def start(self, tm, d, hs, reference, n_ticks: int, *, kinematics: str = "exact", fast: bool = True) -> None:
+        """Prepare a closed-loop run of ``n_ticks`` ticks on ``reference`` (at the
+        controller rate): the reference strokes (``kinematics``: ``"exact"``, the inverse
+        kinematics of the linkage geometry, as the table's controller does, or
+        ``"linear"``, the home Jacobian ``s = J(0) r``), the DOF velocities, the
+        feed-forward demand, and the state arrays :meth:`tick` reads (MuJoCo's ``d``, the
+        hydraulics ``hs``). ``fast``: the compiled tick (False: the numpy reference)."""
+        n = n_ticks
+        if kinematics == "exact":
+            self.s_ref_all = actuator_strokes(tm.desc, reference.d[:n])
+        elif kinematics == "linear":
+            self.s_ref_all = np.ascontiguousarray(reference.d[:n] @ self.J.T)
+        else:
+            raise ValueError(f"kinematics must be 'exact' or 'linear' (got {kinematics!r})")
+        self.v_ref_all = np.ascontiguousarray(reference.v[:n])
+        self.vff_all = self.feedforward(reference.v[:n], reference.a[:n], self.g.rate_hz)
+        self._io = (d.qpos, d.qvel, d.xmat, hs.force[0], hs.state.p_supply)
+        self._qa = np.asarray(tm.stroke_qadr, dtype=np.int64)
+        self._pd, self._pb = tm.platen_dadr, tm.platen_body
+        self._slide_d, self._pdi = tm.platen_slide_dadr, tm.platen_dof_index
+        self._x = np.zeros(len(self._qa))
+        self._v6 = np.zeros(6)
+        self._mode = 0 if not tm.platen_free else (1 if fast else 2)
+
+    def tick(self, i: int, out: np.ndarray) -> None:
+        """Valve commands of tick ``i`` (after :meth:`start`) into ``out`` (n_act,)."""
+        qpos, qvel, xmat, force, psup = self._io
+        if self._mode == 1:  # free platen, compiled, reading MuJoCo's arrays
+            self.command_from_state(
+                i,
+                self.s_ref_all,
+                self.v_ref_all,
+                self.vff_all,
+                qpos,
+                qvel,
+                xmat,
+                self._qa,
+                self._pd,
+                self._pb,
+                force,
+                psup[0],
+                out,
+            )
+        elif self._mode == 0:  # bearing-guided platen: the table's slides
+            x, v6 = self._x, self._v6
+            x[:] = qpos[self._qa]
+            v6[:] = 0.0
+            v6[self._pdi] = qvel[self._slide_d]
+            self.command_fast(self.s_ref_all[i], self.v_ref_all[i], self.vff_all[i], x, v6, force, psup[0], out)
+        else:  # free platen, numpy reference
+            x, v6, pd = self._x, self._v6, self._pd
+            x[:] = qpos[self._qa]
+            v6[:3] = qvel[pd : pd + 3]
+            v6[3:] = xmat[self._pb].reshape(3, 3) @ qvel[pd + 3 : pd + 6]
+            out[:] = self.command(self.s_ref_all[i], self.v_ref_all[i], self.vff_all[i], x, v6, force, psup[0])
 
     def reset(self):
         """Clear the dP high-pass filter (call before a new run)."""

@@ -1,4 +1,4 @@
-"""THE TWIN: the stepping loop (MuJoCo + hydraulics + controller + recorder), its compiled kernels, and the loop of an analog controller."""
+"""THE TWIN: the stepping loop (MuJoCo + hydraulics + controller + recorder), its compiled kernels and recorder; one loop for every table and controller."""
 
 from sim.loop.simulation import GAP_LIMIT_M, RunResult, Simulation
 

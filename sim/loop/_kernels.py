@@ -310,3 +310,31 @@ def all_finite(a, b, c, d):
             if not np.isfinite(v):
                 return False
     return True
+
+
+@numba.njit(**_OPTS)
+def healthy(qpos, qvel, p_a, p_b, p_supply, lo, hi, wnum, widx, w0, sq, slim):
+    """The loop's divergence test in one call: MuJoCo's state finite, every chamber
+    pressure in [lo, hi] (NaN fails), the supply pressure finite, no MuJoCo warning counter
+    of ``widx`` above its start value ``w0`` (``wnum``: a view of ``mjData.warning.number``),
+    and every stroke (qpos at ``sq``) within +/- ``slim``. False: the loop asks
+    ``Simulation._check`` why."""
+    for i in range(qpos.shape[0]):
+        if not np.isfinite(qpos[i]):
+            return False
+    for i in range(qvel.shape[0]):
+        if not np.isfinite(qvel[i]):
+            return False
+    for r in range(p_a.shape[0]):
+        for c in range(p_a.shape[1]):
+            if not (lo <= p_a[r, c] <= hi and lo <= p_b[r, c] <= hi):
+                return False
+    if not np.isfinite(p_supply[0]):
+        return False
+    for i in range(widx.shape[0]):
+        if wnum[widx[i]] > w0[i]:
+            return False
+    for i in range(sq.shape[0]):
+        if abs(qpos[sq[i]]) > slim:
+            return False
+    return True

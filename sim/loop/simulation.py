@@ -36,12 +36,12 @@ import mujoco
 import numpy as np
 
 from hydraulics import HydraulicParams, HydraulicSystem
-from mjcf.description import actuator_strokes
 from mjcf.model import TableModel
-from sim.control.tvc import ControllerGains, TableController
+from sim.control.base import controller_settings
 from sim.effects.faults import hooks_for  # faults:
 from sim.effects.registry import dahl_step
 from sim.errors import RunInterrupted, ScenarioError, is_interrupt
+from sim.loop.recorder import derive, foundation_slides
 from sim.scenario.reference import Reference, reference_from_motions
 from sim.validate import check_samples
 
@@ -99,9 +99,17 @@ class RunResult:
 
 
 class Simulation:
-    """One table simulation (one MjData, one hydraulic system)."""
+    """One table simulation (one MjData, one hydraulic system, one controller).
 
-    def __init__(self, tm: TableModel, *, backend: str = "numba", gains: ControllerGains | None = None):
+    ``gains``: the controller's settings (:mod:`sim.control.base`; default: the table's
+    ``[controller]``, chosen by its ``type``). The controller ticks every
+    ``steps_per_tick`` physics steps (2 for the MTS-style controller at 1024 Hz with a
+    1/2048 s step, 1 for the analog one); the recorder samples every ``steps_per_sample``
+    steps (2 for both: 1024 Hz, and 4000 Hz at the analog controller's 8000 Hz), at a
+    controller tick. :meth:`for_table` builds the model the controller needs.
+    """
+
+    def __init__(self, tm: TableModel, *, backend: str = "numba", gains=None):
         self.tm = tm
         self.m = tm.model
         self.dt = float(self.m.opt.timestep)
@@ -112,25 +120,45 @@ class Simulation:
         self.hs = HydraulicSystem(self.hp, n_sim=1, dt=self.dt, backend=backend)
         for e in tm.effects:
             e.bind(self.m, self.hs)
-        self.gains = gains or ControllerGains.for_table(tm.desc)
-        ratio = 1.0 / (self.gains.rate_hz * self.dt)
-        self.steps_per_tick = int(round(ratio))
-        if abs(ratio - self.steps_per_tick) > 1e-9 or self.steps_per_tick < 1:
+        self.gains = gains or controller_settings(tm.desc)
+        self.steps_per_tick = self._steps(self.gains.controller_rate_hz, "controller")
+        self.steps_per_sample = self._steps(self.gains.rate_hz, "recorder")
+        if self.steps_per_sample % self.steps_per_tick:
             raise ScenarioError(
-                f"controller rate {self.gains.rate_hz} Hz is not a whole fraction of the physics rate "
-                f"{1 / self.dt:.1f} Hz; use a rate that divides it (e.g. 1024 Hz with a 1/2048 s step)"
+                f"recorder rate {self.gains.rate_hz:g} Hz does not divide the controller rate "
+                f"{self.gains.controller_rate_hz:g} Hz; the recorder samples at controller ticks"
             )
         full_flow = float(self.hs.no_load_flow(1.0))
-        self.controller = TableController(
-            tm.desc,
-            self.gains,
-            area_m2=self.hp.area_a_m2,
-            full_flow_m3_s=full_flow,
-            supply_pressure_pa=self.hp.supply_pressure_pa,
-            return_pressure_pa=self.hp.return_pressure_pa,
-        )
+        self.controller = self.gains.build(tm.desc, hp=self.hp, full_flow_m3_s=full_flow, dt=self.dt)
+        self._fnd_q, self._fnd_d = foundation_slides(tm)
+        self._warn_idx = np.array([int(w) for w in MJ_WARNINGS], dtype=np.int64)
         self._prepare_gap()
         self.reset()
+
+    def _steps(self, rate_hz: float, what: str) -> int:
+        ratio = 1.0 / (rate_hz * self.dt)
+        n = int(round(ratio))
+        if abs(ratio - n) > 1e-9 or n < 1:
+            raise ScenarioError(
+                f"{what} rate {rate_hz} Hz is not a whole fraction of the physics rate "
+                f"{1 / self.dt:.1f} Hz; use a rate that divides it (e.g. 1024 Hz with a 1/2048 s step)"
+            )
+        return n
+
+    @classmethod
+    def for_table(cls, desc, payload=None, gains=None, *, backend: str = "numba") -> "Simulation":
+        """The simulation of table ``desc`` (+ ``payload``) with the model its controller
+        needs: ``gains`` (default: the table's, by ``[controller] type``) edit the
+        description (``gains.table``, e.g. the analog controller's parameter set) and set
+        the physics step (``gains.timestep_s``, None: the table's)."""
+        from mjcf.builder import BuildOptions
+        from sim.effects import build_model
+
+        gains = gains or controller_settings(desc)
+        desc = gains.table(desc)
+        dt = gains.timestep_s
+        tm = build_model(desc, payload) if dt is None else build_model(desc, payload, BuildOptions(timestep_s=dt))
+        return cls(tm, backend=backend, gains=gains)
 
     # ------------------------------------------------------------------ state
     def reset(self, pose=None, forces=None):
@@ -186,8 +214,24 @@ class Simulation:
             from sim.loop import _kernels as _fastloop
 
             self._fl = _fastloop
+            self._fl_healthy = _fastloop.healthy
         except ImportError:  # pragma: no cover
             self._fl = None
+            self._fl_healthy = lambda *a: False  # every check takes the slow path of _check
+
+    def _pressure_limits(self) -> tuple[float, float]:
+        """The chamber pressures' sane range [vapour, relief] (with round-off margins)."""
+        hp = self.hp
+        return hp.vapour_pressure_pa * (1 - 1e-9) - 1e-3, hp.relief_pressure_pa * (1 + 1e-9)
+
+    def _at_ticks(self, reference: Reference, n: int, tps: int) -> Reference:
+        """``reference`` (first ``n`` samples at the recorder rate) linearly interpolated to
+        the controller's ``n * tps`` ticks (held after its last sample)."""
+        rate = self.gains.rate_hz
+        tk = np.arange(n) / rate
+        ts = np.arange(n * tps) * (self.steps_per_tick * self.dt)
+        cols = lambda a: np.stack([np.interp(ts, tk, a[:n, i]) for i in range(a.shape[1])], axis=1)  # noqa: E731
+        return Reference(t=ts, d=cols(reference.d), v=cols(reference.v), a=cols(reference.a))
 
     def loop_gap(self) -> float:
         d = self.d
@@ -240,20 +284,24 @@ class Simulation:
         ctrl = self.controller
         ctrl.reset()
         rate = self.gains.rate_hz
-        n_in = len(reference.t) if reference is not None else len(valve_command)
+        cp, spt = self.steps_per_tick, self.steps_per_sample
+        tps = spt // cp  # controller ticks per recorded sample
+        at_ticks = (  # a reference sampled at the controller rate (else at the recorder's)
+            reference is not None
+            and tps > 1
+            and len(reference.t) > 1
+            and abs(reference.rate_hz - self.gains.controller_rate_hz) <= 1e-6 * self.gains.controller_rate_hz
+        )
+        n_in = len(reference.t) // (tps if at_ticks else 1) if reference is not None else len(valve_command)
         n = n_in if duration_s is None else min(n_in, int(round(duration_s * rate)) + 1)
         check_samples(n, f"a run of {n / rate:g} s at {rate:g} Hz", None, ScenarioError)  # before allocating
         na = tm.n_act
-        self._warn0 = [int(self.d.warning[w].number) for w in MJ_WARNINGS]
+        wnum = d.warning.number  # MuJoCo's warning counters (a view)
+        w0 = wnum[self._warn_idx].copy()
+        self._warn0 = [int(v) for v in w0]
         if reference is not None:
-            if kinematics == "exact":
-                s_ref_all = actuator_strokes(tm.desc, reference.d[:n])
-            elif kinematics == "linear":
-                s_ref_all = np.ascontiguousarray(reference.d[:n] @ ctrl.J.T)
-            else:
-                raise ValueError(f"kinematics must be 'exact' or 'linear' (got {kinematics!r})")
-            v_ref_all = np.ascontiguousarray(reference.v[:n])
-            vff_all = ctrl.feedforward(reference.v[:n], reference.a[:n], rate)  # feed-forward velocity demand
+            ref_ticks = reference if tps == 1 or at_ticks else self._at_ticks(reference, n, tps)
+            ctrl.start(tm, d, hs, ref_ticks, n * tps, kinematics=kinematics, fast=fast)
         else:
             vc_all = np.ascontiguousarray(valve_command[:n], dtype=np.float64)
         Q = np.full((n, m.nq), np.nan)
@@ -275,13 +323,10 @@ class Simulation:
         ids = tm.actuator_ids
         qa, da = tm.stroke_qadr, tm.stroke_dadr
         pd, pb_ = tm.platen_dadr, tm.platen_body
-        spt = self.steps_per_tick
         x2 = np.zeros((1, na))
         v2 = np.zeros((1, na))
         cmd2 = np.zeros((1, na))
         cmd = cmd2[0]
-        vel6 = np.zeros(6)
-        xk = np.zeros(na)
         qpos, qvel, qacc, dctrl = d.qpos, d.qvel, d.qacc, d.ctrl
         qa64, da64, ids64 = (np.asarray(a, dtype=np.int64) for a in (qa, da, ids))
         free = tm.platen_free
@@ -294,7 +339,8 @@ class Simulation:
         zfr = self._zfr
         qfa = d.qfrc_applied
         fused = fast and hs.delay_steps == 0 and hs.backend == "numba"  # one compiled call per step
-        slide_d, pdi, n_pd = tm.platen_slide_dadr, tm.platen_dof_index, len(tm.platen_dof_index)
+        slide_d, n_pd = np.asarray(tm.platen_slide_dadr, dtype=np.int64), len(tm.platen_dof_index)
+        fnd_d = self._fnd_d  # a spring-mounted foundation's slides: absolute table acceleration
         xmat = d.xmat
         step = mujoco.mj_step
         hooks = hooks_for(self)  # faults: controller-tick hooks of fault effects (sim/effects/faults.py), or None
@@ -311,10 +357,12 @@ class Simulation:
             and reference is not None
             and not effects
             and spt >= 2
+            and tps == 1
             and ctrl.has_compiled_tick()
         )
         if fuse_tick:
             first, later = FL.tick_first_step, FL.later_step
+            s_ref_all, v_ref_all, vff_all = ctrl.s_ref_all, ctrl.v_ref_all, ctrl.vff_all
             g = ctrl.kernel_args()
             hyd_args = (
                 qa64,
@@ -365,6 +413,13 @@ class Simulation:
                 + hyd_args[3:]
             )
             later_args = (qpos, qvel, qacc, dctrl, qfa, ACC, pd) + hyd_args
+        one = na == 1
+        q0, d0, i0 = int(qa64[0]), int(da64[0]), int(ids64[0])
+        closed = reference is not None
+        tick = ctrl.tick
+        sub_ticks = closed and tps > 1  # controller ticks between recorded samples (open loop: commands held)
+        healthy, glim, lims, widx = self._fl_healthy, GAP_LIMIT_M, self._pressure_limits(), self._warn_idx
+        slim = math.inf if ctrl.stroke_limit_m is None else float(ctrl.stroke_limit_m)
         t_ctrl = t_hyd = t_phys = t_out = t_fused = 0.0
         reason = None
         clock = time.perf_counter
@@ -433,30 +488,19 @@ class Simulation:
                     t_out += t1 - t0
                     # ---- controller tick (valve commands held until the next tick)
                     if hooks is not None:  # faults: the tick with feedback faults, interlock, stuck valves
-                        hooks.tick(k, k / rate, s_ref_all, v_ref_all, vff_all, d, force, psup[0], cmd)
-                    elif reference is not None:
-                        if not free:
-                            xk[:] = qpos[qa]
-                            vel6[:] = 0.0
-                            vel6[pdi] = qvel[slide_d]
-                            ctrl.command_fast(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0], cmd)
-                        elif fast:
-                            ctrl.command_from_state(
-                                k, s_ref_all, v_ref_all, vff_all, qpos, qvel, xmat, qa64, pd, pb_, force, psup[0], cmd
-                            )
-                        else:
-                            xk[:] = qpos[qa]
-                            vel6[:3] = qvel[pd : pd + 3]
-                            vel6[3:] = xmat[pb_].reshape(3, 3) @ qvel[pd + 3 : pd + 6]
-                            cmd[:] = ctrl.command(s_ref_all[k], v_ref_all[k], vff_all[k], xk, vel6, force, psup[0])
+                        hooks.tick(k, k / rate, ctrl.s_ref_all, ctrl.v_ref_all, ctrl.vff_all, d, force, psup[0], cmd)
+                    elif closed:
+                        tick(k * tps, cmd)
                     else:
                         cmd[:] = vc_all[k]
                     H["valve_command"][k] = cmd
                     t2 = clock()
                     t_ctrl += t2 - t1
-                    # ---- physics steps of this tick: hydraulics, then mj_step
+                    # ---- physics steps of this sample: (later controller ticks,) hydraulics, then mj_step
                     for j in range(spt):
                         t3 = clock()
+                        if j and sub_ticks and j % cp == 0:
+                            tick(k * tps + j // cp, cmd)
                         if fused and nq:
                             FL.pre_step_friction(
                                 qpos,
@@ -504,11 +548,16 @@ class Simulation:
                                 hs._P,
                                 hs._G,
                             )
-                        else:
-                            x2[0] = qpos[qa]
-                            v2[0] = qvel[da]
+                        elif one:  # one actuator (a uni-axial table): scalar copies, ~10x cheaper than a fancy index
+                            x2[0, 0] = qpos[q0]
+                            v2[0, 0] = qvel[d0]
                             f = hs.step(cmd2, x2, v2)
-                            dctrl[ids] = f[0]
+                            dctrl[i0] = f[0, 0]
+                        else:
+                            x2[0] = qpos[qa64]  # (int64 indices: a fancy index with MuJoCo's int32 ones is slower)
+                            v2[0] = qvel[da64]
+                            f = hs.step(cmd2, x2, v2)
+                            dctrl[ids64] = f[0]
                         if not (fused and nq) and (effects or nq):
                             qfa[:] = 0.0
                             if nfr:
@@ -531,15 +580,20 @@ class Simulation:
                         if j == 0:
                             if free:
                                 ACC[k] = qacc[pd : pd + 6]
+                            elif fnd_d is not None:
+                                ACC[k, :n_pd] = qacc[fnd_d] + qacc[slide_d]
                             else:
                                 ACC[k, :n_pd] = qacc[slide_d]
                 done = k + 1  # tick k is complete (kept even if the check below stops the run)
-                # ---- divergence checks
+                # ---- divergence checks (one compiled test; the message only when it fails)
                 if k % gap_every == 0 or k == n - 1:
                     t6 = clock()
                     gap = self.loop_gap()
                     ex["loop_gap"][k] = gap
-                    reason = self._check(k / rate, gap)
+                    if not (
+                        gap <= glim and healthy(qpos, qvel, st.p_a, st.p_b, psup, *lims, wnum, widx, w0, qa64, slim)
+                    ):
+                        reason = self._check(k / rate, gap)
                     t_out += clock() - t6
                     if reason:
                         break
@@ -593,109 +647,24 @@ class Simulation:
         return result
 
     def _derive(self, Q, V, ACC) -> dict:
-        """Recorder channels from raw qpos/qvel/platen-qacc samples (vectorised)."""
-        tm = self.tm
-        pq, pd = tm.platen_qadr, tm.platen_dadr
-        if not tm.platen_free:
-            n = len(Q)
-            pose = np.zeros((n, 6))
-            vel = np.zeros((n, 6))
-            pose[:, tm.platen_dof_index] = Q[:, tm.platen_slide_qadr]
-            vel[:, tm.platen_dof_index] = V[:, tm.platen_slide_dadr]
-            acc = np.zeros((n, 6))
-            acc[:, tm.platen_dof_index] = ACC[:, : len(tm.platen_dof_index)]
-            out = {
-                "table_displacement": pose,
-                "table_velocity": vel,
-                "table_acceleration": acc,
-                "actuator_displacement": Q[:, tm.stroke_qadr].copy(),
-            }
-            accs = tm.desc.accelerometers
-            Dn = np.array([a.direction for a in accs]).reshape(-1, 3)
-            out["accelerometers"] = acc[:, :3] @ Dn.T  # no rotation: every point moves alike
-            if len(tm.payload_dadr):
-                qadr = [tm.model.jnt_qposadr[tm.model.dof_jntid[k]] for k in tm.payload_dadr]
-                out["_payload_qpos"] = Q[:, qadr].copy()
-            return out
-        quat = Q[:, pq + 3 : pq + 7]
-        w, x, y, z = quat.T
-        # rotation matrices of the platen (rows of R for each sample)
-        R = np.empty((len(Q), 3, 3))
-        R[:, 0, 0] = 1 - 2 * (y * y + z * z)
-        R[:, 0, 1] = 2 * (x * y - z * w)
-        R[:, 0, 2] = 2 * (x * z + y * w)
-        R[:, 1, 0] = 2 * (x * y + z * w)
-        R[:, 1, 1] = 1 - 2 * (x * x + z * z)
-        R[:, 1, 2] = 2 * (y * z - x * w)
-        R[:, 2, 0] = 2 * (x * z - y * w)
-        R[:, 2, 1] = 2 * (y * z + x * w)
-        R[:, 2, 2] = 1 - 2 * (x * x + y * y)
-        angles = np.stack(
-            [
-                np.arctan2(-R[:, 1, 2], R[:, 2, 2]),
-                np.arcsin(np.clip(R[:, 0, 2], -1, 1)),
-                np.arctan2(-R[:, 0, 1], R[:, 0, 0]),
-            ],
-            axis=1,
-        )
-        pose = np.concatenate([Q[:, pq : pq + 3], angles], axis=1)
-        w_world = np.einsum("nij,nj->ni", R, V[:, pd + 3 : pd + 6])
-        vel = np.concatenate([V[:, pd : pd + 3], w_world], axis=1)
-        alin = ACC[:, :3]
-        aang = np.einsum("nij,nj->ni", R, ACC[:, 3:6])
-        acc = np.concatenate([alin, aang], axis=1)
-        out = {
-            "table_displacement": pose,
-            "table_velocity": vel,
-            "table_acceleration": acc,
-            "actuator_displacement": Q[:, tm.stroke_qadr].copy(),
-        }
-        accs = tm.desc.accelerometers
-        if accs:
-            P = np.array([a.position_m for a in accs])
-            Dn = np.array([a.direction for a in accs])
-            r = np.einsum("nij,aj->nai", R, P)  # sensor offsets in world
-            a_site = (
-                alin[:, None, :]
-                + np.cross(aang[:, None, :], r)
-                + np.cross(w_world[:, None, :], np.cross(w_world[:, None, :], r))
-            )
-            dirs = np.einsum("nij,aj->nai", R, Dn)  # sensor axes in world
-            out["accelerometers"] = np.einsum("nai,nai->na", a_site, dirs)
-        else:
-            out["accelerometers"] = np.zeros((len(Q), 0))
-        # payload coordinates (for drawing a flexible payload): qpos of its joints
-        if len(tm.payload_dadr):
-            qadr = [tm.model.jnt_qposadr[tm.model.dof_jntid[k]] for k in tm.payload_dadr]
-            out["_payload_qpos"] = Q[:, qadr].copy()
-        return out
+        """Recorder channels from raw qpos/qvel/platen-qacc samples (:func:`sim.loop.recorder.derive`)."""
+        return derive(self.tm, Q, V, ACC)
 
     def _check(self, tk: float, gap: float) -> str | None:
         """Why the run must stop at ``tk``, or None: a NaN/Inf in the mechanical or the
         hydraulic state, a swivel gap beyond :data:`GAP_LIMIT_M`, a pressure outside
         [vapour, relief] (the hydraulics clip to that range, so outside it means the step
-        failed), or a MuJoCo warning of :data:`MJ_WARNINGS` raised during the run. The
-        message names the time, the quantity and the likely cause."""
+        failed), a MuJoCo warning of :data:`MJ_WARNINGS` raised during the run, or an
+        actuator beyond its stroke when the controller has a ``stroke_limit_m``. The
+        message names the time, the quantity and the likely cause. (The loop tests all of
+        this in one compiled call, :func:`sim.loop._kernels.healthy`, and comes here only
+        when that fails.)"""
         d = self.d
         st = self.hs.state
         hp = self.hp
-        lo = hp.vapour_pressure_pa * (1 - 1e-9) - 1e-3
-        hi = hp.relief_pressure_pa * (1 + 1e-9)
+        lo, hi = self._pressure_limits()
+        lim = self.controller.stroke_limit_m
         warned = [w for w, n0 in zip(MJ_WARNINGS, self._warn0) if d.warning[w].number > n0]
-        if (
-            not warned
-            and self._fl is not None
-            and self._fl.all_finite(d.qpos, d.qvel, st.p_a, st.p_b)
-            and gap <= GAP_LIMIT_M
-        ):
-            if (
-                st.p_a.max() <= hi
-                and st.p_b.max() <= hi
-                and st.p_a.min() >= lo
-                and st.p_b.min() >= lo
-                and math.isfinite(st.p_supply[0])
-            ):
-                return None
         at = f"simulation diverged at t = {tk:.4f} s"
         step = f"physics step {self.dt * 1e3:.3g} ms"
         for what, arr in (
@@ -714,6 +683,13 @@ class Simulation:
         if warned:
             w = warned[0]
             return f"{at}: {MJ_WARNINGS[w]} (MuJoCo warning {w.name}); {CAUSE_STEP} ({step})"
+        if lim is not None:
+            x = d.qpos[self.tm.stroke_qadr]
+            if np.any(np.abs(x) > lim):
+                return (
+                    f"{at}: an actuator left its stroke (|x| = {np.abs(x).max():.4g} m, half stroke {lim:.4g} m); "
+                    f"likely cause: an unstable control loop (gains) or a motion beyond the stroke ({step})"
+                )
         if gap > GAP_LIMIT_M:
             return (
                 f"{at}: a swivel opened by {gap * 1e3:.3g} mm (limit {GAP_LIMIT_M * 1e3:.3g} mm): the "

@@ -8,14 +8,14 @@ payload, and runs the paper's random test: a white-noise acceleration command,
 Blackman-Harris window (:func:`sim.signals.estimation.frf`), FRF commanded -> achieved absolute
 table acceleration (= x_ta/x_d of Eq. 1).
 
-Rate. The Rice controller is analog; it is evaluated at every physics step of
-1/8000 s (``BuildOptions(timestep_s=1/8000)``), so its zero-order hold adds 0.06 ms to
-the valve delay, and the records are taken every second step: 4000 Hz, the paper's
-DAQ rate, so the segment length, count, window and the 0.244 Hz resolution are the
-paper's. The loop is this module's own (``sim.loop.simulation.Simulation`` runs the MTS-style
-controller at 1024 Hz); it uses the same model (:func:`mjcf.builder.build`) and
-hydraulics (:class:`hydraulics.HydraulicSystem`) and the same coupling order as
-``sim/loop/simulation.py`` (hydraulic step before ``mj_step``, end-of-step pressures).
+Rate. The Rice controller is analog (:class:`sim.control.analog.RiceController`,
+``[controller] type = "analog"``); the one loop, :class:`sim.loop.simulation.Simulation`,
+ticks it at every physics step of 1/8000 s, so its zero-order hold adds 0.06 ms to the
+valve delay, and records every second step: 4000 Hz, the paper's DAQ rate, so the
+segment length, count, window and the 0.244 Hz resolution are the paper's. The command
+is synthesised at the controller rate (8000 Hz) and handed to the loop as its reference;
+the records are the loop's channels (absolute table displacement and acceleration,
+including the foundation's motion; the stroke; the chamber pressures; the valve opening).
 
 UCSD (seed 002): see :func:`ucsd_programme` further down.
 """
@@ -30,8 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from mjcf.description import DOFS6, load_payload, parse_table
+from sim.control.analog import PHYSICS_RATE_HZ as RICE_RATE_HZ
+from sim.control.analog import RECORDER_RATE_HZ as RICE_FS_HZ
+from sim.control.analog import AnalogGains, apply_parameter_set
 from sim.effects import build_model
-from sim.loop.analog import RICE_FS_HZ, RICE_RATE_HZ, RiceGains, RiceSimulation, _apply_parameter_set, is_rice  # noqa: F401
 from sim.papers import rice as R
 
 RICE_NPERSEG = 2**14
@@ -44,7 +46,7 @@ def rice_description(parameter_set: str = "d18", *, delay: bool = True, path=R.T
     beta -> fluid.bulk_modulus_pa, k_le -> cross leakage k_le * A, tau -> valve delay
     (0 with ``delay=False``). k_t is the controller's volt-to-flow scale (returned).
     """
-    return _apply_parameter_set(R._raw(path), parameter_set, delay, str(path))
+    return apply_parameter_set(R._raw(path), parameter_set, delay, str(path))
 
 
 def white_noise_command(n: int, fs: float, *, rms_m_s2: float = 2.0, band_hz=(0.3, 250.0), seed: int = 0):
@@ -109,13 +111,16 @@ def rice_simulation(
     backend: str = "numba",
 ) -> RiceRun:
     """Run the paper's random test on the model and estimate T (see module docstring)."""
+    from sim.loop.simulation import Simulation
+    from sim.scenario.reference import Reference
     from sim.signals.estimation import frf
 
-    desc, kt = rice_description(parameter_set, delay=delay)
+    desc = parse_table(R._raw(R.TABLE_FILE), str(R.TABLE_FILE))
     pl = load_payload(payload) if payload else None
-    sim = RiceSimulation(
-        desc, pl, RiceGains(gains=gains, parameter_set=parameter_set, delay=delay), kt=kt, backend=backend
-    )
+    settings = AnalogGains(
+        gains=gains, parameter_set=parameter_set, delay=delay
+    )  # the parameter set applied by the loop
+    sim = Simulation.for_table(desc, pl, settings, backend=backend)
     sub = int(round(RICE_RATE_HZ / RICE_FS_HZ))
     n_rec = n_segments * nperseg
     n_lead = int(round(lead_in_s * RICE_FS_HZ))
@@ -127,11 +132,24 @@ def rice_simulation(
     ramp = np.clip(np.arange(n_tot) / (RICE_RATE_HZ * 1.0), 0, 1)
     ramp = 0.5 - 0.5 * np.cos(np.pi * ramp)
     XD, VD = xd[idx] * ramp, vd[idx] * ramp  # ramp-in transient is discarded
+    D = np.zeros((n_tot, 6))
+    V = np.zeros((n_tot, 6))
+    D[:, 0], V[:, 0] = XD, VD
+    ref = Reference(t=np.arange(n_tot) / RICE_RATE_HZ, d=D, v=V, a=np.zeros((n_tot, 6)))  # at the controller rate
     wall0 = time.perf_counter()
-    rec, reason = sim.steps(XD, VD, record_from=n_lead * sub, every=sub, n_rec=n_rec)
+    res = sim.run(reference=ref)
     wall = time.perf_counter() - wall0
-    if reason:
-        raise RuntimeError(f"Rice simulation: {reason} (gains {gains})")
+    if res.incomplete_reason:
+        raise RuntimeError(f"Rice simulation: {res.incomplete_reason} (gains {gains})")
+    ch = res.channels
+    keep = slice(n_lead, n_lead + n_rec)  # the lead-in's records are discarded
+    rec = {
+        "a_table": ch["table_acceleration"][keep, 0],
+        "x_table": ch["table_displacement"][keep, 0],
+        "stroke": ch["actuator_displacement"][keep, 0],
+        "dp": ch["pressure_a"][keep, 0] - ch["pressure_b"][keep, 0],
+        "opening": ch["valve_command"][keep, 0],
+    }
     a_cmd = ad[::sub][:n_rec]
     x_cmd = xd[::sub][:n_rec]
     fr = frf(

@@ -178,7 +178,7 @@ FAULTS = {
     "fault on the analog table": (
         SINE.replace('table = "cgs"', 'table = "rice"').replace("amplitude = 0.01", "amplitude = 0.005")
         + '[output]\nsample_rate_hz = 4000.0\n[[fault]]\ntype = "valve_stuck"\nwhere = "actuator:A"\nopening = 1.0\n',
-        ["analog (uni-axial) loop runs no controller-tick faults (valve_stuck)"],
+        ["analog controller runs no controller-tick faults (valve_stuck)"],
     ),
     "fault with drive iterations": (
         SINE + '[iteration]\ncount = 1\n[[fault]]\ntype = "pump_trip"\n',

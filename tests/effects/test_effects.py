@@ -580,20 +580,22 @@ def test_table_parameters_round_trip(ucsd_desc, cgs):
 
 
 def test_the_analog_loop_runs_the_effect_lifecycle(tmp_path):
-    """The Rice table's analog loop (sim.loop.analog) binds, resets and applies effects
-    like the digital one; the user's file is found next to the description."""
-    from sim.loop.analog import RiceSimulation
+    """The one loop with the Rice table's analog controller binds, resets and applies
+    effects like with the digital one; the user's file is found next to the description."""
+    from sim.loop.simulation import Simulation
+    from sim.scenario.reference import Reference
 
     (tmp_path / "my_effects.py").write_text(USER_FILE)
     shutil.copy(mjcf.description.TABLES_DIR / "rice.toml", tmp_path / "rice.toml")
     with open(tmp_path / "rice.toml", "a") as f:
         f.write('\n[[effect]]\ntype = "my_effects.py:Pickup"\nwhere = "dof:x"\nforce_n = 10.0\n')
-    sim = RiceSimulation(mjcf.load_table(tmp_path / "rice.toml"))
+    sim = Simulation.for_table(mjcf.load_table(tmp_path / "rice.toml"))
     (e,) = sim.tm.step_effects
     calls = type(e).calls
     before = dict(calls)
     sim.reset()
-    sim.steps(np.zeros(40), np.zeros(40))
+    z = np.zeros((20, 6))  # 20 samples at the 4000 Hz recorder rate: 40 physics steps at 8000 Hz
+    sim.run(reference=Reference(t=np.arange(20) / 4000.0, d=z, v=z, a=z))
     assert calls["reset"] == before["reset"] + 1 and calls["apply"] == before["apply"] + 40
     assert sim.d.qfrc_applied[sim.tm.platen_dadr] == 10.0
 

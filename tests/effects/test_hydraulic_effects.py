@@ -379,14 +379,14 @@ def test_effects_are_parameters_for_calibration():
 
 
 def test_the_analog_loop_takes_hydraulic_effects_too():
-    """The uni-axial analog-controller loop (sim/loop/analog.py) edits its hydraulics
-    with the description's effects, as the digital loop does."""
-    from sim.loop.analog import RiceSimulation
+    """The one loop with the uni-axial table's analog controller edits its hydraulics
+    with the description's effects, as with the digital one."""
+    from sim.loop.simulation import Simulation
 
     desc = mjcf.load_table(TABLES / "rice.toml")
     raw = copy.deepcopy(desc.raw)
     name = raw["actuator"][0]["name"]
     raw.setdefault("effect", []).append({"type": "valve_null_offset", "where": f"actuator:{name}", "offset": 0.02})
-    sim = RiceSimulation(parse_table(raw, "test"))
+    sim = Simulation.for_table(parse_table(raw, "test"))
     assert sim.hp.per_actuator("valve_null_offset")[0] == 0.02
-    assert RiceSimulation(desc).hp.valve_null_offset is None
+    assert Simulation.for_table(desc).hp.valve_null_offset is None

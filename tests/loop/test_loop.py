@@ -285,3 +285,101 @@ def test_air_spring_kernel_matches_the_polytropic_law():
         exact = F0 * (1 + c * qpos) ** (-n)
         assert np.allclose(linear + qfa, exact, rtol=1e-12, atol=1e-9)
         assert np.array_equal(qfa, qfa_np) or np.allclose(qfa, qfa_np, rtol=1e-15, atol=1e-12)
+
+
+# ------------------------------------------------------------------ one loop, two controllers
+@pytest.fixture(scope="module")
+def rice_sim():
+    return Simulation.for_table(mjcf.load_table("rice"))
+
+
+def test_the_controller_is_chosen_by_its_type_and_both_follow_the_protocol(harmonic, rice_sim):
+    from sim.control.analog import AnalogGains, RiceController
+    from sim.control.base import Controller, ControllerSettings, controller_settings
+    from sim.control.tvc import TableController
+    from sim.errors import ScenarioError
+
+    tm, _ = harmonic
+    cgs = Simulation(tm)
+    assert isinstance(cgs.controller, TableController) and isinstance(cgs.controller, Controller)
+    assert isinstance(rice_sim.controller, RiceController) and isinstance(rice_sim.controller, Controller)
+    assert isinstance(cgs.gains, ControllerGains) and isinstance(rice_sim.gains, AnalogGains)
+    assert isinstance(cgs.gains, ControllerSettings) and isinstance(rice_sim.gains, ControllerSettings)
+    # MTS style: a tick and a record every 2 steps of 1/2048 s; analog: a tick every 1/8000 s step, a record every 2
+    assert (cgs.steps_per_tick, cgs.steps_per_sample) == (2, 2)
+    assert (rice_sim.steps_per_tick, rice_sim.steps_per_sample) == (1, 2) and rice_sim.dt == 1 / 8000
+    assert cgs.controller.has_compiled_tick() and not rice_sim.controller.has_compiled_tick()
+    # the analog controller's model has its parameter set applied (the bulk modulus of set d18)
+    ps = rice_sim.tm.desc.raw["controller"]["parameter_sets"]["d18"]
+    assert rice_sim.hp.bulk_modulus_pa == ps["beta_pa"]
+    raw = json.loads(json.dumps(tm.desc.raw))
+    raw.setdefault("controller", {})["type"] = "hydromechanical"
+    with pytest.raises(ScenarioError, match="controller.type 'hydromechanical' is not one of digital, analog"):
+        controller_settings(mjcf.description.parse_table(raw, src="t.toml"))
+
+
+def _rice_ref(rate, n, slope=0.01):
+    """A ramp of the commanded x (m, m/s): linear, so interpolating it is exact."""
+    from sim.scenario.reference import Reference
+
+    t = np.arange(n) / rate
+    D, V = np.zeros((n, 6)), np.zeros((n, 6))
+    D[:, 0], V[:, 0] = slope * t, slope
+    return Reference(t=t, d=D, v=V, a=np.zeros((n, 6)))
+
+
+def test_analog_controller_ticks_every_step_from_either_reference_rate(rice_sim):
+    """The loop takes a reference at the recorder rate (interpolated to the controller's
+    ticks) or at the controller rate (the paper's per-step command): the same run for a
+    linear command; the valve command changes at every physics step, recorded every 2."""
+    rice_sim.reset()
+    a = rice_sim.run(reference=_rice_ref(4000.0, 201))
+    rice_sim.reset()
+    b = rice_sim.run(reference=_rice_ref(8000.0, 402))
+    assert a.incomplete_reason is None and len(a.t) == len(b.t) == 201 and a.timing["steps"] == 402
+    assert a.t[1] == 1 / 4000.0
+    for ch in a.channels:
+        assert np.allclose(a.channels[ch], b.channels[ch], rtol=1e-9, atol=1e-12), ch
+    # the commanded ramp is followed (the stroke moves with it, not held between records)
+    x = a.channels["actuator_displacement"][:, 0]
+    assert x[-1] > 0.2 * 0.01 * a.t[-1] and np.all(np.isfinite(a.channels["valve_command"]))
+
+
+def test_analog_run_stops_when_the_actuator_leaves_its_stroke(rice_sim):
+    """The analog controller's stroke limit (the paper's sign of an unstable loop) is part
+    of the loop's one compiled divergence test."""
+    rice_sim.reset()
+    half = rice_sim.tm.desc.actuators[0].cls.half_stroke_m
+    rice_sim.d.qpos[rice_sim.tm.stroke_qadr[0]] = 1.5 * half
+    res = rice_sim.run(reference=_rice_ref(4000.0, 100, slope=0.0))
+    assert res.incomplete_reason.startswith("simulation diverged at t = 0.0000 s: an actuator left its stroke")
+    assert len(res.t) == 1
+
+
+def test_the_recorder_can_sample_every_physics_step(rice_sim):
+    """Recorder period 1 (records at the 8000 Hz physics rate) against period 2 on the
+    same per-step command: the same run, every second record."""
+    from sim.control.analog import AnalogGains
+
+    g = rice_sim.gains
+    every = Simulation.for_table(mjcf.load_table("rice"), gains=dataclasses.replace(g, rate_hz=8000.0))
+    assert (every.steps_per_tick, every.steps_per_sample) == (1, 1) and isinstance(every.gains, AnalogGains)
+    ref = _rice_ref(8000.0, 400, slope=0.02)
+    rice_sim.reset()
+    half = rice_sim.run(reference=ref)
+    full = every.run(reference=ref)
+    assert len(full.t) == 400 and len(half.t) == 200 and full.t[1] == 1 / 8000.0
+    for ch in half.channels:
+        assert np.array_equal(full.channels[ch][::2], half.channels[ch]), ch
+
+
+def test_open_loop_on_the_analog_table_holds_the_recorded_commands(rice_sim):
+    """Open loop (recorded valve commands at the recorder rate) on a table whose controller
+    ticks between records: the commands are held for the whole sample, no tick runs."""
+    rice_sim.reset()
+    res = rice_sim.run(valve_command=np.full((200, 1), 0.01))  # 50 ms: past the valve's delay (set d18's tau)
+    assert res.incomplete_reason is None and len(res.t) == 200
+    assert np.all(res.channels["valve_command"] == 0.01)
+    # the delayed spool settles on the held command (a tick would have moved it)
+    assert np.allclose(res.channels["spool_position"][150:], 0.01, rtol=1e-6, atol=0)
+    assert res.channels["actuator_displacement"][-1, 0] > res.channels["actuator_displacement"][0, 0]
