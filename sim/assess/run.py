@@ -256,6 +256,7 @@ def plan_scenario(
     motions: dict | None = None,
     overrides: dict | None = None,
     engine: str = "loop",
+    start_s: float | None = None,
 ) -> ScenarioPlan:
     """Build everything a run of ``scenario`` (a :class:`~sim.scenario.files.Scenario` or
     its name/path) needs; raises :class:`~sim.errors.UserError` for bad inputs.
@@ -267,7 +268,9 @@ def plan_scenario(
     table, payload and scenario data (:mod:`sim.scenario.overrides`), e.g. a sweep case.
     ``engine``: ``"loop"`` (:meth:`Simulation.run`, the reference) or ``"callback"`` (the
     same run with the coupled step inside MuJoCo, :mod:`sim.loop.callback`; used where the
-    table allows it: closed loop, no drive iterations)."""
+    table allows it: closed loop, no drive iterations). ``start_s``: where the run starts
+    in the motion instead of the strong motion (``scenario.start_s``; see
+    :func:`sim.scenario.files.build_window`)."""
     import mjcf
     from sim.control.tvc import ControllerGains
     from sim.effects import build_model
@@ -316,7 +319,7 @@ def plan_scenario(
                 f"{sc.path or sc.name}: a motion in {dof} but table '{desc.name}' moves only "
                 f"{', '.join(desc.dofs)}; remove [motion.{dof}] or use a table with {dof}"
             )
-    ref, window = build_window(sc, motions, duration_s)
+    ref, window = build_window(sc, motions, duration_s, start_s)
     warns = limit_warnings(desc, motions)
     tm = rice.tm if rice else build_model(desc, payload)
     sim = rice or Simulation(tm, gains=gains)
@@ -350,6 +353,7 @@ def run_scenario(
     progress=None,
     overrides: dict | None = None,
     engine: str = "loop",
+    start_s: float | None = None,
 ) -> RunOutcome:
     """Simulate ``scenario`` (a :class:`~sim.scenario.files.Scenario` or its name/path).
 
@@ -360,7 +364,7 @@ def run_scenario(
     :class:`~sim.errors.UserError` for anything wrong with the inputs.
     """
     return plan_scenario(
-        scenario, duration_s=duration_s, iterations=iterations, overrides=overrides, engine=engine
+        scenario, duration_s=duration_s, iterations=iterations, overrides=overrides, engine=engine, start_s=start_s
     ).run(progress=progress)
 
 

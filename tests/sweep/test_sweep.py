@@ -139,3 +139,72 @@ def test_load_sweep_names_the_file(tmp_path):
     p.write_text("[sweep]\nscenario = 3\n")
     with pytest.raises(SweepError, match="bad.toml: 'sweep.scenario'"):
         load_sweep(p)
+
+
+def test_start_s_places_the_window_and_the_default_keeps_the_strong_motion(tmp_path):
+    """One windowing mechanism (build_window): a duration alone keeps a record's strong
+    motion; scenario.start_s / start_s= place the same tapered window elsewhere; a start
+    past the motion is a one-line scenario error."""
+    from dataclasses import replace
+
+    from sim.errors import ScenarioError
+    from sim.scenario.files import build_motions, build_window, load_scenario
+
+    sc = load_scenario("elcentro_20t")
+    motions = build_motions(sc)
+    strong_ref, strong = build_window(sc, motions, 4.0)
+    assert "strong motion" in strong["why"] and strong["start_s"] > 0
+    ref, win = build_window(sc, motions, 4.0, start_s=10.0)
+    assert win["start_s"] == pytest.approx(10.0) and win["end_s"] == pytest.approx(14.0)
+    assert "start_s = 10" in win["why"] and len(ref.t) == len(strong_ref.t)
+    # the file's key does the same, and the argument wins over it
+    sc2 = replace(sc, start_s=strong["start_s"])
+    ref2, win2 = build_window(sc2, motions, 4.0)
+    assert win2["start_s"] == strong["start_s"] and np.array_equal(ref2.d, strong_ref.d)
+    assert build_window(sc2, motions, 4.0, start_s=10.0)[1]["start_s"] == pytest.approx(10.0)
+    # the window is the record's motion between the tapers, at rest at both ends
+    rate = sc.sample_rate_hz
+    i = int(round(2.0 * rate))  # mid-window (the taper is 0.8 s)
+    x = motions["x"]
+    assert ref.d[i, 0] == pytest.approx(x.d[int(round(10.0 * rate)) + i], abs=1e-12)
+    assert abs(ref.d[0, 0]) < 1e-12 and abs(ref.d[-1, 0]) < 1e-12
+    with pytest.raises(ScenarioError, match="past the end of the motion"):
+        build_window(sc, motions, 4.0, start_s=x.duration_s - 1.0)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SCENARIO.replace("duration_s = 1.0", "duration_s = 1.0\nstart_s = -2.0"))
+    with pytest.raises(ScenarioError, match="scenario.start_s"):
+        load_scenario(bad)
+
+
+def test_run_plans_equals_each_plans_own_run():
+    """The shared route (sim.assess.many.run_plans): batchable plans with other table
+    parameters and a plan it cannot batch (the analog-controller table) together, each
+    outcome equal to the plan's own run, in order."""
+    from sim.assess.many import batchable, run_plans
+    from sim.assess.run import plan_scenario
+
+    def plans():
+        return [
+            plan_scenario("elcentro_20t", duration_s=0.15, iterations=0, engine="callback"),
+            plan_scenario("rice_sine", duration_s=0.1),
+            plan_scenario(
+                "elcentro_20t",
+                duration_s=0.15,
+                iterations=0,
+                engine="callback",
+                overrides={"table.fluid.bulk_modulus_pa": 0.7e9, "payload.mass_kg": {"scale": 1.2}},
+            ),
+        ]
+
+    together = run_plans(plans(), nthread=2)
+    alone = [p.run() for p in plans()]
+    assert [batchable(p) for p in plans()] == [True, False, True]
+    for a, b in zip(together, alone):
+        assert a.result.channels.keys() == b.result.channels.keys()
+        for k in a.result.channels:
+            assert np.array_equal(a.result.channels[k], b.result.channels[k]), k
+        assert a.summary["feasibility"]["limiting_utilisation"] == b.summary["feasibility"]["limiting_utilisation"]
+    # the overrides reached the third run
+    assert not np.array_equal(
+        together[0].result.channels["actuator_force"], together[2].result.channels["actuator_force"]
+    )
