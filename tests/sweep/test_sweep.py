@@ -208,3 +208,27 @@ def test_run_plans_equals_each_plans_own_run():
     assert not np.array_equal(
         together[0].result.channels["actuator_force"], together[2].result.channels["actuator_force"]
     )
+
+
+def test_feasibility_suite_runs_its_cases_together_with_each_cases_own_verdict():
+    """The suite stages every case, runs the simulations together on run_plans (the
+    batch), and gives each case the verdict of its own assess()."""
+    import mjcf
+    from sim.assess import study
+
+    pay = mjcf.load_payload("rigid_20t")
+    rows = study.suite("cgs", ["elcentro1940"], [0.3, 0.6], [pay], window_s=1.0, nthread=2)
+    assert [r["scale"] for r in rows] == [0.3, 0.6] and all(r["simulated"] for r in rows)
+    for r in rows:
+        alone = study.assess(
+            study.Case(table="cgs", motion="elcentro1940", payload=pay, scale=r["scale"], window_s=1.0)
+        )
+        assert alone["limiting"] == r["limiting"]
+        assert alone["limiting_utilisation"] == r["limiting_utilisation"]
+    assert rows[1]["limiting_utilisation"] > rows[0]["limiting_utilisation"]
+    # and these cases did go to the batch (not each plan's own loop)
+    from sim.assess.many import batchable
+
+    case = study.Case(table="cgs", motion="elcentro1940", payload=pay, scale=0.3, window_s=1.0)
+    pre, plan = study.stage(study.prepare(case), 0.3)
+    assert pre is None and batchable(plan)
