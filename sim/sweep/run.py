@@ -25,6 +25,7 @@ import io
 import json
 import math
 import os
+import re
 import time
 from pathlib import Path
 
@@ -46,9 +47,16 @@ def run_cases(
     group's wall time shared equally among its cases."""
     from sim.assess.many import run_plans
     from sim.assess.run import plan_scenario
+    from sim.scenario.files import build_motions, load_scenario
 
     t0 = time.perf_counter()
     plans, rows = [], {}
+    motions = None  # the scenario's motions, built once for the group when no case changes them
+    if not any(k.split(".")[0] == "motion" for c in cases for k in c.overrides):
+        try:
+            motions = build_motions(load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario)
+        except UserError:
+            motions = None  # each case's plan reports it
     for c in cases:
         try:
             p = plan_scenario(
@@ -58,6 +66,7 @@ def run_cases(
                 iterations=iterations,
                 overrides=c.overrides,
                 engine="callback",
+                motions=motions,
             )
             plans.append((c, p))
         except UserError as e:
@@ -86,6 +95,28 @@ def run_case(scenario, case, *, duration_s=None, start_s=None, iterations=None, 
     ]
 
 
+#: checks that do not depend on the simulation: the rated envelope of the demanded motion
+#: (``sim.assess.feasibility.envelope_checks``) and the static specimen checks
+_DEMAND = re.compile(r"^(stroke|velocity|acceleration|rotation)_(x|y|z|rx|ry|rz)$|^(specimen_mass|support_load)$")
+
+
+def simulated_limiting(checks: list) -> tuple[str, float]:
+    """The most used capability check among those computed from the simulation (not the
+    demanded motion's envelope nor the static specimen checks; not the tracking checks,
+    which are not part of the verdict either) and its utilisation; ("", nan) without any."""
+    from sim.assess.feasibility import is_tracking
+
+    run = [
+        c
+        for c in checks
+        if not _DEMAND.match(c["name"]) and not is_tracking(c) and c["utilisation"] == c["utilisation"]
+    ]
+    if not run:
+        return "", math.nan
+    c = max(run, key=lambda c: float(c["utilisation"]))
+    return c["name"], float(c["utilisation"])
+
+
 def error_row(case, message, wall) -> dict:
     return {
         "id": case.id,
@@ -112,6 +143,8 @@ def outcome_row(case, out, run_dir, wall) -> dict:
             float(f["limiting_utilisation"]) if f["limiting_utilisation"] is not None else math.nan
         ),
         "failed": ";".join(f["failed"]),
+        "run_limiting": "",
+        "run_limiting_utilisation": math.nan,
         "complete": bool(s["complete"]),
         "incomplete_reason": s["incomplete_reason"] or "",
         "duration_s": s["duration_s"],
@@ -119,6 +152,7 @@ def outcome_row(case, out, run_dir, wall) -> dict:
         "case_wall_s": wall,
         "error": "",
     }
+    row["run_limiting"], row["run_limiting_utilisation"] = simulated_limiting(f["checks"])
     for c in f["checks"]:  # one column per kind of check ("actuator_force_X3" -> util_actuator_force)
         name = c["name"]
         kind = "_".join(name.split("_")[:2]) if name.startswith("actuator_") else name
@@ -309,4 +343,14 @@ class ProgressLine:
         self.stream.flush()
 
 
-__all__ = ["EXECUTORS", "ProgressLine", "error_row", "outcome_row", "run_case", "run_cases", "run_sweep", "write_table"]
+__all__ = [
+    "EXECUTORS",
+    "ProgressLine",
+    "error_row",
+    "outcome_row",
+    "run_case",
+    "run_cases",
+    "run_sweep",
+    "simulated_limiting",
+    "write_table",
+]

@@ -84,6 +84,13 @@ def test_local_sweep_resumes_without_redoing_cases(tmp_path, sweep_file):
     # a heavier block needs more force: the varied inputs reached the runs
     f = {(r["bulk_modulus_pa"], r["mass_factor"]): r["util_actuator_force"] for r in rows}
     assert f[(0.8e9, 1.25)] > f[(0.8e9, 1.0)]
+    # the limiting check among those from the simulation: not an envelope/specimen check, at most the overall
+    for r in rows:
+        assert r["run_limiting"] and not r["run_limiting"].startswith(("stroke_", "velocity_", "acceleration_"))
+        assert 0 < r["run_limiting_utilisation"] <= r["limiting_utilisation"]
+        assert r["run_limiting_utilisation"] == r[f"util_{'_'.join(r['run_limiting'].split('_')[:2])}"] or not r[
+            "run_limiting"
+        ].startswith("actuator_")
     # the batch gives each case its single run: compare one case with run_scenario
     from sim.sweep.run import run_case
 
