@@ -114,6 +114,7 @@ class BatchRunner:
         spt = int(spt[0])
         done = np.zeros(N, dtype=np.int64)
         with CB.installed():
+            c0 = time.process_time()
             t0 = time.perf_counter()
             while True:
                 active = np.flatnonzero((done < ns) & np.array([c.C[CB.S_DONE] < 0 for c in ctxs]))
@@ -123,6 +124,7 @@ class BatchRunner:
                 b.step(ids=active, nstep=k * spt)
                 done[active] += k
             wall = time.perf_counter() - t0
+            self.cpu_s = time.process_time() - c0  # CPU time of every thread of the process
         self.wall_s = wall
         self.batch = b
         qpos, qvel = b.bind("qpos"), b.bind("qvel")
