@@ -239,3 +239,35 @@ def test_feasibility_suite_runs_its_cases_together_with_each_cases_own_verdict()
     case = study.Case(table="cgs", motion="elcentro1940", payload=pay, scale=0.3, window_s=1.0)
     pre, plan = study.stage(study.prepare(case), 0.3)
     assert pre is None and batchable(plan)
+
+
+def test_report_gives_both_distributions(tmp_path):
+    """report.md: percentiles of the overall and of the simulated limiting utilisation
+    (failed cases apart), the limiting checks counted, and the two-panel histogram."""
+    import math
+
+    from sim.sweep.report import summarize, write_report
+
+    rows = [
+        {
+            "id": f"{i}",
+            "error": "",
+            "feasible": True,
+            "limiting": "stroke_y",
+            "limiting_utilisation": 0.83,
+            "run_limiting": "actuator_force" if i % 4 else "oil_flow",
+            "run_limiting_utilisation": 0.1 + 0.01 * i,
+        }
+        for i in range(20)
+    ]
+    rows.append(
+        {"id": "bad", "error": "diverged", "feasible": False, "limiting": "error", "limiting_utilisation": math.inf}
+    )
+    r = summarize(rows, "run_limiting_utilisation", "run_limiting")
+    assert r["simulated"] == 20 and r["utilisation"]["min"] == pytest.approx(0.1)
+    assert r["utilisation"]["max"] == pytest.approx(0.29) and r["limiting"] == {"actuator_force": 15, "oil_flow": 5}
+    info = {"sweep": "t", "scenario": "s", "ran": 21, "skipped": 0, "executor": "local", "workers": 1, "wall_s": 1.0}
+    text = write_report(tmp_path, info, rows).read_text()
+    assert "median 0.83" in text and "checks computed from the simulation" in text and "median 0.195" in text
+    assert "actuator_force 15, oil_flow 5" in text and "errors: 1" in text
+    assert (tmp_path / "limiting_utilisation.png").stat().st_size > 1000
