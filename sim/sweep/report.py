@@ -82,6 +82,7 @@ def write_report(out, info: dict, rows: list, title: str = "") -> Path:
         f"{ru['median']:.4g}, mean {ru['mean']:.4g}, 95 % {ru['p95']:.4g}, max {ru['max']:.4g}",
         "- its limiting check: " + ", ".join(f"{k} {v}" for k, v in r["limiting"].items()),
         "",
+        *_per_check(rows, info.get("varied") or []),
         "![limiting utilisation](limiting_utilisation.png)",
         "",
         "Utilisation of a check: its peak over its limit (stroke, force, valve saturation time, "
@@ -92,6 +93,39 @@ def write_report(out, info: dict, rows: list, title: str = "") -> Path:
     path = out / "report.md"
     write_text_atomic(path, "\n".join(lines))
     return path
+
+
+def _per_check(rows: list, varied: list) -> list:
+    """Markdown lines: per kind of check (the rows' ``util_*`` columns), the spread of its
+    utilisation over the cases and its correlation with each varied input."""
+    ok = [r for r in rows if r.get("error") == ""]
+    cols = sorted({k for r in ok for k in r if k.startswith("util_")})
+    if not ok or not cols:
+        return []
+    head = "| check | min | 5 % | median | 95 % | max |" + "".join(f" corr. {v} |" for v in varied)
+    lines = [
+        "Per kind of check (the largest over its instances, e.g. over the actuators):",
+        "",
+        head,
+        "|---" * (6 + len(varied)) + "|",
+    ]
+    for c in cols:
+        pairs = [(r.get(c), [r.get(v) for v in varied]) for r in ok]
+        pairs = [(u, xs) for u, xs in pairs if u is not None and np.isfinite(u)]
+        if not pairs:
+            continue
+        u = np.array([p[0] for p in pairs], float)
+        q = np.percentile(u, [0, 5, 50, 95, 100])
+        cells = [f"{x:.4g}" for x in q]
+        for j in range(len(varied)):
+            x = np.array([p[1][j] if p[1][j] is not None else np.nan for p in pairs], float)
+            good = np.isfinite(x)
+            if good.sum() > 2 and np.std(u[good]) > 0 and np.std(x[good]) > 0:
+                cells.append(f"{np.corrcoef(x[good], u[good])[0, 1]:+.2f}")
+            else:
+                cells.append("-")
+        lines.append(f"| {c[5:]} | " + " | ".join(cells) + " |")
+    return lines + [""]
 
 
 __all__ = ["summarize", "write_report"]

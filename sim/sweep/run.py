@@ -290,6 +290,7 @@ def run_sweep(
         "skipped": skipped,
         "executor": executor,
         "workers": workers,
+        "varied": [v.name for v in sweep.vary],
         "wall_s": wall,
         "table": str(table),
     }

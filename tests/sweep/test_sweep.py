@@ -257,6 +257,8 @@ def test_report_gives_both_distributions(tmp_path):
             "limiting_utilisation": 0.83,
             "run_limiting": "actuator_force" if i % 4 else "oil_flow",
             "run_limiting_utilisation": 0.1 + 0.01 * i,
+            "mass": 1.0 + i,
+            "util_actuator_force": 0.05 * (1.0 + i),  # grows with the mass: correlation +1
         }
         for i in range(20)
     ]
@@ -267,7 +269,9 @@ def test_report_gives_both_distributions(tmp_path):
     assert r["simulated"] == 20 and r["utilisation"]["min"] == pytest.approx(0.1)
     assert r["utilisation"]["max"] == pytest.approx(0.29) and r["limiting"] == {"actuator_force": 15, "oil_flow": 5}
     info = {"sweep": "t", "scenario": "s", "ran": 21, "skipped": 0, "executor": "local", "workers": 1, "wall_s": 1.0}
+    info["varied"] = ["mass"]
     text = write_report(tmp_path, info, rows).read_text()
     assert "median 0.83" in text and "checks computed from the simulation" in text and "median 0.195" in text
     assert "actuator_force 15, oil_flow 5" in text and "errors: 1" in text
+    assert "| actuator_force | 0.05 | " in text and "| corr. mass |" in text and "| +1.00 |" in text
     assert (tmp_path / "limiting_utilisation.png").stat().st_size > 1000
