@@ -11,6 +11,7 @@ a rerun recording in a folder.
 
 from __future__ import annotations
 
+import copy
 import sys
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
@@ -187,12 +188,12 @@ class ScenarioPlan:
             "complete": res.incomplete_reason is None,
             "incomplete_reason": res.incomplete_reason,
             "interrupted": bool(getattr(res, "interrupted", False)),
-            "tracking": _tracking(res, ref),
+            "tracking": (tracking := _tracking(res, ref)),
             "drive_iterations": {
                 "count": len(history) - 1 if history else 0,
                 "chosen": best,
                 "frf": settings.frf if history else None,
-                "tracking_plain_controller": _tracking(plain, ref),
+                "tracking_plain_controller": copy.deepcopy(tracking) if plain is res else _tracking(plain, ref),
                 "history": [
                     {"iteration": h["iteration"], "mean_nrmse_acceleration": h["mean_nrmse_acceleration"]}
                     for h in history
