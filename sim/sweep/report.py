@@ -48,17 +48,26 @@ def write_report(out, info: dict, rows: list, title: str = "") -> Path:
     out = Path(out)
     s = summarize(rows)
     r = summarize(rows, "run_limiting_utilisation", "run_limiting")
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
-    for ax, x, what in (
-        (axes[0], s, "every check (peak / limit of the most used)"),
-        (axes[1], r, "checks from the simulation only"),
-    ):
-        if len(x["values"]):
-            ax.hist(x["values"], bins=min(40, max(5, len(x["values"]) // 10)), color="#4477aa")
-        ax.axvline(1.0, color="#cc3311", lw=1, label="limit")
-        ax.set_xlabel(f"limiting utilisation: {what}", fontsize=9)
+    panels = [
+        (s["values"], "limiting utilisation, every check"),
+        (r["values"], "limiting utilisation, checks from the simulation"),
+    ]
+    spread = _widest(rows)
+    if spread is not None:
+        panels.append((spread[1], f"utilisation of {spread[0]} (the widest spread)"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 3.8))
+    for ax, (vals, what) in zip(np.atleast_1d(axes), panels):
+        if len(vals):
+            lo, hi = float(np.min(vals)), float(np.max(vals))
+            if hi - lo > 1e-9 * max(abs(hi), 1.0):
+                ax.hist(vals, bins=min(40, max(5, len(vals) // 10)))
+            else:  # the same value in every case: one visible bar
+                ax.bar([lo], [len(vals)], width=0.02 * max(abs(lo), 0.05))
+            if hi >= 0.7:  # the limit on the axis only when the values come near it
+                ax.axvline(1.0, color="#cc3311", lw=1, label="limit (1)")
+                ax.legend()
+            ax.set_xlabel(f"{what}\n(min {lo:.4g}, max {hi:.4g})", fontsize=9)
         ax.set_ylabel("cases")
-        ax.legend()
     fig.tight_layout()
     png = out / "limiting_utilisation.png"
     tmp = out / ".limiting_utilisation.tmp.png"
@@ -93,6 +102,30 @@ def write_report(out, info: dict, rows: list, title: str = "") -> Path:
     path = out / "report.md"
     write_text_atomic(path, "\n".join(lines))
     return path
+
+
+def _widest(rows: list):
+    """(check kind, values) of the simulated capability check (a ``util_*`` column other
+    than the demanded motion's envelope, the static and the tracking checks) whose
+    utilisation varies most over the cases (standard deviation, in utilisation: how much
+    closer to its limit the inputs can bring it); None without one."""
+    from sim.assess.feasibility import TRACKING_PREFIXES
+    from sim.sweep.run import is_demand_check
+
+    ok = [r for r in rows if r.get("error") == ""]
+    best = None
+    for c in sorted({k for r in ok for k in r if k.startswith("util_")}):
+        kind = c[5:]
+        if is_demand_check(kind) or kind.startswith(TRACKING_PREFIXES):
+            continue
+        v = np.array([r[c] for r in ok if r.get(c) is not None], float)
+        v = v[np.isfinite(v)]
+        if len(v) < 2 or not v.mean() > 0:
+            continue
+        cv = float(v.std())
+        if cv > 0 and (best is None or cv > best[0]):
+            best = (cv, kind, v)
+    return None if best is None else (best[1], best[2])
 
 
 def _per_check(rows: list, varied: list) -> list:

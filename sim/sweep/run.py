@@ -100,6 +100,12 @@ def run_case(scenario, case, *, duration_s=None, start_s=None, iterations=None, 
 _DEMAND = re.compile(r"^(stroke|velocity|acceleration|rotation)_(x|y|z|rx|ry|rz)$|^(specimen_mass|support_load)$")
 
 
+def is_demand_check(name: str) -> bool:
+    """A check of the demanded motion's envelope or a static specimen check (not from the
+    simulation)."""
+    return bool(_DEMAND.match(name))
+
+
 def simulated_limiting(checks: list) -> tuple[str, float]:
     """The most used capability check among those computed from the simulation (not the
     demanded motion's envelope nor the static specimen checks; not the tracking checks,
@@ -109,7 +115,7 @@ def simulated_limiting(checks: list) -> tuple[str, float]:
     run = [
         c
         for c in checks
-        if not _DEMAND.match(c["name"]) and not is_tracking(c) and c["utilisation"] == c["utilisation"]
+        if not is_demand_check(c["name"]) and not is_tracking(c) and c["utilisation"] == c["utilisation"]
     ]
     if not run:
         return "", math.nan
