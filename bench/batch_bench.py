@@ -4,8 +4,10 @@
   physics step over the bare ``mj_step`` of the same model (target <= 1.15), beside the
   Python loop's figure;
 * batches of N on all cores (``sim.loop.batch``): simulated seconds per wall second, and
-  the efficiency = batch physics steps per second / (threads x the single bare
-  ``mj_step`` rate) (target >= 0.85 for N >= 32).
+  the efficiency = batch physics steps per second / (min(N, threads) x the single bare
+  ``mj_step`` rate) (target >= 0.85 for N >= 32), beside the same figure for MuJoCo's
+  batch of plain models (no callback): what MuJoCo's batch itself reaches on this machine
+  at this moment, so a shortfall can be put on the twin or on MuJoCo / the machine.
 
 All figures from this one run; on a shared machine they are noisy, the ratios less so
 (taken side by side).
@@ -45,15 +47,55 @@ def bare_replay_rate(tm, forces, spt: int) -> float:
     """Bare ``mj_step`` calls per second of the same model on the same motion: the
     recorded actuator forces (held over each tick) into ``ctrl``, no hydraulics,
     controller or recorder; one thread."""
+    return bare_replay(tm, forces, spt)[0]
+
+
+def bare_replay(tm, forces, spt: int) -> tuple[float, float]:
+    """:func:`bare_replay_rate` and the same in steps per CPU second (the process's CPU
+    time: what the steps cost, whatever share of the cores the machine gave them)."""
     m = tm.model
     d = tm.new_data()
     ids = tm.actuator_ids
+    c0 = time.process_time()
     t0 = time.perf_counter()
     for f in forces:
         d.ctrl[ids] = f
         for _ in range(spt):
             mujoco.mj_step(m, d)
-    return len(forces) * spt / (time.perf_counter() - t0)
+    n = len(forces) * spt
+    return n / (time.perf_counter() - t0), n / max(time.process_time() - c0, 1e-9)
+
+
+def plain_batch_rate(tm, n: int, threads: int, nstep: int) -> float:
+    """Physics steps per second of ``mujoco.batch.Batch`` stepping ``n`` copies of the
+    same model with no callback and no controls (MuJoCo's own batch, nothing of the twin):
+    the ceiling the twin's batch can reach on this machine."""
+    from mujoco import batch as mjbatch
+
+    m = tm.model
+    d = tm.new_data()
+    row = np.empty(mujoco.mj_stateSize(m, _INTEGRATION))
+    mujoco.mj_getState(m, d, row, _INTEGRATION)
+    b = mjbatch.Batch(m, n, threads)
+    b.state[:] = row
+    b.step(nstep=8)  # threads started, MjData touched
+    t0 = time.perf_counter()
+    b.step(nstep=nstep)
+    return n * nstep / (time.perf_counter() - t0)
+
+
+def plain_step_rate(tm, nstep: int) -> float:
+    """Physics steps per second of ``mj_step(m, d, nstep)`` on the same state as
+    :func:`plain_batch_rate` (one thread, no Python between steps)."""
+    m = tm.model
+    d = tm.new_data()
+    mujoco.mj_step(m, d, 8)
+    t0 = time.perf_counter()
+    mujoco.mj_step(m, d, nstep)
+    return nstep / (time.perf_counter() - t0)
+
+
+_INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 
 
 def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads: int | None = None) -> dict:
@@ -65,18 +107,21 @@ def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads:
     sim.reset()
     loop = sim.run(reference=ref)
     F = loop.channels["actuator_force"]
-    rate0 = bare_replay_rate(tm, F, sim.steps_per_tick)
+    rate0, cpu0 = bare_replay(tm, F, sim.steps_per_tick)
     sim.reset()
     cb = run_callback(sim, ref)
-    rate1 = bare_replay_rate(tm, F, sim.steps_per_tick)
+    rate1, cpu1 = bare_replay(tm, F, sim.steps_per_tick)
     bare_us = 2e6 / (rate0 + rate1)  # before and after the callback run
+    bare_cpu_us = 2e6 / (cpu0 + cpu1)
     steps = cb.timing["steps"]
     out = {
         "bare_us": bare_us,
+        "bare_cpu_us": bare_cpu_us,
         "loop_us": loop.wall_s / loop.timing["steps"] * 1e6,
         "callback_us": cb.wall_s / steps * 1e6,
         "threads": threads,
         "batches": {},
+        "load_before": os.getloadavg()[0],
     }
     out["loop_ratio"] = out["loop_us"] / bare_us
     out["callback_ratio"] = out["callback_us"] / bare_us
@@ -86,24 +131,50 @@ def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads:
         f"callback route {out['callback_us']:.1f} us/step ({out['callback_ratio']:.2f} x)"
     )
     print(
-        f"batches on {threads} threads, {batch_seconds:g} s simulated each "
-        f"(efficiency = physics steps/s over {threads} x the bare mj_step rate):"
+        f"batches on {threads} threads, {batch_seconds:g} s simulated each; efficiency = physics steps/s over "
+        f"min(N, {threads}) x the bare mj_step rate (a batch of N < threads cannot use more than N threads); "
+        "'MuJoCo alone' = the same batch of plain models (no callback, no controls) over min(N, threads) x "
+        "mj_step(m, d, nstep) measured just before it: MuJoCo's own batch scaling on this machine now; "
+        f"'CPU eff.' = the bare mj_step's CPU time per step ({bare_cpu_us:.1f} us) over the batch's (the work "
+        "the batch adds, whatever the load); 'busy' = the batch's CPU time over wall time x min(N, threads) "
+        "(the share of its threads' cores it got): efficiency ~ CPU eff. x busy"
     )
-    print(f"  {'N':>5s} {'sim s / wall s':>15s} {'steps/s':>10s} {'efficiency':>10s}")
+    print(
+        f"  {'N':>5s} {'sim s / wall s':>15s} {'steps/s':>10s} {'efficiency':>10s} {'MuJoCo alone':>12s} "
+        f"{'CPU eff.':>9s} {'busy':>6s}"
+    )
+    nstep = int(round(batch_seconds * sim.gains.rate_hz)) * sim.steps_per_tick
     for n in sizes:
+        used = min(n, threads)
+        one = plain_step_rate(tm, nstep)
+        plain = plain_batch_rate(tm, n, threads, nstep) / (used * one)
         sims = [Simulation(tm) for _ in range(n)]
         runner = BatchRunner(sims, nthread=threads)
         res = runner.run([ref] * n, duration_s=batch_seconds)
         wall = runner.wall_s
         nsteps = sum(r.timing["steps"] for r in res)
         sps = nsteps / wall
-        eff = sps / (threads * 1e6 / bare_us)
+        eff = sps / (used * 1e6 / bare_us)
         simps = sum(r.sim_s for r in res) / wall
-        out["batches"][n] = {"sim_s_per_wall_s": simps, "steps_per_s": sps, "efficiency": eff}
-        print(f"  {n:5d} {simps:15.2f} {sps:10.0f} {eff:10.2f}")
+        cpu_eff = bare_cpu_us / (runner.cpu_s / nsteps * 1e6)
+        busy = runner.cpu_s / wall / used
+        out["batches"][n] = {
+            "sim_s_per_wall_s": simps,
+            "steps_per_s": sps,
+            "efficiency": eff,
+            "mujoco_alone": plain,
+            "cpu_efficiency": cpu_eff,
+            "busy": busy,
+        }
+        print(f"  {n:5d} {simps:15.2f} {sps:10.0f} {eff:10.2f} {plain:12.2f} {cpu_eff:9.2f} {busy:6.2f}")
+    out["load_after"] = os.getloadavg()[0]
+    print(
+        f"load average (1 min) {out['load_before']:.1f} before, {out['load_after']:.1f} after, on "
+        f"{os.cpu_count()} cores (a load above the cores: other processes share them with the batch's threads)"
+    )
     big = max(n for n in sizes if n >= 32) if any(n >= 32 for n in sizes) else max(sizes)
     out["summary_n"] = big
     return out
 
 
-__all__ = ["bare_rate", "main"]
+__all__ = ["bare_rate", "main", "plain_batch_rate", "plain_step_rate"]

@@ -11,6 +11,7 @@ a rerun recording in a folder.
 
 from __future__ import annotations
 
+import copy
 import sys
 from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
@@ -187,12 +188,12 @@ class ScenarioPlan:
             "complete": res.incomplete_reason is None,
             "incomplete_reason": res.incomplete_reason,
             "interrupted": bool(getattr(res, "interrupted", False)),
-            "tracking": _tracking(res, ref),
+            "tracking": (tracking := _tracking(res, ref)),
             "drive_iterations": {
                 "count": len(history) - 1 if history else 0,
                 "chosen": best,
                 "frf": settings.frf if history else None,
-                "tracking_plain_controller": _tracking(plain, ref),
+                "tracking_plain_controller": copy.deepcopy(tracking) if plain is res else _tracking(plain, ref),
                 "history": [
                     {"iteration": h["iteration"], "mean_nrmse_acceleration": h["mean_nrmse_acceleration"]}
                     for h in history
@@ -298,6 +299,7 @@ def plan_scenario(
     motions: dict | None = None,
     overrides: dict | None = None,
     engine: str = "loop",
+    start_s: float | None = None,
 ) -> ScenarioPlan:
     """Build everything a run of ``scenario`` (a :class:`~sim.scenario.files.Scenario` or
     its name/path) needs; raises :class:`~sim.errors.UserError` for bad inputs.
@@ -309,7 +311,9 @@ def plan_scenario(
     table, payload and scenario data (:mod:`sim.scenario.overrides`), e.g. a sweep case.
     ``engine``: ``"loop"`` (:meth:`Simulation.run`, the reference) or ``"callback"`` (the
     same run with the coupled step inside MuJoCo, :mod:`sim.loop.callback`; used where the
-    table allows it: closed loop, no drive iterations)."""
+    table allows it: closed loop, no drive iterations). ``start_s``: where the run starts
+    in the motion instead of the strong motion (``scenario.start_s``; see
+    :func:`sim.scenario.files.build_window`)."""
     import mjcf
     from sim.control.base import controller_settings, controller_type
     from sim.loop.simulation import Simulation
@@ -352,7 +356,7 @@ def plan_scenario(
                 f"{sc.path or sc.name}: a motion in {dof} but table '{desc.name}' moves only "
                 f"{', '.join(desc.dofs)}; remove [motion.{dof}] or use a table with {dof}"
             )
-    ref, window = build_window(sc, motions, duration_s)
+    ref, window = build_window(sc, motions, duration_s, start_s)
     warns = limit_warnings(desc, motions)
     sim = Simulation.for_table(desc, payload, gains)
     tm = sim.tm
@@ -386,6 +390,7 @@ def run_scenario(
     progress=None,
     overrides: dict | None = None,
     engine: str = "loop",
+    start_s: float | None = None,
 ) -> RunOutcome:
     """Simulate ``scenario`` (a :class:`~sim.scenario.files.Scenario` or its name/path).
 
@@ -396,7 +401,7 @@ def run_scenario(
     :class:`~sim.errors.UserError` for anything wrong with the inputs.
     """
     return plan_scenario(
-        scenario, duration_s=duration_s, iterations=iterations, overrides=overrides, engine=engine
+        scenario, duration_s=duration_s, iterations=iterations, overrides=overrides, engine=engine, start_s=start_s
     ).run(progress=progress)
 
 

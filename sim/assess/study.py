@@ -270,7 +270,27 @@ def _bare_support(desc):
 def evaluate(prep: Prepared, scale: float, *, simulate: bool = True, progress=None) -> dict:
     """The verdict of a prepared case at ``scale``: specimen and envelope checks on the
     whole motion; if they pass (or always, with the specimen buildable and ``simulate``)
-    the run checks of a closed-loop simulation of the window."""
+    the run checks of a closed-loop simulation of the window, run on the shared route
+    of many runs (:func:`sim.assess.many.run_plans`; the batch where the table allows)."""
+    from sim.assess.many import run_plans
+
+    pre, plan = stage(prep, scale, simulate=simulate)
+    if plan is None:
+        return pre
+    if progress:
+        progress(f"simulating {plan.reference.t[-1]:.1f} s at scale {scale:.4g}")
+    outcome = run_plans([plan], nthread=1)[0]
+    if isinstance(outcome, UserError):
+        raise outcome
+    return settle(prep, scale, outcome)
+
+
+def stage(prep: Prepared, scale: float, *, simulate: bool = True) -> tuple[dict | None, object]:
+    """What a verdict at ``scale`` needs: ``(verdict, None)`` when it needs no simulation
+    (the specimen cannot be built, or the checks on the whole motion fail and not
+    ``simulate``), else ``(None, plan)``: the :class:`~sim.assess.run.ScenarioPlan` of
+    the window at ``scale`` (its simulation shared with the prepared case's other
+    scales: run one at a time), for :func:`settle` once run."""
     from sim.assess.feasibility import envelope_checks, verdict
     from sim.assess.run import plan_scenario
     from sim.scenario.reference import reference_from_motions
@@ -290,18 +310,21 @@ def evaluate(prep: Prepared, scale: float, *, simulate: bool = True, progress=No
             else "not simulated: the specimen or envelope checks already fail"
         )
         out["scale"] = float(scale)
-        return out
+        return out, None
     win = scaled(prep.window, scale)
     wlen = max(m.duration_s for m in win.values())
     if prep.plan is None:
         prep.plan = plan_scenario(
             _scenario_for(prep.case, prep.desc), payload=prep.payload, motions=win, iterations=prep.case.iterations
         )
-    prep.plan.sim.reset()  # Simulation.run continues from where the last run ended
     plan = replace(
         prep.plan, reference=reference_from_motions(win, rate, wlen), envelope_reference=env_ref, warnings=warns
     )
-    outcome = plan.run(progress=progress)
+    return None, plan
+
+
+def settle(prep: Prepared, scale: float, outcome) -> dict:
+    """The verdict of a simulated :func:`stage` plan from its ``RunOutcome``."""
     fe = dict(outcome.summary["feasibility"])
     fe["simulated"] = True
     fe["scale"] = float(scale)
@@ -465,29 +488,57 @@ SUITE_COLUMNS = ("record", "scale", "payload", "feasible", "limiting", "limiting
 
 
 def suite(
-    table: str, records: list[str], scales: list[float], payloads: list, *, window_s=None, iterations=0, progress=None
+    table: str,
+    records: list[str],
+    scales: list[float],
+    payloads: list,
+    *,
+    window_s=None,
+    iterations=0,
+    progress=None,
+    nthread: int = 0,
 ) -> list[dict]:
-    """Every record x scale x payload: one row per case (see :data:`SUITE_COLUMNS`)."""
-    rows = []
+    """Every record x scale x payload: one row per case (see :data:`SUITE_COLUMNS`).
+
+    Every case is prepared and checked first; the simulations then run together on the
+    shared route of many runs (:func:`sim.assess.many.run_plans`: MuJoCo's batch on
+    ``nthread`` threads, 0 = all cores, where the table allows), each the same run as
+    the case's own :func:`assess`."""
+    from sim.assess.many import run_plans
+
+    say = progress or (lambda text: None)
+    cases, preps, staged = [], [], []
     for rec in records:
         for pay in payloads:
             for s in scales:
-                v = assess(
-                    Case(table=table, motion=rec, payload=pay, scale=s, window_s=window_s, iterations=iterations),
-                    progress=progress,
-                )
-                rows.append(
-                    {
-                        "record": Path(rec).name,
-                        "scale": s,
-                        "payload": getattr(pay, "name", None) or "bare",
-                        "feasible": v["feasible"],
-                        "limiting": v["limiting"],
-                        "limiting_utilisation": v["limiting_utilisation"],
-                        "failed": ";".join(v["failed"]),
-                        "simulated": v["simulated"],
-                    }
-                )
+                case = Case(table=table, motion=rec, payload=pay, scale=s, window_s=window_s, iterations=iterations)
+                prep = prepare(case)  # one per case: each case's plan has its own simulation
+                cases.append((rec, pay, s))
+                preps.append(prep)
+                staged.append(stage(prep, s, simulate=True))
+    todo = [i for i, (pre, plan) in enumerate(staged) if plan is not None]
+    say(f"simulating {len(todo)} of {len(cases)} cases together")
+    outs = run_plans([staged[i][1] for i in todo], nthread=nthread)
+    verdicts = {i: pre for i, (pre, plan) in enumerate(staged) if plan is None}
+    for i, o in zip(todo, outs):
+        if isinstance(o, UserError):
+            raise o
+        verdicts[i] = settle(preps[i], cases[i][2], o)
+    rows = []
+    for i, (rec, pay, s) in enumerate(cases):
+        v = _finish(preps[i], verdicts[i])
+        rows.append(
+            {
+                "record": Path(rec).name,
+                "scale": s,
+                "payload": getattr(pay, "name", None) or "bare",
+                "feasible": v["feasible"],
+                "limiting": v["limiting"],
+                "limiting_utilisation": v["limiting_utilisation"],
+                "failed": ";".join(v["failed"]),
+                "simulated": v["simulated"],
+            }
+        )
     return rows
 
 
@@ -503,6 +554,8 @@ __all__ = [
     "max_scale",
     "prepare",
     "record_motions",
+    "settle",
+    "stage",
     "strongest_window",
     "suite",
     "suite_records",

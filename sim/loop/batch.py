@@ -114,6 +114,7 @@ class BatchRunner:
         spt = int(spt[0])
         done = np.zeros(N, dtype=np.int64)
         with CB.installed():
+            c0 = time.process_time()
             t0 = time.perf_counter()
             while True:
                 active = np.flatnonzero((done < ns) & np.array([c.C[CB.S_DONE] < 0 for c in ctxs]))
@@ -123,6 +124,7 @@ class BatchRunner:
                 b.step(ids=active, nstep=k * spt)
                 done[active] += k
             wall = time.perf_counter() - t0
+            self.cpu_s = time.process_time() - c0  # CPU time of every thread of the process
         self.wall_s = wall
         self.batch = b
         qpos, qvel = b.bind("qpos"), b.bind("qvel")
@@ -137,4 +139,53 @@ def run_batch(sims: list, references: list, *, nthread: int = 0, duration_s: flo
     return BatchRunner(sims, nthread=nthread).run(references, duration_s=duration_s)
 
 
-__all__ = ["BatchRunner", "run_batch"]
+def _batch_key(sim):
+    """Simulations with equal keys can share one batch (same MjData layout, physics step
+    and controller rate)."""
+    m = sim.m
+    return (m.nq, m.nv, m.nu, m.nbody, m.neq, sim.steps_per_tick, float(sim.dt))
+
+
+def run_many(sims: list, references: list, *, nthread: int = 0, group: int = 32) -> list:
+    """Run simulation ``i`` closed loop on ``references[i]`` from its current state (as
+    :meth:`Simulation.run <sim.loop.simulation.Simulation.run>` does: ``reset`` first
+    for a fresh run); returns one result per simulation, in order.
+
+    The shared route for many simulations (sweep cases, feasibility suites, calibration
+    candidates): simulations the callback can run (:func:`sim.loop.callback.accepts`)
+    go to :class:`BatchRunner` in batches of up to ``group`` simulations that share a
+    layout, on ``nthread`` threads (0: all cores); the others (the Rice table's analog
+    loop, per-step effects, a valve delay) run their own ``run``. Every result equals
+    the simulation's own ``Simulation.run`` bit for bit (``tests/loop/test_batch.py``).
+    A simulation that diverges ends early with ``incomplete_reason`` set, as in
+    ``Simulation.run``; the others are not affected.
+    """
+    if len(sims) != len(references):
+        raise ValueError(f"{len(sims)} simulations but {len(references)} references")
+    if group < 1:
+        raise ValueError(f"group must be at least 1 (got {group})")
+    from sim.loop.simulation import Simulation
+
+    out: list = [None] * len(sims)
+    pending: dict = {}  # batch key -> indices waiting for a batch
+    order = []
+    for i, s in enumerate(sims):
+        if isinstance(s, Simulation) and CB.accepts(s) is None:
+            k = _batch_key(s)
+            if k not in pending:
+                pending[k] = []
+                order.append(k)
+            pending[k].append(i)
+        else:
+            out[i] = s.run(reference=references[i])
+    for k in order:
+        idx = pending[k]
+        for j in range(0, len(idx), group):
+            part = idx[j : j + group]
+            res = BatchRunner([sims[i] for i in part], nthread=nthread).run([references[i] for i in part])
+            for i, r in zip(part, res):
+                out[i] = r
+    return out
+
+
+__all__ = ["BatchRunner", "run_batch", "run_many"]

@@ -7,6 +7,7 @@ A scenario file (``scenarios/<name>.toml``)::
     table = "cgs"                 # scenarios/tables/cgs.toml
     payload = "rigid_20t"         # optional, scenarios/payloads/rigid_20t.toml
     duration_s = 60.0             # optional: default = the motion's length
+    start_s = 20.0                # optional: where the run starts in the motion (default: the strong motion)
     pad_to_duration = false       # allow a duration longer than the motion (quiet padding)
     description = "..."
 
@@ -47,7 +48,7 @@ from sim.scenario.reference import Reference, reference_from_motions
 SCENARIOS_DIR = REPO_ROOT / "scenarios"
 DOFS = DOFS6
 
-_SCEN_KEYS = {"name", "table", "payload", "duration_s", "pad_to_duration", "description"}
+_SCEN_KEYS = {"name", "table", "payload", "duration_s", "start_s", "pad_to_duration", "description"}
 #: Every motion type's keys and what each must be: "num" any finite number, "pos" > 0,
 #: "nonneg" >= 0, "int" a whole number >= 0, "band" [f_lo, f_hi] in Hz, "text", "table".
 _MOTION_SPEC = {
@@ -149,6 +150,7 @@ class Scenario:
     raw: dict = field(default_factory=dict, repr=False)
     faults: list = field(default_factory=list)  #: [[fault]] and [[effect]] entries (sim.effects.faults)
     interlock: dict = field(default_factory=dict)  #: [interlock] limits over the table's
+    start_s: float | None = None  #: where the run starts in the motion (None: the strong motion of a record)
 
 
 def _load(path: Path) -> dict:
@@ -186,6 +188,9 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     dur = sc.get("duration_s")
     if dur is not None:
         V.number(dur, "scenario.duration_s", src, ScenarioError, unit="s", positive=True)
+    start = sc.get("start_s")
+    if start is not None:
+        V.number(start, "scenario.start_s", src, ScenarioError, unit="s", nonneg=True)
     mo = V.require_table(data, "motion", "motion", src, ScenarioError, what="type = ... or one [motion.<dof>] per DOF")
     if not mo:
         raise ScenarioError(f'{src}: [motion] is empty; give type = "el_centro_1940" or one [motion.<dof>] table')
@@ -253,6 +258,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         iteration=dict(it),
         faults=faults,
         interlock=dict(interlock),
+        start_s=float(start) if start is not None else None,
     )
     _check_motion(s)
     return s
@@ -383,7 +389,9 @@ def build_reference(s: Scenario, motions: dict[str, M.Motion], duration_s: float
 WINDOW_TAPER_S = 2.0
 
 
-def build_window(s: Scenario, motions: dict[str, M.Motion], duration_s: float | None = None) -> tuple[Reference, dict]:
+def build_window(
+    s: Scenario, motions: dict[str, M.Motion], duration_s: float | None = None, start_s: float | None = None
+) -> tuple[Reference, dict]:
     """The 6-DOF reference over the run's duration and the window of the motion it holds.
 
     A duration (``duration_s``, else ``scenario.duration_s``) shorter than an earthquake
@@ -392,10 +400,15 @@ def build_window(s: Scenario, motions: dict[str, M.Motion], duration_s: float | 
     window of that length holding the most intensity; the window's displacement is
     tapered over :data:`WINDOW_TAPER_S` at both ends (:func:`sim.scenario.records.window_motion`),
     so the table starts and ends at rest. Other motions run their first ``duration`` seconds.
+    A start (``start_s``, else ``scenario.start_s``) places the window there instead, in
+    any motion, tapered the same way (default duration: the rest of the motion).
     The window: ``{"start_s", "end_s", "of_record_s", "why"}`` (s of the motion's time).
     """
     rate = s.sample_rate_hz
     length = max(m.duration_s for m in motions.values())
+    start = start_s if start_s is not None else s.start_s
+    if start is not None:
+        return _window_at(s, motions, duration_s if duration_s is not None else s.duration_s, float(start))
     dur = duration_s if duration_s is not None else (s.duration_s if s.duration_s is not None else length)
     V.check_samples(dur * rate + 1, f"a run of {dur:g} s at {rate:g} Hz", s.path, ScenarioError)
     if dur > length + 1.5 / rate and not s.pad_to_duration:
@@ -432,20 +445,50 @@ def build_window(s: Scenario, motions: dict[str, M.Motion], duration_s: float | 
             f"the {dur:g} s holding the most Arias intensity ({100 * share:.0f} % of the record's; "
             f"its 5-95 % interval is {t5:.1f}-{t95:.1f} s)"
         )
-    i1 = i0 + n_win
+    return _cut(motions, rate, n_len, i0, dur, f"strong motion: {how}")
+
+
+def _cut(motions: dict, rate: float, n_len: int, i0: int, dur: float, why: str) -> tuple[Reference, dict]:
+    """Samples [i0, i0 + dur * rate] of every motion (a shorter one at rest after its end),
+    tapered at both ends (:data:`WINDOW_TAPER_S`, at most a fifth of the window)."""
+    h = 1.0 / rate
+    i1 = i0 + int(round(dur * rate)) + 1
     taper = min(WINDOW_TAPER_S, 0.2 * dur)
     cut = {}
     for dof, m in motions.items():
-        if len(m.d) < n_len:  # at rest after its end
-            m = R.pad(m, 0.0, (n_len - len(m.d)) * h)
+        if len(m.d) < max(n_len, i1):  # at rest after its end
+            m = R.pad(m, 0.0, (max(n_len, i1) - len(m.d)) * h)
         cut[dof] = R.window_motion(m, i0, i1, taper)
     window = {
         "start_s": i0 * h,
         "end_s": (i1 - 1) * h,
-        "of_record_s": float(length),
-        "why": f"strong motion: {how}; the displacement tapered over {taper:g} s at both ends",
+        "of_record_s": float(max(mo.duration_s for mo in motions.values())),
+        "why": f"{why}; the displacement tapered over {taper:g} s at both ends",
     }
     return reference_from_motions(cut, rate, dur), window
+
+
+def _window_at(s: Scenario, motions: dict, dur: float | None, start: float) -> tuple[Reference, dict]:
+    """The window of :func:`build_window` placed at ``start`` (s of the motion)."""
+    rate = s.sample_rate_hz
+    length = max(m.duration_s for m in motions.values())
+    n_len = max(len(m.t) for m in motions.values())
+    where = s.path or s.name
+    if not start >= 0:
+        raise ScenarioError(f"{where}: start {start:g} s must be 0 or more seconds into the motion")
+    if start >= length:
+        raise ScenarioError(
+            f"{where}: start {start:g} s is at or past the end of the motion ({length:.2f} s); give a start_s before it"
+        )
+    dur = length - start if dur is None else float(dur)
+    V.check_samples(dur * rate + 1, f"a run of {dur:g} s at {rate:g} Hz", s.path, ScenarioError)
+    if start + dur > length + 1.5 / rate and not s.pad_to_duration:
+        raise ScenarioError(
+            f"{where}: start {start:g} s + duration {dur:g} s runs past the end of the motion ({length:.2f} s); "
+            "start earlier, shorten the duration or set 'scenario.pad_to_duration = true'"
+        )
+    i0 = int(round(start * rate))
+    return _cut(motions, rate, n_len, i0, dur, f"from start_s = {start:g} s")
 
 
 def limit_warnings(desc, motions: dict[str, M.Motion]) -> list[str]:

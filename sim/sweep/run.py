@@ -1,16 +1,16 @@
 """Run a sweep: every case of a :class:`sim.sweep.spec.Sweep`, one results table.
 
-The per-case function is a plain library call, :func:`run_case` =
-:func:`sim.assess.run.run_scenario` with the case's overrides, so a feasibility suite or
-a calibration candidate goes through the same path. Executors:
+The per-group function is a plain library call, :func:`run_cases`: each case planned by
+:func:`sim.assess.run.plan_scenario` with its overrides, then all simulated together by
+:func:`sim.assess.many.run_plans` (the route feasibility suites and calibration
+candidates share: :class:`sim.loop.batch.BatchRunner`, MuJoCo's batch with the coupled
+step compiled as MuJoCo's control callback). Executors:
 
-* ``local``: this machine's cores. Cases are planned one by one (the same
-  :func:`sim.assess.run.plan_scenario`) and simulated together on
-  :class:`sim.loop.batch.BatchRunner` (MuJoCo's thread pool, the coupled step compiled as
-  MuJoCo's control callback), ``workers`` threads, in groups of ``group`` cases;
-* ``dask``: the cases are submitted to a Dask cluster (``dask.distributed``), one
-  :func:`run_case` per task: a scheduler address, or a ``LocalCluster`` of ``workers``
-  processes when none is given.
+* ``local``: this machine's cores: groups of ``group`` cases (default 32), each one
+  batch on ``workers`` threads;
+* ``dask``: groups of ``group`` cases (default 8) submitted to a Dask cluster
+  (``dask.distributed``), one :func:`run_cases` per task on one thread: a scheduler
+  address, or a ``LocalCluster`` of ``workers`` processes when none is given.
 
 Each finished case is written at once, atomically, to ``OUT/cases/<id>.json`` (plus its
 run file with ``run_files``); a case whose file exists is not run again, so an
@@ -25,6 +25,7 @@ import io
 import json
 import math
 import os
+import re
 import time
 from pathlib import Path
 
@@ -33,22 +34,93 @@ from sim.errors import UserError
 EXECUTORS = ("local", "dask")
 
 
-def run_case(scenario, case, *, duration_s=None, iterations=None, run_dir=None) -> dict:
-    """One case: :func:`sim.assess.run.run_scenario` with ``case.overrides`` (on the
-    callback engine where the table allows, the same run as the loop); returns its
-    row (varied values, verdict, limiting utilisation, timing). A case the inputs make
-    impossible (a user error, e.g. divergence before the second sample) gives a row with
-    ``error`` instead of raising, so one bad case does not stop a sweep."""
-    from sim.assess.run import run_scenario
+def run_cases(
+    scenario, cases, *, duration_s=None, start_s=None, iterations=None, run_dir=None, nthread: int = 1, group=32
+) -> list:
+    """Cases of one scenario: each planned with its ``overrides``, then all simulated
+    together (:func:`sim.assess.many.run_plans`: the batch on ``nthread`` threads where
+    the table allows, the plan's own loop otherwise; the same runs as
+    :func:`sim.assess.run.run_scenario`); returns one row per case, in order (varied
+    values, verdict, limiting utilisation, timing). A case the inputs make impossible (a
+    user error, e.g. divergence before the second sample) gives a row with ``error``
+    instead of raising, so one bad case does not stop a sweep. ``case_wall_s`` is the
+    group's wall time shared equally among its cases."""
+    from sim.assess.many import run_plans
+    from sim.assess.run import plan_scenario
+    from sim.scenario.files import build_motions, load_scenario
 
     t0 = time.perf_counter()
-    try:
-        out = run_scenario(
-            scenario, duration_s=duration_s, iterations=iterations, overrides=case.overrides, engine="callback"
-        )
-    except UserError as e:
-        return error_row(case, str(e), time.perf_counter() - t0)
-    return outcome_row(case, out, run_dir, time.perf_counter() - t0)
+    plans, rows = [], {}
+    motions = None  # the scenario's motions, built once for the group when no case changes them
+    if not any(k.split(".")[0] == "motion" for c in cases for k in c.overrides):
+        try:
+            motions = build_motions(load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario)
+        except UserError:
+            motions = None  # each case's plan reports it
+    for c in cases:
+        try:
+            p = plan_scenario(
+                scenario,
+                duration_s=duration_s,
+                start_s=start_s,
+                iterations=iterations,
+                overrides=c.overrides,
+                engine="callback",
+                motions=motions,
+            )
+            plans.append((c, p))
+        except UserError as e:
+            rows[c.id] = e
+    outs = run_plans([p for _, p in plans], nthread=nthread, group=group)
+    for (c, _), o in zip(plans, outs):
+        rows[c.id] = o
+    wall = (time.perf_counter() - t0) / max(len(cases), 1)
+    result = []
+    for c in cases:
+        o = rows[c.id]
+        if isinstance(o, UserError):
+            result.append(error_row(c, str(o), wall))
+            continue
+        try:
+            result.append(outcome_row(c, o, run_dir, wall))
+        except UserError as e:
+            result.append(error_row(c, str(e), wall))
+    return result
+
+
+def run_case(scenario, case, *, duration_s=None, start_s=None, iterations=None, run_dir=None) -> dict:
+    """One case (:func:`run_cases` of one): its row."""
+    return run_cases(scenario, [case], duration_s=duration_s, start_s=start_s, iterations=iterations, run_dir=run_dir)[
+        0
+    ]
+
+
+#: checks that do not depend on the simulation: the rated envelope of the demanded motion
+#: (``sim.assess.feasibility.envelope_checks``) and the static specimen checks
+_DEMAND = re.compile(r"^(stroke|velocity|acceleration|rotation)_(x|y|z|rx|ry|rz)$|^(specimen_mass|support_load)$")
+
+
+def is_demand_check(name: str) -> bool:
+    """A check of the demanded motion's envelope or a static specimen check (not from the
+    simulation)."""
+    return bool(_DEMAND.match(name))
+
+
+def simulated_limiting(checks: list) -> tuple[str, float]:
+    """The most used capability check among those computed from the simulation (not the
+    demanded motion's envelope nor the static specimen checks; not the tracking checks,
+    which are not part of the verdict either) and its utilisation; ("", nan) without any."""
+    from sim.assess.feasibility import is_tracking
+
+    run = [
+        c
+        for c in checks
+        if not is_demand_check(c["name"]) and not is_tracking(c) and c["utilisation"] == c["utilisation"]
+    ]
+    if not run:
+        return "", math.nan
+    c = max(run, key=lambda c: float(c["utilisation"]))
+    return c["name"], float(c["utilisation"])
 
 
 def error_row(case, message, wall) -> dict:
@@ -80,6 +152,8 @@ def outcome_row(case, out, run_dir, wall) -> dict:
             float(f["limiting_utilisation"]) if f["limiting_utilisation"] is not None else math.nan
         ),
         "failed": ";".join(f["failed"]),
+        "run_limiting": "",
+        "run_limiting_utilisation": math.nan,
         "complete": bool(s["complete"]),
         "incomplete_reason": s["incomplete_reason"] or "",
         "duration_s": s["duration_s"],
@@ -87,6 +161,7 @@ def outcome_row(case, out, run_dir, wall) -> dict:
         "case_wall_s": wall,
         "error": "",
     }
+    row["run_limiting"], row["run_limiting_utilisation"] = simulated_limiting(f["checks"])
     for c in f["checks"]:  # one column per kind of check ("actuator_force_X3" -> util_actuator_force)
         name = c["name"]
         kind = "_".join(name.split("_")[:2]) if name.startswith("actuator_") else name
@@ -106,55 +181,27 @@ def _case_path(out: Path, case) -> Path:
     return out / "cases" / f"{case.id}.json"
 
 
-def _local(sweep, todo, out, workers, group, done_cb):
-    from sim.assess.run import plan_scenario
-    from sim.loop.batch import BatchRunner
+def _kw(sweep, out):
+    return dict(
+        duration_s=sweep.duration_s,
+        start_s=sweep.start_s,
+        iterations=sweep.iterations,
+        run_dir=out / "runs" if sweep.run_files else None,
+    )
 
-    run_dir = out / "runs" if sweep.run_files else None
+
+def _local(sweep, todo, out, workers, group, done_cb):
     for i in range(0, len(todo), group):
         chunk = todo[i : i + group]
-        plans, rows, t0 = [], {}, time.perf_counter()
-        for c in chunk:
-            try:
-                plans.append(
-                    (
-                        c,
-                        plan_scenario(
-                            sweep.scenario,
-                            duration_s=sweep.duration_s,
-                            iterations=sweep.iterations,
-                            overrides=c.overrides,
-                        ),
-                    )
-                )
-            except UserError as e:
-                rows[c.id] = error_row(c, str(e), 0.0)
-        batchable = [(c, p) for c, p in plans if BatchRunner.accepts(p)]
-        other = [(c, p) for c, p in plans if not BatchRunner.accepts(p)]
-        if batchable:
-            runner = BatchRunner([p.sim for _, p in batchable], nthread=workers)
-            results = runner.run([p.reference for _, p in batchable])
-            wall = (time.perf_counter() - t0) / len(chunk)
-            for (c, p), res in zip(batchable, results):
-                try:
-                    rows[c.id] = outcome_row(c, p.outcome(res), run_dir, wall)
-                except UserError as e:
-                    rows[c.id] = error_row(c, str(e), wall)
-        for c, p in other:  # drive iterations, analog controller: the plan's own loop
-            t1 = time.perf_counter()
-            try:
-                rows[c.id] = outcome_row(c, p.run(), run_dir, time.perf_counter() - t1)
-            except UserError as e:
-                rows[c.id] = error_row(c, str(e), time.perf_counter() - t1)
-        for c in chunk:
-            done_cb(c, rows[c.id])
+        rows = run_cases(sweep.scenario, chunk, nthread=workers, group=group, **_kw(sweep, out))
+        for c, row in zip(chunk, rows):
+            done_cb(c, row)
 
 
-def _dask(sweep, todo, out, workers, address, done_cb):
+def _dask(sweep, todo, out, workers, address, group, done_cb):
     import dask
     from dask.distributed import Client, LocalCluster, as_completed
 
-    run_dir = out / "runs" if sweep.run_files else None
     cluster = None
     if address is None:
         # a case holds its worker's GIL for seconds; on a loaded machine heartbeats come
@@ -164,21 +211,23 @@ def _dask(sweep, todo, out, workers, address, done_cb):
         address = cluster
     client = Client(address)
     try:
+        chunks = [todo[i : i + group] for i in range(0, len(todo), group)]
         futs = {
             client.submit(
-                run_case,
+                run_cases,
                 sweep.scenario,
-                c,
-                duration_s=sweep.duration_s,
-                iterations=sweep.iterations,
-                run_dir=run_dir,
+                chunk,
+                nthread=1,
+                group=group,
                 pure=False,
-                key=f"case-{sweep.name}-{c.id}",
-            ): c
-            for c in todo
+                key=f"cases-{sweep.name}-{chunk[0].id}-{chunk[-1].id}",
+                **_kw(sweep, out),
+            ): chunk
+            for chunk in chunks
         }
         for fut in as_completed(futs):
-            done_cb(futs[fut], fut.result())
+            for c, row in zip(futs[fut], fut.result()):
+                done_cb(c, row)
     finally:
         client.close()
         if cluster is not None:
@@ -192,13 +241,14 @@ def run_sweep(
     workers: int | None = None,
     executor: str = "local",
     address: str | None = None,
-    group: int = 32,
+    group: int | None = None,
     progress=None,
 ) -> dict:
     """Run every case of ``sweep`` not yet in ``out``; write the results table.
 
     ``workers``: threads (local) or worker processes (a Dask ``LocalCluster``); default
-    the machine's cores. ``address``: a Dask scheduler to submit to instead of a local
+    the machine's cores. ``group``: cases per batch (local, default 32) or per Dask task
+    (default 8); default the sweep file's ``group``. ``address``: a Dask scheduler to submit to instead of a local
     cluster. ``progress(done, total)`` is called after each case. Returns
     ``{"cases", "ran", "skipped", "wall_s", "table", "rows"}``.
     """
@@ -235,9 +285,9 @@ def run_sweep(
     t0 = time.perf_counter()
     if todo:
         if executor == "local":
-            _local(sweep, todo, out, workers, group, done)
+            _local(sweep, todo, out, workers, group or sweep.group or 32, done)
         else:
-            _dask(sweep, todo, out, workers, address, done)
+            _dask(sweep, todo, out, workers, address, group or sweep.group or 8, done)
     wall = time.perf_counter() - t0
     rows = [json.loads(_case_path(out, c).read_text()) for c in cases]
     table = write_table(out, rows)
@@ -249,6 +299,7 @@ def run_sweep(
         "skipped": skipped,
         "executor": executor,
         "workers": workers,
+        "varied": [v.name for v in sweep.vary],
         "wall_s": wall,
         "table": str(table),
     }
@@ -302,4 +353,14 @@ class ProgressLine:
         self.stream.flush()
 
 
-__all__ = ["EXECUTORS", "ProgressLine", "error_row", "outcome_row", "run_case", "run_sweep", "write_table"]
+__all__ = [
+    "EXECUTORS",
+    "ProgressLine",
+    "error_row",
+    "outcome_row",
+    "run_case",
+    "run_cases",
+    "run_sweep",
+    "simulated_limiting",
+    "write_table",
+]

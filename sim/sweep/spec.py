@@ -5,7 +5,9 @@ A sweep file (TOML)::
     [sweep]
     name = "mc_20t"                 # folder name of the results (default: the file's stem)
     scenario = "elcentro_20t"       # scenario name or path (relative to the sweep file)
-    duration_s = 5.0                # optional: simulate only the first S seconds
+    duration_s = 5.0                # optional: simulate S seconds (of a record: its strong motion)
+    start_s = 20.0                  # optional: start there in the motion instead (scenario.start_s)
+    group = 8                       # optional: cases per batch (local) or per task (dask)
     iterations = 0                  # optional: drive iterations per case (default: the scenario's)
     mode = "random"                 # "grid" (every combination) or "random"
     n = 1000                        # random: number of cases
@@ -35,7 +37,7 @@ import numpy as np
 from mjcf.description import load_toml
 from sim.errors import UserError
 
-_SWEEP_KEYS = {"name", "scenario", "duration_s", "iterations", "mode", "n", "seed", "run_files"}
+_SWEEP_KEYS = {"name", "scenario", "duration_s", "start_s", "group", "iterations", "mode", "n", "seed", "run_files"}
 _VARY_KEYS = {"name", "key", "keys", "scale", "values", "distribution", "low", "high", "mean", "std"}
 _DISTS = {"uniform": ("low", "high"), "normal": ("mean", "std"), "lognormal": ("mean", "std")}
 
@@ -76,6 +78,8 @@ class Sweep:
     run_files: bool
     vary: list
     path: Path | None = None
+    start_s: float | None = None  #: where each run starts in the motion (None: the strong motion of a record)
+    group: int | None = None  #: cases per batch / per Dask task (None: the executor's default)
 
     def cases(self) -> list[Case]:
         """Every case, in a fixed order (the same file always gives the same cases)."""
@@ -138,6 +142,14 @@ def load_sweep(path) -> Sweep:
     dur = sw.get("duration_s")
     if dur is not None:
         _number(dur, f"{src}: 'sweep.duration_s'", positive=True)
+    start = sw.get("start_s")
+    if start is not None:
+        _number(start, f"{src}: 'sweep.start_s'")
+        if start < 0:
+            raise SweepError(f"{src}: 'sweep.start_s' must be 0 or more seconds into the motion (got {start!r})")
+    group = sw.get("group")
+    if group is not None:
+        _number(group, f"{src}: 'sweep.group'", positive=True, integer=True)
     it = sw.get("iterations")
     if it is not None:
         _number(it, f"{src}: 'sweep.iterations'", integer=True)
@@ -198,6 +210,8 @@ def load_sweep(path) -> Sweep:
         run_files=run_files,
         vary=vary,
         path=path,
+        start_s=None if start is None else float(start),
+        group=group,
     )
 
 

@@ -233,3 +233,26 @@ def test_response_spectrum_closed_form(zeta):
     # zero period gives PGA; periods and freqs agree
     p = response_spectrum(m.a, 1 / fs, periods=np.array([0.0, 0.5]), damping=zeta)
     assert p[0] == pytest.approx(np.max(np.abs(m.a))) and p[1] == pytest.approx(psa[2])
+
+
+def test_response_spectrum_filters_are_remembered_and_bit_identical():
+    """The oscillator filters are cached per (frequencies, damping, step): a second spectrum
+    at the same periods reuses them (read-only) and equals the uncached computation."""
+    from sim.scenario import motions as MO
+
+    rng = np.random.default_rng(7)
+    acc = rng.normal(0, 1, 2000)
+    periods = np.linspace(0.05, 2.0, 17)
+    MO._FOH_CACHE.clear()
+    first = MO.response_spectrum(acc, 1 / 512, periods)
+    assert len(MO._FOH_CACHE) == 1
+    b, a = next(iter(MO._FOH_CACHE.values()))
+    assert not b.flags.writeable and not a.flags.writeable
+    again = MO.response_spectrum(acc, 1 / 512, periods)
+    assert len(MO._FOH_CACHE) == 1
+    assert np.array_equal(first, again)
+    w = 2 * np.pi / periods
+    b0, a0 = MO._foh_filters_uncached(w, 0.05, 1 / 512)
+    assert np.array_equal(b, b0) and np.array_equal(a, a0)
+    MO.response_spectrum(acc, 1 / 256, periods)  # another step: another entry
+    assert len(MO._FOH_CACHE) == 2
