@@ -156,6 +156,28 @@ def choose_path(runs) -> str:
     )
 
 
+def check_path(runs, path: str) -> str:
+    """``path`` if every run has the channels it needs (one-line error naming the first
+    run that lacks them)."""
+    need = {
+        "mechanical": (MECH_CHANNELS, "actuator_force and table displacement, velocity and acceleration"),
+        "replay": (("valve_command",), "valve_command and a recorded output (force, acceleration, displacement)"),
+        "closed_loop": (("reference",), "the reference and a recorded output (force, acceleration, displacement)"),
+    }
+    if path not in need:
+        raise CalibrationError(f"--path {path}: give one of {', '.join(PATHS)}")
+    chans, what = need[path]
+    for r in runs:
+        miss = [c for c in chans if getattr(r, c) is None]
+        if path != "mechanical" and not any(getattr(r, c) is not None for c in FIT_CHANNELS):
+            miss.append("any output")
+        if miss:
+            raise CalibrationError(
+                f"{r.name}: lacks {', '.join(miss)} for --path {path}; it needs {what} (or leave --path out)"
+            )
+    return path
+
+
 def check_finite(run, channels) -> None:
     for ch in channels:
         arr = getattr(run, ch)
@@ -463,6 +485,7 @@ __all__ = [
     "CalibrationError",
     "MechRun",
     "PATHS",
+    "check_path",
     "choose_path",
     "mechanical_runs",
     "nrmse_runs",
