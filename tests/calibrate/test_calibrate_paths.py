@@ -12,6 +12,8 @@ run is measured in docs/calibration.md."""
 from __future__ import annotations
 
 import copy
+import json
+import tomllib
 
 import pytest
 
@@ -19,6 +21,7 @@ from sim.calibrate import search as S
 
 #: candidate types of these tests: the planted ones and their nearest confusers
 EFFECTS = ["valve_flow_gain", "valve_delay", "bulk_modulus", "coulomb_friction", "sensor_gain", "sensor_delay"]
+SENSORS = ["sensor_gain", "sensor_offset", "sensor_delay", "sensor_lowpass"]
 SECONDS = 3.0
 
 
@@ -58,9 +61,14 @@ def _cgs_measured(out, effects=(), seeds=(3, 4, 5), seconds=SECONDS):
 
 
 @pytest.fixture(scope="module")
-def clean(tmp_path_factory):
-    paths = _cgs_measured(tmp_path_factory.mktemp("clean"))
-    return paths, S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
+def clean_paths(tmp_path_factory):
+    return _cgs_measured(tmp_path_factory.mktemp("clean"))
+
+
+@pytest.fixture(scope="module")
+def clean(clean_paths):
+    """The clean runs' replay error (the noise floor; a sensor-only search needs no replays)."""
+    return clean_paths, S.calibrate(clean_paths, path="replay", effects=["sensor_gain"], workers=2)
 
 
 def _check(res, clean_res, name, where, key, truth):
@@ -76,8 +84,8 @@ def _check(res, clean_res, name, where, key, truth):
     )
 
 
-def test_clean_runs_add_nothing(clean):
-    _paths, res = clean
+def test_clean_runs_add_nothing(clean_paths):
+    res = S.calibrate(clean_paths, path="replay", effects=EFFECTS + SENSORS, workers=2)
     assert res.residual_path == "replay"
     assert res.effects_added == []
     assert res.error_after == res.error_before
@@ -88,3 +96,120 @@ def test_flow_gain_of_one_actuator_found(clean, tmp_path):
     paths = _cgs_measured(tmp_path, [{"type": "valve_flow_gain", "where": "actuator:X1", "factor": 0.8}])
     res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
     _check(res, clean[1], "valve_flow_gain", "actuator:X1", "factor", 0.8)
+
+
+@pytest.fixture(scope="module")
+def sensor_runs(tmp_path_factory):
+    """Y1's load cell (column 4) reading 20 % high (a wrong sensitivity entered). A
+    sensor effect acts on one column of 18 compared: smaller errors move the pooled
+    held-out error by less than the 5 % acceptance margin."""
+    return _cgs_measured(
+        tmp_path_factory.mktemp("sgain"),
+        [{"type": "sensor_gain", "where": "channel:actuator_force[4]", "gain": 1.2}],
+    )
+
+
+def test_sensor_gain_of_one_load_cell_found(sensor_runs, clean):
+    res = S.calibrate(sensor_runs, path="replay", effects=SENSORS, workers=2)
+    _check(res, clean[1], "sensor_gain", "channel:actuator_force[4]", "gain", 1.2)
+    assert len(res.effects_added) == 1
+
+
+def test_sensor_delay_of_one_accelerometer_found(clean, tmp_path):
+    """The y accelerometer 3 ms late (3.07 samples at 1024 Hz)."""
+    paths = _cgs_measured(
+        tmp_path, [{"type": "sensor_delay", "where": "channel:table_acceleration[1]", "delay_s": 3e-3}]
+    )
+    res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
+    _check(res, clean[1], "sensor_delay", "channel:table_acceleration[1]", "delay_s", 3e-3)
+
+
+@pytest.mark.slow
+def test_valve_delay_of_a_class_found(clean, tmp_path):
+    """The vertical valves 4 ms late (realised as 8 physics steps of 1/2048 s: 3.9 ms)."""
+    paths = _cgs_measured(tmp_path, [{"type": "valve_delay", "where": "class:vertical", "delay_s": 4e-3}])
+    res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
+    _check(res, clean[1], "valve_delay", "class:vertical", "delay_s", 4e-3)
+
+
+@pytest.mark.slow
+def test_bulk_modulus_of_a_class_found(clean, tmp_path):
+    """Aerated oil in the lateral actuators: 0.6 GPa where the description says 1.0 GPa."""
+    paths = _cgs_measured(tmp_path, [{"type": "bulk_modulus", "where": "class:lateral", "bulk_modulus_pa": 0.6e9}])
+    res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
+    _check(res, clean[1], "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.6e9)
+
+
+@pytest.mark.slow
+def test_two_effects_at_once_hydraulic_and_mechanical(clean, tmp_path):
+    """X1's valve flowing 20 % short and 5 kN more dry friction on every lateral actuator."""
+    planted = [
+        {"type": "valve_flow_gain", "where": "actuator:X1", "factor": 0.8},
+        {"type": "coulomb_friction", "where": "class:lateral", "force_n": 5000.0},
+    ]
+    res = S.calibrate(_cgs_measured(tmp_path, planted), path="replay", effects=EFFECTS, workers=2)
+    found = {(e["name"], e["where"]): e["parameters"] for e in res.effects_added}
+    assert set(found) == {("valve_flow_gain", "actuator:X1"), ("coulomb_friction", "class:lateral")}, found
+    assert found[("valve_flow_gain", "actuator:X1")]["factor"] == pytest.approx(0.8, rel=0.10)
+    assert found[("coulomb_friction", "class:lateral")]["force_n"] == pytest.approx(5000.0, rel=0.10)
+    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * clean[1].error_before
+
+
+def _reference_only(paths, out):
+    """The runs with only the reference and the table's motion (no valve commands, no
+    forces or pressures): the closed-loop path is the one left."""
+    from sim.runs.runfile import read_run, write_run
+
+    res = []
+    for p in paths:
+        r = read_run(p)
+        r.valve_command = r.actuator_force = r.pressure_a = r.pressure_b = r.spool_position = None
+        r.actuator_displacement = None
+        res.append(str(write_run(out / p.split("/")[-1], r)))
+    return res
+
+
+def test_closed_loop_path_finds_an_accelerometer_gain(sensor_runs, tmp_path):
+    """Only the reference recorded: the model runs closed loop through the table's
+    controller; an x accelerometer reading 15 % low is found there."""
+    src = _cgs_measured(
+        tmp_path, [{"type": "sensor_gain", "where": "channel:table_acceleration[0]", "gain": 0.85}], seeds=(3, 4)
+    )
+    (tmp_path / "ref").mkdir()
+    paths = _reference_only(src, tmp_path / "ref")
+    res = S.calibrate(paths, effects=SENSORS, workers=2)
+    assert res.residual_path == "closed_loop"
+    assert [(e["name"], e["where"]) for e in res.effects_added] == [("sensor_gain", "channel:table_acceleration[0]")]
+    assert res.effects_added[0]["parameters"]["gain"] == pytest.approx(0.85, rel=0.10)
+    assert res.error_after <= 0.2 * res.error_before or res.error_after < 0.08
+
+
+def test_cli_replay_path_writes_json_report_and_table(sensor_runs, tmp_path):
+    from sim.cli import main
+
+    out = tmp_path / "out"
+    rc = main(["calibrate", *sensor_runs, "--path", "replay", "--effects", "sensor_gain", "--out", str(out), "--json"])
+    assert rc == 0
+    js = json.loads((out / "calibration.json").read_text(), parse_constant=lambda c: pytest.fail(c))
+    assert js["residual_path"] == "replay"
+    assert [(e["name"], e["where"]) for e in js["effects_added"]] == [("sensor_gain", "channel:actuator_force[4]")]
+    for k in ("error_before", "error_after", "candidates", "unexplained", "per_channel", "timing"):
+        assert k in js
+    raw = tomllib.loads((out / "cgs_calibrated.toml").read_text())
+    (e,) = [e for e in raw["effect"] if e["type"] == "sensor_gain"]
+    assert e["where"] == "channel:actuator_force[4]" and e["source"].startswith("calibrated: shaketable calibrate")
+    md = (out / "report.md").read_text()
+    for fig in ("holdout_error.png", "residual_time.png", "residual_spectra.png", "effects.png"):
+        assert (out / fig).stat().st_size > 1000 and fig in md
+
+
+def test_forced_path_the_runs_cannot_take_is_one_line(sensor_runs, tmp_path, capsys):
+    from sim.cli import main
+
+    (tmp_path / "ref").mkdir()
+    paths = _reference_only(sensor_runs[:1], tmp_path / "ref")
+    out = tmp_path / "out"
+    rc = main(["calibrate", *paths, "--path", "replay", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err.startswith("error: ") and "\n" not in err and "valve_command" in err, err
+    assert not out.exists()
