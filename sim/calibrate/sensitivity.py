@@ -157,8 +157,10 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
             elif t == "valve_null_offset":
                 x0, h = float(np.mean(hp.per_actuator("valve_null_offset")[idx])), 2e-3
             elif t == "bulk_modulus":
+                # stepped down by 20 %: air and hoses lower the effective value, never raise it,
+                # and the oil-column frequency moves far with it (a secant reaches further)
                 x0 = float(np.mean(hp.per_actuator("chamber_bulk_modulus_pa")[idx]))
-                h = 0.1 * x0
+                h = -0.2 * x0
             elif t == "leakage":
                 x0 = float(np.mean(hp.leakage_cross_m3_s_pa[idx]))
                 # a step that leaks 1 % of rated flow at the supply pressure
