@@ -18,9 +18,10 @@ Three paths, chosen by the channels every run has (:func:`choose_path`):
   the filter's memory after them) are left out: there the friction force is anything
   within its bounds.
 * ``replay``: recorded valve commands, replayed open loop (after removing a valve null
-  offset, the command's mean, or a real record drifts to the end stop); residual of
-  force, acceleration and displacement (:func:`replay_residual`).
-* ``closed_loop``: only a reference: the run through the controller model.
+  offset, or a real record drifts to the end stop); ``closed_loop``: only a reference,
+  the run through the controller model. Their residuals and search are in
+  :mod:`sim.calibrate.paths` and :mod:`sim.calibrate.pathsearch` (:func:`simulate_path`
+  here is the older single-run helper).
 
 Residuals are per channel, per DOF, in time and frequency (:func:`spectra`, with the
 coherence with the states).
