@@ -20,7 +20,7 @@ import pytest
 from sim.calibrate import search as S
 
 #: candidate types of these tests: the planted ones and their nearest confusers
-EFFECTS = ["valve_flow_gain", "valve_delay", "bulk_modulus", "coulomb_friction", "sensor_gain", "sensor_delay"]
+EFFECTS = ["valve_flow_gain", "valve_delay", "bulk_modulus", "sensor_gain", "sensor_delay"]
 SENSORS = ["sensor_gain", "sensor_offset", "sensor_delay", "sensor_lowpass"]
 SECONDS = 3.0
 
@@ -66,21 +66,27 @@ def clean_paths(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def clean(clean_paths):
-    """The clean runs' replay error (the noise floor; a sensor-only search needs no replays)."""
-    return clean_paths, S.calibrate(clean_paths, path="replay", effects=["sensor_gain"], workers=2)
+def floor(clean_paths):
+    """The clean held-out run's replay NRMSE against the declared model: the noise floor."""
+    import mjcf
+    from sim.calibrate import paths as P
+    from sim.runs.runfile import read_run
+
+    desc = mjcf.load_table("cgs")
+    (pr,) = P.path_runs([read_run(clean_paths[1])], desc, "replay")  # held out: every third run from the second
+    return P.nrmse([pr], [P.simulate_job(pr.job(desc.raw, str(desc.source), None, []))])
 
 
-def _check(res, clean_res, name, where, key, truth):
+def _check(res, floor, name, where, key, truth):
     assert res.residual_path == "replay"
     assert [(e["name"], e["where"]) for e in res.effects_added][:1] == [(name, where)], res.effects_added
     e = res.effects_added[0]
     assert e["parameters"][key] == pytest.approx(truth, rel=0.10)
     assert 0 < e["uncertainty"][key] < abs(e["parameters"][key])
-    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * clean_res.error_before, (
+    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor, (
         res.error_before,
         res.error_after,
-        clean_res.error_before,
+        floor,
     )
 
 
@@ -92,10 +98,10 @@ def test_clean_runs_add_nothing(clean_paths):
     assert res.error_before < 0.08  # the recorder model's noise floor on these runs
 
 
-def test_flow_gain_of_one_actuator_found(clean, tmp_path):
+def test_flow_gain_of_one_actuator_found(floor, tmp_path):
     paths = _cgs_measured(tmp_path, [{"type": "valve_flow_gain", "where": "actuator:X1", "factor": 0.8}])
     res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
-    _check(res, clean[1], "valve_flow_gain", "actuator:X1", "factor", 0.8)
+    _check(res, floor, "valve_flow_gain", "actuator:X1", "factor", 0.8)
 
 
 @pytest.fixture(scope="module")
@@ -109,52 +115,54 @@ def sensor_runs(tmp_path_factory):
     )
 
 
-def test_sensor_gain_of_one_load_cell_found(sensor_runs, clean):
+def test_sensor_gain_of_one_load_cell_found(sensor_runs, floor):
     res = S.calibrate(sensor_runs, path="replay", effects=SENSORS, workers=2)
-    _check(res, clean[1], "sensor_gain", "channel:actuator_force[4]", "gain", 1.2)
+    _check(res, floor, "sensor_gain", "channel:actuator_force[4]", "gain", 1.2)
     assert len(res.effects_added) == 1
 
 
-def test_sensor_delay_of_one_accelerometer_found(clean, tmp_path):
+def test_sensor_delay_of_one_accelerometer_found(floor, tmp_path):
     """The y accelerometer 3 ms late (3.07 samples at 1024 Hz)."""
     paths = _cgs_measured(
         tmp_path, [{"type": "sensor_delay", "where": "channel:table_acceleration[1]", "delay_s": 3e-3}]
     )
     res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
-    _check(res, clean[1], "sensor_delay", "channel:table_acceleration[1]", "delay_s", 3e-3)
+    _check(res, floor, "sensor_delay", "channel:table_acceleration[1]", "delay_s", 3e-3)
 
 
 @pytest.mark.slow
-def test_valve_delay_of_a_class_found(clean, tmp_path):
+def test_valve_delay_of_a_class_found(floor, tmp_path):
     """The vertical valves 4 ms late (realised as 8 physics steps of 1/2048 s: 3.9 ms)."""
     paths = _cgs_measured(tmp_path, [{"type": "valve_delay", "where": "class:vertical", "delay_s": 4e-3}])
     res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
-    _check(res, clean[1], "valve_delay", "class:vertical", "delay_s", 4e-3)
+    _check(res, floor, "valve_delay", "class:vertical", "delay_s", 4e-3)
 
 
 @pytest.mark.slow
-def test_bulk_modulus_of_a_class_found(clean, tmp_path):
+def test_bulk_modulus_of_a_class_found(floor, tmp_path):
     """Aerated oil in the lateral actuators: 0.7 GPa where the description says 1.0 GPa.
     (At 0.6 GPa the open-loop replay is 145 % off and the search, linearised at 1.0 GPa,
     took a lateral flow gain of 0.2 instead: a limit of the screening, docs/calibration.md.)"""
     paths = _cgs_measured(tmp_path, [{"type": "bulk_modulus", "where": "class:lateral", "bulk_modulus_pa": 0.7e9}])
     res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
-    _check(res, clean[1], "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.7e9)
+    _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.7e9)
 
 
 @pytest.mark.slow
-def test_two_effects_at_once_hydraulic_and_mechanical(clean, tmp_path):
+def test_two_effects_at_once_hydraulic_and_mechanical(floor, tmp_path):
     """X1's valve flowing 20 % short and 5 kN more dry friction on every lateral actuator."""
     planted = [
         {"type": "valve_flow_gain", "where": "actuator:X1", "factor": 0.8},
         {"type": "coulomb_friction", "where": "class:lateral", "force_n": 5000.0},
     ]
-    res = S.calibrate(_cgs_measured(tmp_path, planted), path="replay", effects=EFFECTS, workers=2)
+    res = S.calibrate(
+        _cgs_measured(tmp_path, planted), path="replay", effects=EFFECTS + ["coulomb_friction"], workers=2
+    )
     found = {(e["name"], e["where"]): e["parameters"] for e in res.effects_added}
     assert set(found) == {("valve_flow_gain", "actuator:X1"), ("coulomb_friction", "class:lateral")}, found
     assert found[("valve_flow_gain", "actuator:X1")]["factor"] == pytest.approx(0.8, rel=0.10)
     assert found[("coulomb_friction", "class:lateral")]["force_n"] == pytest.approx(5000.0, rel=0.10)
-    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * clean[1].error_before
+    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor.error_before
 
 
 def _reference_only(paths, out):
