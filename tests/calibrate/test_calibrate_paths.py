@@ -98,6 +98,7 @@ def test_clean_runs_add_nothing(clean_paths):
     assert res.error_before < 0.08  # the recorder model's noise floor on these runs
 
 
+@pytest.mark.slow
 def test_flow_gain_of_one_actuator_found(floor, tmp_path):
     paths = _cgs_measured(tmp_path, [{"type": "valve_flow_gain", "where": "actuator:X1", "factor": 0.8}])
     res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
