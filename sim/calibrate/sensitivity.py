@@ -374,6 +374,9 @@ def _jac(c, theta, r, prs, base_models, ctx):
         if np.isfinite(c.upper[p]) and th[p] > c.upper[p]:
             h, th[p] = -h, theta[p] - h
         r1 = _residual_at(c, th, prs, base_models, ctx)
+        if r1 is None:  # the stepped model failed (diverged, refused): the other side
+            h, th[p] = -h, theta[p] - h
+            r1 = _residual_at(c, th, prs, base_models, ctx)
         if r1 is None:
             return None
         cols.append((r1 - r) / h)
@@ -428,10 +431,15 @@ def refine_job(job) -> Refined:
         lo = np.where(np.isfinite(c.lower), c.lower, -np.inf)
         hi = np.where(np.isfinite(c.upper), c.upper, np.inf)
         x0 = np.clip(theta0, lo + 1e-9 * np.abs(c.step), hi - 1e-9 * np.abs(c.step))
+
+        def jac(th):
+            J = _jac(c, np.asarray(th, float), fun(th), prs, base_models, ctx)
+            return J if J is not None else np.zeros((len(r0), len(th)))  # no slope: the solver stops here
+
         sol = least_squares(
             fun,
             x0,
-            jac=lambda th: _jac(c, np.asarray(th, float), fun(th), prs, base_models, ctx),
+            jac=jac,
             bounds=(lo, hi),
             x_scale=np.abs(c.step),
             max_nfev=max_nfev,
