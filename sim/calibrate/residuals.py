@@ -18,9 +18,10 @@ Three paths, chosen by the channels every run has (:func:`choose_path`):
   the filter's memory after them) are left out: there the friction force is anything
   within its bounds.
 * ``replay``: recorded valve commands, replayed open loop (after removing a valve null
-  offset, the command's mean, or a real record drifts to the end stop); residual of
-  force, acceleration and displacement (:func:`replay_residual`).
-* ``closed_loop``: only a reference: the run through the controller model.
+  offset, or a real record drifts to the end stop); ``closed_loop``: only a reference,
+  the run through the controller model. Their residuals and search are in
+  :mod:`sim.calibrate.paths` and :mod:`sim.calibrate.pathsearch` (:func:`simulate_path`
+  here is the older single-run helper).
 
 Residuals are per channel, per DOF, in time and frequency (:func:`spectra`, with the
 coherence with the states).
@@ -154,6 +155,28 @@ def choose_path(runs) -> str:
         f"{runs[0].name}: the runs support different residual paths; calibrate runs that "
         "record the same channels together"
     )
+
+
+def check_path(runs, path: str) -> str:
+    """``path`` if every run has the channels it needs (one-line error naming the first
+    run that lacks them)."""
+    need = {
+        "mechanical": (MECH_CHANNELS, "actuator_force and table displacement, velocity and acceleration"),
+        "replay": (("valve_command",), "valve_command and a recorded output (force, acceleration, displacement)"),
+        "closed_loop": (("reference",), "the reference and a recorded output (force, acceleration, displacement)"),
+    }
+    if path not in need:
+        raise CalibrationError(f"--path {path}: give one of {', '.join(PATHS)}")
+    chans, what = need[path]
+    for r in runs:
+        miss = [c for c in chans if getattr(r, c) is None]
+        if path != "mechanical" and not any(getattr(r, c) is not None for c in FIT_CHANNELS):
+            miss.append("any output")
+        if miss:
+            raise CalibrationError(
+                f"{r.name}: lacks {', '.join(miss)} for --path {path}; it needs {what} (or leave --path out)"
+            )
+    return path
 
 
 def check_finite(run, channels) -> None:
@@ -481,6 +504,7 @@ __all__ = [
     "CalibrationError",
     "MechRun",
     "PATHS",
+    "check_path",
     "choose_path",
     "mechanical_runs",
     "nrmse_runs",

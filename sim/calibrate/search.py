@@ -95,23 +95,30 @@ def _check_names(paths, holdout):
         raise CalibrationError(f"{both[0]}: is both a fit run and a --holdout run; hold out runs that are not fitted")
 
 
+def check_effect_names(effects) -> None:
+    """One-line error for a name in ``--effects`` that is no effect type."""
+    from sim.calibrate.laws import LAWS
+    from sim.effects.base import EFFECTS
+
+    known = sorted(set(LAWS) | set(EFFECTS))
+    bad = [e for e in effects or [] if e not in known]
+    if bad:
+        import difflib
+
+        close = difflib.get_close_matches(bad[0], known, n=1)
+        raise CalibrationError(
+            f"--effects: unknown effect '{bad[0]}'"
+            + (f" (did you mean '{close[0]}'?)" if close else f"; known: {', '.join(known)}")
+        )
+
+
 def candidate_laws(effects=None) -> list:
     """The laws to try: every law whose effect type is usable (see
     :func:`sim.calibrate.laws.usable`), or those named in ``effects``."""
     from sim.calibrate.laws import LAWS, usable
-    from sim.effects.base import EFFECTS
 
-    known = sorted(set(LAWS) | set(EFFECTS))
     if effects:
-        bad = [e for e in effects if e not in known]
-        if bad:
-            import difflib
-
-            close = difflib.get_close_matches(bad[0], known, n=1)
-            raise CalibrationError(
-                f"--effects: unknown effect '{bad[0]}'"
-                + (f" (did you mean '{close[0]}'?)" if close else f"; known: {', '.join(known)}")
-            )
+        check_effect_names(effects)
         nolaw = [e for e in effects if e not in LAWS]
         if nolaw:
             raise CalibrationError(
@@ -200,13 +207,20 @@ def accept(cur, new, e_ho_cur, e_ho_new, flat_cur, flat_new, term, margin=HOLDOU
     ok, why, unc = param_report(new.terms[i], new.values[i], new.sigma[i])
     if not ok:
         return False, why, unc
+    ok, why = accept_numbers(e_ho_cur, e_ho_new, cur.bic, new.bic, flat_cur, flat_new, margin)
+    return ok, why, unc
+
+
+def accept_numbers(e_ho_cur, e_ho_new, bic_cur, bic_new, flat_cur, flat_new, margin=HOLDOUT_MARGIN):
+    """``(accepted, reason)`` by the tests every path shares (parameters checked apart):
+    held-out error down by ``margin`` of itself, BIC down, residual whiter."""
     if not e_ho_new <= (1 - margin) * e_ho_cur:
-        return False, f"held-out error {e_ho_cur:.4f} -> {e_ho_new:.4f} falls by less than {100 * margin:g} %", unc
-    if not new.bic < cur.bic:
-        return False, f"BIC does not improve ({cur.bic:.1f} -> {new.bic:.1f})", unc
+        return False, f"held-out error {e_ho_cur:.4f} -> {e_ho_new:.4f} falls by less than {100 * margin:g} %"
+    if not bic_new < bic_cur:
+        return False, f"BIC does not improve ({bic_cur:.1f} -> {bic_new:.1f})"
     if not flat_new > flat_cur:
-        return False, f"residual no whiter (spectral flatness {flat_cur:.3f} -> {flat_new:.3f})", unc
-    return True, "", unc
+        return False, f"residual no whiter (spectral flatness {flat_cur:.3f} -> {flat_new:.3f})"
+    return True, ""
 
 
 # ------------------------------------------------------------------ what is left
@@ -262,10 +276,15 @@ def calibrate(
     accel_lowpass_hz="table",
     margin: float = HOLDOUT_MARGIN,
     log=None,
+    path: str | None = None,
+    workers: int | None = None,
 ) -> CalibrationResult:
-    """Calibrate ``table`` (default: the runs' table) against the runs; see the module docstring."""
+    """Calibrate ``table`` (default: the runs' table) against the runs; see the module
+    docstring. ``path``: force a residual path (default: chosen by the channels every
+    run has, :func:`sim.calibrate.residuals.choose_path`); ``workers``: processes of the
+    replay and closed-loop searches (default: every core)."""
     import mjcf
-    from sim.calibrate.residuals import choose_path, mechanical_runs, nrmse_runs, places
+    from sim.calibrate.residuals import PATHS, check_path, choose_path, mechanical_runs, nrmse_runs, places
     from sim.calibrate.trace import Term, fit_terms, flatness, predict
 
     say = log or (lambda *_: None)
@@ -275,9 +294,9 @@ def calibrate(
     _check_names(run_paths, holdout)
     if effect_file:
         load_effect_file(effect_file)
-    laws = candidate_laws(effects)
-    if not effects:  # laws for a specimen that is there but not declared: only when told so
-        laws = [w for w in laws if w.when == "always" or (w.when == "undeclared_specimen" and payload == "none")]
+    check_effect_names(effects)
+    if path is not None and path not in PATHS:
+        raise CalibrationError(f"--path {path}: give one of {', '.join(PATHS)}")
     all_runs = load_runs(list(run_paths) + list(holdout or []), table)
     runs, ho_given = all_runs[: len(run_paths)], all_runs[len(run_paths) :]
     desc = mjcf.load_table(table or runs[0].meta["table"])
@@ -289,13 +308,12 @@ def calibrate(
             )
     pay = payload if payload is not None else runs[0].meta.get("payload")
     pl = mjcf.load_payload(pay) if pay and pay != "none" else None  # "none": the specimen is not declared
-    path = choose_path(all_runs)
+    path = check_path(all_runs, path) if path else choose_path(all_runs)
     if path != "mechanical":
-        raise CalibrationError(
-            f"{runs[0].name}: the runs support only the {path} path; this version calibrates "
-            "from table motion and actuator forces (record actuator_force and table "
-            "displacement/velocity/acceleration), the replay search is `shaketable fit`"
-        )
+        return _calibrate_path(all_runs[: len(run_paths)], ho_given, desc, pl, path, effects, margin, workers, say, t0)
+    laws = candidate_laws(effects)
+    if not effects:  # laws for a specimen that is there but not declared: only when told so
+        laws = [w for w in laws if w.when == "always" or (w.when == "undeclared_specimen" and payload == "none")]
     lp = desc.accelerometer_bandwidth_hz if accel_lowpass_hz == "table" else accel_lowpass_hz
     if lp and lp >= 0.5 * runs[0].sample_rate_hz:
         lp = None  # the conditioner is above the recorder's Nyquist: it does not delay the record
@@ -444,6 +462,37 @@ def calibrate(
     return res
 
 
+def _calibrate_path(runs, ho_given, desc, pl, path, effects, margin, workers, say, t0) -> CalibrationResult:
+    """The replay / closed-loop search (:mod:`sim.calibrate.pathsearch`) as a result."""
+    from sim.calibrate.pathsearch import calibrate_path
+
+    t1 = time.perf_counter()
+    timing: dict = {}
+    out = calibrate_path(
+        runs,
+        ho_given,
+        desc,
+        pl,
+        path,
+        effects=effects,
+        margin=margin,
+        max_rounds=MAX_ROUNDS,
+        workers=workers,
+        say=say,
+        timing=timing,
+    )
+    t2 = time.perf_counter()
+    timing.update({"read_s": t1 - t0, "search_s": t2 - t1, "total_s": t2 - t0})
+    return CalibrationResult(
+        table=desc.name,
+        table_source=str(desc.source),
+        runs=[str(r.name) for r in runs],
+        residual_path=path,
+        timing=timing,
+        **out,
+    )
+
+
 def distinct_places(mr, wheres) -> list:
     """Places whose force maps into DOF space differently (a uni-axial table's actuators
     and classes all push along x: one place, ``dof:x``, stands for them)."""
@@ -492,7 +541,9 @@ __all__ = [
     "CalibrationResult",
     "HOLDOUT_MARGIN",
     "accept",
+    "accept_numbers",
     "calibrate",
+    "check_effect_names",
     "candidate_laws",
     "load_effect_file",
     "load_runs",

@@ -127,6 +127,8 @@ def cmd_calibrate(args) -> int:
         effect_file=args.effect_file,
         accel_lowpass_hz=_lowpass(args.accel_lowpass),
         log=log,
+        path=args.path,
+        workers=args.workers,
     )
     out = out_dir(args.out)
     js = write_outputs(res, out, args.inputs)
@@ -174,6 +176,13 @@ def add_parsers(sub) -> None:
         help="the accelerometer conditioner's low-pass in Hz, 'table' (the "
         "description's [sensors] accelerometer_bandwidth_hz, default) or 'none'",
     )
+    c.add_argument(
+        "--path",
+        choices=("mechanical", "replay", "closed_loop"),
+        help="the residual path (default: chosen by the channels every run has: mechanical, "
+        "else replay of the valve commands, else closed loop on the reference)",
+    )
+    c.add_argument("--workers", type=int, help="processes for the replay / closed-loop search (default: every core)")
     c.add_argument(
         "--masses",
         action="store_true",

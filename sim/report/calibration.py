@@ -23,6 +23,8 @@ def figures(res, out: Path) -> list[str]:
     """Draw the calibration's figures into ``out``; returns their file names."""
     from sim.calibrate.residuals import spectra
 
+    if res.series.get("kind") == "path":
+        return path_figures(res, out)
     plt = _plt()
     names = []
     ho, before, after = res.series["holdout"], res.series["before"], res.series["after"]
@@ -113,6 +115,95 @@ def figures(res, out: Path) -> list[str]:
     return names
 
 
+def _bars(plt, res, out, ylabel) -> str:
+    keys = list(res.per_channel)
+    fig, ax = plt.subplots(figsize=(min(max(5, 0.5 * len(keys) + 2), 24), 3.8))
+    x = np.arange(len(keys))
+    ax.bar(x - 0.2, [100 * res.per_channel[k]["before"] for k in keys], 0.4, label="declared model")
+    ax.bar(x + 0.2, [100 * res.per_channel[k]["after"] for k in keys], 0.4, label="calibrated")
+    ax.set_xticks(x, keys, rotation=60, ha="right", fontsize=6)
+    ax.set_ylabel(ylabel)
+    ax.set_title(f"held-out error {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} %")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "holdout_error.png", dpi=110)
+    plt.close(fig)
+    return "holdout_error.png"
+
+
+def path_figures(res, out: Path, n_columns: int = 6) -> list[str]:
+    """The figures of the replay / closed-loop paths: held-out error per channel column,
+    residual time series and spectra before/after for the columns with the largest
+    residual, residual against the recorded signal, accepted effects."""
+    from sim.calibrate.paths import residual_columns
+    from sim.calibrate.residuals import spectra
+
+    plt = _plt()
+    names = [_bars(plt, res, out, "held-out NRMSE per channel column (%)")]
+    pr, m0, m1 = res.series["holdout"][0], res.series["before"][0], res.series["after"][0]
+    c0, c1 = residual_columns(pr, m0), residual_columns(pr, m1)
+    order = sorted(
+        range(len(c0)),
+        key=lambda i: (
+            -float(np.sum(c0[i][2] ** 2)) / max(float(np.sum(pr.recorded[c0[i][0]][pr.rows][:, c0[i][1]] ** 2)), 1e-300)
+        ),
+    )[:n_columns]
+    t = pr.t[pr.rows]
+    fig, ax = plt.subplots(len(order), 1, figsize=(10, 2.0 * len(order)), squeeze=False)
+    fig2, ax2 = plt.subplots(len(order), 1, figsize=(7, 2.4 * len(order)), squeeze=False)
+    fig3, ax3 = plt.subplots(len(order), 2, figsize=(10, 2.6 * len(order)), squeeze=False)
+    for r, i in enumerate(order):
+        ch, j, e0 = c0[i]
+        e1 = c1[i][2]
+        lab = f"{Path(pr.name).name} {ch}[{j}]"
+        ax[r, 0].plot(t, e0, lw=0.6, label="declared model")
+        ax[r, 0].plot(t, e1, lw=0.6, label="calibrated")
+        ax[r, 0].set_title(lab + ": recorded - model", fontsize=9)
+        s0, s1 = spectra(e0, 1.0 / pr.dt), spectra(e1, 1.0 / pr.dt)
+        ax2[r, 0].semilogy(s0["f"][1:], s0["psd"][1:], lw=0.8, label="declared model")
+        ax2[r, 0].semilogy(s1["f"][1:], s1["psd"][1:], lw=0.8, label="calibrated")
+        ax2[r, 0].set_title(lab, fontsize=9)
+        ax2[r, 0].set_ylabel("PSD (unit^2/Hz)")
+        x = pr.recorded[ch][pr.rows][:, j]
+        for k, (nm, e) in enumerate((("declared model", e0), ("calibrated", e1))):
+            ax3[r, k].plot(x, e, ",", alpha=0.5)
+            ax3[r, k].set_title(f"{nm}: residual vs recorded, {ch}[{j}]", fontsize=8)
+    ax[0, 0].legend(fontsize=7)
+    ax2[0, 0].legend(fontsize=7)
+    ax[-1, 0].set_xlabel("s")
+    ax2[-1, 0].set_xlabel("Hz")
+    for f_, nm in ((fig, "residual_time.png"), (fig2, "residual_spectra.png"), (fig3, "residual_vs_state.png")):
+        f_.tight_layout()
+        f_.savefig(out / nm, dpi=110)
+        plt.close(f_)
+        names.append(nm)
+    if res.effects_added:
+        names.append(_effects_figure(plt, res, out))
+    return names
+
+
+def _effects_figure(plt, res, out) -> str:
+    labels, rel, err = [], [], []
+    for e in res.effects_added:
+        for p, v in e["parameters"].items():
+            labels.append(f"{e['name']} {e['where']}\n{p}")
+            rel.append(1.0)
+            err.append(abs(e["uncertainty"][p] / v) if v else np.inf)
+    fig, ax = plt.subplots(figsize=(max(5, 1.6 * len(labels)), 3.6))
+    ax.errorbar(np.arange(len(labels)), rel, yerr=err, fmt="o", capsize=4)
+    ax.set_xticks(np.arange(len(labels)), labels, fontsize=8)
+    ax.set_ylabel("value / fitted value (95 % interval)")
+    ax.set_title("accepted effects")
+    fig.tight_layout()
+    fig.savefig(out / "effects.png", dpi=110)
+    plt.close(fig)
+    return "effects.png"
+
+
+def _pct(x) -> str:
+    return "-" if x is None else f"{100 * x:.2f} %"
+
+
 def report_md(res, figs: list[str], toml_name: str) -> str:
     L = [f"# Calibration of `{res.table}`", ""]
     L.append(
@@ -149,26 +240,40 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
     for c in res.candidates:
         L.append(
             f"| {c['round']} | {c['name']} | {c['where']} | {100 * c['explained_fraction']:.2f} % | "
-            f"{100 * c['holdout_error']:.2f} % | {'yes' if c['accepted'] else 'no'} | {c['reason']} |"
+            f"{_pct(c['holdout_error'])} | {'yes' if c['accepted'] else 'no'} | {c['reason']} |"
         )
     L += ["", "## Unexplained", ""]
     u = res.unexplained
     if u:
         L.append(
             f"A spectral line at **{u['peak_hz']:.2f} Hz** in `{u['channel']}` ({u['where']}) holds "
-            f"{100 * u['fraction_of_residual']:.1f} % of the residual left (coherence with the motion "
-            f"{u['coherence_with_motion']:.2f}); no effect of the library explains it."
+            f"{100 * u['fraction_of_residual']:.1f} % of the residual left (coherence with the "
+            + (
+                f"motion {u['coherence_with_motion']:.2f}"
+                if "coherence_with_motion" in u
+                else f"drive {u['coherence_with_drive']:.2f}"
+            )
+            + "); no effect of the library explains it."
         )
     else:
         L.append("No spectral line holds a notable share of the residual left.")
     L += ["", "## Figures", ""] + [f"![{f}]({f})" for f in figs]
     tm = res.timing
-    L += [
-        "",
-        f"Time: {tm['total_s']:.1f} s (reading {tm['read_s']:.1f} s, residuals {tm['residuals_s']:.1f} s, "
-        f"search {tm['search_s']:.1f} s, {tm['least_squares_fits']} candidate fits).",
-        "",
-    ]
+    if "least_squares_fits" in tm:
+        L += [
+            "",
+            f"Time: {tm['total_s']:.1f} s (reading {tm['read_s']:.1f} s, residuals {tm['residuals_s']:.1f} s, "
+            f"search {tm['search_s']:.1f} s, {tm['least_squares_fits']} candidate fits).",
+            "",
+        ]
+    else:
+        L += [
+            "",
+            f"Time: {tm['total_s']:.1f} s (reading {tm['read_s']:.1f} s; simulations of the current model "
+            f"{tm['simulate_s']:.1f} s, screening {tm['screen_s']:.1f} s, refinement {tm['refine_s']:.1f} s, "
+            f"whole-run acceptance {tm['accept_s']:.1f} s; {tm['replays']} replays).",
+            "",
+        ]
     return "\n".join(L)
 
 
@@ -180,4 +285,4 @@ def write_report(res, out, toml_name: str) -> list[str]:
     return figs + ["report.md"]
 
 
-__all__ = ["figures", "report_md", "write_report"]
+__all__ = ["figures", "path_figures", "report_md", "write_report"]

@@ -1,0 +1,408 @@
+"""The replay and closed-loop residual paths of ``shaketable calibrate``.
+
+* ``replay``: runs with recorded valve commands. Each actuator's valve null offset is
+  estimated from the recorded motion and removed first (:func:`sim.calibrate.valve_null.estimate`,
+  or a real record drifts to the end stop in seconds); the model replays the commands
+  open loop at the record's own rate (:func:`sim.calibrate.replay.run_at_record`).
+* ``closed_loop``: runs with only a reference: the model runs it through the table's
+  controller (:class:`sim.loop.simulation.Simulation`, the table's own gains).
+
+The model's channels pass through the recorder's deterministic conditioning when the
+run says what it was (``meta.measurement.model`` of ``run --measure``: gain, offset,
+anti-alias low-pass, skew; not its noise or quantisation), so record and model are
+compared like for like. The residual is recorded minus model on the channels present
+(:data:`FIT_CHANNELS`: actuator force, table acceleration and velocity; the band-passed
+displacement when a run has no velocity; the chamber pressures when it has no force),
+per column (actuator / DOF), each column scaled by its recorded RMS: the pooled NRMSE is
+the root of the mean over runs and columns of ``sum e^2 / sum x^2``.
+
+:func:`simulate_job` is the one simulation of these paths, a module-level function of
+one picklable job, so that candidate replays run in :func:`sim.parallel.map_jobs`.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sim.calibrate.residuals import CalibrationError, check_finite
+
+#: channels compared on these paths, in order of preference
+FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_velocity")
+#: a column whose recorded RMS is below this share of its channel's largest is left out
+#: (a DOF the run does not excite: its residual is noise over nothing). Assumed: 5 %,
+#: above the cross-talk of a 3-axis test into the rotations, below any DOF a test drives.
+QUIET_COLUMN = 0.05
+#: ... and so is a column whose RMS is below this many times its recorded noise, when the
+#: run says what its sensor model was (``meta.measurement``)
+NOISE_COLUMN = 3.0
+DOF_CHANNELS = ("table_displacement", "table_velocity", "table_acceleration")
+
+
+@dataclass
+class PathRun:
+    """One run on the replay or closed-loop path."""
+
+    name: str
+    path: str
+    t: np.ndarray  # (n,) from 0
+    drive: np.ndarray  # (n, n_act) valve command (null removed) or (n, 6) reference pose
+    dofs: list
+    actuators: list
+    recorded: dict  # channel -> (n, m) as compared (band-passed displacement, if used)
+    columns: dict  # channel -> indices of the columns compared
+    scale: dict  # channel -> (m,) recorded RMS of each compared column over the scored rows
+    rows: slice = field(default_factory=lambda: slice(None))  # the scored rows
+    conditioning: dict | None = None
+    valve_null: dict | None = None
+    bandpass: dict = field(default_factory=dict)  # channel -> band (Hz) it is compared in
+
+    @property
+    def dt(self) -> float:
+        return float(self.t[1] - self.t[0])
+
+    @property
+    def n(self) -> int:
+        return len(self.t)
+
+    def window(self, seconds: float | None) -> "PathRun":
+        """The first ``seconds`` of the run (all of it for None), scored over all its rows."""
+        if seconds is None or seconds >= self.t[-1]:
+            n = self.n
+        else:
+            n = max(int(round(seconds / self.dt)) + 1, 64)
+        rec = {c: x[:n] for c, x in self.recorded.items()}
+        out = copy.copy(self)
+        out.t, out.drive, out.recorded, out.rows = self.t[:n], self.drive[:n], rec, slice(None)
+        out.scale = _scales(rec, self.columns, slice(None))
+        return out
+
+    def job(self, raw, src, payload, extra) -> tuple:
+        """The picklable job of one simulation of this run with ``extra`` effect entries."""
+        return (
+            raw,
+            src,
+            payload,
+            list(extra),
+            self.path,
+            self.t,
+            self.drive,
+            list(self.dofs),
+            {c: list(v) for c, v in self.columns.items()},
+            self.conditioning,
+            dict(self.bandpass),
+        )
+
+    def column_names(self) -> list[tuple[str, int, str]]:
+        """(channel, column index, place) of each compared column, in residual order."""
+        out = []
+        for ch, cols in self.columns.items():
+            for j in cols:
+                if ch.startswith("table_"):
+                    out.append((ch, j, f"dof:{self.dofs[j]}"))
+                else:
+                    out.append((ch, j, f"actuator:{self.actuators[j]}"))
+        return out
+
+
+def _scales(rec, columns, rows) -> dict:
+    return {c: np.sqrt(np.mean(rec[c][rows][:, cols] ** 2, axis=0)) for c, cols in columns.items()}
+
+
+def fit_channels(run) -> list[str]:
+    """The channels of ``run`` this path compares (see the module docstring)."""
+    have = [c for c in FIT_CHANNELS if getattr(run, c) is not None]
+    if run.table_velocity is None and run.table_displacement is not None:
+        have.append("table_displacement")
+    if run.actuator_force is None:
+        have += [c for c in ("pressure_a", "pressure_b") if getattr(run, c) is not None]
+    return have
+
+
+def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[PathRun]:
+    """The records of ``runs`` on ``path`` (``"replay"`` or ``"closed_loop"``).
+    ``score_from``: run name -> first scored sample (the held-out part of one run)."""
+    from mjcf.description import DOFS6
+    from sim.calibrate.replay import DISPLACEMENT_BAND_HZ
+    from sim.calibrate.valve_null import estimate
+    from sim.signals.resample import bandpass
+
+    out = []
+    for r in runs:
+        chans = fit_channels(r)
+        check_finite(r, chans + (["valve_command"] if path == "replay" else ["reference"]))
+        t = np.asarray(r.t, float) - float(r.t[0])
+        vn = None
+        if path == "replay":
+            est = estimate(r, desc, drift=False)
+            drive = np.asarray(r.valve_command, float) + est.at(np.asarray(r.t, float))
+            vn = est.as_dict(r.actuators)
+        else:
+            drive = np.zeros((r.n_samples, 6))
+            for j, d in enumerate(r.dofs):
+                drive[:, DOFS6.index(d)] = r.reference[:, j]
+        rec, cols, bands = {}, {}, {}
+        meas = (r.meta.get("measurement") or {}).get("model")
+        for c in chans:
+            x = np.asarray(getattr(r, c), float)
+            if c == "table_displacement":
+                band = (DISPLACEMENT_BAND_HZ[0], min(DISPLACEMENT_BAND_HZ[1], 0.45 * r.sample_rate_hz))
+                x = bandpass(x, r.sample_rate_hz, band)
+                bands[c] = band
+            rms = np.sqrt(np.mean((x - x.mean(axis=0)) ** 2, axis=0))
+            noise = np.broadcast_to(
+                np.asarray(((meas or {}).get("channel", {}).get(c, {})).get("noise_rms", 0.0), float), rms.shape
+            )
+            keep = [
+                j
+                for j in range(x.shape[1])
+                if rms[j] > QUIET_COLUMN * max(rms.max(), 1e-300) and rms[j] > NOISE_COLUMN * noise[j]
+            ]
+            if keep:
+                rec[c], cols[c] = x, keep
+        if not rec:
+            raise CalibrationError(
+                f"{r.name}: no recorded output moves (actuator_force, table_acceleration, "
+                "table_velocity all silent); calibrate runs that excite the table"
+            )
+        a = (score_from or {}).get(r.name, 0)
+        rows = slice(a, None)
+        out.append(
+            PathRun(
+                name=r.name,
+                path=path,
+                t=t,
+                drive=drive,
+                dofs=list(r.dofs),
+                actuators=list(r.actuators),
+                recorded=rec,
+                columns=cols,
+                scale=_scales(rec, cols, rows),
+                rows=rows,
+                conditioning=meas,
+                valve_null=vn,
+                bandpass=bands,
+            )
+        )
+    return out
+
+
+# ------------------------------------------------------------------ the simulation
+def condition(chans: dict, sensors: dict | None, fs: float) -> dict:
+    """The model's channels through the recorder's deterministic conditioning
+    (``run --measure``'s chain without noise and quantisation)."""
+    if not sensors:
+        return chans
+    from sim.signals import sensing
+
+    rec = sensors.get("recorder", {})
+    fc = rec.get("anti_alias_hz")
+    order = int(rec.get("anti_alias_order", 4))  # as sim.runs.measure: 4 poles unless the model says otherwise
+    digital = set(rec.get("digital", ()))
+    out = {}
+    for name, x in chans.items():
+        spec = sensors.get("channel", {}).get(name, {})
+        x = np.asarray(x, float) * np.asarray(spec.get("gain", 1.0), float) + np.asarray(spec.get("offset", 0.0), float)
+        if fc is not None and name not in digital and len(x) > 1 and fc < 0.5 * fs:
+            x = sensing.lowpass(x, fc, order, fs)
+        skew = np.broadcast_to(np.asarray(spec.get("skew_s", 0.0), float), (x.shape[1],))
+        for j in np.nonzero(skew)[0]:
+            x[:, j] = sensing.fractional_delay(x[:, j], -skew[j], 1.0 / fs)
+        out[name] = x
+    return out
+
+
+def simulate_job(job) -> dict | None:
+    """The model's compared channels for one job (:meth:`PathRun.job`): ``{channel: (n, m)}``
+    over every column of the channel, or None when the run diverged or stopped early."""
+    raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands = job
+    from hydraulics.params import HydraulicsParamError
+    from mjcf.description import parse_table
+    from sim.effects import build_model
+    from sim.errors import UserError
+    from sim.signals.resample import bandpass
+
+    raw = copy.deepcopy(raw)
+    if extra:
+        raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in extra]
+    fs = 1.0 / float(t[1] - t[0])
+    try:  # a candidate's value the model refuses (a supply drop below the return): no model
+        desc = parse_table(raw, src=src)
+        tm = build_model(desc, payload)
+        if path == "replay":
+            from sim.calibrate.replay import run_at_record
+
+            res, chans, _extras, n = run_at_record(tm, t, drive, dofs)
+        else:
+            res, chans, n = _closed_loop(tm, t, drive, dofs)
+    except (FloatingPointError, UserError, HydraulicsParamError):
+        return None
+    if res.incomplete_reason or n < len(t):
+        return None
+    want = {c: chans[c][: len(t)] for c in columns if c in chans}
+    if len(want) < len(columns):
+        return None
+    want = condition(want, cond, fs)
+    for c, band in bands.items():
+        want[c] = bandpass(want[c], fs, tuple(band))
+    if not all(np.all(np.isfinite(x)) for x in want.values()):
+        return None
+    return want
+
+
+def _closed_loop(tm, t, pose6, dofs):
+    """The model through its controller on the recorded reference (6-DOF pose at ``t``)."""
+    from sim.loop.simulation import Simulation
+    from sim.runs.build import build_runfile
+    from sim.runs.runfile import ACTUATOR_CHANNELS
+    from sim.scenario.reference import Reference
+    from sim.signals.resample import interpolate
+
+    sim = Simulation(tm)
+    rate = sim.gains.rate_hz
+    n_tick = int(np.floor(t[-1] * rate + 1e-6)) + 1
+    tt = np.arange(n_tick) / rate
+    d = interpolate(t, pose6, tt) if len(tt) != len(t) or not np.allclose(tt, t) else np.asarray(pose6, float)
+    v = np.gradient(d, 1.0 / rate, axis=0, edge_order=2)
+    a = np.gradient(v, 1.0 / rate, axis=0, edge_order=2)
+    res = sim.run(reference=Reference(t=tt, d=d, v=v, a=a))
+    tick = build_runfile(res, tm)
+    n = int(np.searchsorted(t, res.t[-1] + 1e-6 / rate, side="right"))
+    same = abs(rate * float(t[1] - t[0]) - 1.0) < 1e-9
+    chans = {}
+    for ch in ACTUATOR_CHANNELS + DOF_CHANNELS:
+        arr = getattr(tick, ch)
+        if arr is None:
+            continue
+        if ch in DOF_CHANNELS:
+            arr = arr[:, [list(tick.dofs).index(x) for x in dofs]]
+        chans[ch] = arr[:n].copy() if same else interpolate(res.t, arr, t[:n])
+    return res, chans, n
+
+
+# ------------------------------------------------------------------ residuals
+def residual_vector(pr: PathRun, model: dict | None) -> np.ndarray | None:
+    """The scored residual of one run, scaled so that ``sum(r**2)`` is the mean over its
+    columns of ``sum e^2 / sum x^2`` (its NRMSE squared); None if the model failed."""
+    if model is None:
+        return None
+    parts = []
+    ncol = sum(len(c) for c in pr.columns.values())
+    for ch, cols in pr.columns.items():
+        e = (pr.recorded[ch][pr.rows][:, cols] - model[ch][pr.rows][:, cols]) / pr.scale[ch]
+        n = e.shape[0]
+        parts.append((e / math.sqrt(n * ncol)).T.reshape(-1))
+    return np.concatenate(parts)
+
+
+def stacked(prs, models) -> np.ndarray | None:
+    """Residuals of several runs stacked, each run weighted alike (sum of squares: the
+    mean over runs of their NRMSE squared)."""
+    rs = [residual_vector(p, m) for p, m in zip(prs, models)]
+    if any(r is None for r in rs):
+        return None
+    return np.concatenate(rs) / math.sqrt(len(rs))
+
+
+def nrmse(prs, models) -> float:
+    r = stacked(prs, models)
+    return float(math.sqrt(np.sum(r**2))) if r is not None else float("nan")
+
+
+def column_errors(pr: PathRun, model: dict) -> dict:
+    """NRMSE per compared column: ``"<channel>[<place>]" -> value``."""
+    out = {}
+    for ch, cols in pr.columns.items():
+        for k, j in enumerate(cols):
+            e = pr.recorded[ch][pr.rows][:, j] - model[ch][pr.rows][:, j]
+            out[f"{ch}[{_place(pr, ch, j)}]"] = float(np.sqrt(np.mean(e**2)) / pr.scale[ch][k])
+    return out
+
+
+def _place(pr, ch, j) -> str:
+    return pr.dofs[j] if ch.startswith("table_") else pr.actuators[j]
+
+
+def residual_columns(pr: PathRun, model: dict) -> list[tuple[str, int, np.ndarray]]:
+    """(channel, column, residual over the scored rows, in channel units) of each column."""
+    return [
+        (ch, j, pr.recorded[ch][pr.rows][:, j] - model[ch][pr.rows][:, j])
+        for ch, cols in pr.columns.items()
+        for j in cols
+    ]
+
+
+def flatness(prs, models) -> float:
+    """Mean spectral flatness of the residual over runs and columns (1: white)."""
+    from sim.calibrate.residuals import spectral_flatness
+
+    vals = []
+    for pr, m in zip(prs, models):
+        for _ch, _j, e in residual_columns(pr, m):
+            if np.any(e):
+                vals.append(spectral_flatness(e, 1.0 / pr.dt))
+    return float(np.mean(vals)) if vals else 0.0
+
+
+def unexplained(prs, models, fraction: float) -> dict | None:
+    """The residual's strongest narrow spectral line over the compared columns (pooled
+    over runs): frequency, channel, place, share of that column's residual and its
+    coherence with the drive (the valve commands or the reference); None below
+    ``fraction``."""
+    import scipy.signal as sig
+
+    from sim.calibrate.residuals import spectra
+
+    best = None
+    for pr, m in zip(prs, models):
+        drive = pr.drive[pr.rows]
+        drive = drive[:, np.ptp(drive, axis=0) > 0]
+        for ch, j, e in residual_columns(pr, m):
+            if not np.any(e):
+                continue
+            s = spectra(e, 1.0 / pr.dt)
+            P, f = s["psd"], s["f"]
+            k = int(np.argmax(P[1:]) + 1)
+            w = slice(max(k - 2, 1), k + 3)
+            frac = float(P[w].sum() / P[1:].sum())
+            if best is not None and frac <= best["fraction_of_residual"]:
+                continue
+            nper = 2 * (len(f) - 1)
+            coh = 0.0
+            for q in range(drive.shape[1]):
+                _, C = sig.coherence(e, drive[:, q], fs=1.0 / pr.dt, nperseg=nper)
+                coh = max(coh, float(C[k]))
+            place = _place(pr, ch, j)
+            best = {
+                "peak_hz": float(f[k]),
+                "channel": f"{ch}[{j}]",
+                "where": (f"dof:{place}" if ch.startswith("table_") else f"actuator:{place}")
+                if coh >= 0.5
+                else f"channel:{ch}[{j}]",
+                "fraction_of_residual": frac,
+                "coherence_with_drive": coh,
+                "run": pr.name,
+            }
+    if best is None or best["fraction_of_residual"] < fraction:
+        return None
+    return best
+
+
+__all__ = [
+    "FIT_CHANNELS",
+    "PathRun",
+    "column_errors",
+    "condition",
+    "fit_channels",
+    "flatness",
+    "nrmse",
+    "path_runs",
+    "residual_columns",
+    "residual_vector",
+    "simulate_job",
+    "stacked",
+    "unexplained",
+]

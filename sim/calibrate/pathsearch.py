@@ -1,0 +1,290 @@
+"""The effect search of ``shaketable calibrate`` on the replay and closed-loop paths.
+
+Per round: the residual of the current model (the declared description plus the effects
+accepted so far) on the fit runs; every candidate of the library
+(:func:`sim.calibrate.sensitivity.candidates`) screened on short windows of the fit runs
+(one replay per parameter, in :func:`sim.parallel.map_jobs`); the best few refined by
+nonlinear least squares on longer windows; then, best first, each judged on the whole
+runs by the rules of the mechanical path (:func:`sim.calibrate.search.accept_numbers`:
+held-out error down by the margin, BIC down, parameters off their bounds with finite 95 %
+intervals that exclude the neutral value, residual whiter). The first that passes is
+added; repeated while one passes.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: screening window: the first seconds of the first fit run (short: one replay per parameter)
+SCREEN_S = 1.0
+#: refinement windows: the first seconds of every fit run (a few least-squares iterations per candidate)
+REFINE_S = 2.0
+#: candidates refined per round (the best by their linearised score)
+N_REFINE = 3
+#: a candidate whose linearised fit explains less than this share is not refined
+MIN_SCORE = 0.05
+MAX_NFEV = 6
+
+
+def motion_rms(runs, desc) -> dict:
+    """place -> (u, v, a) RMS of the recorded motion (from the table channels, else the
+    reference), for the mechanical candidates' step sizes."""
+    from mjcf.description import DOFS6
+    from sim.control.tvc import dof_jacobian
+
+    r = runs[0]
+    fs = r.sample_rate_hz
+    src = r.table_displacement if r.table_displacement is not None else r.reference
+    u = np.asarray(src, float) - np.mean(src, axis=0) if src is not None else None
+    v = (
+        r.table_velocity
+        if r.table_velocity is not None
+        else (np.gradient(u, 1 / fs, axis=0) if u is not None else None)
+    )
+    a = r.table_acceleration if r.table_acceleration is not None else np.gradient(v, 1 / fs, axis=0)
+    if u is None:
+        u = np.cumsum(v - v.mean(0), axis=0) / fs
+    six = [np.zeros((len(r.t), 6)) for _ in range(3)]
+    for j, d in enumerate(r.dofs):
+        for k, x in enumerate((u, v, a)):
+            six[k][:, DOFS6.index(d)] = x[:, j]
+    J = dof_jacobian(desc)
+    out = {}
+    rms = [np.sqrt(np.mean(x**2, axis=0)) for x in six]
+    for d in desc.dofs:
+        out[f"dof:{d}"] = tuple(float(x[DOFS6.index(d)]) for x in rms)
+    stroke = [np.sqrt(np.mean((x @ J.T) ** 2, axis=0)) for x in six]
+    for i, name in enumerate(desc.actuator_names):
+        out[f"actuator:{name}"] = tuple(float(x[i]) for x in stroke)
+    for c in sorted({a_.cls.name for a_ in desc.actuators}):
+        idx = [i for i, a_ in enumerate(desc.actuators) if a_.cls.name == c]
+        out[f"class:{c}"] = tuple(float(np.mean(x[idx])) for x in stroke)
+    return out
+
+
+def _split(runs, ho_given):
+    """Fit and held-out runs; with one run, the held-out part is its last 30 % of the same
+    replay (a replay cannot start mid-record: the state there is unknown)."""
+    if ho_given:
+        return runs, ho_given, {}, "given with --holdout"
+    if len(runs) >= 2:
+        ho = [r for i, r in enumerate(runs) if i % 3 == 1]
+        fit = [r for i, r in enumerate(runs) if i % 3 != 1]
+        return fit, ho, {}, "held out (no --holdout): " + ", ".join(Path(r.name).name for r in ho)
+    from sim.calibrate.search import _slice_run
+
+    r = runs[0]
+    cut = int(0.7 * r.n_samples)
+    note = (
+        f"held out (one run, no --holdout): the last 30 % of {Path(r.name).name} (from t = {r.t[cut]:.2f} s; "
+        "replayed from the start, scored after the cut)"
+    )
+    return [_slice_run(r, 0, cut, "fit part")], [r], {r.name: cut}, note
+
+
+def _bic(rss, n, p) -> float:
+    return n * math.log(max(rss, 1e-300) / n) + p * math.log(n)
+
+
+def calibrate_path(
+    runs, ho_given, desc, payload, path, *, effects=None, margin, max_rounds, workers=None, say=None, timing=None
+):
+    """The search on ``path``; returns the fields of a
+    :class:`sim.calibrate.search.CalibrationResult` as a dict."""
+    from sim.calibrate import paths as P
+    from sim.calibrate.search import UNEXPLAINED_FRACTION, Z95, accept_numbers
+    from sim.calibrate.sensitivity import candidates, refine_job, screen, sensor_model
+    from sim.parallel import map_jobs
+
+    say = say or (lambda *_: None)
+    tm = {"simulate_s": 0.0, "screen_s": 0.0, "refine_s": 0.0, "accept_s": 0.0, "replays": 0}
+    fit_runs, ho_runs, score_from, ho_note = _split(runs, ho_given)
+    pfit = P.path_runs(fit_runs, desc, path)
+    pho = P.path_runs(ho_runs, desc, path, score_from=score_from)
+    wscr = [pfit[0].window(SCREEN_S)]
+    wref = [p.window(REFINE_S) for p in pfit]
+    raw, src = desc.raw, str(desc.source)
+    mot = motion_rms(runs, desc)
+    accepted: list = []
+
+    def sims(prs_lists, extra):
+        jobs = [p.job(raw, src, payload, extra) for prs in prs_lists for p in prs]
+        t = time.perf_counter()
+        ms = map_jobs(P.simulate_job, jobs, workers=workers)
+        tm["simulate_s"] += time.perf_counter() - t
+        tm["replays"] += len(jobs)
+        out, k = [], 0
+        for prs in prs_lists:
+            out.append(ms[k : k + len(prs)])
+            k += len(prs)
+        return out
+
+    mfit, mho, mscr, mref = sims([pfit, pho, wscr, wref], accepted)
+    for p, m in zip(pfit + pho, mfit + mho):
+        if m is None:
+            from sim.calibrate.residuals import CalibrationError
+
+            raise CalibrationError(
+                f"{p.name}: the declared model's {path.replace('_', '-')} run diverged or stopped early; "
+                "check the table description against the run (valve map, controller, payload)"
+            )
+    mho0 = mho
+    e_ho0 = P.nrmse(pho, mho)
+    e_ho = e_ho0
+    r = P.stacked(pfit, mfit)
+    N = len(r)
+    rss, n_par = float(r @ r), 0
+    flat = P.flatness(pfit, mfit)
+    say(f"{path} path: {len(pfit)} fit runs, {len(pho)} held out; held-out NRMSE {e_ho0:.4f}")
+    tried, added = [], []
+    for rnd in range(max_rounds):
+        ctx = (raw, src, payload, list(accepted))
+        cands = candidates(desc, payload, wscr, accepted, mot, effects)
+        t = time.perf_counter()
+        sc = screen(cands, wscr, mscr, ctx, workers=workers, say=say)
+        tm["screen_s"] += time.perf_counter() - t
+        tm["replays"] += sum(len(c.screened) for c in cands if not c.sensor) * len(wscr)
+        sc.sort(key=lambda s: -s.score)
+        top = [s for s in sc if s.ok and s.score >= MIN_SCORE][:N_REFINE]
+        say("  best by sensitivity: " + ", ".join(f"{s.cand.type} {s.cand.where} {100 * s.score:.1f} %" for s in top))
+        if not top:
+            for s in sc[:5]:
+                tried.append(_row(rnd, s, None, None, f"explains less than {100 * MIN_SCORE:g} % (linearised)"))
+            break
+        t = time.perf_counter()
+        jobs = [(s.cand, s.theta, wref, mref, ctx, MAX_NFEV) for s in top]
+        sens = [j for j in jobs if j[0].sensor]
+        mods = [j for j in jobs if not j[0].sensor]
+        ref = {id(j): refine_job(j) for j in sens}
+        for j, rf in zip(mods, map_jobs(refine_job, mods, workers=workers)):
+            ref[id(j)] = rf
+        refined = [ref[id(j)] for j in jobs]
+        tm["refine_s"] += time.perf_counter() - t
+        refined.sort(key=lambda rf: -rf.explained)
+        say(
+            "  refined: "
+            + ", ".join(
+                f"{rf.cand.type} {rf.cand.where} {rf.cand.values(rf.theta)} {100 * rf.explained:.1f} %"
+                for rf in refined
+            )
+        )
+        winner = None
+        for rf in refined:  # best first, each on the whole runs
+            sc_of = next(s.score for s in top if s.cand.key == rf.cand.key)
+            if not rf.ok:
+                tried.append(_row(rnd, None, rf, None, rf.why, score=sc_of))
+                continue
+            t = time.perf_counter()
+            if rf.cand.sensor:
+                ms = [sensor_model(rf.cand, rf.theta, p, m) for p, m in zip(pfit + pho, mfit + mho)]
+            else:
+                jobs = [p.job(raw, src, payload, accepted + [rf.cand.entry(rf.theta)]) for p in pfit + pho]
+                ms = map_jobs(P.simulate_job, jobs, workers=workers)
+                tm["replays"] += len(jobs)
+            tm["accept_s"] += time.perf_counter() - t
+            mf, mh = ms[: len(pfit)], ms[len(pfit) :]
+            rn = P.stacked(pfit, mf)
+            if rn is None or any(m is None for m in mh):
+                tried.append(_row(rnd, None, rf, None, "the whole-run replay diverged", score=sc_of))
+                continue
+            e_new = P.nrmse(pho, mh)
+            rss_new = float(rn @ rn)
+            p_new = n_par + len(rf.theta)
+            f_new = P.flatness(pfit, mf)
+            okp, why, unc = param_check(rf, Z95)
+            ok, why = (
+                accept_numbers(e_ho, e_new, _bic(rss, N, n_par), _bic(rss_new, N, p_new), flat, f_new, margin)
+                if okp
+                else (False, why)
+            )
+            row = _row(rnd, None, rf, unc, why, score=sc_of)
+            row.update({"holdout_error": e_new, "bic_change": _bic(rss_new, N, p_new) - _bic(rss, N, n_par)})
+            row.update({"flatness": f_new, "accepted": ok})
+            tried.append(row)
+            say(
+                f"  {rf.cand.type:20s} {rf.cand.where:26s} explains {100 * rf.explained:6.2f} %  held-out {e_new:.4f}"
+                + ("  ACCEPTED" if ok else f"  ({why})")
+            )
+            if ok:
+                winner = (rf, unc, mf, mh, e_new, rss_new, p_new, f_new)
+                break
+        for s in sc[len(top) : len(top) + 10]:  # the next ones by score, for the record
+            tried.append(_row(rnd, s, None, None, "not refined (lower linearised score)"))
+        if winner is None:
+            break
+        rf, unc, mfit, mho, e_ho, rss, n_par, flat = winner
+        entry = rf.cand.entry(rf.theta)
+        accepted.append(entry)
+        added.append(
+            {
+                "name": rf.cand.type,
+                "where": rf.cand.where,
+                "parameters": rf.cand.values(rf.theta),
+                "uncertainty": unc,
+                "units": dict(rf.cand.units),
+            }
+        )
+        mscr, mref = sims([wscr, wref], accepted)
+    per = {}
+    for p, m0, m1 in zip(pho, mho0, mho):
+        e0, e1 = P.column_errors(p, m0), P.column_errors(p, m1)
+        for k in e0:
+            per[f"{Path(p.name).name}:{k}"] = {"before": e0[k], "after": e1[k]}
+    if timing is not None:
+        timing.update(tm)
+    return {
+        "holdout": [str(p.name) for p in pho],
+        "holdout_note": ho_note,
+        "error_before": e_ho0,
+        "error_after": e_ho,
+        "effects_added": added,
+        "candidates": tried,
+        "unexplained": P.unexplained(pfit, mfit, UNEXPLAINED_FRACTION),
+        "per_channel": per,
+        "series": {"kind": "path", "holdout": pho, "before": mho0, "after": mho, "fit": pfit, "fit_after": mfit},
+    }
+
+
+def param_check(rf, z95) -> tuple[bool, str, dict]:
+    """Off the bounds, a finite 95 % interval, the neutral value (no effect) outside it."""
+    c = rf.cand
+    sig = c.sigmas(rf.theta, rf.sigma)
+    vals = c.values(rf.theta)
+    unc = {k: z95 * s for k, s in sig.items()}
+    for i, k in enumerate(c.names):
+        th, s = float(rf.theta[i]), float(rf.sigma[i])
+        if not math.isfinite(s) or not math.isfinite(sig[k]):
+            return False, f"{k}: no finite confidence interval", unc
+        tol = 1e-3 * abs(c.step[i])
+        lo, hi = c.lower[i], c.upper[i]
+        if (math.isfinite(lo) and th - lo <= tol) or (math.isfinite(hi) and hi - th <= tol):
+            return False, f"{k} = {vals[k]:.4g} {c.units[k]} at its bound", unc
+        if i in c.screened and abs(th - c.neutral[i]) <= z95 * s:
+            return False, f"{k} = {vals[k]:.4g} {c.units[k]}: its 95 % interval includes the no-effect value", unc
+    return True, "", unc
+
+
+def _row(rnd, s, rf, unc, why, score=None) -> dict:
+    c = (s or rf).cand
+    theta = rf.theta if rf is not None else s.theta
+    return {
+        "round": rnd,
+        "name": c.type,
+        "where": c.where,
+        "explained_fraction": rf.explained if rf is not None else s.score,
+        "linearised_score": score if score is not None else s.score,
+        "parameters": c.values(theta),
+        "uncertainty": unc or {},
+        "holdout_error": None,
+        "bic_change": None,
+        "flatness": None,
+        "accepted": False,
+        "reason": why,
+    }
+
+
+__all__ = ["calibrate_path", "motion_rms", "param_check"]

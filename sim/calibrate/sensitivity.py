@@ -1,0 +1,463 @@
+"""Candidates of the replay and closed-loop paths, screened by sensitivity, refined by
+nonlinear least squares.
+
+A candidate is one registered effect type at one place of the table: the hydraulic
+effects (:mod:`sim.effects.hydraulic`) at each actuator and each class (the supply drop
+at the supply), the mechanical effects with a coefficient that vanishes (spring,
+viscous damping, power-law damping, Coulomb friction, added mass) at each DOF, actuator
+and class, and the sensor effects (:mod:`sim.effects.sensors`: gain, offset, delay,
+low-pass) on each compared channel and on each of its columns.
+
+*Screening* (:func:`screen`): from the current model (parameters at their *neutral*
+value, where the effect changes nothing: a flow-gain factor of 1, the description's
+bulk modulus, no delay, zero force), one short replay per parameter with the parameter
+stepped gives the sensitivity ``S`` of the compared channels; the linearised least
+squares ``r0 + S d = min`` gives the step ``d`` and the share of the residual it
+explains (the score). Sensor candidates need no replay: the sensor acts on the
+model's channels after the fact. *Refinement* (:func:`refine_job`): the best few,
+``scipy.optimize.least_squares`` from the linearised estimate on a longer window
+(Jacobian by the same finite steps; a valve delay, realised as whole physics steps,
+by a scan of its grid), with the covariance ``s^2 (J^T J)^-1`` at the solution.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: mechanical effect types tried on these paths: coefficient key, and shape keys held
+#: at a start value during the screening (freed in the refinement)
+MECHANICAL = {
+    "spring": ("stiffness_n_m", {}),
+    "viscous_damping": ("damping_n_s_m", {}),
+    "coulomb_friction": ("force_n", {}),
+    "added_mass": ("mass_kg", {}),
+    # assumed: alpha starts at 0.5, the NEES-UCSD table's value (docs/uniaxial.md), refined freely
+    "power_damping": ("coefficient", {"exponent": 0.5}),
+}
+HYDRAULIC = (
+    "valve_delay",
+    "valve_bandwidth",
+    "valve_flow_gain",
+    "valve_null_offset",
+    "bulk_modulus",
+    "leakage",
+    "supply_pressure_drop",
+)
+SENSOR = ("sensor_gain", "sensor_offset", "sensor_delay", "sensor_lowpass")
+#: the force a mechanical candidate's screening step adds: this share of the mean
+#: actuator's capability A_a p_s (assumed: 1 %, the order of the seal friction of a
+#: servo-actuator, docs/effects.md; large enough to stand above round-off, small enough
+#: to stay linear)
+FORCE_STEP = 0.01
+
+
+@dataclass
+class Candidate:
+    """One effect type at one place, with the parameters fitted (``names``, in the
+    order of ``neutral``/``step``/bounds) and fixed entry keys (``fixed``)."""
+
+    type: str
+    where: str
+    names: tuple
+    neutral: np.ndarray
+    step: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    units: dict
+    screened: tuple = (0,)  # indices of the parameters stepped in the screening
+    fixed: dict = field(default_factory=dict)
+    sensor: bool = False
+    grid: float | None = None  # the parameter (index 0) is realised on this grid
+
+    @property
+    def key(self) -> tuple:
+        return (self.type, self.where)
+
+    def values(self, theta) -> dict:
+        """Parameter values (the effect's own keys, SI) for the internal ``theta``."""
+        if self.type == "sensor_lowpass":  # internal: 1/cutoff (s), neutral 0 = no filter
+            return {"cutoff_hz": 1.0 / float(theta[0]) if theta[0] > 0 else math.inf}
+        return {k: float(v) for k, v in zip(self.names, theta)}
+
+    def sigmas(self, theta, sigma) -> dict:
+        if self.type == "sensor_lowpass":
+            return {"cutoff_hz": float(sigma[0]) / float(theta[0]) ** 2 if theta[0] > 0 else math.inf}
+        return {k: float(s) for k, s in zip(self.names, sigma)}
+
+    def entry(self, theta) -> dict:
+        return {"type": self.type, "where": self.where, **self.fixed, **self.values(theta)}
+
+    def is_neutral(self, theta) -> bool:
+        return bool(np.all(np.asarray(theta) == self.neutral))
+
+
+# ------------------------------------------------------------------ the candidates
+def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[Candidate]:
+    """Every candidate of the library on this table for the compared channels of ``prs``;
+    ``accepted``: entries already added (their parameters are the new neutral values);
+    ``motion_rms``: place -> (u, v, a) RMS of the recorded motion (mechanical steps);
+    ``effects``: only these types (None: all)."""
+    from hydraulics.params import HydraulicParams
+    from mjcf.description import parse_table
+    from sim.effects import build_model
+    from sim.effects.base import EFFECTS
+    from sim.effects.hydraulic import actuator_indices
+
+    raw = dict(desc.raw)
+    raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in accepted]
+    cur = parse_table(raw, src=desc.source)
+    tm = build_model(cur, payload)
+    hp = HydraulicParams.from_table(cur.raw)
+    for e in tm.effects:
+        hp = e.edit_hydraulics(hp)
+    dt = float(tm.model.opt.timestep)
+    cap = float(np.mean(hp.area_a_m2)) * hp.supply_pressure_pa
+    Fs = FORCE_STEP * cap
+    want = set(effects) if effects else None
+    have = {(e["type"], e["where"]) for e in accepted}
+    names = list(cur.actuator_names)
+    classes = sorted({a.cls.name for a in cur.actuators})
+    hyd_places = [f"class:{c}" for c in classes] + ([f"actuator:{a}" for a in names] if len(names) > 1 else [])
+    mech_places = [f"dof:{d}" for d in cur.dofs] + hyd_places
+    out = []
+
+    def spec(t, k):
+        u, lo, hi, _d = EFFECTS[t].SPEC[k]
+        return u, lo, hi
+
+    class _W:  # an effect-like object for actuator_indices
+        def __init__(self, where):
+            self.where, self.source = where, "candidate"
+
+    for t in HYDRAULIC:
+        if t not in EFFECTS or (want and t not in want):
+            continue
+        for w in ["supply"] if t == "supply_pressure_drop" else hyd_places:
+            if (t, w) in have:
+                continue
+            idx = actuator_indices(_W(w), hp) if w != "supply" else None
+            key = next(iter(EFFECTS[t].SPEC))
+            unit, lo, hi = spec(t, key)
+            grid = None
+            if t == "valve_delay":
+                x0, h, grid = float(np.mean(hp.per_actuator("valve_delay_s")[idx])), 2 * dt, dt
+            elif t == "valve_bandwidth":
+                arr = (
+                    hp.per_actuator("valve_natural_frequency_hz")
+                    if hp.model == "second_order"
+                    else 1.0 / (2 * math.pi * hp.per_actuator("valve_tau_s"))
+                )
+                x0 = float(np.mean(arr[idx]))
+                h = 0.1 * x0
+            elif t == "valve_flow_gain":
+                x0, h = 1.0, 0.05
+            elif t == "valve_null_offset":
+                x0, h = float(np.mean(hp.per_actuator("valve_null_offset")[idx])), 2e-3
+            elif t == "bulk_modulus":
+                # stepped down by 20 %: air and hoses lower the effective value, never raise it,
+                # and the oil-column frequency moves far with it (a secant reaches further)
+                x0 = float(np.mean(hp.per_actuator("chamber_bulk_modulus_pa")[idx]))
+                h = -0.2 * x0
+            elif t == "leakage":
+                x0 = float(np.mean(hp.leakage_cross_m3_s_pa[idx]))
+                # a step that leaks 1 % of rated flow at the supply pressure
+                h = 0.01 * hp.rated_flow_m3_s / hp.supply_pressure_pa
+            else:  # supply_pressure_drop: the supply stays above the return / accumulator precharge
+                x0, h = 0.0, 0.05 * hp.supply_pressure_pa
+                floor = max(hp.return_pressure_pa, hp.accumulator_precharge_pa if hp.accumulator_volume_m3 > 0 else 0.0)
+                hi = min(hi, hp.supply_pressure_pa - floor - h)
+            out.append(
+                Candidate(
+                    t,
+                    w,
+                    (key,),
+                    np.array([x0]),
+                    np.array([h]),
+                    np.array([lo]),
+                    np.array([hi]),
+                    {key: unit},
+                    grid=grid,
+                )
+            )
+    for t, (key, shape) in MECHANICAL.items():
+        if t not in EFFECTS or (want and t not in want):
+            continue
+        for w in mech_places:
+            if (t, w) in have or w not in motion_rms:
+                continue
+            u, v, a = motion_rms[w]
+            ref = {"stiffness_n_m": u, "damping_n_s_m": v, "force_n": 1.0, "mass_kg": a, "coefficient": math.sqrt(v)}
+            if ref[key] <= 0:
+                continue
+            keys = (key,) + tuple(shape)
+            units, lo, hi = {}, [], []
+            for k in keys:
+                un, l_, h_ = spec(t, k)
+                units[k] = un
+                lo.append(l_)
+                hi.append(h_)
+            out.append(
+                Candidate(
+                    t,
+                    w,
+                    keys,
+                    np.array([0.0] + list(shape.values())),
+                    np.array([Fs / ref[key]] + [0.1] * len(shape)),
+                    np.array(lo),
+                    np.array(hi),
+                    units,
+                )
+            )
+    fs = 1.0 / prs[0].dt
+    for t in SENSOR:
+        if t not in EFFECTS or (want and t not in want):
+            continue
+        for ch, cols in prs[0].columns.items():
+            for w in [f"channel:{ch}"] + [f"channel:{ch}[{j}]" for j in cols]:
+                if (t, w) in have:
+                    continue
+                jj = cols if w.endswith(ch) else [int(w.split("[")[1][:-1])]
+                sc = float(np.mean([prs[0].scale[ch][cols.index(j)] for j in jj]))
+                if t == "sensor_gain":
+                    c = ("gain", 1.0, 0.01, -1e3, 1e3, "1")
+                elif t == "sensor_offset":
+                    c = ("offset", 0.0, 0.01 * sc, -1e12, 1e12, "channel units")
+                elif t == "sensor_delay":
+                    c = ("delay_s", 0.0, 0.5 / fs, 0.0, 10.0, "s")
+                else:  # internal 1/cutoff: the first step a filter at fs/4; the cutoff stays below Nyquist
+                    c = ("cutoff_hz", 0.0, 4.0 / fs, 2.2 / fs, math.inf, "Hz")
+                k, x0, h, lo, hi, unit = c
+                out.append(
+                    Candidate(
+                        t,
+                        w,
+                        (k,),
+                        np.array([x0]),
+                        np.array([h]),
+                        np.array([lo]),
+                        np.array([hi]),
+                        {k: unit},
+                        sensor=True,
+                    )
+                )
+    return out
+
+
+# ------------------------------------------------------------------ sensor candidates
+def sensor_model(cand: Candidate, theta, pr, model: dict) -> dict:
+    """The model's channels with sensor candidate ``cand`` at ``theta`` applied."""
+    from sim.effects.base import EFFECTS
+
+    if model is None:
+        return None
+    if cand.type == "sensor_lowpass" and not theta[0] > 0:
+        return model
+    eff = EFFECTS[cand.type](cand.entry(theta))
+    ch = eff.channel
+    if ch not in model:
+        return model
+    out = dict(model)
+    x = np.asarray(model[ch], float)
+    out[ch] = eff.measure(pr.t, {ch: x}, None)[ch]
+    return out
+
+
+# ------------------------------------------------------------------ screening
+@dataclass
+class Screen:
+    cand: Candidate
+    score: float  # share of the residual sum of squares the linearised fit explains
+    theta: np.ndarray  # the linearised estimate (clipped into the bounds)
+    ok: bool = True
+
+
+def linear_fit(r0, S) -> tuple[np.ndarray, float]:
+    """Step ``d`` minimising ``|r0 + S d|`` and the share of ``|r0|^2`` it removes."""
+    d, *_ = np.linalg.lstsq(S, -r0, rcond=None)
+    rr = r0 + S @ d
+    den = float(r0 @ r0)
+    return d, (1.0 - float(rr @ rr) / den) if den > 0 else 0.0
+
+
+def _inside(c: Candidate, theta):
+    lo = np.where(np.isfinite(c.lower), c.lower + 1e-6 * np.abs(c.step), -np.inf)
+    hi = np.where(np.isfinite(c.upper), c.upper - 1e-6 * np.abs(c.step), np.inf)
+    return np.clip(theta, lo, hi)
+
+
+def screen(cands, prs, base_models, ctx, workers=None, say=None) -> list[Screen]:
+    """Score every candidate by its linearised fit on the windows ``prs`` (model channels
+    ``base_models`` from the current model; ``ctx`` = (raw, src, payload, accepted))."""
+    from sim.calibrate.paths import simulate_job, stacked
+    from sim.parallel import map_jobs
+
+    raw, src, payload, accepted = ctx
+    r0 = stacked(prs, base_models)
+    jobs, where = [], []
+    for ci, c in enumerate(cands):
+        if c.sensor:
+            continue
+        for p in c.screened:
+            th = c.neutral.copy()
+            th[p] += c.step[p]
+            for ri, pr in enumerate(prs):
+                jobs.append(pr.job(raw, src, payload, list(accepted) + [c.entry(th)]))
+                where.append((ci, p, ri))
+    if say:
+        say(f"  screening: {len(jobs)} short replays ({len(prs)} windows of {prs[0].t[-1]:.2f} s) ...")
+    models = map_jobs(simulate_job, jobs, workers=workers)
+    got: dict = {}
+    for (ci, p, ri), m in zip(where, models):
+        got.setdefault(ci, {}).setdefault(p, [None] * len(prs))[ri] = m
+    out = []
+    for ci, c in enumerate(cands):
+        cols = []
+        if c.sensor:
+            th = c.neutral.copy()
+            th[0] += c.step[0]
+            r1 = stacked(prs, [sensor_model(c, th, pr, m) for pr, m in zip(prs, base_models)])
+            cols.append((r1 - r0) / c.step[0])
+        else:
+            bad = False
+            for p in c.screened:
+                r1 = stacked(prs, got[ci][p])
+                if r1 is None:
+                    bad = True
+                    break
+                cols.append((r1 - r0) / c.step[p])
+            if bad:
+                out.append(Screen(c, 0.0, c.neutral.copy(), ok=False))
+                continue
+        S = np.stack(cols, axis=1)
+        d, score = linear_fit(r0, S)
+        th = c.neutral.copy()
+        th[list(c.screened)] += d
+        out.append(Screen(c, score, _inside(c, th)))
+    return out
+
+
+# ------------------------------------------------------------------ refinement
+@dataclass
+class Refined:
+    cand: Candidate
+    theta: np.ndarray
+    sigma: np.ndarray
+    rss: float  # |r|^2 on the refinement windows (the pooled NRMSE squared)
+    rss0: float
+    nfev: int
+    ok: bool
+    why: str = ""
+
+    @property
+    def explained(self) -> float:
+        return 1.0 - self.rss / self.rss0 if self.rss0 > 0 else 0.0
+
+
+def _residual_at(c, theta, prs, base_models, ctx):
+    from sim.calibrate.paths import simulate_job, stacked
+
+    if c.sensor:
+        return stacked(prs, [sensor_model(c, theta, pr, m) for pr, m in zip(prs, base_models)])
+    raw, src, payload, accepted = ctx
+    return stacked(prs, [simulate_job(pr.job(raw, src, payload, list(accepted) + [c.entry(theta)])) for pr in prs])
+
+
+def _jac(c, theta, r, prs, base_models, ctx):
+    cols = []
+    for p in range(len(theta)):
+        h = 0.5 * c.step[p] if c.grid is None else c.grid
+        th = theta.copy()
+        th[p] += h
+        if np.isfinite(c.upper[p]) and th[p] > c.upper[p]:
+            h, th[p] = -h, theta[p] - h
+        r1 = _residual_at(c, th, prs, base_models, ctx)
+        if r1 is None:  # the stepped model failed (diverged, refused): the other side
+            h, th[p] = -h, theta[p] - h
+            r1 = _residual_at(c, th, prs, base_models, ctx)
+        if r1 is None:
+            return None
+        cols.append((r1 - r) / h)
+    return np.stack(cols, axis=1)
+
+
+def refine_job(job) -> Refined:
+    """Nonlinear least squares of one candidate on the windows (a picklable job:
+    ``(cand, theta0, prs, base_models, ctx, max_nfev)``)."""
+    from scipy.optimize import least_squares
+
+    c, theta0, prs, base_models, ctx, max_nfev = job
+    from sim.calibrate.paths import stacked
+
+    r0 = stacked(prs, base_models)
+    rss0 = float(r0 @ r0)
+    nfev = 0
+    cache: dict = {}
+
+    def fun(th):
+        nonlocal nfev
+        k = tuple(np.round(th, 15))
+        if k not in cache:
+            nfev += 1
+            r = _residual_at(c, np.asarray(th, float), prs, base_models, ctx)
+            cache[k] = r if r is not None else np.full_like(r0, 1e3)
+        return cache[k]
+
+    if c.grid is not None:  # a delay realised in whole steps: scan the grid around the estimate
+        k0 = max(0, int(round(theta0[0] / c.grid)))
+        best = None
+        for k in range(max(0, k0 - 2), k0 + 3):
+            th = np.array([k * c.grid])
+            r = fun(th)
+            s = float(r @ r)
+            if best is None or s < best[0]:
+                best = (s, th)
+        while True:  # walk on while it improves
+            edge = best[1][0] / c.grid
+            moved = False
+            for k in (int(round(edge)) - 1, int(round(edge)) + 1):
+                if k < 0:
+                    continue
+                th = np.array([k * c.grid])
+                s = float(fun(th) @ fun(th))
+                if s < best[0]:
+                    best, moved = (s, th), True
+            if not moved or nfev > max_nfev + 6:
+                break
+        theta = best[1]
+    else:
+        lo = np.where(np.isfinite(c.lower), c.lower, -np.inf)
+        hi = np.where(np.isfinite(c.upper), c.upper, np.inf)
+        x0 = np.clip(theta0, lo + 1e-9 * np.abs(c.step), hi - 1e-9 * np.abs(c.step))
+
+        def jac(th):
+            J = _jac(c, np.asarray(th, float), fun(th), prs, base_models, ctx)
+            return J if J is not None else np.zeros((len(r0), len(th)))  # no slope: the solver stops here
+
+        sol = least_squares(
+            fun,
+            x0,
+            jac=jac,
+            bounds=(lo, hi),
+            x_scale=np.abs(c.step),
+            max_nfev=max_nfev,
+            method="trf",
+        )
+        theta = sol.x
+    r = fun(theta)
+    J = _jac(c, theta, r, prs, base_models, ctx)
+    if J is None:
+        return Refined(c, theta, np.full(len(theta), math.inf), float(r @ r), rss0, nfev, False, "replay diverged")
+    n, p = len(r), len(theta)
+    s2 = float(r @ r) / max(n - p, 1)
+    try:
+        cov = s2 * np.linalg.inv(J.T @ J)
+        sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    except np.linalg.LinAlgError:
+        sigma = np.full(p, math.inf)
+    return Refined(c, theta, sigma, float(r @ r), rss0, nfev, True)
+
+
+__all__ = ["Candidate", "HYDRAULIC", "MECHANICAL", "Refined", "SENSOR", "Screen", "candidates", "refine_job", "screen"]

@@ -1,0 +1,226 @@
+"""`shaketable calibrate` on the replay and closed-loop paths: runs made on the CGS 6-DOF
+table with a hydraulic or sensor effect the description lacks (3-axis random motion,
+measured through the built-in 1024 Hz recorder model of `run --measure`: anti-alias
+filter, noise, quantisation), calibrated against the description without it, name the
+effect at its place, recover its parameter within 10 % and bring the held-out error
+down; clean runs add nothing.
+
+The candidate list is cut to a few effect types per test (``EFFECTS``; every place of
+each) to keep the runtime down on a shared 2-core machine; the whole library on a 60 s
+run is measured in docs/calibration.md."""
+
+from __future__ import annotations
+
+import copy
+import json
+import tomllib
+
+import pytest
+
+from sim.calibrate import search as S
+
+#: candidate types of these tests: the planted ones and their nearest confusers
+EFFECTS = ["valve_flow_gain", "valve_delay", "bulk_modulus", "sensor_gain", "sensor_delay"]
+SENSORS = ["sensor_gain", "sensor_offset", "sensor_delay", "sensor_lowpass"]
+SECONDS = 3.0
+
+
+def _cgs_measured(out, effects=(), seeds=(3, 4, 5), seconds=SECONDS):
+    """3-axis band-limited white noise (1-30 Hz) on the CGS model with ``effects`` planted,
+    closed loop, measured through the built-in recorder model (seeded)."""
+    import mjcf
+    from mjcf.description import parse_table
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+    from sim.runs.build import build_runfile
+    from sim.runs.measure import load_sensors, measure_run
+    from sim.runs.runfile import write_run
+    from sim.scenario import motions as M
+    from sim.scenario.reference import reference_from_motions
+
+    base = mjcf.load_table("cgs")
+    raw = copy.deepcopy(base.raw)
+    raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in effects]
+    tm = build_model(parse_table(raw, src=base.source))
+    rms = {"x": 1.0, "y": 1.0, "z": 0.8}  # m/s^2 RMS per axis
+    sensors = load_sensors()
+    paths = []
+    for seed in seeds:
+        mo = {
+            d: M.white_noise(
+                duration_s=seconds, sample_rate_hz=1024.0, band_hz=(1.0, 30.0), seed=(seed, k), rms_acceleration=rms[d]
+            )
+            for k, d in enumerate(rms)
+        }
+        ref = reference_from_motions(mo, 1024.0, seconds)
+        res = Simulation(tm).run(reference=ref)
+        assert res.incomplete_reason is None
+        run = build_runfile(res, tm, source="simulated", reference=ref)
+        paths.append(str(write_run(out / f"cgs_{seed}.run.npz", measure_run(run, sensors, seed=seed))))
+    return paths
+
+
+@pytest.fixture(scope="module")
+def clean_paths(tmp_path_factory):
+    return _cgs_measured(tmp_path_factory.mktemp("clean"))
+
+
+@pytest.fixture(scope="module")
+def floor(clean_paths):
+    """The clean held-out run's replay NRMSE against the declared model: the noise floor."""
+    import mjcf
+    from sim.calibrate import paths as P
+    from sim.runs.runfile import read_run
+
+    desc = mjcf.load_table("cgs")
+    (pr,) = P.path_runs([read_run(clean_paths[1])], desc, "replay")  # held out: every third run from the second
+    return P.nrmse([pr], [P.simulate_job(pr.job(desc.raw, str(desc.source), None, []))])
+
+
+def _check(res, floor, name, where, key, truth):
+    assert res.residual_path == "replay"
+    assert [(e["name"], e["where"]) for e in res.effects_added][:1] == [(name, where)], res.effects_added
+    e = res.effects_added[0]
+    assert e["parameters"][key] == pytest.approx(truth, rel=0.10)
+    assert 0 < e["uncertainty"][key] < abs(e["parameters"][key])
+    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor, (
+        res.error_before,
+        res.error_after,
+        floor,
+    )
+
+
+def test_clean_runs_add_nothing(clean_paths):
+    res = S.calibrate(clean_paths, path="replay", effects=EFFECTS + SENSORS, workers=2)
+    assert res.residual_path == "replay"
+    assert res.effects_added == []
+    assert res.error_after == res.error_before
+    assert res.error_before < 0.08  # the recorder model's noise floor on these runs
+
+
+@pytest.mark.slow
+def test_flow_gain_of_one_actuator_found(floor, tmp_path):
+    paths = _cgs_measured(tmp_path, [{"type": "valve_flow_gain", "where": "actuator:X1", "factor": 0.8}])
+    res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
+    _check(res, floor, "valve_flow_gain", "actuator:X1", "factor", 0.8)
+
+
+@pytest.fixture(scope="module")
+def sensor_runs(tmp_path_factory):
+    """Y1's load cell (column 4) reading 20 % high (a wrong sensitivity entered). A
+    sensor effect acts on one column of 18 compared: smaller errors move the pooled
+    held-out error by less than the 5 % acceptance margin."""
+    return _cgs_measured(
+        tmp_path_factory.mktemp("sgain"),
+        [{"type": "sensor_gain", "where": "channel:actuator_force[4]", "gain": 1.2}],
+    )
+
+
+def test_sensor_gain_of_one_load_cell_found(sensor_runs, floor):
+    res = S.calibrate(sensor_runs, path="replay", effects=SENSORS, workers=2)
+    _check(res, floor, "sensor_gain", "channel:actuator_force[4]", "gain", 1.2)
+    assert len(res.effects_added) == 1
+
+
+def test_sensor_delay_of_one_accelerometer_found(floor, tmp_path):
+    """The y accelerometer 3 ms late (3.07 samples at 1024 Hz)."""
+    paths = _cgs_measured(
+        tmp_path, [{"type": "sensor_delay", "where": "channel:table_acceleration[1]", "delay_s": 3e-3}]
+    )
+    res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
+    _check(res, floor, "sensor_delay", "channel:table_acceleration[1]", "delay_s", 3e-3)
+
+
+@pytest.mark.slow
+def test_valve_delay_of_a_class_found(floor, tmp_path):
+    """The vertical valves 4 ms late (realised as 8 physics steps of 1/2048 s: 3.9 ms)."""
+    paths = _cgs_measured(tmp_path, [{"type": "valve_delay", "where": "class:vertical", "delay_s": 4e-3}])
+    res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
+    _check(res, floor, "valve_delay", "class:vertical", "delay_s", 4e-3)
+
+
+@pytest.mark.slow
+def test_bulk_modulus_of_a_class_found(floor, tmp_path):
+    """Aerated oil in the lateral actuators: 0.7 GPa where the description says 1.0 GPa.
+    (At 0.6 GPa the open-loop replay is 145 % off and the search, linearised at 1.0 GPa,
+    took a lateral flow gain of 0.2 instead: a limit of the screening, docs/calibration.md.)"""
+    paths = _cgs_measured(tmp_path, [{"type": "bulk_modulus", "where": "class:lateral", "bulk_modulus_pa": 0.7e9}])
+    res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
+    _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.7e9)
+
+
+@pytest.mark.slow
+def test_two_effects_at_once_hydraulic_and_mechanical(floor, tmp_path):
+    """X1's valve flowing 20 % short and 5 kN more dry friction on every lateral actuator."""
+    planted = [
+        {"type": "valve_flow_gain", "where": "actuator:X1", "factor": 0.8},
+        {"type": "coulomb_friction", "where": "class:lateral", "force_n": 5000.0},
+    ]
+    res = S.calibrate(
+        _cgs_measured(tmp_path, planted), path="replay", effects=EFFECTS + ["coulomb_friction"], workers=2
+    )
+    found = {(e["name"], e["where"]): e["parameters"] for e in res.effects_added}
+    assert set(found) == {("valve_flow_gain", "actuator:X1"), ("coulomb_friction", "class:lateral")}, found
+    assert found[("valve_flow_gain", "actuator:X1")]["factor"] == pytest.approx(0.8, rel=0.10)
+    assert found[("coulomb_friction", "class:lateral")]["force_n"] == pytest.approx(5000.0, rel=0.10)
+    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor.error_before
+
+
+def _reference_only(paths, out):
+    """The runs with only the reference and the table's motion (no valve commands, no
+    forces or pressures): the closed-loop path is the one left."""
+    from sim.runs.runfile import read_run, write_run
+
+    res = []
+    for p in paths:
+        r = read_run(p)
+        r.valve_command = r.actuator_force = r.pressure_a = r.pressure_b = r.spool_position = None
+        r.actuator_displacement = None
+        res.append(str(write_run(out / p.split("/")[-1], r)))
+    return res
+
+
+def test_closed_loop_path_finds_an_accelerometer_gain(sensor_runs, tmp_path):
+    """Only the reference recorded: the model runs closed loop through the table's
+    controller; an x accelerometer reading 15 % low is found there."""
+    src = _cgs_measured(
+        tmp_path, [{"type": "sensor_gain", "where": "channel:table_acceleration[0]", "gain": 0.85}], seeds=(3, 4)
+    )
+    (tmp_path / "ref").mkdir()
+    paths = _reference_only(src, tmp_path / "ref")
+    res = S.calibrate(paths, effects=SENSORS, workers=2)
+    assert res.residual_path == "closed_loop"
+    assert [(e["name"], e["where"]) for e in res.effects_added] == [("sensor_gain", "channel:table_acceleration[0]")]
+    assert res.effects_added[0]["parameters"]["gain"] == pytest.approx(0.85, rel=0.10)
+    assert res.error_after <= 0.2 * res.error_before or res.error_after < 0.08
+
+
+def test_cli_replay_path_writes_json_report_and_table(sensor_runs, tmp_path):
+    from sim.cli import main
+
+    out = tmp_path / "out"
+    rc = main(["calibrate", *sensor_runs, "--path", "replay", "--effects", "sensor_gain", "--out", str(out), "--json"])
+    assert rc == 0
+    js = json.loads((out / "calibration.json").read_text(), parse_constant=lambda c: pytest.fail(c))
+    assert js["residual_path"] == "replay"
+    assert [(e["name"], e["where"]) for e in js["effects_added"]] == [("sensor_gain", "channel:actuator_force[4]")]
+    for k in ("error_before", "error_after", "candidates", "unexplained", "per_channel", "timing"):
+        assert k in js
+    raw = tomllib.loads((out / "cgs_calibrated.toml").read_text())
+    (e,) = [e for e in raw["effect"] if e["type"] == "sensor_gain"]
+    assert e["where"] == "channel:actuator_force[4]" and e["source"].startswith("calibrated: shaketable calibrate")
+    md = (out / "report.md").read_text()
+    for fig in ("holdout_error.png", "residual_time.png", "residual_spectra.png", "effects.png"):
+        assert (out / fig).stat().st_size > 1000 and fig in md
+
+
+def test_forced_path_the_runs_cannot_take_is_one_line(sensor_runs, tmp_path, capsys):
+    from sim.cli import main
+
+    (tmp_path / "ref").mkdir()
+    paths = _reference_only(sensor_runs[:1], tmp_path / "ref")
+    out = tmp_path / "out"
+    rc = main(["calibrate", *paths, "--path", "replay", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err.startswith("error: ") and "\n" not in err and "valve_command" in err, err
+    assert not out.exists()
