@@ -20,8 +20,7 @@ Three paths, chosen by the channels every run has (:func:`choose_path`):
 * ``replay``: recorded valve commands, replayed open loop (after removing a valve null
   offset, or a real record drifts to the end stop); ``closed_loop``: only a reference,
   the run through the controller model. Their residuals and search are in
-  :mod:`sim.calibrate.paths` and :mod:`sim.calibrate.pathsearch` (:func:`simulate_path`
-  here is the older single-run helper).
+  :mod:`sim.calibrate.paths` and :mod:`sim.calibrate.pathsearch`.
 
 Residuals are per channel, per DOF, in time and frequency (:func:`spectra`, with the
 coherence with the states).
@@ -34,9 +33,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sim.errors import RunFileError, UserError
+from sim.errors import UserError
 
 MECH_CHANNELS = ("actuator_force", "table_displacement", "table_velocity", "table_acceleration")
+#: channels a replay or closed-loop residual can compare (a run needs one of them)
+FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_displacement")
 PATHS = ("mechanical", "replay", "closed_loop")
 
 
@@ -433,73 +434,6 @@ def spectral_flatness(x: np.ndarray, fs: float) -> float:
 
 
 # ------------------------------------------------------------------ replay / closed loop
-def null_offset(valve_command: np.ndarray) -> np.ndarray:
-    """Estimated valve null offset per actuator: the mean command of a run that starts
-    and ends at rest (a real valve's null bias integrates to drift otherwise)."""
-    return np.mean(valve_command, axis=0)
-
-
-def simulate_path(run, desc, payload, path: str, effects: list | None = None, seconds: float | None = None):
-    """The model's channels for ``run`` on the replay or closed-loop path (with extra
-    ``[[effect]]`` entries ``effects``); returns ``(channels dict, n samples)``."""
-    import copy
-
-    from mjcf.description import parse_table
-    from sim.control.tvc import ControllerGains
-    from sim.effects import build_model
-    from sim.loop.simulation import Simulation
-
-    raw = copy.deepcopy(desc.raw)
-    if effects:
-        raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in effects]
-        desc = parse_table(raw, src=desc.source)
-    tm = build_model(desc, payload)
-    n = run.n_samples if seconds is None else min(run.n_samples, int(round(seconds / run.dt)) + 1)
-    sim = Simulation(tm, gains=ControllerGains(rate_hz=run.sample_rate_hz))
-    if path == "replay":
-        vc = run.valve_command[:n] - null_offset(run.valve_command[:n])
-        res = sim.run(valve_command=vc)
-    elif path == "closed_loop":
-        from sim.scenario.reference import Reference
-
-        d = run.reference[:n]
-        t = run.t[:n] - run.t[0]
-        v = np.gradient(d, t, axis=0)
-        a = np.gradient(v, t, axis=0)
-        res = sim.run(reference=Reference(t=t, d=d, v=v, a=a))
-    else:
-        raise RunFileError(f"unknown residual path {path!r}")
-    ch = dict(res.channels)
-    ch["_incomplete"] = res.incomplete_reason
-    return ch, min(n, len(res.t))
-
-
-FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_displacement")
-
-
-def path_residuals(run, channels: dict, n: int) -> dict:
-    """Residual arrays per channel (recorded minus model) over the first ``n`` samples."""
-    out = {}
-    for ch in FIT_CHANNELS:
-        m = getattr(run, ch)
-        s = channels.get(ch)
-        if m is None or s is None:
-            continue
-        out[ch] = m[:n] - s[:n]
-    return out
-
-
-def path_nrmse(run, res: dict, n: int) -> float:
-    vals = []
-    for ch, e in res.items():
-        m = getattr(run, ch)[:n]
-        for j in range(m.shape[1]):
-            den = float(np.sum(m[:, j] ** 2))
-            if den > 1e-12 * max(1.0, float(np.sum(m**2))):
-                vals.append(float(np.sum(e[:, j] ** 2)) / den)
-    return float(math.sqrt(np.mean(vals))) if vals else float("nan")
-
-
 __all__ = [
     "CalibrationError",
     "MechRun",
@@ -508,11 +442,7 @@ __all__ = [
     "choose_path",
     "mechanical_runs",
     "nrmse_runs",
-    "null_offset",
-    "path_nrmse",
-    "path_residuals",
     "places",
-    "simulate_path",
     "spectra",
     "spectral_flatness",
 ]
