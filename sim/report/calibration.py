@@ -97,21 +97,7 @@ def figures(res, out: Path) -> list[str]:
     names.append("residual_vs_state.png")
     # 5. accepted effects: value and 95 % interval, relative
     if res.effects_added:
-        labels, rel, err = [], [], []
-        for e in res.effects_added:
-            for p, v in e["parameters"].items():
-                labels.append(f"{e['name']} {e['where']}\n{p}")
-                rel.append(1.0)
-                err.append(abs(e["uncertainty"][p] / v) if v else np.inf)
-        fig, ax = plt.subplots(figsize=(max(5, 1.6 * len(labels)), 3.6))
-        ax.errorbar(np.arange(len(labels)), rel, yerr=err, fmt="o", capsize=4)
-        ax.set_xticks(np.arange(len(labels)), labels, fontsize=8)
-        ax.set_ylabel("value / fitted value (95 % interval)")
-        ax.set_title("accepted effects")
-        fig.tight_layout()
-        fig.savefig(out / "effects.png", dpi=110)
-        plt.close(fig)
-        names.append("effects.png")
+        names.append(_effects_figure(plt, res, out))
     return names
 
 

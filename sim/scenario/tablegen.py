@@ -69,6 +69,48 @@ def _num(inputs: dict, key: str, src: str, *, positive=True, default=None):
     return float(v)
 
 
+def common_sections(f, given: dict, *, ps, q, drop, fv, pump_flow, swept_total) -> list[str]:
+    """The description's lines every generated table shares (uni-axial and 6-DOF):
+    foundation, fluid, supply and servovalve, each number given, assumed or derived with
+    its reason. ``f`` formats a number; ``given`` says where each given number came from."""
+    return [
+        "[foundation]",
+        'mode = "fixed"                      # assumed: rigid reaction mass (measure it if it rocks)',
+        'mass_kg = 1.0e6                     # assumed: only used with mode = "spring"',
+        'frequency_hz = [30.0, 30.0, 30.0]   # assumed: only used with mode = "spring"',
+        'damping_ratio = [0.05, 0.05, 0.05]  # assumed: only used with mode = "spring"',
+        "",
+        "[fluid]",
+        f"bulk_modulus_pa = {f(BULK_MODULUS_PA)}   # assumed: effective oil + hose bulk modulus (oil 1.4-1.8 GPa, "
+        "hoses and entrained air lower it)",
+        "vapour_pressure_pa = 1.0e3          # assumed: lower pressure clip (cavitation)",
+        f"relief_pressure_pa = {f(1.2 * ps)}   # assumed: relief 20 % above supply",
+        "",
+        "[supply]",
+        f"pressure_pa = {f(ps)}   # {given['supply_pressure_pa']}",
+        "return_pressure_pa = 0.3e6          # assumed: return line back pressure",
+        f"pump_flow_m3_s = {f(pump_flow)}   # assumed: half the valves' rated flow (accumulators carry the peaks)",
+        f"accumulator_volume_m3 = {f(max(0.01, 10 * 2 * swept_total))}   # assumed: gas volume of ten full strokes of oil",
+        f"accumulator_precharge_pa = {f(2 * ps / 3)}   # assumed: precharge at 2/3 of supply",
+        "polytropic_exponent = 1.4           # assumed: adiabatic nitrogen",
+        "line_resistance_pa_s_m3 = 0.0       # assumed: no supply line loss",
+        "",
+        "[servovalve]",
+        f"rated_flow_m3_s = {f(q)}   # {given['valve_rated_flow_m3_s']}",
+        f"rated_drop_pa = {f(drop)}   # " + given.get("valve_rated_drop_pa", "assumed: 1000 psi rating convention"),
+        'model = "first"                     # assumed: first-order spool (the bandwidth is the one number given)',
+        f"tau_s = {f(1 / (2 * math.pi * fv))}   # derived: 1 / (2 pi bandwidth), bandwidth {fv:g} Hz ({given['valve_bandwidth_hz']})",
+        f'natural_frequency_hz = {f(fv)}   # derived: the bandwidth (unused with model = "first")',
+        'damping_ratio = 0.7                 # assumed: unused with model = "first"',
+        "delay_s = 0.0                       # assumed: no pure delay (calibrate if the phase says otherwise)",
+        "slew_limit_per_s = 0.0              # assumed: no slew limit",
+        "laminar_drop_pa = 0.1e6             # assumed: laminar region below 0.1 MPa",
+        f"null_leakage_m3_s = {f(1e-3 * q)}   # assumed: 0.1 % of rated flow",
+        "overlap = 0.0                       # assumed: zero-lapped spool",
+        "",
+    ]
+
+
 def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
     """TOML text of a uni-axial table description named ``name`` from the lab's
     ``inputs`` (keys of :data:`LAB_KEYS`); ``src`` names where they came from."""
@@ -191,40 +233,7 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
         f"mass_kg = {f(platen)}   # derived: moving mass ({given['moving_mass_kg']}) - {n_act} rod(s) (assumed below)",
         f"inertia_kg_m2 = [{', '.join(f(v) for v in inertia)}]   # derived: plate m (b^2 + h^2)/12 etc.",
         "",
-        "[foundation]",
-        'mode = "fixed"                      # assumed: rigid reaction mass (measure it if it rocks)',
-        'mass_kg = 1.0e6                     # assumed: only used with mode = "spring"',
-        'frequency_hz = [30.0, 30.0, 30.0]   # assumed: only used with mode = "spring"',
-        'damping_ratio = [0.05, 0.05, 0.05]  # assumed: only used with mode = "spring"',
-        "",
-        "[fluid]",
-        f"bulk_modulus_pa = {f(BULK_MODULUS_PA)}   # assumed: effective oil + hose bulk modulus (oil 1.4-1.8 GPa, "
-        "hoses and entrained air lower it)",
-        "vapour_pressure_pa = 1.0e3          # assumed: lower pressure clip (cavitation)",
-        f"relief_pressure_pa = {f(1.2 * ps)}   # assumed: relief 20 % above supply",
-        "",
-        "[supply]",
-        f"pressure_pa = {f(ps)}   # {given['supply_pressure_pa']}",
-        "return_pressure_pa = 0.3e6          # assumed: return line back pressure",
-        f"pump_flow_m3_s = {f(0.5 * q * n_act)}   # assumed: half the valves' rated flow (accumulators carry the peaks)",
-        f"accumulator_volume_m3 = {f(max(0.01, 10 * 2 * swept * n_act))}   # assumed: gas volume of ten full strokes of oil",
-        f"accumulator_precharge_pa = {f(2 * ps / 3)}   # assumed: precharge at 2/3 of supply",
-        "polytropic_exponent = 1.4           # assumed: adiabatic nitrogen",
-        "line_resistance_pa_s_m3 = 0.0       # assumed: no supply line loss",
-        "",
-        "[servovalve]",
-        f"rated_flow_m3_s = {f(q)}   # {given['valve_rated_flow_m3_s']}",
-        f"rated_drop_pa = {f(drop)}   # " + given.get("valve_rated_drop_pa", "assumed: 1000 psi rating convention"),
-        'model = "first"                     # assumed: first-order spool (the bandwidth is the one number given)',
-        f"tau_s = {f(tau)}   # derived: 1 / (2 pi bandwidth), bandwidth {fv:g} Hz ({given['valve_bandwidth_hz']})",
-        f'natural_frequency_hz = {f(fv)}   # derived: the bandwidth (unused with model = "first")',
-        'damping_ratio = 0.7                 # assumed: unused with model = "first"',
-        "delay_s = 0.0                       # assumed: no pure delay (calibrate if the phase says otherwise)",
-        "slew_limit_per_s = 0.0              # assumed: no slew limit",
-        "laminar_drop_pa = 0.1e6             # assumed: laminar region below 0.1 MPa",
-        f"null_leakage_m3_s = {f(1e-3 * q)}   # assumed: 0.1 % of rated flow",
-        "overlap = 0.0                       # assumed: zero-lapped spool",
-        "",
+        *common_sections(f, given, ps=ps, q=q, drop=drop, fv=fv, pump_flow=0.5 * q * n_act, swept_total=swept * n_act),
         "[actuator_class.main]",
         f"half_stroke_m = {f(s)}   # {given['half_stroke_m']}",
         f"area_a_m2 = {f(A)}   # {given['piston_area_m2']}",
