@@ -34,7 +34,7 @@ class Fit:
     """Terms fitted together: parameters, their standard deviations, the residual."""
 
     terms: list
-    theta: np.ndarray  # linear coefficients, one per term
+    theta: np.ndarray  # linear coefficients, in term order (one per term, several for a vector law)
     values: list  # per term: {param: value}
     sigma: list  # per term: {param: standard deviation}
     rss: float  # weighted residual sum of squares over the fit rows
@@ -78,8 +78,8 @@ def _stack(mruns, terms):
             if k not in cache:
                 if len(cache) > 256:
                     cache.clear()
-                cache[k] = (mr.demean(mr.column(t.law, t.where, t.shape))[mr.rows] * w).reshape(-1)
-            cols.append(cache[k])
+                cache[k] = [(mr.demean(Q)[mr.rows] * w).reshape(-1) for Q in mr.columns(t.law, t.where, t.shape)]
+            cols.extend(cache[k])
         ys.append(mr.extra["y"])
         Xs.append(np.stack(cols, axis=1) if cols else np.zeros((mr.extra["y"].size, 0)))
     return np.concatenate(ys), np.concatenate(Xs, axis=0)
@@ -176,11 +176,12 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
             terms[i] = _joint_shape(mruns, terms, i)
     y, X = _stack(mruns, terms)
     theta, rss = _solve(y, X)
+    off = _offsets(terms)
     # the Jacobian of the fit: coefficient columns and each shape parameter's column
     Jcols = [X]
     for i, t in enumerate(terms):
         if t.shape:
-            Jcols.append(_shape_jacobian(mruns, t, theta[i]))
+            Jcols.append(_shape_jacobian(mruns, t, theta[off[i]]))
     Jm = np.concatenate(Jcols, axis=1) if Jcols else X
     n, p = len(y), Jm.shape[1]
     s2 = rss / max(n - p, 1)
@@ -190,36 +191,42 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
     except np.linalg.LinAlgError:
         sd = np.full(p, np.inf)
     values, sigma = [], []
-    js = len(terms)
+    js = X.shape[1]
     for i, t in enumerate(terms):
-        v = {t.law.linear: float(theta[i])}
-        s = {t.law.linear: float(sd[i])}
+        v = {name: float(theta[off[i] + j]) for j, name in enumerate(t.law.linears)}
+        s = {name: float(sd[off[i] + j]) for j, name in enumerate(t.law.linears)}
         for name, val in t.shape.items():
             v[name] = float(val)
             s[name] = float(sd[js])
             js += 1
         values.append(v)
         sigma.append(s)
-    residuals = [
-        mr.residual
-        - sum(
-            (th * mr.demean(mr.column(t.law, t.where, t.shape)) for th, t in zip(theta, terms)), np.zeros_like(mr.force)
-        )
-        for mr in mruns
-    ]
+    residuals = _residuals(mruns, terms, theta)
     return Fit(terms=terms, theta=theta, values=values, sigma=sigma, rss=rss, n=n, p=p, residuals=residuals)
+
+
+def _offsets(terms) -> list:
+    """Index of each term's first linear coefficient in the stacked ``theta``."""
+    return [int(k) for k in np.cumsum([0] + [len(t.law.linears) for t in terms])[:-1]]
+
+
+def _residuals(mruns, terms, theta) -> list:
+    """Each run's residual less the terms' force at coefficients ``theta`` (stacked)."""
+    out = []
+    for mr in mruns:
+        e = mr.residual.copy()
+        k = 0
+        for t in terms:
+            for Q in mr.columns(t.law, t.where, t.shape):
+                e -= theta[k] * mr.demean(Q)
+                k += 1
+        out.append(e)
+    return out
 
 
 def predict(mruns, fit: Fit) -> list:
     """Residuals of other runs (held out) with the fitted terms' values."""
-    return [
-        mr.residual
-        - sum(
-            (th * mr.demean(mr.column(t.law, t.where, t.shape)) for th, t in zip(fit.theta, fit.terms)),
-            np.zeros_like(mr.force),
-        )
-        for mr in mruns
-    ]
+    return _residuals(mruns, fit.terms, fit.theta)
 
 
 def flatness(mruns, residuals) -> float:
