@@ -240,3 +240,52 @@ def test_planted_effect_recovered(case, cases):
     )
     assert math.isfinite(res.error_after)
     assert res.unexplained is None, res.unexplained
+
+
+# ------------------------------------------------------------------ foundation mode
+#: (mass kg, frequency Hz) of the reaction mass on springs planted: CGS's own 6400 t at the
+#: 30 Hz its description assumes for mode = "spring", and a 1000 t one at 8 Hz (softer and
+#: lighter than CGS's; assumed, to move the table's motion by ~10 %)
+FOUNDATIONS = ((6.4e6, 30.0), (1.0e6, 8.0))
+
+
+@pytest.mark.parametrize("mass_kg, frequency_hz", FOUNDATIONS)
+def test_foundation_mode_hides_in_the_sensor_noise_on_the_mechanical_path(tmp_path, mass_kg, frequency_hz):
+    """The actuators push off the foundation: the force the platen needs for its recorded
+    (absolute) motion does not depend on how the foundation moves, except through the
+    linkages' own terms (stroke = platen minus foundation end: seal drag and friction on
+    the stroke velocity, the supports' springs, the cylinders swinging on the foundation's
+    swivels). A planted foundation mode changes the table's motion (what the replay path
+    compares) by several %, but the mechanical residual of the declared model (no mode)
+    by less than the sensor noise adds to it: not identifiable on this path.
+
+    Measured (2.5 s random run, whole record): residual NRMSE 0.42 % clean, 0.48 % with
+    6400 t at 30 Hz, 1.32 % with 1000 t at 8 Hz (0.1 % and 1.25 % added in quadrature),
+    4.27 % measured through the sensor model (4.25 % added). (A 1000 t mass at 4 Hz, in
+    the band of the run, reaches 3.1 %: see docs/calibration.md.)"""
+    import numpy as np
+
+    import mjcf
+    from sim.calibrate import residuals as R
+    from sim.runs.runfile import read_run
+
+    desc = mjcf.load_table("cgs")
+    fd = {"type": "foundation_mode", "mass_kg": mass_kg, "frequency_hz": frequency_hz, "damping_ratio": 0.05}
+    planted = _cgs_raw()
+    planted["effect"] = [fd] + list(planted.get("effect", []))  # foundation_mode first (it moves bodies)
+    jobs = [
+        (_cgs_raw(), "random", 5, tmp_path / "clean.run.npz", False),
+        (_cgs_raw(), "random", 5, tmp_path / "measured.run.npz", True),
+        (planted, "random", 5, tmp_path / "foundation.run.npz", False),
+    ]
+    runs = [read_run(simulate_measured(j)) for j in jobs]
+    clean, measured, found = (R.mechanical_runs([r], desc)[0] for r in runs)
+    e_clean, e_meas, e_found = (R.nrmse_runs([m], [m.residual]) for m in (clean, measured, found))
+    noise = math.sqrt(max(e_meas**2 - e_clean**2, 0.0))  # what the sensor model adds
+    extra = math.sqrt(max(e_found**2 - e_clean**2, 0.0))  # what the foundation mode adds
+    print(f"residual NRMSE clean {e_clean:.4f}, foundation {e_found:.4f}, measured {e_meas:.4f}")
+    moved = np.linalg.norm(runs[2].table_acceleration - runs[0].table_acceleration, axis=0) / np.linalg.norm(
+        runs[0].table_acceleration, axis=0
+    )
+    assert moved.max() > 0.05, moved  # the planted mode is there: the table moves differently
+    assert extra < 0.5 * noise, (e_clean, e_found, e_meas)
