@@ -6,11 +6,20 @@ residual (recorded force minus the force the declared model needs for the record
 motion) is then explained by linear least squares on the column ``basis``. This module
 is the hook the effect contract (:mod:`sim.effects.base`) does not have yet: a registry
 of :class:`Law` objects keyed by effect type (``coulomb_friction``, ``viscous_damping``,
-``power_damping``, ``spring``, ``added_mass``, the names of branch ``effects``), plus the
+``power_damping``, ``spring``, ``added_mass``, ``payload_mode``, ``cg_offset``: the names of
+the effect library), plus the
 older platen effects of :mod:`sim.effects.registry` (``platen_spring``,
 ``platen_coulomb``, ``platen_power_damping``) so that a description's *declared*
 effects enter the model's force. A law with a nonlinear shape parameter (the exponent
-of power-law damping) is fitted on a grid of it, each point a linear least squares.
+of power-law damping) is fitted on a grid of it, each point a linear least squares. A
+law with several linear coefficients (the CG offset's dx, dy, dz at the ``payload`` place)
+gives one DOF-space column per coefficient.
+
+``foundation_mode`` has no law here: the actuators push off the foundation, so the force
+the platen needs for its recorded (absolute) motion does not involve the foundation's
+motion, except through the linkages' own terms on the stroke (platen minus foundation
+end: dry friction above all), which need the foundation's motion the runs do not record;
+measured in tests/calibrate/test_cgs_mechanical.py, documented in docs/calibration.md.
 
 When an effect type is registered in :data:`sim.effects.base.EFFECTS`, its ``SPEC``
 keys must match the law's parameter names for the law to be used as a candidate; when

@@ -260,7 +260,7 @@ def test_foundation_mode_hides_in_the_sensor_noise_on_the_mechanical_path(tmp_pa
     by less than the sensor noise adds to it: not identifiable on this path.
 
     Measured (2.5 s random run, whole record): residual NRMSE 0.42 % clean, 0.48 % with
-    6400 t at 30 Hz, 1.32 % with 1000 t at 8 Hz (0.1 % and 1.25 % added in quadrature),
+    6400 t at 30 Hz, 1.32 % with 1000 t at 8 Hz (0.22 % and 1.25 % added in quadrature),
     4.27 % measured through the sensor model (4.25 % added). (A 1000 t mass at 4 Hz, in
     the band of the run, reaches 3.1 %: see docs/calibration.md.)"""
     import numpy as np
