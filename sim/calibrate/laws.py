@@ -70,6 +70,11 @@ class Law:
     #: "always" a candidate, or only when named (``--effects``) or, for "undeclared_specimen",
     #: when the calibration is told a specimen stands on the table undeclared (``--payload none``)
     when: str = "always"
+    #: ``(u, v, a, s, values) -> force``: the part of the force of second order in the
+    #: linear coefficients (the CG offset's own parallel-axis inertia), at ``values``: a
+    #: quadratic form in them (the fit tabulates it per product of two coefficients),
+    #: taken at the current coefficients and the solve repeated to a fixed point
+    second_order: Callable | None = None
 
     @property
     def linears(self) -> tuple:
@@ -250,7 +255,7 @@ def cg_offset_force(r, m: float, c, u6, a6, g: float, *, second_order: bool = Tr
 
 def _cg_offset(u, v, a, s):
     """The three columns (3, n, k) of the CG offset's first-order force, per metre of
-    dx, dy, dz (:func:`cg_offset_force`, second order left out: a linear law), in the
+    dx, dy, dz (:func:`cg_offset_force`; its second-order part: :func:`_cg_offset_second`), in the
     run's DOF space (``u``, ``a``: (n, k) of the DOFs ``s["_dofs"]``). The weight's term
     (displacement) goes through the sensor prefilter ``s["_filt"]``, the inertial terms
     not (the recorded acceleration already did)."""
@@ -272,6 +277,18 @@ def _cg_offset(u, v, a, s):
     return np.stack(out)
 
 
+def _cg_offset_second(u, v, a, s, values):
+    """(n, k) the CG offset's second-order force m r x (alpha x r) at ``values`` (its
+    parallel-axis inertia; :func:`cg_offset_force`)."""
+    cols = [DOF6.index(d) for d in s["_dofs"]]
+    a6 = np.zeros((len(a), 6))
+    a6[:, cols] = a
+    m, c, g = s["_payload"]
+    r = np.array([values["dx_m"], values["dy_m"], values["dz_m"]], float)
+    full = cg_offset_force(r, m, c, np.zeros_like(a6), a6, g)
+    return (full - cg_offset_force(r, m, c, np.zeros_like(a6), a6, g, second_order=False))[:, cols]
+
+
 add_law(
     Law(
         "cg_offset",
@@ -281,6 +298,7 @@ add_law(
         places=("payload",),
         inertial=True,  # the prefilter is applied inside (to the weight's term only)
         what="the payload's centre of gravity off where it is declared by (dx, dy, dz)",
+        second_order=_cg_offset_second,
     )
 )
 

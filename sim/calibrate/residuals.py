@@ -112,6 +112,14 @@ class MechRun:
         """(n, k) generalised force of a one-coefficient ``law`` with unit coefficient at ``where``."""
         return self.columns(law, where, shape)[0]
 
+    def second(self, law, where: str, shape: dict, values: dict) -> np.ndarray:
+        """(n, k) the law's force of second order in its coefficients (``law.second_order``)
+        at ``values``."""
+        u, v, a, m = self.place_motion(where)
+        b = np.asarray(law.second_order(u, v, a, _law_args(self, shape), values), float)
+        Q = b[:, None] * m[None, :] if b.ndim == 1 else b @ m
+        return Q if law.inertial else self.filt(Q)
+
     def columns(self, law, where: str, shape: dict) -> list:
         """One (n, k) generalised force per linear coefficient of ``law`` (unit value) at ``where``."""
         key = (law.type, where, tuple(sorted(shape.items())))
@@ -286,6 +294,8 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         other = joints.force(u, v, r.dt)
         for law, where, vals in declared:
             other = other + sum(vals[k] * Q for k, Q in zip(law.linears, _raw_columns(mr, law, where, vals)))
+            if law.second_order is not None:
+                other = other + mr.second(law, where, vals, vals)
         mr.model = a @ Me.T + mr.filt(other)
         mr.rows = _still_rows(v, pre, r.dt)
         out.append(mr)
@@ -310,13 +320,17 @@ def _force_at_acceleration_instant(r) -> np.ndarray:
     return CubicSpline(t, f, axis=0)(np.minimum(t + lag, t[-1]))
 
 
-def _raw_columns(mr, law, where, shape) -> list:
-    """The law's unfiltered DOF-space force per linear coefficient (list of (n, k))."""
-    u, v, a, m = mr.place_motion(where)
+def _law_args(mr, shape) -> dict:
     s = {**shape, "_presliding_m": mr.presliding_m, "_dt": mr.dt, "_dofs": mr.dofs, "_filt": mr.filt}
     if mr.payload is not None:
         s["_payload"] = mr.payload
-    b = np.asarray(law.basis(u, v, a, s), float)
+    return s
+
+
+def _raw_columns(mr, law, where, shape) -> list:
+    """The law's unfiltered DOF-space force per linear coefficient (list of (n, k))."""
+    u, v, a, m = mr.place_motion(where)
+    b = np.asarray(law.basis(u, v, a, _law_args(mr, shape)), float)
     bs = [b] if len(law.linears) == 1 else list(b)
     return [x[:, None] * m[None, :] if x.ndim == 1 else x @ m for x in bs]
 

@@ -123,7 +123,7 @@ def _joint_shape(mruns, terms, i) -> Term:
         trial[i] = Term(
             t.law, t.where, {**t.shape, **{n: float(v) for n, v in zip(names, np.clip(x, lo, hi))}}, t.index
         )
-        return _solve(*_stack(mruns, trial))[1]
+        return _fit_linear(mruns, trial)[1]
 
     x0 = np.array([t.shape[n] for n in names], float)
     r0 = rss(x0)
@@ -151,7 +151,7 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
             def rss_at(val, i=i, name=name, t=t):
                 trial = list(terms)
                 trial[i] = Term(t.law, t.where, {**t.shape, name: float(val)}, t.index)
-                return _solve(*_stack(mruns, trial))[1]
+                return _fit_linear(mruns, trial)[1]
 
             grid = list(grid)
             if name in given[i]:
@@ -174,11 +174,11 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
             terms[i] = t = Term(t.law, t.where, {**t.shape, name: float(best)}, t.index)
         if len(t.law.shape) > 1:  # correlated shape parameters (a mode's frequency and damping): jointly
             terms[i] = _joint_shape(mruns, terms, i)
-    y, X = _stack(mruns, terms)
-    theta, rss = _solve(y, X)
+    theta, rss, y, X = _fit_linear(mruns, terms)
     off = _offsets(terms)
-    # the Jacobian of the fit: coefficient columns and each shape parameter's column
-    Jcols = [X]
+    # the Jacobian of the fit: coefficient columns (with the second-order force's change)
+    # and each shape parameter's column
+    Jcols = [X + _second_jacobian(mruns, terms, theta, X.shape)]
     for i, t in enumerate(terms):
         if t.shape:
             Jcols.append(_shape_jacobian(mruns, t, theta[off[i]]))
@@ -205,6 +205,89 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
     return Fit(terms=terms, theta=theta, values=values, sigma=sigma, rss=rss, n=n, p=p, residuals=residuals)
 
 
+SECOND_ORDER_ITERATIONS = 8  #: fixed-point passes of a law's second-order force (converged: 1e-10)
+
+
+def _fit_linear(mruns, terms):
+    """``(theta, rss, y, X)``: the terms' coefficients by linear least squares; a law's
+    force of second order in its coefficients (the CG offset's own parallel-axis inertia,
+    ``Law.second_order``) is taken to the target at the current coefficients, and the
+    solve repeated to a fixed point (the second-order force is small: a few passes)."""
+    y, X = _stack(mruns, terms)
+    theta, rss = _solve(y, X)
+    for _ in range(SECOND_ORDER_ITERATIONS):
+        q = _second_stack(mruns, terms, theta)
+        if q is None:
+            break
+        new, rss = _solve(y - q, X)
+        done = np.allclose(new, theta, rtol=1e-10, atol=0.0)
+        theta = new
+        if done:
+            break
+    return theta, rss, y, X
+
+
+def _term_values(t, theta, k: int) -> dict:
+    return {name: float(theta[k + j]) for j, name in enumerate(t.law.linears)}
+
+
+def _second_stack(mruns, terms, theta):
+    """The terms' second-order force at ``theta``, weighted and stacked as the target
+    (None: no term has one)."""
+    if not any(getattr(t.law, "second_order", None) for t in terms):
+        return None
+    off = _offsets(terms)
+    parts = []
+    for mr in mruns:
+        tot = 0.0
+        for i, t in enumerate(terms):
+            if getattr(t.law, "second_order", None):
+                Q, pairs = _second_columns(mr, t)
+                th = theta[off[i] : off[i] + len(t.law.linears)]
+                tot = tot + Q @ np.array([th[a] * th[b] for a, b in pairs])
+        parts.append(tot)
+    return np.concatenate(parts)
+
+
+def _second_columns(mr, t):
+    """A term's second-order force as a quadratic form in its coefficients: the stacked,
+    weighted column of each product theta_i theta_j (i <= j), and the pairs (cached per
+    run: the fit's passes and shape scans reuse them)."""
+    cache = mr.extra.setdefault("second", {})
+    k = _key(t)
+    if k not in cache:
+        names = t.law.linears
+        E = np.eye(len(names))
+
+        def q(vec):
+            F = mr.second(t.law, t.where, t.shape, dict(zip(names, map(float, vec))))
+            return (mr.demean(F)[mr.rows] * mr.extra["w"]).reshape(-1)
+
+        sq = [q(E[i]) for i in range(len(names))]
+        pairs = [(i, j) for i in range(len(names)) for j in range(i, len(names))]
+        cols = [sq[i] if i == j else q(E[i] + E[j]) - sq[i] - sq[j] for i, j in pairs]
+        cache[k] = (np.stack(cols, axis=1), pairs)
+    return cache[k]
+
+
+def _second_jacobian(mruns, terms, theta, shape, h: float = 1e-4) -> np.ndarray:
+    """d(second-order force)/d(coefficient), stacked like ``X`` (central differences:
+    exact for a quadratic); zeros without a second-order term."""
+    out = np.zeros(shape)
+    if not any(getattr(t.law, "second_order", None) for t in terms):
+        return out
+    off = _offsets(terms)
+    for i, t in enumerate(terms):
+        if not getattr(t.law, "second_order", None):
+            continue
+        for j in range(len(t.law.linears)):
+            up, dn = np.array(theta, float), np.array(theta, float)
+            up[off[i] + j] += h
+            dn[off[i] + j] -= h
+            out[:, off[i] + j] = (_second_stack(mruns, terms, up) - _second_stack(mruns, terms, dn)) / (2 * h)
+    return out
+
+
 def _offsets(terms) -> list:
     """Index of each term's first linear coefficient in the stacked ``theta``."""
     return [int(k) for k in np.cumsum([0] + [len(t.law.linears) for t in terms])[:-1]]
@@ -217,6 +300,8 @@ def _residuals(mruns, terms, theta) -> list:
         e = mr.residual.copy()
         k = 0
         for t in terms:
+            if getattr(t.law, "second_order", None):
+                e -= mr.demean(mr.second(t.law, t.where, t.shape, _term_values(t, theta, k)))
             for Q in mr.columns(t.law, t.where, t.shape):
                 e -= theta[k] * mr.demean(Q)
                 k += 1

@@ -115,3 +115,42 @@ def test_cg_offset_inertial_part_is_the_effective_mass_change():
     _, _, a = _motion(n=50)
     dM = plant.effective_mass_matrix() - decl.effective_mass_matrix()
     np.testing.assert_allclose(a @ dM.T, cg_offset_force(R_OFF, m, c, np.zeros_like(a), a, g), rtol=0, atol=1e-9 * m)
+
+
+def test_cg_offset_fit_takes_the_second_order_to_a_fixed_point():
+    """A residual that is exactly the closed form's force (first and second order) of
+    ``R_OFF``: the fit finds the offset to 1e-9 and leaves nothing; the linear solve alone
+    (the first-order law) is off by more than 1 mm (the parallel-axis term aliased)."""
+    from sim.calibrate import trace
+    from sim.calibrate.laws import LAWS, cg_offset_force
+    from sim.calibrate.residuals import MechRun
+
+    m, c, g = 20000.0, np.array([0.0, 0.0, 0.465]), 9.81
+    u, v, a = _motion(n=1200, seconds=3.0)
+    rng = np.random.default_rng(3)
+    a = a + rng.normal(0.0, 0.5, a.shape)  # broadband, so that the columns are not collinear
+    f = cg_offset_force(R_OFF, m, c, u, a, g)
+    dofs = ["x", "y", "z", "rx", "ry", "rz"]
+    mr = MechRun(
+        name="planted",
+        dt=1 / 400,
+        dofs=dofs,
+        u=u,
+        v=v,
+        a=a,
+        force=f + 1e3 * a,  # a declared force the model explains (the weights see a force)
+        model=1e3 * a,
+        J=np.eye(6),
+        actuators=dofs,
+        classes={},
+        rows=np.ones(len(u), bool),
+        payload=(m, c, g),
+    )
+    fit = trace.fit_terms([mr], [trace.Term(LAWS["cg_offset"], "payload")])
+    got = np.array([fit.values[0][k] for k in ("dx_m", "dy_m", "dz_m")])
+    np.testing.assert_allclose(got, R_OFF, rtol=0, atol=1e-9)
+    assert np.abs(fit.residuals[0]).max() < 1e-6 * np.abs(mr.residual).max()
+    assert all(0 < s < 1e-6 for s in fit.sigma[0].values())
+    y, X = trace._stack([mr], fit.terms)
+    first, _ = trace._solve(y, X)
+    assert np.abs(first - R_OFF).max() > 1e-3, first
