@@ -236,7 +236,8 @@ def cg_offset_force(r, m: float, c, u6, a6, g: float, *, second_order: bool = Tr
       mechanical path removes each run's static part);
     * ``second_order``: m r x (alpha x r) = m (|r|^2 alpha - r (r . alpha)), the
       parallel-axis inertia of the offset itself (2600 kg m^2 about z for 20 t at
-      (0.3, 0.2, 0) m, 0.7 % of CGS's yaw inertia with that payload).
+      (0.3, 0.2, 0) m, 0.7 % of CGS's yaw inertia with that payload; the law takes it,
+      :func:`_cg_offset_second`).
 
     Left out: the centripetal terms (omega^2: 1e-3 of the alpha terms at the motions the
     tables run) and the change of the actuators' static forces with the linkage geometry
@@ -303,6 +304,14 @@ add_law(
 )
 
 
+#: effects of the library the mechanical path cannot identify, and why (the --effects error)
+NOT_ON_MECHANICAL = {
+    "foundation_mode": "the actuators push off the foundation, so its motion is not in the force "
+    "the platen needs for its recorded motion (docs/calibration.md); calibrate runs with valve "
+    "commands on the replay path (--path replay)",
+}
+
+
 def declared_forces(entry: dict):
     """``(law, where, values)`` of a declared ``[[effect]]`` entry whose force is not in
     the MuJoCo model's joints (those the mechanical path reads from the compiled model:
@@ -341,4 +350,14 @@ def usable(law: Law) -> bool:
     return cls is None or set(law.params) <= set(getattr(cls, "SPEC", {}))
 
 
-__all__ = ["DEADBAND", "DOF6", "LAWS", "Law", "add_law", "cg_offset_force", "declared_forces", "usable"]
+__all__ = [
+    "DEADBAND",
+    "DOF6",
+    "LAWS",
+    "NOT_ON_MECHANICAL",
+    "Law",
+    "add_law",
+    "cg_offset_force",
+    "declared_forces",
+    "usable",
+]

@@ -115,11 +115,15 @@ def check_effect_names(effects) -> None:
 def candidate_laws(effects=None) -> list:
     """The laws to try: every law whose effect type is usable (see
     :func:`sim.calibrate.laws.usable`), or those named in ``effects``."""
-    from sim.calibrate.laws import LAWS, usable
+    from sim.calibrate.laws import LAWS, NOT_ON_MECHANICAL, usable
 
     if effects:
         check_effect_names(effects)
         nolaw = [e for e in effects if e not in LAWS]
+        if nolaw and nolaw[0] in NOT_ON_MECHANICAL:
+            raise CalibrationError(
+                f"--effects: '{nolaw[0]}' is not identifiable on the mechanical path: " + NOT_ON_MECHANICAL[nolaw[0]]
+            )
         if nolaw:
             raise CalibrationError(
                 f"--effects: '{nolaw[0]}' has no force law for the mechanical path; "

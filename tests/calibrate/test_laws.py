@@ -154,3 +154,15 @@ def test_cg_offset_fit_takes_the_second_order_to_a_fixed_point():
     y, X = trace._stack([mr], fit.terms)
     first, _ = trace._solve(y, X)
     assert np.abs(first - R_OFF).max() > 1e-3, first
+
+
+def test_foundation_mode_named_on_the_mechanical_path_says_use_the_replay_path():
+    """``--effects foundation_mode`` on the mechanical path: a one-line error naming the
+    replay path (no law: see test_cgs_mechanical's foundation test for why)."""
+    from sim.calibrate.residuals import CalibrationError
+    from sim.calibrate.search import candidate_laws
+
+    with pytest.raises(CalibrationError, match=r"foundation_mode.*not identifiable.*--path replay") as e:
+        candidate_laws(["foundation_mode"])
+    assert "\n" not in str(e.value)
+    assert [w.type for w in candidate_laws(["cg_offset"])] == ["cg_offset"]
