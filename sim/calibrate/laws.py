@@ -6,11 +6,20 @@ residual (recorded force minus the force the declared model needs for the record
 motion) is then explained by linear least squares on the column ``basis``. This module
 is the hook the effect contract (:mod:`sim.effects.base`) does not have yet: a registry
 of :class:`Law` objects keyed by effect type (``coulomb_friction``, ``viscous_damping``,
-``power_damping``, ``spring``, ``added_mass``, the names of branch ``effects``), plus the
+``power_damping``, ``spring``, ``added_mass``, ``payload_mode``, ``cg_offset``: the names of
+the effect library), plus the
 older platen effects of :mod:`sim.effects.registry` (``platen_spring``,
 ``platen_coulomb``, ``platen_power_damping``) so that a description's *declared*
 effects enter the model's force. A law with a nonlinear shape parameter (the exponent
-of power-law damping) is fitted on a grid of it, each point a linear least squares.
+of power-law damping) is fitted on a grid of it, each point a linear least squares. A
+law with several linear coefficients (the CG offset's dx, dy, dz at the ``payload`` place)
+gives one DOF-space column per coefficient.
+
+``foundation_mode`` has no law here: the actuators push off the foundation, so the force
+the platen needs for its recorded (absolute) motion does not involve the foundation's
+motion, except through the linkages' own terms on the stroke (platen minus foundation
+end: dry friction above all), which need the foundation's motion the runs do not record;
+measured in tests/calibrate/test_cgs_mechanical.py, documented in docs/calibration.md.
 
 When an effect type is registered in :data:`sim.effects.base.EFFECTS`, its ``SPEC``
 keys must match the law's parameter names for the law to be used as a candidate; when
@@ -28,10 +37,13 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Law:
-    """``force = value[linear] * basis(u, v, a, shape)`` at one coordinate.
+    """``force = value[linear] * basis(u, v, a, shape)`` at one coordinate, or, for a law
+    with several linear coefficients (``linear`` a tuple: the CG offset's three
+    components), ``force = sum_i value[linear[i]] * basis(...)[i]``.
 
     ``params``: name -> (unit, lower, upper) (SI, the ``[[effect]]`` keys); ``linear``:
-    the name of the coefficient; ``shape``: name -> grid of values scanned (nonlinear
+    the name of the coefficient (or a tuple of them; their 95 % test asks that one of
+    them differs from zero: the components of one vector); ``shape``: name -> grid of values scanned (nonlinear
     parameters); ``inertial``: the basis is the acceleration (not passed through the
     sensor prefilter, which the recorded acceleration already went through);
     ``places``: the place kinds it can act at; ``dofs``: the DOFs a ``dof:`` place may
@@ -58,6 +70,16 @@ class Law:
     #: "always" a candidate, or only when named (``--effects``) or, for "undeclared_specimen",
     #: when the calibration is told a specimen stands on the table undeclared (``--payload none``)
     when: str = "always"
+    #: ``(u, v, a, s, values) -> force``: the part of the force of second order in the
+    #: linear coefficients (the CG offset's own parallel-axis inertia), at ``values``: a
+    #: quadratic form in them (the fit tabulates it per product of two coefficients),
+    #: taken at the current coefficients and the solve repeated to a fixed point
+    second_order: Callable | None = None
+
+    @property
+    def linears(self) -> tuple:
+        """The linear coefficients' names (one, or several for a vector law)."""
+        return (self.linear,) if isinstance(self.linear, str) else tuple(self.linear)
 
     def acts_at(self, where: str) -> bool:
         kind, _, name = where.partition(":")
@@ -190,6 +212,106 @@ add_law(
 )
 
 
+DOF6 = ("x", "y", "z", "rx", "ry", "rz")
+
+
+def cg_offset_force(r, m: float, c, u6, a6, g: float, *, second_order: bool = True) -> np.ndarray:
+    """(n, 6) generalised force (x, y, z; rx, ry, rz about the platen's reference point O,
+    world axes) that a payload of mass ``m`` whose centre of gravity sits at ``c + r``
+    (``c``: where it is declared, from O in the platen frame) needs beyond the one at ``c``,
+    along a small motion: ``u6`` (n, 6) displacement (rotation vector theta), ``a6`` (n, 6)
+    acceleration (translational a of O, angular alpha).
+
+    The platen holds the payload with F = m (a + alpha x rho + g e_z) and, about O,
+    M = rho x F + I_c alpha, rho = (c + r) + theta x (c + r) (the centre of gravity,
+    turned with the platen; I_c its inertia about the centre of gravity, which the offset
+    keeps). The part that depends on r, to first order in the motion:
+
+    * F: m alpha x r (the offset centre's tangential acceleration), so the translational
+      force changes too (by 3 kN at alpha = 0.5 rad/s^2 for 20 t at 0.3 m);
+    * M: m r x a + m [c x (alpha x r) + r x (alpha x c)] (the moment of the inertial force
+      and the coupling with the declared centre's lever arm: the parallel-axis terms linear
+      in r) + m g (theta x r) x e_z = m g (r theta_z - theta r_z) (the weight's moment as
+      the platen turns: a tilt moves a raised centre sideways) + m g r x e_z (static: the
+      mechanical path removes each run's static part);
+    * ``second_order``: m r x (alpha x r) = m (|r|^2 alpha - r (r . alpha)), the
+      parallel-axis inertia of the offset itself (2600 kg m^2 about z for 20 t at
+      (0.3, 0.2, 0) m, 0.7 % of CGS's yaw inertia with that payload; the law takes it,
+      :func:`_cg_offset_second`).
+
+    Left out: the centripetal terms (omega^2: 1e-3 of the alpha terms at the motions the
+    tables run) and the change of the actuators' static forces with the linkage geometry
+    (the static moment m g r x e_z times the Jacobian's change with the pose: of the order
+    of the weight term)."""
+    r = np.asarray(r, float)
+    c = np.asarray(c, float)
+    acc, alpha, th = a6[:, :3], a6[:, 3:], u6[:, 3:]
+    F = m * np.cross(alpha, r)
+    M = m * (np.cross(r, acc) + np.cross(c, np.cross(alpha, r)) + np.cross(r, np.cross(alpha, c)))
+    M = M + m * g * (r[None, :] * th[:, 2:3] - th * r[2])
+    if second_order:
+        M = M + m * np.cross(r, np.cross(alpha, r))
+    return np.hstack([F, M])
+
+
+def _cg_offset(u, v, a, s):
+    """The three columns (3, n, k) of the CG offset's first-order force, per metre of
+    dx, dy, dz (:func:`cg_offset_force`; its second-order part: :func:`_cg_offset_second`), in the
+    run's DOF space (``u``, ``a``: (n, k) of the DOFs ``s["_dofs"]``). The weight's term
+    (displacement) goes through the sensor prefilter ``s["_filt"]``, the inertial terms
+    not (the recorded acceleration already did)."""
+    dofs = list(s["_dofs"])
+    cols = [DOF6.index(d) for d in dofs]
+    u6 = np.zeros((len(u), 6))
+    a6 = np.zeros((len(a), 6))
+    u6[:, cols] = u
+    a6[:, cols] = a
+    m, c, g = s["_payload"]
+    inert = np.zeros_like(u6)
+    out = []
+    for i in range(3):
+        e = np.zeros(3)
+        e[i] = 1.0
+        Q = cg_offset_force(e, m, c, inert, a6, g, second_order=False)  # inertial part
+        Q = Q + s["_filt"](cg_offset_force(e, m, c, u6, 0.0 * a6, g, second_order=False))  # weight part
+        out.append(Q[:, cols])
+    return np.stack(out)
+
+
+def _cg_offset_second(u, v, a, s, values):
+    """(n, k) the CG offset's second-order force m r x (alpha x r) at ``values`` (its
+    parallel-axis inertia; :func:`cg_offset_force`)."""
+    cols = [DOF6.index(d) for d in s["_dofs"]]
+    a6 = np.zeros((len(a), 6))
+    a6[:, cols] = a
+    m, c, g = s["_payload"]
+    r = np.array([values["dx_m"], values["dy_m"], values["dz_m"]], float)
+    full = cg_offset_force(r, m, c, np.zeros_like(a6), a6, g)
+    return (full - cg_offset_force(r, m, c, np.zeros_like(a6), a6, g, second_order=False))[:, cols]
+
+
+add_law(
+    Law(
+        "cg_offset",
+        {"dx_m": ("m", -np.inf, np.inf), "dy_m": ("m", -np.inf, np.inf), "dz_m": ("m", -np.inf, np.inf)},
+        ("dx_m", "dy_m", "dz_m"),
+        _cg_offset,
+        places=("payload",),
+        inertial=True,  # the prefilter is applied inside (to the weight's term only)
+        what="the payload's centre of gravity off where it is declared by (dx, dy, dz)",
+        second_order=_cg_offset_second,
+    )
+)
+
+
+#: effects of the library the mechanical path cannot identify, and why (the --effects error)
+NOT_ON_MECHANICAL = {
+    "foundation_mode": "the actuators push off the foundation, so its motion is not in the force "
+    "the platen needs for its recorded motion (docs/calibration.md); calibrate runs with valve "
+    "commands on the replay path (--path replay)",
+}
+
+
 def declared_forces(entry: dict):
     """``(law, where, values)`` of a declared ``[[effect]]`` entry whose force is not in
     the MuJoCo model's joints (those the mechanical path reads from the compiled model:
@@ -215,7 +337,7 @@ def declared_forces(entry: dict):
             return None  # built into the MJCF (edit_spec): read from the compiled joints
         law = LAWS[kind]
         vals = {k: float(entry[k]) for k in law.params if k in entry}
-        if len(vals) == len(law.params):
+        if len(vals) == len(law.params) and len(law.linears) == 1:
             return law, str(entry["where"]), vals
     return None
 
@@ -228,4 +350,14 @@ def usable(law: Law) -> bool:
     return cls is None or set(law.params) <= set(getattr(cls, "SPEC", {}))
 
 
-__all__ = ["DEADBAND", "LAWS", "Law", "add_law", "declared_forces", "usable"]
+__all__ = [
+    "DEADBAND",
+    "DOF6",
+    "LAWS",
+    "NOT_ON_MECHANICAL",
+    "Law",
+    "add_law",
+    "cg_offset_force",
+    "declared_forces",
+    "usable",
+]

@@ -64,6 +64,9 @@ class MechRun:
     prefilter: tuple | None = None
     t0: float = 0.0
     presliding_m: float | None = None  #: the table's pre-sliding travel, if its dry friction has one
+    #: the declared payload's (mass kg, centre of gravity from the reference point m (3,),
+    #: gravity m/s^2), None without one (the ``payload`` place of the CG offset's law)
+    payload: tuple | None = None
     extra: dict = field(default_factory=dict)
 
     @property
@@ -83,8 +86,10 @@ class MechRun:
 
     def place_motion(self, where: str):
         """(u, v, a, map) of a place: its coordinate's motion (n,) and ``map`` (k,) or
-        (m, k) that takes its force into DOF space."""
+        (m, k) that takes its force into DOF space (``payload``: the whole DOF space)."""
         kind, _, name = where.partition(":")
+        if kind == "payload" and self.payload is not None:
+            return self.u, self.v, self.a, np.eye(len(self.dofs))
         if kind == "dof":
             j = self.dofs.index(name)
             e = np.zeros(len(self.dofs))
@@ -98,28 +103,43 @@ class MechRun:
             idx = self.classes[name]
             Jc = self.J[idx]
             return self.u @ Jc.T, self.v @ Jc.T, self.a @ Jc.T, Jc
-        raise CalibrationError(f"where = '{where}': the mechanical path acts at dof:, actuator: or class: places")
+        raise CalibrationError(
+            f"where = '{where}': the mechanical path acts at dof:, actuator: or class: places"
+            + (" (payload: only with a declared payload)" if kind == "payload" else "")
+        )
 
     def column(self, law, where: str, shape: dict) -> np.ndarray:
-        """(n, k) generalised force of ``law`` with unit coefficient at ``where``."""
+        """(n, k) generalised force of a one-coefficient ``law`` with unit coefficient at ``where``."""
+        return self.columns(law, where, shape)[0]
+
+    def second(self, law, where: str, shape: dict, values: dict) -> np.ndarray:
+        """(n, k) the law's force of second order in its coefficients (``law.second_order``)
+        at ``values``."""
+        u, v, a, m = self.place_motion(where)
+        b = np.asarray(law.second_order(u, v, a, _law_args(self, shape), values), float)
+        Q = b[:, None] * m[None, :] if b.ndim == 1 else b @ m
+        return Q if law.inertial else self.filt(Q)
+
+    def columns(self, law, where: str, shape: dict) -> list:
+        """One (n, k) generalised force per linear coefficient of ``law`` (unit value) at ``where``."""
         key = (law.type, where, tuple(sorted(shape.items())))
         cache = self.extra.setdefault("raw_columns", {})
         if key in cache:
             return cache[key]
-        u, v, a, m = self.place_motion(where)
-        b = np.asarray(law.basis(u, v, a, {**shape, "_presliding_m": self.presliding_m, "_dt": self.dt}), float)
-        Q = b[:, None] * m[None, :] if b.ndim == 1 else b @ m
-        Q = Q if law.inertial else self.filt(Q)
+        Qs = [Q if law.inertial else self.filt(Q) for Q in _raw_columns(self, law, where, shape)]
         if len(cache) > 128:  # shape scans make many; the accepted terms' come back
             for k in [k for k in cache if k[2]][:64]:
                 del cache[k]
-        cache[key] = Q
-        return Q
+        cache[key] = Qs
+        return Qs
 
 
-def places(desc, kinds) -> list[str]:
-    """Every place of ``kinds`` on this table."""
+def places(desc, kinds, payload: bool = False) -> list[str]:
+    """Every place of ``kinds`` on this table (``payload``: with a payload declared, on a
+    table that turns: a CG offset shows through rotations)."""
     out = []
+    if "payload" in kinds and payload and {"rx", "ry", "rz"} & set(desc.dofs):
+        out.append("payload")
     if "dof" in kinds:
         out += [f"dof:{d}" for d in desc.dofs]
     if "actuator" in kinds and len(desc.actuators) > 1:
@@ -233,6 +253,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
     for i, a in enumerate(desc.actuators):
         classes.setdefault(a.cls.name, []).append(i)
     joints = joint_terms(tm, k_of)
+    pay = payload_inertial(tm, desc.gravity_m_s2)
     declared = [d for d in (declared_forces(e) for e in desc.effects) if d is not None]
     out = []
     for r in runs:
@@ -267,11 +288,14 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             rows=np.ones(len(u), bool),
             prefilter=pre,
             presliding_m=desc.friction_presliding_m if desc.friction_model == "presliding" else None,
+            payload=pay,
         )
         mr.force = mr.filt(f @ J)
         other = joints.force(u, v, r.dt)
         for law, where, vals in declared:
-            other = other + vals[law.linear] * _raw_column(mr, law, where, vals)
+            other = other + sum(vals[k] * Q for k, Q in zip(law.linears, _raw_columns(mr, law, where, vals)))
+            if law.second_order is not None:
+                other = other + mr.second(law, where, vals, vals)
         mr.model = a @ Me.T + mr.filt(other)
         mr.rows = _still_rows(v, pre, r.dt)
         out.append(mr)
@@ -296,10 +320,38 @@ def _force_at_acceleration_instant(r) -> np.ndarray:
     return CubicSpline(t, f, axis=0)(np.minimum(t + lag, t[-1]))
 
 
-def _raw_column(mr, law, where, shape):
+def _law_args(mr, shape) -> dict:
+    s = {**shape, "_presliding_m": mr.presliding_m, "_dt": mr.dt, "_dofs": mr.dofs, "_filt": mr.filt}
+    if mr.payload is not None:
+        s["_payload"] = mr.payload
+    return s
+
+
+def _raw_columns(mr, law, where, shape) -> list:
+    """The law's unfiltered DOF-space force per linear coefficient (list of (n, k))."""
     u, v, a, m = mr.place_motion(where)
-    b = np.asarray(law.basis(u, v, a, {**shape, "_presliding_m": mr.presliding_m, "_dt": mr.dt}), float)
-    return b[:, None] * m[None, :] if b.ndim == 1 else b @ m
+    b = np.asarray(law.basis(u, v, a, _law_args(mr, shape)), float)
+    bs = [b] if len(law.linears) == 1 else list(b)
+    return [x[:, None] * m[None, :] if x.ndim == 1 else x @ m for x in bs]
+
+
+def payload_inertial(tm, g: float):
+    """(mass kg, centre of gravity (3,) m from the platen's reference point in its frame,
+    ``g``) of the payload bodies the model built (``tm.info.payload_bodies``) at home;
+    None without a payload."""
+    import mujoco
+
+    names = list(getattr(getattr(tm, "info", None), "payload_bodies", None) or [])
+    m = tm.model
+    ids = [i for i in (mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in names) if i >= 0]
+    if not ids:
+        return None
+    d = tm.new_data()
+    mass = np.array([m.body_mass[i] for i in ids], float)
+    com = (mass[:, None] * np.array([d.xipos[i] for i in ids])).sum(axis=0) / mass.sum()
+    p = int(tm.platen_body)
+    R = np.array(d.xmat[p]).reshape(3, 3)
+    return float(mass.sum()), R.T @ (com - np.array(d.xpos[p])), float(g)
 
 
 @dataclass

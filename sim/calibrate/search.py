@@ -115,11 +115,15 @@ def check_effect_names(effects) -> None:
 def candidate_laws(effects=None) -> list:
     """The laws to try: every law whose effect type is usable (see
     :func:`sim.calibrate.laws.usable`), or those named in ``effects``."""
-    from sim.calibrate.laws import LAWS, usable
+    from sim.calibrate.laws import LAWS, NOT_ON_MECHANICAL, usable
 
     if effects:
         check_effect_names(effects)
         nolaw = [e for e in effects if e not in LAWS]
+        if nolaw and nolaw[0] in NOT_ON_MECHANICAL:
+            raise CalibrationError(
+                f"--effects: '{nolaw[0]}' is not identifiable on the mechanical path: " + NOT_ON_MECHANICAL[nolaw[0]]
+            )
         if nolaw:
             raise CalibrationError(
                 f"--effects: '{nolaw[0]}' has no force law for the mechanical path; "
@@ -193,8 +197,12 @@ def param_report(term, values: dict, sigma: dict) -> tuple[bool, str, dict]:
             grid = term.law.shape[name]
             if v <= min(grid) + 1e-9 or v >= max(grid) - 1e-9:
                 return False, f"{name} = {v:.4g} at the edge of its scanned range", unc
-        elif abs(v) <= Z95 * s:
+        elif abs(v) <= Z95 * s and len(term.law.linears) == 1:
             return False, f"{name} = {v:.4g} {unit}: its 95 % interval +/-{Z95 * s:.3g} includes zero", unc
+    lin = term.law.linears
+    if len(lin) > 1 and all(abs(values[k]) <= Z95 * sigma[k] for k in lin):
+        # the components of one vector (a CG offset): one of them must differ from zero
+        return False, f"{', '.join(lin)}: every 95 % interval includes zero", unc
     for name, (at, simpler) in getattr(term.law, "nested", {}).items():
         if abs(values[name] - at) <= Z95 * sigma.get(name, math.inf):
             return False, f"{name} = {values[name]:.4g} +/-{unc[name]:.3g} holds {at:g}: that is {simpler}", unc
@@ -330,7 +338,7 @@ def calibrate(
     cands = [
         (law, w)
         for law in laws
-        for w in distinct_places(mfit[0], [p for p in places(desc, law.places) if law.acts_at(p)])
+        for w in distinct_places(mfit[0], [p for p in places(desc, law.places, pl is not None) if law.acts_at(p)])
     ]
     tried, added = [], []
     n_fits = 0

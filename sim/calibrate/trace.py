@@ -34,7 +34,7 @@ class Fit:
     """Terms fitted together: parameters, their standard deviations, the residual."""
 
     terms: list
-    theta: np.ndarray  # linear coefficients, one per term
+    theta: np.ndarray  # linear coefficients, in term order (one per term, several for a vector law)
     values: list  # per term: {param: value}
     sigma: list  # per term: {param: standard deviation}
     rss: float  # weighted residual sum of squares over the fit rows
@@ -78,8 +78,8 @@ def _stack(mruns, terms):
             if k not in cache:
                 if len(cache) > 256:
                     cache.clear()
-                cache[k] = (mr.demean(mr.column(t.law, t.where, t.shape))[mr.rows] * w).reshape(-1)
-            cols.append(cache[k])
+                cache[k] = [(mr.demean(Q)[mr.rows] * w).reshape(-1) for Q in mr.columns(t.law, t.where, t.shape)]
+            cols.extend(cache[k])
         ys.append(mr.extra["y"])
         Xs.append(np.stack(cols, axis=1) if cols else np.zeros((mr.extra["y"].size, 0)))
     return np.concatenate(ys), np.concatenate(Xs, axis=0)
@@ -123,7 +123,7 @@ def _joint_shape(mruns, terms, i) -> Term:
         trial[i] = Term(
             t.law, t.where, {**t.shape, **{n: float(v) for n, v in zip(names, np.clip(x, lo, hi))}}, t.index
         )
-        return _solve(*_stack(mruns, trial))[1]
+        return _fit_linear(mruns, trial)[1]
 
     x0 = np.array([t.shape[n] for n in names], float)
     r0 = rss(x0)
@@ -151,7 +151,7 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
             def rss_at(val, i=i, name=name, t=t):
                 trial = list(terms)
                 trial[i] = Term(t.law, t.where, {**t.shape, name: float(val)}, t.index)
-                return _solve(*_stack(mruns, trial))[1]
+                return _fit_linear(mruns, trial)[1]
 
             grid = list(grid)
             if name in given[i]:
@@ -174,13 +174,14 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
             terms[i] = t = Term(t.law, t.where, {**t.shape, name: float(best)}, t.index)
         if len(t.law.shape) > 1:  # correlated shape parameters (a mode's frequency and damping): jointly
             terms[i] = _joint_shape(mruns, terms, i)
-    y, X = _stack(mruns, terms)
-    theta, rss = _solve(y, X)
-    # the Jacobian of the fit: coefficient columns and each shape parameter's column
-    Jcols = [X]
+    theta, rss, y, X = _fit_linear(mruns, terms)
+    off = _offsets(terms)
+    # the Jacobian of the fit: coefficient columns (with the second-order force's change)
+    # and each shape parameter's column
+    Jcols = [X + _second_jacobian(mruns, terms, theta, X.shape)]
     for i, t in enumerate(terms):
         if t.shape:
-            Jcols.append(_shape_jacobian(mruns, t, theta[i]))
+            Jcols.append(_shape_jacobian(mruns, t, theta[off[i]]))
     Jm = np.concatenate(Jcols, axis=1) if Jcols else X
     n, p = len(y), Jm.shape[1]
     s2 = rss / max(n - p, 1)
@@ -190,36 +191,127 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
     except np.linalg.LinAlgError:
         sd = np.full(p, np.inf)
     values, sigma = [], []
-    js = len(terms)
+    js = X.shape[1]
     for i, t in enumerate(terms):
-        v = {t.law.linear: float(theta[i])}
-        s = {t.law.linear: float(sd[i])}
+        v = {name: float(theta[off[i] + j]) for j, name in enumerate(t.law.linears)}
+        s = {name: float(sd[off[i] + j]) for j, name in enumerate(t.law.linears)}
         for name, val in t.shape.items():
             v[name] = float(val)
             s[name] = float(sd[js])
             js += 1
         values.append(v)
         sigma.append(s)
-    residuals = [
-        mr.residual
-        - sum(
-            (th * mr.demean(mr.column(t.law, t.where, t.shape)) for th, t in zip(theta, terms)), np.zeros_like(mr.force)
-        )
-        for mr in mruns
-    ]
+    residuals = _residuals(mruns, terms, theta)
     return Fit(terms=terms, theta=theta, values=values, sigma=sigma, rss=rss, n=n, p=p, residuals=residuals)
+
+
+SECOND_ORDER_ITERATIONS = 8  #: fixed-point passes of a law's second-order force (converged: 1e-10)
+
+
+def _fit_linear(mruns, terms):
+    """``(theta, rss, y, X)``: the terms' coefficients by linear least squares; a law's
+    force of second order in its coefficients (the CG offset's own parallel-axis inertia,
+    ``Law.second_order``) is taken to the target at the current coefficients, and the
+    solve repeated to a fixed point (the second-order force is small: a few passes)."""
+    y, X = _stack(mruns, terms)
+    theta, rss = _solve(y, X)
+    for _ in range(SECOND_ORDER_ITERATIONS):
+        q = _second_stack(mruns, terms, theta)
+        if q is None:
+            break
+        new, rss = _solve(y - q, X)
+        done = np.allclose(new, theta, rtol=1e-10, atol=0.0)
+        theta = new
+        if done:
+            break
+    return theta, rss, y, X
+
+
+def _term_values(t, theta, k: int) -> dict:
+    return {name: float(theta[k + j]) for j, name in enumerate(t.law.linears)}
+
+
+def _second_stack(mruns, terms, theta):
+    """The terms' second-order force at ``theta``, weighted and stacked as the target
+    (None: no term has one)."""
+    if not any(getattr(t.law, "second_order", None) for t in terms):
+        return None
+    off = _offsets(terms)
+    parts = []
+    for mr in mruns:
+        tot = 0.0
+        for i, t in enumerate(terms):
+            if getattr(t.law, "second_order", None):
+                Q, pairs = _second_columns(mr, t)
+                th = theta[off[i] : off[i] + len(t.law.linears)]
+                tot = tot + Q @ np.array([th[a] * th[b] for a, b in pairs])
+        parts.append(tot)
+    return np.concatenate(parts)
+
+
+def _second_columns(mr, t):
+    """A term's second-order force as a quadratic form in its coefficients: the stacked,
+    weighted column of each product theta_i theta_j (i <= j), and the pairs (cached per
+    run: the fit's passes and shape scans reuse them)."""
+    cache = mr.extra.setdefault("second", {})
+    k = _key(t)
+    if k not in cache:
+        names = t.law.linears
+        E = np.eye(len(names))
+
+        def q(vec):
+            F = mr.second(t.law, t.where, t.shape, dict(zip(names, map(float, vec))))
+            return (mr.demean(F)[mr.rows] * mr.extra["w"]).reshape(-1)
+
+        sq = [q(E[i]) for i in range(len(names))]
+        pairs = [(i, j) for i in range(len(names)) for j in range(i, len(names))]
+        cols = [sq[i] if i == j else q(E[i] + E[j]) - sq[i] - sq[j] for i, j in pairs]
+        cache[k] = (np.stack(cols, axis=1), pairs)
+    return cache[k]
+
+
+def _second_jacobian(mruns, terms, theta, shape, h: float = 1e-4) -> np.ndarray:
+    """d(second-order force)/d(coefficient), stacked like ``X`` (central differences:
+    exact for a quadratic); zeros without a second-order term."""
+    out = np.zeros(shape)
+    if not any(getattr(t.law, "second_order", None) for t in terms):
+        return out
+    off = _offsets(terms)
+    for i, t in enumerate(terms):
+        if not getattr(t.law, "second_order", None):
+            continue
+        for j in range(len(t.law.linears)):
+            up, dn = np.array(theta, float), np.array(theta, float)
+            up[off[i] + j] += h
+            dn[off[i] + j] -= h
+            out[:, off[i] + j] = (_second_stack(mruns, terms, up) - _second_stack(mruns, terms, dn)) / (2 * h)
+    return out
+
+
+def _offsets(terms) -> list:
+    """Index of each term's first linear coefficient in the stacked ``theta``."""
+    return [int(k) for k in np.cumsum([0] + [len(t.law.linears) for t in terms])[:-1]]
+
+
+def _residuals(mruns, terms, theta) -> list:
+    """Each run's residual less the terms' force at coefficients ``theta`` (stacked)."""
+    out = []
+    for mr in mruns:
+        e = mr.residual.copy()
+        k = 0
+        for t in terms:
+            if getattr(t.law, "second_order", None):
+                e -= mr.demean(mr.second(t.law, t.where, t.shape, _term_values(t, theta, k)))
+            for Q in mr.columns(t.law, t.where, t.shape):
+                e -= theta[k] * mr.demean(Q)
+                k += 1
+        out.append(e)
+    return out
 
 
 def predict(mruns, fit: Fit) -> list:
     """Residuals of other runs (held out) with the fitted terms' values."""
-    return [
-        mr.residual
-        - sum(
-            (th * mr.demean(mr.column(t.law, t.where, t.shape)) for th, t in zip(fit.theta, fit.terms)),
-            np.zeros_like(mr.force),
-        )
-        for mr in mruns
-    ]
+    return _residuals(mruns, fit.terms, fit.theta)
 
 
 def flatness(mruns, residuals) -> float:

@@ -68,8 +68,12 @@ def _reference(kind: str, seed: int):
 def simulate_measured(job):
     """One run of the CGS model described by ``raw`` (with its ``[[effect]]`` entries),
     written as a run file and measured through the built-in sensor model (seeded).
-    ``job = (raw, kind, seed, out_path, measure)``; returns the path."""
-    raw, kind, seed, out, measure = job
+    ``job = (raw, kind, seed, out_path, measure[, payload])`` (``payload``: the name of
+    the payload standing on the table, recorded in the run as the declared one); returns
+    the path."""
+    raw, kind, seed, out, measure, *rest = job
+    payload = rest[0] if rest else None
+    import mjcf
     from mjcf.description import parse_table
     from sim.effects import build_model
     from sim.loop.simulation import Simulation
@@ -77,11 +81,11 @@ def simulate_measured(job):
     from sim.runs.measure import load_sensors, measure_run
     from sim.runs.runfile import write_run
 
-    tm = build_model(parse_table(raw, src="<truth>"))
+    tm = build_model(parse_table(raw, src="<truth>"), mjcf.load_payload(payload) if payload else None)
     ref = _reference(kind, seed)
     res = Simulation(tm).run(reference=ref)
     assert res.incomplete_reason is None, res.incomplete_reason
-    run = build_runfile(res, tm, source="simulated", reference=ref)
+    run = build_runfile(res, tm, source="simulated", reference=ref, payload_name=payload)
     if measure:
         run = measure_run(run, load_sensors(), seed=seed)
     return str(write_run(out, run))
@@ -106,7 +110,15 @@ CASES = {
         {"type": "spring", "where": "dof:x", "stiffness_n_m": 1.5e7},
         {"type": "coulomb_friction", "where": "class:vertical", "force_n": 8000.0},
     ],
+    # the 20 t block's centre of gravity 0.3 m and 0.2 m off where it is declared (assumed:
+    # a specimen's mass distribution known to tens of cm)
+    "clean_payload": [],
+    "cg_offset_payload": [{"type": "cg_offset", "where": "payload", "dx_m": 0.3, "dy_m": 0.2, "dz_m": 0.0}],
 }
+#: case -> the payload on the table (declared: the runs name it, the calibration reads it)
+PAYLOAD = {"clean_payload": "rigid_20t", "cg_offset_payload": "rigid_20t"}
+#: the clean cases (their held-out error is the floor of the cases on the same payload)
+CLEAN = ("clean", "clean_payload")
 #: what else a case must add: a payload_mode is a body on a slide along its DOF, rigid
 #: with the platen along the others, so its modal mass is also found as added_mass at
 #: dof:y and dof:z (physically right, within 10 % of the 5 t)
@@ -124,6 +136,7 @@ MAIN = {
     "power_damping": "coefficient",
     "spring": "stiffness_n_m",
     "payload_mode": "mass_kg",
+    "cg_offset": "dx_m",
 }
 
 
@@ -150,7 +163,7 @@ def cases(tmp_path_factory):
         raw = copy.deepcopy(base)
         raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in effects]
         for i, kind in enumerate(("random", "harmonic")):
-            jobs.append((raw, kind, 11 + i, out / f"{name}_{kind}.run.npz", True))
+            jobs.append((raw, kind, 11 + i, out / f"{name}_{kind}.run.npz", True, PAYLOAD.get(name)))
     paths = map_jobs(simulate_measured, jobs, workers=2)
     results = map_jobs(calibrate_case, [paths[2 * k : 2 * k + 2] for k in range(len(CASES))], workers=2)
     return dict(zip(CASES, results))
@@ -186,8 +199,9 @@ def test_clean_simulated_run_balances_without_the_28hz_line(tmp_path):
 
 # ------------------------------------------------------------------ plant and recover
 @pytest.mark.slow
-def test_clean_measured_runs_add_nothing(cases):
-    res = cases["clean"]
+@pytest.mark.parametrize("case", CLEAN)
+def test_clean_measured_runs_add_nothing(case, cases):
+    res = cases[case]
     assert res.residual_path == "mechanical"
     assert res.effects_added == [], res.effects_added
     assert res.error_after == res.error_before
@@ -196,7 +210,7 @@ def test_clean_measured_runs_add_nothing(cases):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case", [c for c in CASES if c != "clean"])
+@pytest.mark.parametrize("case", [c for c in CASES if c not in CLEAN])
 def test_planted_effect_recovered(case, cases):
     """Right effect, right place, main parameter within 10 %, held-out error to
     <= 0.2 x before or within 1.3 x the clean floor; nothing else added."""
@@ -212,10 +226,13 @@ def test_planted_effect_recovered(case, cases):
         assert 0 < e["uncertainty"][k] < 0.1 * abs(e["parameters"][k])
         if p["type"] == "power_damping":
             assert e["parameters"]["exponent"] == pytest.approx(p["exponent"], abs=0.06)
+        if p["type"] == "cg_offset":  # the offset's other components: y within 10 %, z within 2 cm
+            assert e["parameters"]["dy_m"] == pytest.approx(p["dy_m"], rel=0.10)
+            assert abs(e["parameters"]["dz_m"] - p["dz_m"]) < 0.02, e["parameters"]
         if p["type"] == "payload_mode":
             assert e["parameters"]["frequency_hz"] == pytest.approx(p["frequency_hz"], rel=0.10)
             assert e["parameters"]["damping_ratio"] == pytest.approx(p["damping_ratio"], rel=0.10)
-    floor = cases["clean"].error_before
+    floor = cases["clean_payload" if PAYLOAD.get(case) else "clean"].error_before
     assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor, (
         res.error_before,
         res.error_after,
@@ -223,3 +240,52 @@ def test_planted_effect_recovered(case, cases):
     )
     assert math.isfinite(res.error_after)
     assert res.unexplained is None, res.unexplained
+
+
+# ------------------------------------------------------------------ foundation mode
+#: (mass kg, frequency Hz) of the reaction mass on springs planted: CGS's own 6400 t at the
+#: 30 Hz its description assumes for mode = "spring", and a 1000 t one at 8 Hz (softer and
+#: lighter than CGS's; assumed, to move the table's motion by ~10 %)
+FOUNDATIONS = ((6.4e6, 30.0), (1.0e6, 8.0))
+
+
+@pytest.mark.parametrize("mass_kg, frequency_hz", FOUNDATIONS)
+def test_foundation_mode_hides_in_the_sensor_noise_on_the_mechanical_path(tmp_path, mass_kg, frequency_hz):
+    """The actuators push off the foundation: the force the platen needs for its recorded
+    (absolute) motion does not depend on how the foundation moves, except through the
+    linkages' own terms (stroke = platen minus foundation end: seal drag and friction on
+    the stroke velocity, the supports' springs, the cylinders swinging on the foundation's
+    swivels). A planted foundation mode changes the table's motion (what the replay path
+    compares) by several %, but the mechanical residual of the declared model (no mode)
+    by less than the sensor noise adds to it: not identifiable on this path.
+
+    Measured (2.5 s random run, whole record): residual NRMSE 0.42 % clean, 0.48 % with
+    6400 t at 30 Hz, 1.32 % with 1000 t at 8 Hz (0.22 % and 1.25 % added in quadrature),
+    4.27 % measured through the sensor model (4.25 % added). (A 1000 t mass at 4 Hz, in
+    the band of the run, reaches 3.1 %: see docs/calibration.md.)"""
+    import numpy as np
+
+    import mjcf
+    from sim.calibrate import residuals as R
+    from sim.runs.runfile import read_run
+
+    desc = mjcf.load_table("cgs")
+    fd = {"type": "foundation_mode", "mass_kg": mass_kg, "frequency_hz": frequency_hz, "damping_ratio": 0.05}
+    planted = _cgs_raw()
+    planted["effect"] = [fd] + list(planted.get("effect", []))  # foundation_mode first (it moves bodies)
+    jobs = [
+        (_cgs_raw(), "random", 5, tmp_path / "clean.run.npz", False),
+        (_cgs_raw(), "random", 5, tmp_path / "measured.run.npz", True),
+        (planted, "random", 5, tmp_path / "foundation.run.npz", False),
+    ]
+    runs = [read_run(simulate_measured(j)) for j in jobs]
+    clean, measured, found = (R.mechanical_runs([r], desc)[0] for r in runs)
+    e_clean, e_meas, e_found = (R.nrmse_runs([m], [m.residual]) for m in (clean, measured, found))
+    noise = math.sqrt(max(e_meas**2 - e_clean**2, 0.0))  # what the sensor model adds
+    extra = math.sqrt(max(e_found**2 - e_clean**2, 0.0))  # what the foundation mode adds
+    print(f"residual NRMSE clean {e_clean:.4f}, foundation {e_found:.4f}, measured {e_meas:.4f}")
+    moved = np.linalg.norm(runs[2].table_acceleration - runs[0].table_acceleration, axis=0) / np.linalg.norm(
+        runs[0].table_acceleration, axis=0
+    )
+    assert moved.max() > 0.05, moved  # the planted mode is there: the table moves differently
+    assert extra < 0.5 * noise, (e_clean, e_found, e_meas)

@@ -1,0 +1,168 @@
+"""The mechanical path's force laws against the MuJoCo model they stand for.
+
+``cg_offset``: the closed form of :func:`sim.calibrate.laws.cg_offset_force` against MuJoCo's
+inverse dynamics of the CGS platen carrying the 20 t rigid block with its centre of gravity
+planted off by ``R_OFF``, minus the declared one's, on a 6-DOF motion of the size the
+calibration tests run.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+R_OFF = np.array([0.3, 0.2, 0.15])  #: m: a 20 t specimen's centre of gravity off by tens of cm
+
+
+def _motion(n=400, seconds=2.0):
+    """u, v, a (n, 6): a sine per DOF, amplitudes and frequencies of the calibration
+    tests' harmonic run (tests/calibrate/test_cgs_mechanical.py), peak 1.6-3.9 m/s^2 (rad/s^2)."""
+    amp = np.array([0.010, 0.008, 0.004, 0.003, 0.003, 0.004])
+    f = np.array([3.0, 3.5, 4.5, 4.0, 5.0, 3.2])
+    t = np.linspace(0.0, seconds, n)[:, None]
+    w = 2 * np.pi * f
+    ph = np.arange(6) * 0.7
+    u = amp * np.sin(w * t + ph)
+    v = amp * w * np.cos(w * t + ph)
+    a = -amp * w**2 * np.sin(w * t + ph)
+    return u, v, a
+
+
+def _models(offset):
+    import mjcf
+    from mjcf.description import parse_table
+    from sim.effects import build_model
+
+    raw = copy.deepcopy(mjcf.load_table("cgs").raw)
+    pl = mjcf.load_payload("rigid_20t")
+    planted = copy.deepcopy(raw)
+    planted["effect"] = list(planted.get("effect", [])) + [
+        {"type": "cg_offset", "dx_m": offset[0], "dy_m": offset[1], "dz_m": offset[2]}
+    ]
+    return build_model(parse_table(raw, src="<declared>"), pl), build_model(parse_table(planted, src="<planted>"), pl)
+
+
+def _platen_inverse(tm, u, v, a) -> np.ndarray:
+    """(n, 6) force and moment (world axes, about the platen's reference point) MuJoCo's
+    inverse dynamics needs on the platen's free joint for the motion, the linkages cut
+    (equality constraints off: the platen and what it carries alone)."""
+    import mujoco
+    from scipy.spatial.transform import Rotation
+
+    m = tm.model
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_EQUALITY) | int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    d = tm.new_data()
+    j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "platen")
+    pq, pd = int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j])
+    p0 = d.qpos[pq : pq + 3].copy()
+    out = np.zeros((len(u), 6))
+    for k in range(len(u)):
+        R = Rotation.from_rotvec(u[k, 3:]).as_matrix()
+        d.qpos[pq : pq + 3] = p0 + u[k, :3]
+        d.qpos[pq + 3 : pq + 7] = Rotation.from_rotvec(u[k, 3:]).as_quat(scalar_first=True)
+        d.qvel[:] = 0.0
+        d.qacc[:] = 0.0
+        d.qvel[pd : pd + 3], d.qvel[pd + 3 : pd + 6] = v[k, :3], R.T @ v[k, 3:]
+        d.qacc[pd : pd + 3], d.qacc[pd + 3 : pd + 6] = a[k, :3], R.T @ a[k, 3:]
+        mujoco.mj_inverse(m, d)
+        f = d.qfrc_inverse[pd : pd + 6]
+        out[k] = np.concatenate([f[:3], R @ f[3:]])  # the free joint's moment is in the platen frame
+    return out
+
+
+def test_cg_offset_closed_form_is_the_models_inverse_dynamics():
+    """Planted minus declared inverse dynamics (static part removed, as the mechanical path
+    does) is the closed form to < 1 % per DOF; without its second-order term (the law's
+    linear part) the yaw moment misses by the offset's own parallel-axis inertia, and the
+    law's three columns sum to that linear part."""
+    from sim.calibrate.laws import LAWS, cg_offset_force
+    from sim.calibrate.residuals import payload_inertial
+
+    decl, plant = _models(R_OFF)
+    m, c, g = payload_inertial(decl, decl.desc.gravity_m_s2)
+    assert m == pytest.approx(20000.0) and c == pytest.approx([0.0, 0.0, 0.465])
+    u, v, a = _motion()
+    model = _platen_inverse(plant, u, v, a) - _platen_inverse(decl, u, v, a)
+    model -= model.mean(axis=0)
+    law = cg_offset_force(R_OFF, m, c, u, a, g)
+    law -= law.mean(axis=0)
+    err = np.linalg.norm(law - model, axis=0) / np.linalg.norm(model, axis=0)
+    assert np.all(err < 0.01), err
+    first = cg_offset_force(R_OFF, m, c, u, a, g, second_order=False)
+    first -= first.mean(axis=0)
+    err1 = np.linalg.norm(first - model, axis=0) / np.linalg.norm(model, axis=0)
+    assert err1[5] > 5 * err[5], (err1, err)  # the parallel-axis term shows about z
+    cols = LAWS["cg_offset"].basis(
+        u, v, a, {"_dofs": ["x", "y", "z", "rx", "ry", "rz"], "_payload": (m, c, g), "_filt": lambda x: x}
+    )
+    assert cols.shape == (3, len(u), 6)
+    np.testing.assert_allclose(
+        np.tensordot(R_OFF, cols, axes=1), cg_offset_force(R_OFF, m, c, u, a, g, second_order=False)
+    )
+
+
+def test_cg_offset_inertial_part_is_the_effective_mass_change():
+    """The declared model of the mechanical path (the effective mass at home, linkages
+    closed): its change with the planted offset, times the acceleration, is the closed
+    form's inertial part (first and second order in the offset) to 1e-9."""
+    from sim.calibrate.laws import cg_offset_force
+    from sim.calibrate.residuals import payload_inertial
+
+    decl, plant = _models(R_OFF)
+    m, c, g = payload_inertial(decl, decl.desc.gravity_m_s2)
+    _, _, a = _motion(n=50)
+    dM = plant.effective_mass_matrix() - decl.effective_mass_matrix()
+    np.testing.assert_allclose(a @ dM.T, cg_offset_force(R_OFF, m, c, np.zeros_like(a), a, g), rtol=0, atol=1e-9 * m)
+
+
+def test_cg_offset_fit_takes_the_second_order_to_a_fixed_point():
+    """A residual that is exactly the closed form's force (first and second order) of
+    ``R_OFF``: the fit finds the offset to 1e-9 and leaves nothing; the linear solve alone
+    (the first-order law) is off by more than 1 mm (the parallel-axis term aliased)."""
+    from sim.calibrate import trace
+    from sim.calibrate.laws import LAWS, cg_offset_force
+    from sim.calibrate.residuals import MechRun
+
+    m, c, g = 20000.0, np.array([0.0, 0.0, 0.465]), 9.81
+    u, v, a = _motion(n=1200, seconds=3.0)
+    rng = np.random.default_rng(3)
+    a = a + rng.normal(0.0, 0.5, a.shape)  # broadband, so that the columns are not collinear
+    f = cg_offset_force(R_OFF, m, c, u, a, g)
+    dofs = ["x", "y", "z", "rx", "ry", "rz"]
+    mr = MechRun(
+        name="planted",
+        dt=1 / 400,
+        dofs=dofs,
+        u=u,
+        v=v,
+        a=a,
+        force=f + 1e3 * a,  # a declared force the model explains (the weights see a force)
+        model=1e3 * a,
+        J=np.eye(6),
+        actuators=dofs,
+        classes={},
+        rows=np.ones(len(u), bool),
+        payload=(m, c, g),
+    )
+    fit = trace.fit_terms([mr], [trace.Term(LAWS["cg_offset"], "payload")])
+    got = np.array([fit.values[0][k] for k in ("dx_m", "dy_m", "dz_m")])
+    np.testing.assert_allclose(got, R_OFF, rtol=0, atol=1e-9)
+    assert np.abs(fit.residuals[0]).max() < 1e-6 * np.abs(mr.residual).max()
+    assert all(0 < s < 1e-6 for s in fit.sigma[0].values())
+    y, X = trace._stack([mr], fit.terms)
+    first, _ = trace._solve(y, X)
+    assert np.abs(first - R_OFF).max() > 1e-3, first
+
+
+def test_foundation_mode_named_on_the_mechanical_path_says_use_the_replay_path():
+    """``--effects foundation_mode`` on the mechanical path: a one-line error naming the
+    replay path (no law: see test_cgs_mechanical's foundation test for why)."""
+    from sim.calibrate.residuals import CalibrationError
+    from sim.calibrate.search import candidate_laws
+
+    with pytest.raises(CalibrationError, match=r"foundation_mode.*not identifiable.*--path replay") as e:
+        candidate_laws(["foundation_mode"])
+    assert "\n" not in str(e.value)
+    assert [w.type for w in candidate_laws(["cg_offset"])] == ["cg_offset"]
