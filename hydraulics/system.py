@@ -70,6 +70,7 @@ Bookkeeping (cumulative m^3, exact in the discretisation up to round-off):
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -138,6 +139,25 @@ class HydraulicState:
             + np.sum(s.vol_relief_a + s.vol_relief_b - s.vol_cav_a - s.vol_cav_b)
         )
         return supply, valve_in, out
+
+
+@functools.lru_cache(maxsize=256)
+def _valve_transition(fn_hz: float, zeta: float, dt: float) -> np.ndarray:
+    """The second-order valve's exact one-step transition ``expm(M dt)`` (3 x 3, read
+    only) for natural frequency ``fn_hz`` and damping ratio ``zeta``. Cached: scipy's
+    ``expm`` of a 3 x 3 costs ~10 ms, and every simulation of a table (twelve valves
+    alike, every candidate of a calibration round) asks for the same few."""
+    from scipy.linalg import expm
+
+    wn = 2.0 * math.pi * fn_hz
+    M = np.zeros((3, 3))
+    M[0, 1] = 1.0
+    M[1, 0] = -wn * wn
+    M[1, 1] = -2.0 * zeta * wn
+    M[1, 2] = wn * wn
+    E = expm(M * dt)
+    E.flags.writeable = False
+    return E
 
 
 class HydraulicSystem:
@@ -228,17 +248,9 @@ class HydraulicSystem:
         G[L.G_OLEAK] = p.null_leakage_m3_s / (2.0 * K * gq)
         if p.model == "second":
             G[L.G_MODEL] = 1.0
-            from scipy.linalg import expm
-
             z = p.damping_ratio
             for i, fn in enumerate(p.per_actuator("valve_natural_frequency_hz")):
-                wn = 2.0 * math.pi * fn
-                M = np.zeros((3, 3))
-                M[0, 1] = 1.0
-                M[1, 0] = -wn * wn
-                M[1, 1] = -2.0 * z * wn
-                M[1, 2] = wn * wn
-                E = expm(M * dt)
+                E = _valve_transition(float(fn), float(z), float(dt))
                 P[L.P_F00, i], P[L.P_F01, i], P[L.P_F10, i], P[L.P_F11, i] = E[0, 0], E[0, 1], E[1, 0], E[1, 1]
                 P[L.P_G0, i], P[L.P_G1, i] = E[0, 2], E[1, 2]
             # the globals keep the nominal (scalar) valve, for reference

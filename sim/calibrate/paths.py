@@ -16,8 +16,13 @@ displacement when a run has no velocity; the chamber pressures when it has no fo
 per column (actuator / DOF), each column scaled by its recorded RMS: the pooled NRMSE is
 the root of the mean over runs and columns of ``sum e^2 / sum x^2``.
 
-:func:`simulate_job` is the one simulation of these paths, a module-level function of
-one picklable job, so that candidate replays run in :func:`sim.parallel.map_jobs`.
+:func:`simulate_job` is the one simulation of these paths (a picklable job in, the
+compared channels out). Many jobs (a round's candidate replays) go through
+:func:`simulate_many`: dealt into one chunk per worker process
+(:func:`sim.parallel.map_jobs`), each chunk run on the batch route
+(:func:`sim.loop.batch.run_many`: MuJoCo's batch with the twin inside ``mj_step``, open
+loop on the replay path; each simulation's own ``run`` where the callback cannot take
+it, e.g. a valve delay), with the same answers as :func:`simulate_job`, bit for bit.
 """
 
 from __future__ import annotations
@@ -28,7 +33,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hydraulics.params import HydraulicsParamError
 from sim.calibrate.residuals import CalibrationError, check_finite
+from sim.errors import UserError
 
 #: channels compared on these paths, in order of preference
 FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_velocity")
@@ -218,33 +225,72 @@ def condition(chans: dict, sensors: dict | None, fs: float) -> dict:
 def simulate_job(job) -> dict | None:
     """The model's compared channels for one job (:meth:`PathRun.job`): ``{channel: (n, m)}``
     over every column of the channel, or None when the run diverged or stopped early."""
+    prep = _setup(job)
+    if prep is None:
+        return None
+    sim, ref, cmd, post = prep
+    try:
+        res = sim.run(reference=ref) if ref is not None else sim.run(valve_command=cmd)
+    except _REFUSED:
+        return None
+    return post(res)
+
+
+#: what a candidate's model may raise instead of running (a supply drop below the return)
+_REFUSED = (FloatingPointError, UserError, HydraulicsParamError)
+
+
+def _setup(job):
+    """The simulation of one job, ready to run from its reset: ``(sim, reference,
+    valve_command, post)`` (one of reference / valve_command None; ``post(result)`` gives
+    :func:`simulate_job`'s answer), or None when the model refuses the candidate."""
     raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands = job
-    from hydraulics.params import HydraulicsParamError
     from mjcf.description import parse_table
     from sim.effects import build_model
-    from sim.errors import UserError
-    from sim.signals.resample import bandpass
 
     raw = copy.deepcopy(raw)
     if extra:
         raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in extra]
-    fs = 1.0 / float(t[1] - t[0])
     try:  # a candidate's value the model refuses (a supply drop below the return): no model
         desc = parse_table(raw, src=src)
         tm = build_model(desc, payload)
         if path == "replay":
-            from sim.calibrate.replay import run_at_record
+            from sim.calibrate.replay import record_channels, replay_setup
 
-            res, chans, _extras, n = run_at_record(tm, t, drive, dofs)
+            sim, cmd = replay_setup(tm, t, drive)
+            ref = None
+
+            def chans_of(res):
+                chans, _extras, n = record_channels(res, tm, t, dofs, sim.gains.rate_hz)
+                return chans, n
         else:
-            res, chans, n = _closed_loop(tm, t, drive, dofs)
-    except (FloatingPointError, UserError, HydraulicsParamError):
+            sim, ref = _closed_loop_setup(tm, t, drive)
+            cmd = None
+
+            def chans_of(res):
+                return _closed_loop_channels(res, tm, t, dofs, sim.gains.rate_hz)
+    except _REFUSED:
         return None
-    if res.incomplete_reason or n < len(t):
+
+    def post(res):
+        if res.incomplete_reason:
+            return None
+        chans, n = chans_of(res)
+        return _compared(chans, n, t, columns, cond, bands)
+
+    return sim, ref, cmd, post
+
+
+def _compared(chans, n, t, columns, cond, bands) -> dict | None:
+    """The compared channels of a finished model run (conditioned, band-passed), or None."""
+    from sim.signals.resample import bandpass
+
+    if n < len(t):
         return None
     want = {c: chans[c][: len(t)] for c in columns if c in chans}
     if len(want) < len(columns):
         return None
+    fs = 1.0 / float(t[1] - t[0])
     want = condition(want, cond, fs)
     for c, band in bands.items():
         want[c] = bandpass(want[c], fs, tuple(band))
@@ -253,11 +299,85 @@ def simulate_job(job) -> dict | None:
     return want
 
 
-def _closed_loop(tm, t, pose6, dofs):
-    """The model through its controller on the recorded reference (6-DOF pose at ``t``)."""
+#: simulations built and run together in one chunk (memory: one model each)
+CHUNK_GROUP = 32
+
+
+def simulate_jobs(jobs, counts: dict | None = None) -> list:
+    """:func:`simulate_job` of every job, in this process, the simulations on the batch
+    route (:func:`sim.loop.batch.run_many`, one thread: MuJoCo's batch with the coupled
+    step inside ``mj_step``, or each simulation's own ``run`` where the callback cannot
+    run it) in groups of :data:`CHUNK_GROUP`. Same answers as :func:`simulate_job`, bit
+    for bit. ``counts``: ``"batch"``/``"fallback"`` simulations added (jobs the model
+    refuses count in neither)."""
+    from sim.loop.batch import run_many
+
+    out: list = [None] * len(jobs)
+    for g in range(0, len(jobs), CHUNK_GROUP):
+        idx = list(range(g, min(g + CHUNK_GROUP, len(jobs))))
+        preps = {i: _setup(jobs[i]) for i in idx}
+        ready = [i for i in idx if preps[i] is not None]
+        for kind in ("reference", "valve_command"):
+            part = [i for i in ready if (preps[i][1] if kind == "reference" else preps[i][2]) is not None]
+            if not part:
+                continue
+            sims = [preps[i][0] for i in part]
+            given = [preps[i][1] if kind == "reference" else preps[i][2] for i in part]
+            got: dict = {}
+            try:
+                if kind == "reference":
+                    res = run_many(sims, given, nthread=1, counts=got)
+                else:
+                    res = run_many(sims, valve_commands=given, nthread=1, counts=got)
+            except _REFUSED:  # one run raised: each job on its own (as simulate_job)
+                for i in part:
+                    out[i] = simulate_job(jobs[i])
+                if counts is not None:
+                    counts["fallback"] = counts.get("fallback", 0) + len(part)
+                continue
+            for key, v in got.items():
+                if counts is not None:
+                    counts[key] = counts.get(key, 0) + v
+            for i, r in zip(part, res):
+                out[i] = preps[i][3](r)
+    return out
+
+
+def _chunk_job(jobs) -> tuple[list, dict]:
+    counts: dict = {}
+    return simulate_jobs(jobs, counts), counts
+
+
+def simulate_many(jobs, *, workers: int | None = None, counts: dict | None = None) -> list:
+    """:func:`simulate_job` of every job (same answers, in order): the jobs dealt into
+    ``workers`` chunks (round robin), each chunk one process of
+    :func:`sim.parallel.map_jobs` running :func:`simulate_jobs` (process parallelism
+    across chunks, MuJoCo's batch inside each). ``counts`` as :func:`simulate_jobs`."""
+    from sim.parallel import default_workers, map_jobs
+
+    jobs = list(jobs)
+    if not jobs:
+        return []
+    w = default_workers(len(jobs)) if workers is None else max(1, min(int(workers), len(jobs)))
+    if w > 1:  # the compiled callback loaded here once, inherited by forked workers
+        from sim.loop.callback import control_callback
+
+        control_callback()
+    chunks = [list(range(c, len(jobs), w)) for c in range(w)]
+    out: list = [None] * len(jobs)
+    for idx, (res, got) in zip(chunks, map_jobs(_chunk_job, [[jobs[i] for i in c] for c in chunks], workers=w)):
+        for i, r in zip(idx, res):
+            out[i] = r
+        if counts is not None:
+            for key, v in got.items():
+                counts[key] = counts.get(key, 0) + v
+    return out
+
+
+def _closed_loop_setup(tm, t, pose6):
+    """The simulation of the closed-loop path and its reference (the recorded 6-DOF pose
+    at ``t`` on the controller's ticks)."""
     from sim.loop.simulation import Simulation
-    from sim.runs.build import build_runfile
-    from sim.runs.runfile import ACTUATOR_CHANNELS
     from sim.scenario.reference import Reference
     from sim.signals.resample import interpolate
 
@@ -268,7 +388,16 @@ def _closed_loop(tm, t, pose6, dofs):
     d = interpolate(t, pose6, tt) if len(tt) != len(t) or not np.allclose(tt, t) else np.asarray(pose6, float)
     v = np.gradient(d, 1.0 / rate, axis=0, edge_order=2)
     a = np.gradient(v, 1.0 / rate, axis=0, edge_order=2)
-    res = sim.run(reference=Reference(t=tt, d=d, v=v, a=a))
+    return sim, Reference(t=tt, d=d, v=v, a=a)
+
+
+def _closed_loop_channels(res, tm, t, dofs, rate: float):
+    """The closed-loop run's channels (controller ``rate``) at the record's instants ``t``:
+    ``(channels, n)``."""
+    from sim.runs.build import build_runfile
+    from sim.runs.runfile import ACTUATOR_CHANNELS
+    from sim.signals.resample import interpolate
+
     tick = build_runfile(res, tm)
     n = int(np.searchsorted(t, res.t[-1] + 1e-6 / rate, side="right"))
     same = abs(rate * float(t[1] - t[0]) - 1.0) < 1e-9
@@ -280,7 +409,7 @@ def _closed_loop(tm, t, pose6, dofs):
         if ch in DOF_CHANNELS:
             arr = arr[:, [list(tick.dofs).index(x) for x in dofs]]
         chans[ch] = arr[:n].copy() if same else interpolate(res.t, arr, t[:n])
-    return res, chans, n
+    return chans, n
 
 
 # ------------------------------------------------------------------ residuals
@@ -403,6 +532,8 @@ __all__ = [
     "residual_columns",
     "residual_vector",
     "simulate_job",
+    "simulate_jobs",
+    "simulate_many",
     "stacked",
     "unexplained",
 ]

@@ -3,11 +3,12 @@
 Per round: the residual of the current model (the declared description plus the effects
 accepted so far) on the fit runs; every candidate of the library
 (:func:`sim.calibrate.sensitivity.candidates`) screened on short windows of the fit runs
-(one replay per parameter, in :func:`sim.parallel.map_jobs`); the best few refined by
-nonlinear least squares on longer windows; then, best first, each judged on the whole
-runs by the rules of the mechanical path (:func:`sim.calibrate.search.accept_numbers`:
-held-out error down by the margin, BIC down, parameters off their bounds with finite 95 %
-intervals that exclude the neutral value, residual whiter). The first that passes is
+(one replay per parameter, on the batch route of :func:`sim.calibrate.paths.simulate_many`);
+the best few refined by nonlinear least squares on longer windows; then, best first,
+each judged on the whole runs by the rules of the mechanical path
+(:func:`sim.calibrate.search.accept_numbers`: held-out error down by the margin, BIC
+down, parameters off their bounds with finite 95 % intervals that exclude the neutral
+value, residual whiter). The first that passes is
 added; repeated while one passes.
 """
 
@@ -102,6 +103,7 @@ def calibrate_path(
 
     say = say or (lambda *_: None)
     tm = {"simulate_s": 0.0, "screen_s": 0.0, "refine_s": 0.0, "accept_s": 0.0, "replays": 0}
+    routes: dict = {"batch": 0, "fallback": 0}  # where the replays ran (sim.calibrate.paths.simulate_many)
     fit_runs, ho_runs, score_from, ho_note = _split(runs, ho_given)
     pfit = P.path_runs(fit_runs, desc, path)
     pho = P.path_runs(ho_runs, desc, path, score_from=score_from)
@@ -114,7 +116,7 @@ def calibrate_path(
     def sims(prs_lists, extra):
         jobs = [p.job(raw, src, payload, extra) for prs in prs_lists for p in prs]
         t = time.perf_counter()
-        ms = map_jobs(P.simulate_job, jobs, workers=workers)
+        ms = P.simulate_many(jobs, workers=workers, counts=routes)
         tm["simulate_s"] += time.perf_counter() - t
         tm["replays"] += len(jobs)
         out, k = [], 0
@@ -145,7 +147,7 @@ def calibrate_path(
         ctx = (raw, src, payload, list(accepted))
         cands = candidates(desc, payload, wscr, accepted, mot, effects)
         t = time.perf_counter()
-        sc = screen(cands, wscr, mscr, ctx, workers=workers, say=say)
+        sc = screen(cands, wscr, mscr, ctx, workers=workers, say=say, counts=routes)
         tm["screen_s"] += time.perf_counter() - t
         tm["replays"] += sum(len(c.screened) for c in cands if not c.sensor) * len(wscr)
         sc.sort(key=lambda s: -s.score)
@@ -183,7 +185,7 @@ def calibrate_path(
                 ms = [sensor_model(rf.cand, rf.theta, p, m) for p, m in zip(pfit + pho, mfit + mho)]
             else:
                 jobs = [p.job(raw, src, payload, accepted + [rf.cand.entry(rf.theta)]) for p in pfit + pho]
-                ms = map_jobs(P.simulate_job, jobs, workers=workers)
+                ms = P.simulate_many(jobs, workers=workers, counts=routes)
                 tm["replays"] += len(jobs)
             tm["accept_s"] += time.perf_counter() - t
             mf, mh = ms[: len(pfit)], ms[len(pfit) :]
@@ -236,6 +238,7 @@ def calibrate_path(
             per[f"{Path(p.name).name}:{k}"] = {"before": e0[k], "after": e1[k]}
     if timing is not None:
         timing.update(tm)
+        timing["replays_batch"], timing["replays_fallback"] = routes["batch"], routes["fallback"]
     return {
         "holdout": [str(p.name) for p in pho],
         "holdout_note": ho_note,

@@ -292,10 +292,18 @@ def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress
     (sensor effects applied) are sampled back at the record's instants, DOF channels in
     the columns ``dofs``. Returns ``(result, channels, extras, n)``: ``n`` record samples
     were reached (all of them unless the run stopped early)."""
+    sim, cmd = replay_setup(tm, t_rec, valve_command, hold=hold)
+    res = sim.run(valve_command=cmd, progress=progress)
+    chans, extras, n = record_channels(res, tm, t_rec, dofs, sim.gains.rate_hz)
+    return res, chans, extras, n
+
+
+def replay_setup(tm, t_rec, valve_command, *, hold: str = "zoh"):
+    """The simulation of :func:`run_at_record` (controller at the model's tick rate) and
+    the command on its ticks: ``(sim, command)``, to run as ``sim.run(valve_command=command)``
+    (or on the batch route, :func:`sim.loop.batch.run_many`)."""
     from sim.control.tvc import ControllerGains
     from sim.loop.simulation import Simulation
-    from sim.runs.build import build_runfile
-    from sim.runs.runfile import ACTUATOR_CHANNELS, DOF_CHANNELS
     from sim.signals.resample import hold as zoh
     from sim.signals.resample import interpolate
 
@@ -305,8 +313,19 @@ def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress
     n_tick = int(np.floor(t_rec[-1] * rate + 1e-6)) + 1
     t_tick = np.arange(n_tick) / rate
     cmd = zoh(t_rec, valve_command, t_tick) if hold == "zoh" else interpolate(t_rec, valve_command, t_tick)
-    sim = Simulation(tm, gains=ControllerGains(rate_hz=rate))
-    res = sim.run(valve_command=cmd, progress=progress)
+    return Simulation(tm, gains=ControllerGains(rate_hz=rate)), cmd
+
+
+def record_channels(res, tm, t_rec, dofs, rate: float):
+    """The recorder's channels of the replay ``res`` (at the model's tick ``rate``) at the
+    record's instants ``t_rec``: ``(channels, extras, n)`` as :func:`run_at_record`
+    returns them."""
+    from sim.runs.build import build_runfile
+    from sim.runs.runfile import ACTUATOR_CHANNELS, DOF_CHANNELS
+    from sim.signals.resample import interpolate
+
+    t_rec = np.asarray(t_rec, float)
+    fs = 1.0 / float(t_rec[1] - t_rec[0])
     tick_run = build_runfile(res, tm)
     n = int(np.searchsorted(t_rec, res.t[-1] + 1e-6 / rate, side="right"))
     chans = {}
@@ -321,7 +340,7 @@ def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress
         k: (np.asarray(v, float)[:n].copy() if rate == fs else interpolate(res.t, np.asarray(v, float), t_rec[:n]))
         for k, v in tick_run.extras.items()
     }
-    return res, chans, extras, n
+    return chans, extras, n
 
 
-__all__ = ["ReplayOutcome", "replay", "residuals", "tick_rate"]
+__all__ = ["ReplayOutcome", "record_channels", "replay", "replay_setup", "residuals", "run_at_record", "tick_rate"]

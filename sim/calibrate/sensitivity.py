@@ -288,11 +288,11 @@ def _inside(c: Candidate, theta):
     return np.clip(theta, lo, hi)
 
 
-def screen(cands, prs, base_models, ctx, workers=None, say=None) -> list[Screen]:
+def screen(cands, prs, base_models, ctx, workers=None, say=None, counts=None) -> list[Screen]:
     """Score every candidate by its linearised fit on the windows ``prs`` (model channels
-    ``base_models`` from the current model; ``ctx`` = (raw, src, payload, accepted))."""
-    from sim.calibrate.paths import simulate_job, stacked
-    from sim.parallel import map_jobs
+    ``base_models`` from the current model; ``ctx`` = (raw, src, payload, accepted)); the
+    replays on the batch route (:func:`sim.calibrate.paths.simulate_many`, ``counts``)."""
+    from sim.calibrate.paths import simulate_many, stacked
 
     raw, src, payload, accepted = ctx
     r0 = stacked(prs, base_models)
@@ -308,7 +308,7 @@ def screen(cands, prs, base_models, ctx, workers=None, say=None) -> list[Screen]
                 where.append((ci, p, ri))
     if say:
         say(f"  screening: {len(jobs)} short replays ({len(prs)} windows of {prs[0].t[-1]:.2f} s) ...")
-    models = map_jobs(simulate_job, jobs, workers=workers)
+    models = simulate_many(jobs, workers=workers, counts=counts)
     got: dict = {}
     for (ci, p, ri), m in zip(where, models):
         got.setdefault(ci, {}).setdefault(p, [None] * len(prs))[ri] = m
@@ -357,12 +357,12 @@ class Refined:
 
 
 def _residual_at(c, theta, prs, base_models, ctx):
-    from sim.calibrate.paths import simulate_job, stacked
+    from sim.calibrate.paths import simulate_jobs, stacked
 
     if c.sensor:
         return stacked(prs, [sensor_model(c, theta, pr, m) for pr, m in zip(prs, base_models)])
     raw, src, payload, accepted = ctx
-    return stacked(prs, [simulate_job(pr.job(raw, src, payload, list(accepted) + [c.entry(theta)])) for pr in prs])
+    return stacked(prs, simulate_jobs([pr.job(raw, src, payload, list(accepted) + [c.entry(theta)]) for pr in prs]))
 
 
 def _jac(c, theta, r, prs, base_models, ctx):

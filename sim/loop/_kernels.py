@@ -221,6 +221,62 @@ def tick_first_step(
 
 
 @numba.njit(**_OPTS)
+def tick_first_step_open(
+    k,
+    qpos,
+    qvel,
+    ctrl,
+    qfa,
+    Q,
+    V,
+    H_spool,
+    H_force,
+    H_pa,
+    H_pb,
+    H_cmd,
+    E_ps,
+    E_gas,
+    vc,
+    qa,
+    da,
+    ids,
+    cmd2,
+    x2,
+    v2,
+    X,
+    Y,
+    IC,
+    ICS,
+    buf,
+    P,
+    G,
+    fr_dofs,
+    fr_fc,
+    zfr,
+    zss,
+    dt,
+    aq,
+    ad,
+    aF0,
+    ac,
+    an,
+):
+    """:func:`tick_first_step` of an open-loop replay: :func:`record`, the recorded valve
+    command ``vc[k]`` into ``cmd2`` (held until the next tick) and its row of ``H_cmd``,
+    then :func:`pre_step` and the applied forces. The operations of the loop's open-loop
+    tick (``Simulation.run(valve_command=...)``) in its order, so the results are identical."""
+    record(
+        k, qpos, qvel, Q, V, X, Y, L.SPOOL, L.FORCE, L.PA, L.PB, H_spool, H_force, H_pa, H_pb, L.PS, L.GASV, E_ps, E_gas
+    )
+    for i in range(cmd2.shape[1]):
+        cmd2[0, i] = vc[k, i]
+        H_cmd[k, i] = vc[k, i]
+    pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, 0, P, G)
+    if fr_dofs.shape[0] or aq.shape[0]:
+        applied_forces(qpos, qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an)
+
+
+@numba.njit(**_OPTS)
 def later_step(
     k,
     qpos,
@@ -274,6 +330,7 @@ __all__ = [
     "loop_gap",
     "all_finite",
     "tick_first_step",
+    "tick_first_step_open",
     "later_step",
 ]
 

@@ -2,7 +2,8 @@
 
 :class:`BatchRunner` takes N prepared :class:`sim.loop.simulation.Simulation` objects
 (each from its own plan, so each may have its own payload mass, bulk modulus, gains,
-friction, motion and scale) and runs them closed loop together: MuJoCo steps them on
+friction, motion and scale) and runs them together, closed loop on references or open
+loop on recorded valve commands (calibration replays): MuJoCo steps them on
 its thread pool with the coupled step compiled as its control callback
 (:mod:`sim.loop.callback`), so no Python runs between physics steps. Per-simulation
 model fields come from each simulation's own compiled model (``Batch.set_models``:
@@ -66,18 +67,21 @@ class BatchRunner:
 
         return isinstance(plan.sim, Simulation) and CB.accepts(plan.sim) is None and not plan.iteration.get("count", 0)
 
-    def run(self, references: list, *, duration_s: float | None = None, chunk_ticks: int = 256) -> list:
-        """Run simulation i on ``references[i]`` from its current state (its
-        ``reset``); returns one :class:`sim.loop.simulation.RunResult` per simulation."""
+    def run(
+        self,
+        references: list | None = None,
+        *,
+        valve_commands: list | None = None,
+        duration_s: float | None = None,
+        chunk_ticks: int = 256,
+    ) -> list:
+        """Run simulation i on ``references[i]`` (closed loop) or ``valve_commands[i]``
+        ((n_i, n_act) at the controller rate, open loop; give one of the two) from its
+        current state (its ``reset``); returns one
+        :class:`sim.loop.simulation.RunResult` per simulation."""
         sims, N = self.sims, len(self.sims)
-        if len(references) != N:
-            raise ValueError(f"{N} simulations but {len(references)} references")
-        ns = np.array(
-            [
-                len(r.t) if duration_s is None else min(len(r.t), int(round(duration_s * s.gains.rate_hz)) + 1)
-                for s, r in zip(sims, references)
-            ]
-        )
+        refs, vcs = _inputs(N, references, valve_commands)
+        ns = np.array([CB.run_length(s, r, v, duration_s) for s, r, v in zip(sims, refs, vcs)])
         from hydraulics import _layout as HL
 
         # the batch's hydraulic and pre-sliding state, simulations first
@@ -93,8 +97,9 @@ class BatchRunner:
                 r,
                 int(n),
                 state={"X": self.X[i], "Y": self.Y[i], "IC": self.IC[i], "ICS": self.ICS[i], "ZFR": self.ZFR[i]},
+                valve_command=v,
             )
-            for i, (s, r, n) in enumerate(zip(sims, references, ns))
+            for i, (s, r, v, n) in enumerate(zip(sims, refs, vcs, ns))
         ]
         m0 = self.models[0]
         b = mjbatch.Batch(m0, N, self.nthread)
@@ -134,9 +139,28 @@ class BatchRunner:
         return out
 
 
-def run_batch(sims: list, references: list, *, nthread: int = 0, duration_s: float | None = None) -> list:
+def _inputs(N: int, references, valve_commands) -> tuple[list, list]:
+    """Per simulation: its reference and its valve commands (one of them None)."""
+    if (references is None) == (valve_commands is None):
+        raise ValueError("give exactly one of references and valve_commands")
+    given = references if references is not None else valve_commands
+    if len(given) != N:
+        what = "references" if references is not None else "valve command arrays"
+        raise ValueError(f"{N} simulations but {len(given)} {what}")
+    none = [None] * N
+    return (list(references), none) if references is not None else (none, list(valve_commands))
+
+
+def run_batch(
+    sims: list,
+    references: list | None = None,
+    *,
+    valve_commands: list | None = None,
+    nthread: int = 0,
+    duration_s: float | None = None,
+) -> list:
     """:meth:`BatchRunner.run` of a new runner: one result per simulation."""
-    return BatchRunner(sims, nthread=nthread).run(references, duration_s=duration_s)
+    return BatchRunner(sims, nthread=nthread).run(references, valve_commands=valve_commands, duration_s=duration_s)
 
 
 def _batch_key(sim):
@@ -146,22 +170,33 @@ def _batch_key(sim):
     return (m.nq, m.nv, m.nu, m.nbody, m.neq, sim.steps_per_tick, float(sim.dt))
 
 
-def run_many(sims: list, references: list, *, nthread: int = 0, group: int = 32) -> list:
-    """Run simulation ``i`` closed loop on ``references[i]`` from its current state (as
-    :meth:`Simulation.run <sim.loop.simulation.Simulation.run>` does: ``reset`` first
-    for a fresh run); returns one result per simulation, in order.
+def run_many(
+    sims: list,
+    references: list | None = None,
+    *,
+    valve_commands: list | None = None,
+    nthread: int = 0,
+    group: int = 32,
+    counts: dict | None = None,
+) -> list:
+    """Run simulation ``i`` closed loop on ``references[i]``, or open loop on
+    ``valve_commands[i]`` ((n_i, n_act) at the controller rate; give one of the two),
+    from its current state (as :meth:`Simulation.run
+    <sim.loop.simulation.Simulation.run>` does: ``reset`` first for a fresh run);
+    returns one result per simulation, in order.
 
     The shared route for many simulations (sweep cases, feasibility suites, calibration
     candidates): simulations the callback can run (:func:`sim.loop.callback.accepts`)
     go to :class:`BatchRunner` in batches of up to ``group`` simulations that share a
     layout, on ``nthread`` threads (0: all cores); the others (the Rice table's analog
     loop, per-step effects, a valve delay) run their own ``run``. Every result equals
-    the simulation's own ``Simulation.run`` bit for bit (``tests/loop/test_batch.py``).
-    A simulation that diverges ends early with ``incomplete_reason`` set, as in
-    ``Simulation.run``; the others are not affected.
+    the simulation's own ``Simulation.run`` bit for bit (``tests/loop/test_batch.py``,
+    ``tests/loop/test_batch_open.py``). A simulation that diverges ends early with
+    ``incomplete_reason`` set, as in ``Simulation.run``; the others are not affected.
+    ``counts`` (a dict, optional) gets ``"batch"`` and ``"fallback"`` added: how many
+    simulations went each way.
     """
-    if len(sims) != len(references):
-        raise ValueError(f"{len(sims)} simulations but {len(references)} references")
+    refs, vcs = _inputs(len(sims), references, valve_commands)
     if group < 1:
         raise ValueError(f"group must be at least 1 (got {group})")
     from sim.loop.simulation import Simulation
@@ -176,15 +211,25 @@ def run_many(sims: list, references: list, *, nthread: int = 0, group: int = 32)
                 pending[k] = []
                 order.append(k)
             pending[k].append(i)
+        elif refs[i] is not None:
+            out[i] = s.run(reference=refs[i])
         else:
-            out[i] = s.run(reference=references[i])
+            out[i] = s.run(valve_command=vcs[i])
     for k in order:
         idx = pending[k]
         for j in range(0, len(idx), group):
             part = idx[j : j + group]
-            res = BatchRunner([sims[i] for i in part], nthread=nthread).run([references[i] for i in part])
+            runner = BatchRunner([sims[i] for i in part], nthread=nthread)
+            if references is not None:
+                res = runner.run([refs[i] for i in part])
+            else:
+                res = runner.run(valve_commands=[vcs[i] for i in part])
             for i, r in zip(part, res):
                 out[i] = r
+    if counts is not None:
+        n_batch = sum(len(v) for v in pending.values())
+        counts["batch"] = counts.get("batch", 0) + n_batch
+        counts["fallback"] = counts.get("fallback", 0) + len(sims) - n_batch
     return out
 
 

@@ -25,7 +25,12 @@ reads ``xmat`` as the previous ``mj_step`` left it (the pose one step before ``q
 so the callback keeps the platen's ``xmat`` of the previous step; and the loop's gap is
 measured on the last step's kinematics, which is what the callback sees on that step.
 
-``mjData`` field addresses are read from the MjData struct (:func:`_field_offsets`,
+Open loop (a context built with ``valve_command``, scalar ``S_OPEN`` = 1): the first
+step of tick ``k`` records, holds the recorded command ``VC[k]`` and runs the pre-step
+(:func:`sim.loop._kernels.tick_first_step_open`), as ``Simulation.run(valve_command=...)``
+does; the later steps are the same as closed loop.
+
+``mjData`` field addresses are read from the MjData struct (:func:`sim.loop.mjlayout.field_offsets`,
 found by matching the Python binding's array addresses, so no header layout is assumed);
 the callback is compiled once per process (a few seconds) with those offsets.
 """
@@ -46,6 +51,7 @@ from numba.extending import intrinsic
 from hydraulics import _layout as HL
 from sim.errors import ScenarioError
 from sim.loop import _kernels as FL
+from sim.loop.mjlayout import field_offsets
 from sim.loop.simulation import CAUSE_STEP, GAP_LIMIT_M, RunResult
 
 NUSERDATA = 2  #: userdata[0] = context address, userdata[1] = physics-step counter
@@ -54,13 +60,13 @@ _FIELDS = ("qpos", "qvel", "qacc", "ctrl", "qfrc_applied", "xpos", "xmat", "user
 # ---- context scalars
 # fmt: off
 (S_N, S_SPT, S_GAP_EVERY, S_RELIEF, S_PD, S_PB, S_DT, S_ZSS, S_AC, S_AN, S_DONE, S_PENDING, S_CODE, S_VALUE,
- S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ, S_VAPOUR) = range(23)
+ S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ, S_VAPOUR, S_OPEN) = range(24)
 NS = 24
 # ---- context arrays (descriptor rows: address, dim0, dim1, dim2)
 ARRAYS = ("Q", "V", "ACC", "HSP", "HF", "HPA", "HPB", "HCMD", "EPS", "EGAS", "GAP",
           "SREF", "VREF", "VFF", "QA", "DA", "IDS", "CONSTS", "J", "JP", "NN", "GAINS", "CSTATE", "PLHP", "PLPREV",
           "CMD2", "X2", "V2", "X", "Y", "IC", "ICS", "BUF", "P", "G", "FRD", "FRFC", "ZFR", "AQ", "AD", "AF0",
-          "XMP", "GB1", "GB2", "GA1", "GA2")
+          "XMP", "GB1", "GB2", "GA1", "GA2", "VC")
 # fmt: on
 A = {name: i for i, name in enumerate(ARRAYS)}
 NCTX = NS + 4 * len(ARRAYS)
@@ -260,6 +266,50 @@ def _tick(
 
 
 @numba.njit(**_J)
+def _tick_open(k, C, qpos, qvel, ctrl, qfa, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr):
+    FL.tick_first_step_open(
+        k,
+        qpos,
+        qvel,
+        ctrl,
+        qfa,
+        _f2(C, A_Q),
+        _f2(C, A_V),
+        _f2(C, A_HSP),
+        _f2(C, A_HF),
+        _f2(C, A_HPA),
+        _f2(C, A_HPB),
+        _f2(C, A_HCMD),
+        _f1(C, A_EPS),
+        _f1(C, A_EGAS),
+        _f2(C, A_VC),
+        qa,
+        da,
+        ids,
+        cmd2,
+        x2,
+        v2,
+        X,
+        Y,
+        IC,
+        ICS,
+        buf,
+        P,
+        G,
+        frd,
+        frfc,
+        zfr,
+        C[S_ZSS],
+        C[S_DT],
+        _i1(C, A_AQ),
+        _i1(C, A_AD),
+        _f1(C, A_AF0),
+        C[S_AC],
+        C[S_AN],
+    )
+
+
+@numba.njit(**_J)
 def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud):
     """One call of the control callback on one simulation (``C``: its context)."""
     s = np.int64(ud[1])
@@ -306,7 +356,9 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud):
     ad = _i1(C, A_AD)
     af0 = _f1(C, A_AF0)
     zss, dt, ac, an = C[S_ZSS], C[S_DT], C[S_AC], C[S_AN]
-    if j == 0:
+    if j == 0 and C[S_OPEN] > 0:
+        _tick_open(k, C, qpos, qvel, ctrl, qfa, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr)
+    elif j == 0:
         _tick(
             k,
             C,
@@ -376,7 +428,7 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud):
             ac,
             an,
         )
-    if j == spt - 1 and k % np.int64(C[S_GAP_EVERY]) == 0:
+    if j == spt - 1 and (k % np.int64(C[S_GAP_EVERY]) == 0 or k == n - 1):  # as the loop: also the last tick
         gap = FL.loop_gap(xpos, xmat, _i1(C, A_GB1), _i1(C, A_GB2), _f2(C, A_GA1), _f2(C, A_GA2))
         _f1(C, A_GAP)[k] = gap
         C[S_PENDING] = 1.0
@@ -391,71 +443,13 @@ A_Q, A_V, A_ACC, A_HSP, A_HF, A_HPA, A_HPB, A_HCMD, A_EPS, A_EGAS, A_GAP = range
     11, 25
 )
 A_CMD2, A_X2, A_V2, A_X, A_Y, A_IC, A_ICS, A_BUF, A_P, A_G, A_FRD, A_FRFC, A_ZFR, A_AQ, A_AD, A_AF0 = range(25, 41)
-A_XMP, A_GB1, A_GB2, A_GA1, A_GA2 = range(41, 46)
-assert A_GA2 == A["GA2"] and A_XMP == A["XMP"] and A_CMD2 == A["CMD2"] and A_SREF == A["SREF"]
+A_XMP, A_GB1, A_GB2, A_GA1, A_GA2, A_VC = range(41, 47)
+assert A_VC == A["VC"] and A_GA2 == A["GA2"] and A_XMP == A["XMP"] and A_CMD2 == A["CMD2"] and A_SREF == A["SREF"]
 
 
 # ------------------------------------------------------------------ MjData layout
-_offsets = None
 _cfunc = None
 _lock = threading.Lock()
-
-
-def _field_offsets() -> dict:
-    """Byte offsets of the array pointers of ``_FIELDS`` in MuJoCo's ``mjData`` struct,
-    found by matching each field's address (from the binding) in the struct's memory."""
-    global _offsets
-    if _offsets is not None:
-        return _offsets
-    spec = mujoco.MjSpec()
-    b = spec.worldbody.add_body()
-    b.add_freejoint()
-    b.add_geom(size=[0.1, 0, 0])
-    spec.nuserdata = 3
-    m = spec.compile()
-    d = mujoco.MjData(m)
-    ptrs = {f: getattr(d, f).ctypes.data for f in _FIELDS if f != "ctrl"}
-    size = 1 << 20
-    for size in (1 << 14, 1 << 16, 1 << 18, 1 << 20):
-        words = np.frombuffer(ctypes.string_at(d._address, size), dtype=np.uint64)
-        found = {f: np.flatnonzero(words == p) for f, p in ptrs.items()}
-        if all(len(v) for v in found.values()):
-            break
-    # a second MjData (a model with an actuator, so ctrl exists) settles fields whose
-    # address also sits in another slot (qpos is also the start of the state buffer)
-    spec2 = mujoco.MjSpec()
-    b2 = spec2.worldbody.add_body()
-    b2.add_joint(name="h")
-    b2.add_geom(size=[0.1, 0, 0])
-    spec2.add_actuator(target="h", trntype=mujoco.mjtTrn.mjTRN_JOINT)
-    spec2.nuserdata = 5
-    m2 = spec2.compile()
-    d2 = mujoco.MjData(m2)
-    words2 = np.frombuffer(ctypes.string_at(d2._address, size), dtype=np.uint64)
-    out = {}
-    for f in _FIELDS:
-        addr2 = getattr(d2, f).ctypes.data
-        hits2 = set(np.flatnonzero(words2 == addr2).tolist())
-        hits = hits2 & set(found[f].tolist()) if f in found else hits2
-        if len(hits) != 1:
-            hits = {h for h in hits if h == max(hits)}  # the field itself comes after buffer/arena starts
-        if len(hits) != 1:
-            raise RuntimeError(f"mjData field {f}: not found once in the struct")
-        out[f] = int(hits.pop()) * 8
-    # nuserdata in mjModel (an int): where two models differing only in it differ
-    specs = []
-    for nud in (3, 77777):
-        sp = mujoco.MjSpec()
-        sp.worldbody.add_body().add_geom(size=[0.1, 0, 0])
-        sp.nuserdata = nud
-        specs.append(sp.compile())
-    a, b = (np.frombuffer(ctypes.string_at(mm._address, 4096), dtype=np.int32) for mm in specs)
-    hits = np.flatnonzero((a == 3) & (b == 77777))
-    if len(hits) != 1:
-        raise RuntimeError("mjModel field nuserdata: not found once in the struct")
-    out["nuserdata"] = int(hits[0]) * 4
-    _offsets = out
-    return out
 
 
 # byte offsets of the mjData array pointers, set by control_callback before compiling
@@ -501,7 +495,7 @@ def control_callback():
     with _lock:
         if _cfunc is not None:
             return _cfunc
-        off = _field_offsets()
+        off = field_offsets(_FIELDS)
         O_QPOS, O_QVEL, O_QACC, O_CTRL = off["qpos"], off["qvel"], off["qacc"], off["ctrl"]
         O_QFA, O_XPOS, O_XMAT, O_UD = off["qfrc_applied"], off["xpos"], off["xmat"], off["userdata"]
         O_NUD = off["nuserdata"]
@@ -536,8 +530,8 @@ def callback_model(sim) -> mujoco.MjModel:
 
 def accepts(sim) -> str | None:
     """Why ``sim`` cannot run on the callback (None: it can): the callback is the fused
-    closed loop (free platen, no per-step effects, no valve delay, two or more physics
-    steps per controller tick)."""
+    loop, closed or open (free platen, no per-step effects, no valve delay, two or more
+    physics steps per controller tick, the recorder sampling every tick)."""
     tm, hs = sim.tm, sim.hs
     if not tm.platen_free:
         return "the platen is not free (bearing-guided table)"
@@ -549,16 +543,30 @@ def accepts(sim) -> str | None:
         return "the hydraulics have a valve delay or the numpy backend"
     if sim.steps_per_tick < 2:
         return "one physics step per controller tick"
+    if sim.steps_per_sample != sim.steps_per_tick:
+        return "the recorder samples every few controller ticks"
     return None
 
 
 class Context:
     """The float64 block :func:`coupled_step` reads, with the arrays it points to (kept
-    alive here): recorder arrays of ``n`` ticks, the reference, and views of the
-    simulation's hydraulic and controller state (or, with ``state``, arrays given by a
-    batch)."""
+    alive here): recorder arrays of ``n`` ticks, the reference (closed loop) or the valve
+    commands ``valve_command`` (n, n_act) (open loop, ``reference`` None), and views of
+    the simulation's hydraulic and controller state (or, with ``state``, arrays given by
+    a batch)."""
 
-    def __init__(self, sim, reference, n: int, *, gap_every: int = 8, state: dict | None = None):
+    def __init__(
+        self,
+        sim,
+        reference,
+        n: int,
+        *,
+        gap_every: int = 8,
+        state: dict | None = None,
+        valve_command: np.ndarray | None = None,
+    ):
+        if (reference is None) == (valve_command is None):
+            raise ValueError("give exactly one of reference and valve_command")
         tm, hs, ctrl = sim.tm, sim.hs, sim.controller
         m = sim.m
         na = tm.n_act
@@ -575,9 +583,16 @@ class Context:
         from mjcf.description import actuator_strokes
 
         rate = sim.gains.rate_hz
-        arr["SREF"] = np.ascontiguousarray(actuator_strokes(tm.desc, reference.d[:n]), dtype=float)
-        arr["VREF"] = np.ascontiguousarray(reference.v[:n], dtype=float)
-        arr["VFF"] = np.ascontiguousarray(ctrl.feedforward(reference.v[:n], reference.a[:n], rate), dtype=float)
+        if reference is not None:
+            arr["SREF"] = np.ascontiguousarray(actuator_strokes(tm.desc, reference.d[:n]), dtype=float)
+            arr["VREF"] = np.ascontiguousarray(reference.v[:n], dtype=float)
+            arr["VFF"] = np.ascontiguousarray(ctrl.feedforward(reference.v[:n], reference.a[:n], rate), dtype=float)
+            arr["VC"] = np.zeros((1, na))
+        else:  # open loop: the commands as Simulation.run holds them (float64, C order)
+            if len(valve_command) < n or np.shape(valve_command)[1:] != (na,):
+                raise ValueError(f"valve_command: {np.shape(valve_command)}, wanted ({n}, {na})")
+            arr["VC"] = np.ascontiguousarray(valve_command[:n], dtype=np.float64)
+            arr["SREF"], arr["VREF"], arr["VFF"] = np.zeros((1, na)), np.zeros((1, 6)), np.zeros((1, na))
         arr["QA"], arr["DA"], arr["IDS"] = (
             np.asarray(a, dtype=np.int64) for a in (tm.stroke_qadr, tm.stroke_dadr, tm.actuator_ids)
         )
@@ -614,6 +629,7 @@ class Context:
         C[S_PD], C[S_PB], C[S_DT] = tm.platen_dadr, tm.platen_body, sim.dt
         C[S_ZSS], C[S_AC], C[S_AN] = tm.friction_presliding_m, tm.air_area_over_volume, tm.air_exponent
         C[S_DONE] = -1
+        C[S_OPEN] = 0.0 if valve_command is None else 1.0
         C[S_NQ], C[S_NV], C[S_NA], C[S_NBODY] = m.nq, m.nv, m.nu, m.nbody
         for name, a in arr.items():
             want = np.int64 if name in ("QA", "DA", "IDS", "IC", "ICS", "FRD", "AQ", "AD", "GB1", "GB2") else np.float64
@@ -699,18 +715,34 @@ class Context:
         )
 
 
+def run_length(sim, reference=None, valve_command=None, duration_s: float | None = None) -> int:
+    """Ticks of a run on ``reference`` or ``valve_command`` (as ``Simulation.run`` counts
+    them when the recorder samples every tick)."""
+    if (reference is None) == (valve_command is None):
+        raise ValueError("give exactly one of reference and valve_command")
+    n_in = len(reference.t) if reference is not None else len(valve_command)
+    return n_in if duration_s is None else min(n_in, int(round(duration_s * sim.gains.rate_hz)) + 1)
+
+
 def run_callback(
-    sim, reference, *, duration_s: float | None = None, gap_every: int = 8, chunk_ticks: int = 512
+    sim,
+    reference=None,
+    *,
+    valve_command: np.ndarray | None = None,
+    duration_s: float | None = None,
+    gap_every: int = 8,
+    chunk_ticks: int = 512,
 ) -> RunResult:
-    """Closed-loop run of ``sim`` on ``reference`` with the coupled step inside MuJoCo
+    """Closed-loop run of ``sim`` on ``reference`` (or open loop on ``valve_command``,
+    (n, n_act) at the controller rate) with the coupled step inside MuJoCo
     (``mj_step(m, d, nstep)`` in chunks of ``chunk_ticks`` controller ticks, stopping at
     a divergence). Starts from ``sim``'s current state (its :meth:`reset`), which it
-    leaves unchanged; same result as ``sim.run(reference=...)`` (the fused loop)."""
+    leaves unchanged; same result as ``sim.run(reference=...)`` (the fused loop) or
+    ``sim.run(valve_command=...)``."""
     why = accepts(sim)
     if why:
         raise ScenarioError(f"the callback route cannot run this table: {why}; use Simulation.run")
-    rate = sim.gains.rate_hz
-    n = len(reference.t) if duration_s is None else min(len(reference.t), int(round(duration_s * rate)) + 1)
+    n = run_length(sim, reference, valve_command, duration_s)
     m2 = callback_model(sim)
     d2 = mujoco.MjData(m2)
     copy_state(sim.m, sim.d, m2, d2)
@@ -721,7 +753,7 @@ def run_callback(
         "ICS": sim.hs._ICS.copy(),
         "ZFR": sim._zfr.copy(),
     }
-    ctx = Context(sim, reference, n, gap_every=gap_every, state=st)
+    ctx = Context(sim, reference, n, gap_every=gap_every, state=st, valve_command=valve_command)
     d2.userdata[0] = ctx.address
     d2.userdata[1] = 0.0
     spt = sim.steps_per_tick
@@ -761,4 +793,5 @@ __all__ = [
     "coupled_step",
     "installed",
     "run_callback",
+    "run_length",
 ]

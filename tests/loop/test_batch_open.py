@@ -1,0 +1,124 @@
+"""Open loop on the callback route (sim.loop.callback with valve commands, the batch and
+run_many): the same runs as ``Simulation.run(valve_command=...)``, bit for bit, as a
+calibration replay runs them (the CGS table, the controller at the record's 1024 Hz)."""
+
+import copy
+
+import numpy as np
+import pytest
+
+from sim.loop.batch import BatchRunner, run_many
+from sim.loop.callback import accepts, run_callback
+
+N_TICK = 203  # 0.2 s at 1024 Hz; 202 is not a multiple of the gap check's 8 ticks (the last tick's check)
+
+
+def _sim(effects=()):
+    import mjcf
+    from mjcf.description import parse_table
+    from sim.control.tvc import ControllerGains
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+
+    base = mjcf.load_table("cgs")
+    raw = copy.deepcopy(base.raw)
+    raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in effects]
+    return Simulation(build_model(parse_table(raw, src=base.source)), gains=ControllerGains(rate_hz=1024.0))
+
+
+def _commands(seed, n=N_TICK, na=12):
+    """Zero-mean valve commands (fraction of rated opening): a few sines per valve."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / 1024.0
+    f = rng.uniform(2.0, 15.0, size=(3, na))
+    ph = rng.uniform(0, 2 * np.pi, size=(3, na))
+    return 0.02 * np.sin(2 * np.pi * f[None] * t[:, None, None] + ph[None]).sum(axis=1)
+
+
+def _same(a, b):
+    assert len(a.t) == len(b.t)
+    assert a.incomplete_reason == b.incomplete_reason
+    assert set(a.channels) == set(b.channels) and set(a.extras) == set(b.extras)
+    for k in a.channels:
+        assert np.array_equal(a.channels[k], b.channels[k], equal_nan=True), k
+    for k in a.extras:
+        assert np.array_equal(a.extras[k], b.extras[k], equal_nan=True), k
+
+
+VARIANTS = [
+    (),
+    ({"type": "bulk_modulus", "where": "class:vertical", "bulk_modulus_pa": 0.8e9},),
+    ({"type": "valve_flow_gain", "where": "actuator:X2", "factor": 1.15},),
+]
+
+
+def test_open_loop_callback_run_equals_the_loop_bit_for_bit():
+    sim = _sim()
+    assert accepts(sim) is None
+    vc = _commands(1)
+    sim.reset()
+    loop = sim.run(valve_command=vc)
+    sim.reset()
+    cb = run_callback(sim, valve_command=vc)
+    assert np.abs(loop.channels["actuator_force"]).max() > 1e3  # a run that does something
+    assert np.abs(np.diff(loop.channels["table_acceleration"], axis=0)).max() > 0
+    assert np.array_equal(loop.channels["valve_command"], vc)
+    assert np.isfinite(loop.extras["loop_gap"][-1])  # the last tick's gap (202 % 8 != 0)
+    for k in ("valve_command", "spool_position", "actuator_force", "pressure_a", "pressure_b"):
+        assert k in cb.channels
+    for k in ("supply_pressure", "accumulator_gas_volume", "loop_gap"):
+        assert k in cb.extras
+    _same(loop, cb)
+    with pytest.raises(ValueError, match="exactly one"):
+        run_callback(sim)
+
+
+def test_open_loop_batch_and_run_many_equal_single_runs():
+    """Three simulations (declared, other bulk modulus, other flow gain of one valve) on
+    three command arrays of different lengths: the batch and run_many give each its own
+    ``Simulation.run(valve_command=...)``."""
+    sims = [_sim(v) for v in VARIANTS]
+    vcs = [_commands(10 + i, n=N_TICK - 17 * i) for i in range(3)]
+    singles = []
+    for s, vc in zip(sims, vcs):
+        s.reset()
+        singles.append(s.run(valve_command=vc))
+        s.reset()
+    res = BatchRunner(sims, nthread=2).run(valve_commands=vcs)
+    for a, b in zip(singles, res):
+        _same(a, b)
+    # the parameters took effect: the same commands on other parameters give other forces
+    same_cmd = run_many(sims, valve_commands=[vcs[0]] * 3, nthread=1)
+    f = [r.channels["actuator_force"] for r in same_cmd]
+    assert not np.array_equal(f[0], f[1]) and not np.array_equal(f[0], f[2])
+    # run_many: a simulation the callback does not take (a valve delay) runs its own loop
+    delayed = _sim(({"type": "valve_delay", "where": "class:vertical", "delay_s": 2 / 2048},))
+    assert accepts(delayed) is not None
+    for s in sims:
+        s.reset()
+    counts: dict = {}
+    many = run_many(sims + [delayed], valve_commands=vcs + [vcs[0]], nthread=2, group=2, counts=counts)
+    assert counts == {"batch": 3, "fallback": 1}
+    for a, b in zip(singles, many):
+        _same(a, b)
+    delayed.reset()
+    _same(delayed.run(valve_command=vcs[0]), many[3])
+    with pytest.raises(ValueError, match="exactly one"):
+        run_many(sims, references=[None] * 3, valve_commands=vcs)
+
+
+def test_closed_loop_callback_checks_the_last_tick_as_the_loop_does():
+    """The loop measures the gap (and checks) on the last tick whatever its number; the
+    callback now does too (before, a run whose last tick was not a multiple of 8 had NaN
+    there on the callback route)."""
+    from sim.scenario import motions as M
+    from sim.scenario.reference import reference_from_motions
+
+    sim = _sim()
+    mo = {"x": M.white_noise(duration_s=1.0, sample_rate_hz=1024.0, band_hz=(2.0, 20.0), seed=7, rms_acceleration=0.5)}
+    ref = reference_from_motions(mo, 1024.0, 1.0)
+    sim.reset()
+    loop = sim.run(reference=ref, duration_s=0.2)
+    assert (len(loop.t) - 1) % 8 and np.isfinite(loop.extras["loop_gap"][-1])
+    sim.reset()
+    _same(loop, run_callback(sim, ref, duration_s=0.2))
