@@ -267,15 +267,14 @@ def null_total(cand, theta, unc, pfit, desc) -> dict:
     adds its correction ``theta - declared``. The whole null is the estimate (mean over the
     fit runs and the place's actuators) plus that correction; its 95 % half-width adds the
     estimate's spread over the fit runs to the correction's in quadrature."""
+    from hydraulics.params import HydraulicParams
     from sim.calibrate.search import Z95
     from sim.calibrate.valve_null import declared_null
+    from sim.effects.base import EFFECTS
     from sim.effects.hydraulic import actuator_indices
 
-    class _At:  # an effect-like object for actuator_indices
-        where, source = cand.where, "candidate"
-
     names = list(desc.actuator_names)
-    idx = actuator_indices(_At(), _Names(names, [a.cls.name for a in desc.actuators]))
+    idx = actuator_indices(EFFECTS[cand.type](cand.entry(theta)), HydraulicParams.from_table(desc.raw))
     per_run = [float(np.mean([pr.valve_null["offset"][names[i]] for i in idx])) for pr in pfit]
     est = float(np.mean(per_run))
     spread = float(np.std(per_run, ddof=1)) / math.sqrt(len(per_run)) if len(per_run) > 1 else 0.0
@@ -288,13 +287,6 @@ def null_total(cand, theta, unc, pfit, desc) -> dict:
             f"{'+' if corr >= 0 else '-'} {abs(corr):.3g} fitted by the search"
         ),
     }
-
-
-class _Names:
-    """The actuator names and classes :func:`sim.effects.hydraulic.actuator_indices` reads."""
-
-    def __init__(self, names, classes):
-        self.names, self.classes = names, classes
 
 
 def _acts_on(cand):

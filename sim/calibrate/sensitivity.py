@@ -257,10 +257,12 @@ def internal_force_free(desc) -> tuple:
     """The actuator channels whose static part the replay path cannot tell from a sensor
     offset: on a table with more actuators than the rank of its kinematic Jacobian (CGS:
     12 for 6 DOF) the actuators can hold a constant internal force against each other
-    that moves nothing. On replay it is set by each valve's null (estimated from the
-    motion, to within the record's noise) integrated against the others: on clean CGS
-    runs X1 and X3 replay ~1 kN off their recorded mean, alike in every run, which a load
-    cell offset would absorb. Empty for a table without such redundancy."""
+    that moves nothing, and the replay does not set it from the motion: it is what small
+    differences of the drive (each valve's null estimated from the motion, the recorded
+    command's quantisation) integrate to in actuators that cannot move apart (the
+    mechanism was not measured apart). On clean CGS runs X1 and X3 replay ~1 kN off
+    their recorded mean, alike in every run, which a load cell offset would absorb.
+    Empty for a table without such redundancy."""
     from sim.control.tvc import dof_jacobian
 
     J = dof_jacobian(desc)
