@@ -2,7 +2,9 @@
 
 * ``replay``: runs with recorded valve commands. Each actuator's valve null offset is
   estimated from the recorded motion and removed first (:func:`sim.calibrate.valve_null.estimate`,
-  or a real record drifts to the end stop in seconds); the model replays the commands
+  or a real record drifts to the end stop in seconds); the estimate replaces the null the
+  description declares (drive = command + estimate - declared null, so the model's valve
+  sees command + estimate whatever it declares); the model replays the commands
   open loop at the record's own rate (:func:`sim.calibrate.replay.run_at_record`).
 * ``closed_loop``: runs with only a reference: the model runs it through the table's
   controller (:class:`sim.loop.simulation.Simulation`, the table's own gains).
@@ -103,6 +105,14 @@ class PathRun:
             dict(self.bandpass),
         )
 
+    def only(self, keep) -> "PathRun":
+        """This run compared on the columns ``(channel, column)`` for which ``keep`` holds."""
+        out = copy.copy(self)
+        cols = {c: [j for j in v if keep(c, j)] for c, v in self.columns.items()}
+        out.columns = {c: v for c, v in cols.items() if v}
+        out.scale = {c: self.scale[c][[self.columns[c].index(j) for j in v]] for c, v in out.columns.items()}
+        return out
+
     def column_names(self) -> list[tuple[str, int, str]]:
         """(channel, column index, place) of each compared column, in residual order."""
         out = []
@@ -134,10 +144,11 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
     ``score_from``: run name -> first scored sample (the held-out part of one run)."""
     from mjcf.description import DOFS6
     from sim.calibrate.replay import DISPLACEMENT_BAND_HZ
-    from sim.calibrate.valve_null import estimate
+    from sim.calibrate.valve_null import declared_null, estimate
     from sim.signals.resample import bandpass
 
     out = []
+    null0 = declared_null(desc) if path == "replay" else None
     for r in runs:
         chans = fit_channels(r)
         check_finite(r, chans + (["valve_command"] if path == "replay" else ["reference"]))
@@ -145,7 +156,8 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
         vn = None
         if path == "replay":
             est = estimate(r, desc, drift=False)
-            drive = np.asarray(r.valve_command, float) + est.at(np.asarray(r.t, float))
+            # the estimate is the whole null the motion shows: it replaces the declared one
+            drive = np.asarray(r.valve_command, float) + est.at(np.asarray(r.t, float)) - null0[None, :]
             vn = est.as_dict(r.actuators)
         else:
             drive = np.zeros((r.n_samples, 6))
@@ -464,15 +476,19 @@ def residual_columns(pr: PathRun, model: dict) -> list[tuple[str, int, np.ndarra
     ]
 
 
-def flatness(prs, models) -> float:
-    """Mean spectral flatness of the residual over runs and columns (1: white)."""
+def flatness(prs, models, *, bias: bool = False) -> float:
+    """Mean spectral flatness of the residual over runs and columns (1: white). The Welch
+    spectrum removes each segment's mean, so a constant bias of the residual does not
+    show; with ``bias`` each column's flatness is multiplied by the share of its mean
+    square that is not that bias, ``var(e) / mean(e^2)`` (1 for zero-mean noise)."""
     from sim.calibrate.residuals import spectral_flatness
 
     vals = []
     for pr, m in zip(prs, models):
         for _ch, _j, e in residual_columns(pr, m):
             if np.any(e):
-                vals.append(spectral_flatness(e, 1.0 / pr.dt))
+                share = float(np.var(e) / np.mean(e**2)) if bias else 1.0
+                vals.append(spectral_flatness(e, 1.0 / pr.dt) * share)
     return float(np.mean(vals)) if vals else 0.0
 
 

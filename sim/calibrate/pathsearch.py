@@ -8,8 +8,12 @@ the best few refined by nonlinear least squares on longer windows; then, best fi
 each judged on the whole runs by the rules of the mechanical path
 (:func:`sim.calibrate.search.accept_numbers`: held-out error down by the margin, BIC
 down, parameters off their bounds with finite 95 % intervals that exclude the neutral
-value, residual whiter). The first that passes is
-added; repeated while one passes.
+value, residual whiter). A sensor candidate, which changes only its own channel or
+column of the model, is judged on those columns (:func:`judge_sensor`; pooled over the
+18 columns of a 6-DOF table a clear error on one column moves the held-out error by less
+than the margin). The first that passes is added; repeated while one passes. A valve
+null offset found on the replay path is reported as the valve's whole null, the path's
+estimate plus the fitted correction (:func:`null_total`).
 """
 
 from __future__ import annotations
@@ -198,12 +202,17 @@ def calibrate_path(
             p_new = n_par + len(rf.theta)
             f_new = P.flatness(pfit, mf)
             okp, why, unc = param_check(rf, Z95)
-            ok, why = (
-                accept_numbers(e_ho, e_new, _bic(rss, N, n_par), _bic(rss_new, N, p_new), flat, f_new, margin)
-                if okp
-                else (False, why)
-            )
+            bics = (_bic(rss, N, n_par), _bic(rss_new, N, p_new))
+            local = None
+            if not okp:
+                ok = False
+            elif rf.cand.sensor:  # judged on the columns it acts on
+                ok, why, local = judge_sensor(rf.cand, pfit, pho, (mfit, mho), (mf, mh), bics, margin)
+            else:
+                ok, why = accept_numbers(e_ho, e_new, *bics, flat, f_new, margin)
             row = _row(rnd, None, rf, unc, why, score=sc_of)
+            if local is not None:
+                row["on_its_columns"] = local
             row.update({"holdout_error": e_new, "bic_change": _bic(rss_new, N, p_new) - _bic(rss, N, n_par)})
             row.update({"flatness": f_new, "accepted": ok})
             tried.append(row)
@@ -221,15 +230,16 @@ def calibrate_path(
         rf, unc, mfit, mho, e_ho, rss, n_par, flat = winner
         entry = rf.cand.entry(rf.theta)
         accepted.append(entry)
-        added.append(
-            {
-                "name": rf.cand.type,
-                "where": rf.cand.where,
-                "parameters": rf.cand.values(rf.theta),
-                "uncertainty": unc,
-                "units": dict(rf.cand.units),
-            }
-        )
+        found = {
+            "name": rf.cand.type,
+            "where": rf.cand.where,
+            "parameters": rf.cand.values(rf.theta),
+            "uncertainty": unc,
+            "units": dict(rf.cand.units),
+        }
+        if path == "replay" and rf.cand.type == "valve_null_offset":
+            found.update(null_total(rf.cand, rf.theta, unc, pfit, desc))
+        added.append(found)
         mscr, mref = sims([wscr, wref], accepted)
     per = {}
     for p, m0, m1 in zip(pho, mho0, mho):
@@ -250,6 +260,75 @@ def calibrate_path(
         "per_channel": per,
         "series": {"kind": "path", "holdout": pho, "before": mho0, "after": mho, "fit": pfit, "fit_after": mfit},
     }
+
+
+def null_total(cand, theta, unc, pfit, desc) -> dict:
+    """A valve null offset found on the replay path, as the valve's whole null: the replay
+    drives the model with the command plus each run's null estimate
+    (:mod:`sim.calibrate.valve_null`, in place of the declared null), and the candidate
+    adds its correction ``theta - declared``. The whole null is the estimate (mean over the
+    fit runs and the place's actuators) plus that correction; its 95 % half-width adds the
+    estimate's spread over the fit runs to the correction's in quadrature."""
+    from hydraulics.params import HydraulicParams
+    from sim.calibrate.search import Z95
+    from sim.calibrate.valve_null import declared_null
+    from sim.effects.base import EFFECTS
+    from sim.effects.hydraulic import actuator_indices
+
+    names = list(desc.actuator_names)
+    idx = actuator_indices(EFFECTS[cand.type](cand.entry(theta)), HydraulicParams.from_table(desc.raw))
+    per_run = [float(np.mean([pr.valve_null["offset"][names[i]] for i in idx])) for pr in pfit]
+    est = float(np.mean(per_run))
+    spread = float(np.std(per_run, ddof=1)) / math.sqrt(len(per_run)) if len(per_run) > 1 else 0.0
+    corr = float(theta[0]) - float(np.mean(declared_null(desc)[idx]))
+    return {
+        "parameters": {"offset": est + corr},
+        "uncertainty": {"offset": math.hypot(unc["offset"], Z95 * spread)},
+        "note": (
+            f"the valve's whole null: {est:.4g} estimated from the recorded motion (mean over the fit runs) "
+            f"{'+' if corr >= 0 else '-'} {abs(corr):.3g} fitted by the search"
+        ),
+    }
+
+
+def _acts_on(cand):
+    """``keep(channel, column)``: the compared columns a sensor candidate acts on."""
+    from sim.effects.sensors import parse_channel
+
+    ch, col = parse_channel(cand.where)
+    return lambda c, j: c == ch and (col is None or j == col)
+
+
+def judge_sensor(cand, pfit, pho, cur, new, bics, margin) -> tuple[bool, str, dict | None]:
+    """``(accepted, reason, numbers)`` of a sensor candidate, judged on the columns it acts
+    on: a sensor effect changes only its own channel (or column) of the model, so pooled
+    over every compared column (18 on a 6-DOF table) a clear error on one column moves
+    the held-out error by less than the margin. Its columns' held-out NRMSE must fall by
+    ``margin`` of itself, the BIC (pooled) fall, its columns' fit residual get whiter
+    (flatness counting a constant bias, :func:`sim.calibrate.paths.flatness`), and the
+    other columns' held-out error not rise. ``cur``/``new``: (fit, held-out) model
+    channels without / with it."""
+    from sim.calibrate import paths as P
+    from sim.calibrate.search import accept_numbers
+
+    keep = _acts_on(cand)
+    on_ho = [p.only(keep) for p in pho]
+    if any(not p.columns for p in on_ho):
+        return False, f"{cand.where} is not compared in every held-out run", None
+    on_fit = [p.only(keep) for p in pfit]
+    e0, e1 = P.nrmse(on_ho, cur[1]), P.nrmse(on_ho, new[1])
+    f0, f1 = P.flatness(on_fit, cur[0], bias=True), P.flatness(on_fit, new[0], bias=True)
+    nums = {"holdout_error": [e0, e1], "flatness": [f0, f1]}
+    ok, why = accept_numbers(e0, e1, *bics, f0, f1, margin)
+    if not ok:
+        return False, f"on {cand.where}: {why}", nums
+    off_ho = [p.only(lambda c, j: not keep(c, j)) for p in pho]
+    if all(p.columns for p in off_ho):
+        o0, o1 = P.nrmse(off_ho, cur[1]), P.nrmse(off_ho, new[1])
+        nums["other_columns_holdout_error"] = [o0, o1]
+        if o1 > o0 * (1 + 1e-9):
+            return False, f"the other columns' held-out error rises ({o0:.4f} -> {o1:.4f})", nums
+    return True, "", nums
 
 
 def param_check(rf, z95) -> tuple[bool, str, dict]:
@@ -290,4 +369,4 @@ def _row(rnd, s, rf, unc, why, score=None) -> dict:
     }
 
 
-__all__ = ["calibrate_path", "motion_rms", "param_check"]
+__all__ = ["calibrate_path", "judge_sensor", "motion_rms", "null_total", "param_check"]

@@ -6,7 +6,9 @@ effects (:mod:`sim.effects.hydraulic`) at each actuator and each class (the supp
 at the supply), the mechanical effects with a coefficient that vanishes (spring,
 viscous damping, power-law damping, Coulomb friction, added mass) at each DOF, actuator
 and class, and the sensor effects (:mod:`sim.effects.sensors`: gain, offset, delay,
-low-pass) on each compared channel and on each of its columns.
+low-pass) on each compared channel and on each of its columns (on the replay path of an
+over-actuated table, no offset on the actuator forces and pressures: an internal force
+the motion does not show looks alike there, :func:`internal_force_free`).
 
 *Screening* (:func:`screen`): from the current model (parameters at their *neutral*
 value, where the effect changes nothing: a flow-gain factor of 1, the description's
@@ -147,7 +149,7 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
             elif t == "valve_bandwidth":
                 arr = (
                     hp.per_actuator("valve_natural_frequency_hz")
-                    if hp.model == "second_order"
+                    if hp.model == "second"
                     else 1.0 / (2 * math.pi * hp.per_actuator("valve_tau_s"))
                 )
                 x0 = float(np.mean(arr[idx]))
@@ -212,10 +214,15 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
                 )
             )
     fs = 1.0 / prs[0].dt
+    # an over-actuated table's static internal force (actuators pushing on each other) is
+    # not set by the motion on the replay path (see internal_force_free)
+    free = internal_force_free(cur) if prs[0].path == "replay" else ()
     for t in SENSOR:
         if t not in EFFECTS or (want and t not in want):
             continue
         for ch, cols in prs[0].columns.items():
+            if t == "sensor_offset" and ch in free:
+                continue
             for w in [f"channel:{ch}"] + [f"channel:{ch}[{j}]" for j in cols]:
                 if (t, w) in have:
                     continue
@@ -244,6 +251,24 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
                     )
                 )
     return out
+
+
+def internal_force_free(desc) -> tuple:
+    """The actuator channels whose static part the replay path cannot tell from a sensor
+    offset: on a table with more actuators than the rank of its kinematic Jacobian (CGS:
+    12 for 6 DOF) the actuators can hold a constant internal force against each other
+    that moves nothing, and the replay does not set it from the motion: it is what small
+    differences of the drive (each valve's null estimated from the motion, the recorded
+    command's quantisation) integrate to in actuators that cannot move apart (the
+    mechanism was not measured apart). On clean CGS runs X1 and X3 replay ~1 kN off
+    their recorded mean, alike in every run, which a load cell offset would absorb.
+    Empty for a table without such redundancy."""
+    from sim.control.tvc import dof_jacobian
+
+    J = dof_jacobian(desc)
+    if np.linalg.matrix_rank(J) >= J.shape[0]:
+        return ()
+    return ("actuator_force", "pressure_a", "pressure_b")
 
 
 # ------------------------------------------------------------------ sensor candidates
@@ -460,4 +485,15 @@ def refine_job(job) -> Refined:
     return Refined(c, theta, sigma, float(r @ r), rss0, nfev, True)
 
 
-__all__ = ["Candidate", "HYDRAULIC", "MECHANICAL", "Refined", "SENSOR", "Screen", "candidates", "refine_job", "screen"]
+__all__ = [
+    "Candidate",
+    "HYDRAULIC",
+    "MECHANICAL",
+    "Refined",
+    "SENSOR",
+    "Screen",
+    "candidates",
+    "internal_force_free",
+    "refine_job",
+    "screen",
+]

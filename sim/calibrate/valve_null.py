@@ -108,4 +108,17 @@ def estimate(run, desc, *, drift: bool = True) -> ValveNull:
     return ValveNull(offset=off, drift_per_s=dr, gain=gain, velocity_from=what, t_mid=tm)
 
 
-__all__ = ["ValveNull", "estimate", "stroke_velocity"]
+def declared_null(desc) -> np.ndarray:
+    """Each actuator's valve null offset as ``desc`` declares it (``[servovalve]`` and its
+    ``valve_null_offset`` effects), fraction of rated opening."""
+    from hydraulics.params import HydraulicParams
+    from sim.effects.base import EFFECTS
+
+    hp = HydraulicParams.from_table(desc.raw)
+    for e in desc.raw.get("effect", []) or []:
+        if isinstance(e, dict) and e.get("type") == "valve_null_offset":
+            hp = EFFECTS["valve_null_offset"](e, source=f"{desc.source}: effect").edit_hydraulics(hp)
+    return np.asarray(hp.per_actuator("valve_null_offset"), float)
+
+
+__all__ = ["ValveNull", "declared_null", "estimate", "stroke_velocity"]

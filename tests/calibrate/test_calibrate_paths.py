@@ -131,6 +131,81 @@ def test_sensor_delay_of_one_accelerometer_found(floor, tmp_path):
     _check(res, floor, "sensor_delay", "channel:table_acceleration[1]", "delay_s", 3e-3)
 
 
+def test_sensor_offset_of_one_accelerometer_found(floor, tmp_path):
+    """The z accelerometer's zero 0.15 m/s^2 off (15 mg, a DC accelerometer's zero after a
+    temperature change). One column of 18: judged on its own column (pathsearch.judge_sensor);
+    the load cells' offsets are not offered on this over-actuated table (internal force)."""
+    paths = _cgs_measured(
+        tmp_path, [{"type": "sensor_offset", "where": "channel:table_acceleration[2]", "offset": 0.15}]
+    )
+    res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
+    _check(res, floor, "sensor_offset", "channel:table_acceleration[2]", "offset", 0.15)
+    assert len(res.effects_added) == 1
+    assert not any(c["name"] == "sensor_offset" and "actuator_force" in c["where"] for c in res.candidates)
+
+
+def test_sensor_lowpass_of_one_accelerometer_found(floor, tmp_path):
+    """The x accelerometer's conditioner set to a 40 Hz 2-pole low-pass (the description
+    and the recorder model have none below the 256 Hz anti-alias filter)."""
+    paths = _cgs_measured(
+        tmp_path, [{"type": "sensor_lowpass", "where": "channel:table_acceleration[0]", "cutoff_hz": 40.0}]
+    )
+    res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
+    _check(res, floor, "sensor_lowpass", "channel:table_acceleration[0]", "cutoff_hz", 40.0)
+
+
+@pytest.mark.slow
+def test_valve_bandwidth_of_a_class_found(floor, tmp_path):
+    """The vertical valves' main stage at 25 Hz where the description says 41.5 Hz
+    (Table A's second-order fit; a worn pilot stage, or a valve of a lower rating)."""
+    paths = _cgs_measured(tmp_path, [{"type": "valve_bandwidth", "where": "class:vertical", "bandwidth_hz": 25.0}])
+    res = S.calibrate(
+        paths, path="replay", effects=["valve_bandwidth", "valve_delay", "valve_flow_gain", "bulk_modulus"], workers=2
+    )
+    _check(res, floor, "valve_bandwidth", "class:vertical", "bandwidth_hz", 25.0)
+
+
+@pytest.mark.slow
+def test_valve_bandwidth_of_one_actuator_found(floor, tmp_path):
+    """Y2's valve alone at 25 Hz (41.5 Hz declared); its nearest confuser, a delay of Y2's
+    valve (3.9 ms explains 83 % against the bandwidth's 97 % on the refinement windows)."""
+    paths = _cgs_measured(tmp_path, [{"type": "valve_bandwidth", "where": "actuator:Y2", "bandwidth_hz": 25.0}])
+    res = S.calibrate(paths, path="replay", effects=["valve_bandwidth", "valve_delay", "valve_flow_gain"], workers=2)
+    _check(res, floor, "valve_bandwidth", "actuator:Y2", "bandwidth_hz", 25.0)
+
+
+@pytest.mark.slow
+def test_supply_pressure_drop_found(floor, tmp_path):
+    """The supply 3 MPa below the declared 21 MPa (18 MPa: a pump compensator set low; it
+    stays above the accumulators' 14 MPa precharge). Its nearest confuser: the flow gain
+    of every class (the valve flow goes as sqrt(p_s - p_L))."""
+    paths = _cgs_measured(tmp_path, [{"type": "supply_pressure_drop", "where": "supply", "drop_pa": 3.0e6}])
+    res = S.calibrate(paths, path="replay", effects=["supply_pressure_drop", "valve_flow_gain"], workers=2)
+    _check(res, floor, "supply_pressure_drop", "supply", "drop_pa", 3.0e6)
+
+
+@pytest.mark.slow
+def test_leakage_of_a_class_found(floor, tmp_path):
+    """Worn piston seals in the lateral actuators: cross-piston leakage 2e-11 m^3/(s Pa)
+    (1.2 l/min at 1 MPa across the piston) where the description says 1e-12."""
+    paths = _cgs_measured(tmp_path, [{"type": "leakage", "where": "class:lateral", "coefficient_m3_s_pa": 2e-11}])
+    res = S.calibrate(paths, path="replay", effects=["leakage", "bulk_modulus", "valve_flow_gain"], workers=2)
+    _check(res, floor, "leakage", "class:lateral", "coefficient_m3_s_pa", 2e-11)
+
+
+@pytest.mark.slow
+def test_valve_null_offset_of_one_actuator_found(floor, tmp_path):
+    """X1's valve 1 % open at zero command (a torque-motor null shift). The replay path's
+    null estimate (from the motion) takes most of it, ~0.009: X1 pushes partly against
+    X2-X4, an internal force the motion does not show; the search adds the rest, and the
+    reported offset is the whole null (estimate + correction, pathsearch.null_total)."""
+    paths = _cgs_measured(tmp_path, [{"type": "valve_null_offset", "where": "actuator:X1", "offset": 0.01}])
+    res = S.calibrate(paths, path="replay", effects=["valve_null_offset", "valve_flow_gain"], workers=2)
+    _check(res, floor, "valve_null_offset", "actuator:X1", "offset", 0.01)
+    (row,) = [c for c in res.candidates if c["accepted"] and c["name"] == "valve_null_offset"][:1]
+    assert 0 < row["parameters"]["offset"] < 0.5 * res.effects_added[0]["parameters"]["offset"]  # the correction
+
+
 @pytest.mark.slow
 def test_valve_delay_of_a_class_found(floor, tmp_path):
     """The vertical valves 4 ms late (realised as 8 physics steps of 1/2048 s: 3.9 ms)."""
@@ -163,7 +238,7 @@ def test_two_effects_at_once_hydraulic_and_mechanical(floor, tmp_path):
     assert set(found) == {("valve_flow_gain", "actuator:X1"), ("coulomb_friction", "class:lateral")}, found
     assert found[("valve_flow_gain", "actuator:X1")]["factor"] == pytest.approx(0.8, rel=0.10)
     assert found[("coulomb_friction", "class:lateral")]["force_n"] == pytest.approx(5000.0, rel=0.10)
-    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor.error_before
+    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor
 
 
 def _reference_only(paths, out):
