@@ -428,11 +428,13 @@ def max_scale(case: Case, *, rel_tol: float = 0.02, max_runs: int = 6, progress=
             cache[s] = settle(prep, s, o)
 
     s0 = float(case.scale)
-    k = 1
+    scale_free = [c["name"] for c in prep.static if not c["pass"]]
     needs, pre0 = free(s0)
-    if needs:
+    k = 1
+    if not scale_free:  # the specimen can be built: one round runs k simulations where the batch takes them
         _, plan0 = stage(prep, s0, simulate=True)
         k = max(1, int(nthread or os.cpu_count() or 1)) if batchable(plan0) else 1
+    if needs:
         todo = [s0]
         n = min(k, max_runs) - 1
         if n > 0:
@@ -447,7 +449,6 @@ def max_scale(case: Case, *, rel_tol: float = 0.02, max_runs: int = 6, progress=
     count["steps"] = 0
     first = cache[s0]
     result = _finish(prep, dict(first))
-    scale_free = [c["name"] for c in prep.static if not c["pass"]]
     if scale_free:
         result.update(
             max_scale=None,
