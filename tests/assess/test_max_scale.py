@@ -90,3 +90,6 @@ def test_two_threads_find_the_same_scale_in_fewer_rounds(monkeypatch):
     assert len(sims) == par["max_scale_runs"] <= 14 and par["max_scale_runs"] > par["max_scale_rounds"]
     # the passing scales found are all below the failing ones (a consistent bracket)
     assert max(s for s, v, _ in log if v["feasible"]) < min(s for s, v, _ in log if not v["feasible"])
+    # a scale run in a round with others (on a spare plan of the case) gives its own run's verdict
+    alone = study.assess(study.Case(**{**_case().__dict__, "scale": par["max_scale"]}))
+    assert [c["utilisation"] for c in alone["checks"]] == [c["utilisation"] for c in par["at_max"]["checks"]]
