@@ -180,7 +180,7 @@ class Prepared:
     window_start_s: float
     static: list
     interaction: dict | None
-    plan: object = None  #: the ScenarioPlan (built once, re-used for every scale)
+    plan: object = None  #: the ScenarioPlan of slot 0 (built once, re-used for every scale)
     buildable: bool = True
     spare_plans: list = field(default_factory=list)  #: more plans, one per scale simulated at the same time
 
