@@ -180,8 +180,9 @@ class Prepared:
     window_start_s: float
     static: list
     interaction: dict | None
-    plan: object = None  #: the ScenarioPlan (built once, re-used for every scale)
+    plan: object = None  #: the ScenarioPlan of slot 0 (built once, re-used for every scale)
     buildable: bool = True
+    spare_plans: list = field(default_factory=list)  #: more plans, one per scale simulated at the same time
 
 
 def _scenario_for(case: Case, desc):
@@ -285,12 +286,13 @@ def evaluate(prep: Prepared, scale: float, *, simulate: bool = True, progress=No
     return settle(prep, scale, outcome)
 
 
-def stage(prep: Prepared, scale: float, *, simulate: bool = True) -> tuple[dict | None, object]:
+def stage(prep: Prepared, scale: float, *, simulate: bool = True, slot: int = 0) -> tuple[dict | None, object]:
     """What a verdict at ``scale`` needs: ``(verdict, None)`` when it needs no simulation
     (the specimen cannot be built, or the checks on the whole motion fail and not
     ``simulate``), else ``(None, plan)``: the :class:`~sim.assess.run.ScenarioPlan` of
-    the window at ``scale`` (its simulation shared with the prepared case's other
-    scales: run one at a time), for :func:`settle` once run."""
+    the window at ``scale``, for :func:`settle` once run. ``slot``: which of the prepared
+    case's simulations the plan uses (built on first use, re-used for later scales):
+    plans of one case staged together need different slots to run together."""
     from sim.assess.feasibility import envelope_checks, verdict
     from sim.assess.run import plan_scenario
     from sim.scenario.reference import reference_from_motions
@@ -317,9 +319,14 @@ def stage(prep: Prepared, scale: float, *, simulate: bool = True) -> tuple[dict 
         prep.plan = plan_scenario(
             _scenario_for(prep.case, prep.desc), payload=prep.payload, motions=win, iterations=prep.case.iterations
         )
-    plan = replace(
-        prep.plan, reference=reference_from_motions(win, rate, wlen), envelope_reference=env_ref, warnings=warns
-    )
+    while slot > len(prep.spare_plans):
+        prep.spare_plans.append(
+            plan_scenario(
+                _scenario_for(prep.case, prep.desc), payload=prep.payload, motions=win, iterations=prep.case.iterations
+            )
+        )
+    base = prep.plan if slot == 0 else prep.spare_plans[slot - 1]
+    plan = replace(base, reference=reference_from_motions(win, rate, wlen), envelope_reference=env_ref, warnings=warns)
     return None, plan
 
 
@@ -352,83 +359,127 @@ def _finish(prep: Prepared, fe: dict) -> dict:
 
 
 # ------------------------------------------------------------------ largest scale
-def max_scale(case: Case, *, rel_tol: float = 0.02, max_runs: int = 6, progress=None) -> dict:
-    """The largest amplitude scale at which every check passes, by bisection on
-    simulations (in log scale), bracketed from the utilisations of the first run.
+def max_scale(case: Case, *, rel_tol: float = 0.02, max_runs: int = 6, progress=None, nthread: int = 0) -> dict:
+    """The largest amplitude scale at which every check passes: a search on simulations
+    in log scale, bracketed from the utilisations of the runs, run in rounds of up to
+    ``k`` simulations together on the shared route of many runs
+    (:func:`sim.assess.many.run_plans`; ``k`` = ``nthread`` threads, 0: all cores; 1
+    where the table's runs cannot go on the batch, e.g. drive iterations).
+
+    A round stages ``k`` scales at once, each on its own simulation of the prepared case:
+
+    * the first round: ``case.scale``, and with ``k > 1`` up to ``k - 1`` scales spread
+      (in log scale) from it up to just under the scale where the highest
+      amplitude-driven utilisation of its checks on the whole motion (the rated
+      envelope) reaches 100 % (the envelope fails above it without a simulation);
+    * while only passing (failing) scales are known: the prediction from the
+      utilisations of the largest passing (smallest failing) one, the scale at which the
+      highest amplitude-driven utilisation would reach 100 % if it grew linearly, and
+      ``k - 1`` points around it ``1 + rel_tol`` apart;
+    * once bracketed: the ``k``-section of the bracket in log scale (fewer points when
+      fewer close it to ``rel_tol``).
+
+    With ``k = 1`` this is the bisection: the same scales, the same answer. The bracket
+    is the smallest failing scale and the largest passing one below it.
 
     Scale-free failures (specimen mass, support load) give ``max_scale`` None. Checks on
     the whole motion (envelope) fail without a simulation, so only scales inside the
-    rated envelope cost a run. Stops when the bracket is within ``rel_tol`` or after
-    ``max_runs`` simulations. Returns the verdict at ``case.scale``, ``max_scale`` with
-    its verdict (``at_max``) and the limiting check just above it (``limiting_above``).
+    rated envelope cost a run (a scale failing there lowers the bracket and the round is
+    planned again). Stops when the bracket is within ``rel_tol`` or after ``max_runs``
+    simulations (simulations, not rounds: a round runs at most the simulations left).
+    Returns the verdict at ``case.scale``, ``max_scale`` with its verdict (``at_max``),
+    the limiting check just above it (``limiting_above``), ``max_scale_runs``
+    (simulations) and ``max_scale_rounds`` (rounds of simulations run together).
     """
+    import os
+
+    from sim.assess.many import batchable, run_plans
+
     say = progress or (lambda text: None)
     prep = prepare(case)
-    runs = 0
-    cache: dict[float, dict] = {}
+    cache: dict[float, dict] = {}  # scale -> its verdict (simulated, or failing without a simulation)
+    count = {"runs": 0, "rounds": 0, "steps": 0}
 
-    def ev(s):
-        nonlocal runs
-        s = float(s)
-        if s in cache:
-            return cache[s]
+    def free(s):
+        """(needs a simulation, the verdict of the checks without one) at ``s``."""
         pre = evaluate(prep, s, simulate=False)
         if pre["feasible"] and prep.buildable:
-            runs += 1
-            say(f"scale {s:.4g}: simulating (run {runs})")
-            pre = evaluate(prep, s, simulate=True)
-        else:
-            say(f"scale {s:.4g}: {pre['limiting']} fails without a simulation")
+            return True, pre
+        say(f"scale {s:.4g}: {pre['limiting']} fails without a simulation")
         cache[s] = pre
-        return pre
+        count["steps"] += 1  # evaluations without a simulation are free; never loop for ever
+        return False, pre
 
-    first = ev(case.scale)
-    result = _finish(prep, dict(first))
+    def simulate(scales):
+        staged = [stage(prep, s, simulate=True, slot=j) for j, s in enumerate(scales)]
+        count["runs"] += len(scales)
+        count["rounds"] += 1
+        count["steps"] += 1
+        say(
+            f"round {count['rounds']}: simulating scale{'s' if len(scales) > 1 else ''} "
+            + ", ".join(f"{s:.4g}" for s in scales)
+            + f" (run{'s' if len(scales) > 1 else ''} {count['runs'] - len(scales) + 1}"
+            + (f"-{count['runs']})" if len(scales) > 1 else ")")
+        )
+        outs = run_plans([plan for _, plan in staged], nthread=nthread)
+        for s, o in zip(scales, outs):
+            if isinstance(o, UserError):
+                raise o
+            cache[s] = settle(prep, s, o)
+
+    s0 = float(case.scale)
     scale_free = [c["name"] for c in prep.static if not c["pass"]]
+    needs, pre0 = free(s0)
+    k = 1
+    if not scale_free:  # the specimen can be built: one round runs k simulations where the batch takes them
+        _, plan0 = stage(prep, s0, simulate=True)
+        k = max(1, int(nthread or os.cpu_count() or 1)) if batchable(plan0) else 1
+    if needs:
+        todo = [s0]
+        n = min(k, max_runs) - 1
+        if n > 0:
+            u = _scaling_utilisation(pre0)
+            top = (s0 / u if u > 0 else s0 * 4) * 0.995  # just under where the envelope fails
+            if top > s0 * (1 + rel_tol):
+                for s in (s0 * (top / s0) ** (j / n) for j in range(1, n + 1)):
+                    if not free(s)[0]:  # the envelope is linear in the scale: not expected
+                        break
+                    todo.append(s)
+        simulate(todo)
+    count["steps"] = 0
+    first = cache[s0]
+    result = _finish(prep, dict(first))
     if scale_free:
         result.update(
             max_scale=None,
             max_scale_limiting=scale_free[0],
             at_max=None,
             limiting_above=scale_free[0],
-            max_scale_runs=runs,
+            max_scale_runs=count["runs"],
+            max_scale_rounds=count["rounds"],
         )
         return result
-    lo = hi = None
-    if first["feasible"]:
-        lo = case.scale
-    else:
-        hi = case.scale
-    last = first
-    steps = 0
-    while runs < max_runs:
-        if lo is not None and hi is not None:
-            if hi / lo <= 1 + rel_tol:
-                break
-            s = np.sqrt(lo * hi)
-        else:
-            u = _scaling_utilisation(last)
-            guess = last["scale"] / u if u > 0 else last["scale"] * 4
-            if lo is not None:  # only passing so far: jump to the prediction, at least +rel_tol
-                s = max(guess * 0.995, lo * (1 + rel_tol))
-            else:
-                s = min(guess * 0.995, hi / (1 + rel_tol))
-        r = ev(s)
-        last = r
-        if r["feasible"]:
-            lo = s if lo is None else max(lo, s)
-        else:
-            hi = s if hi is None else min(hi, s)
-        steps += 1
-        if steps > 40:  # evaluations without a simulation are free; never loop for ever
+    while count["runs"] < max_runs and count["steps"] <= 40:
+        lo, hi = _bracket(cache)
+        scales = _next_scales(cache, lo, hi, min(k, max_runs - count["runs"]), rel_tol)
+        if not scales:
             break
+        todo = []
+        for s in scales:  # ascending: a scale failing without a simulation fails every larger one
+            if not free(s)[0]:
+                break
+            todo.append(s)
+        else:
+            simulate(todo)
+    lo, hi = _bracket(cache)
     if lo is None:
         result.update(
             max_scale=None,
             max_scale_limiting=first["limiting"],
             at_max=None,
-            limiting_above=last["limiting"],
-            max_scale_runs=runs,
+            limiting_above=cache[hi]["limiting"],
+            max_scale_runs=count["runs"],
+            max_scale_rounds=count["rounds"],
         )
         return result
     above = cache.get(hi) if hi is not None else None
@@ -442,13 +493,58 @@ def max_scale(case: Case, *, rel_tol: float = 0.02, max_runs: int = 6, progress=
         max_scale_limiting=(above or at)["limiting"] if above is None else _first_failed(above),
         at_max=_strip(at),
         limiting_above=None if above is None else _first_failed(above),
-        max_scale_runs=runs,
+        max_scale_runs=count["runs"],
+        max_scale_rounds=count["rounds"],
     )
     return result
 
 
+def _bracket(cache: dict) -> tuple[float | None, float | None]:
+    """(largest passing scale below the smallest failing one, smallest failing scale)."""
+    fails = [s for s, v in cache.items() if not v["feasible"]]
+    hi = min(fails) if fails else None
+    passes = [s for s, v in cache.items() if v["feasible"] and (hi is None or s < hi)]
+    return (max(passes) if passes else None), hi
+
+
+def _next_scales(cache: dict, lo, hi, n: int, rel_tol: float) -> list[float]:
+    """The next round's scales, ascending (see :func:`max_scale`); [] when the bracket
+    is closed."""
+    if n < 1:
+        return []
+    if lo is not None and hi is not None:
+        if hi / lo <= 1 + rel_tol:
+            return []
+        need = int(np.ceil(np.log(hi / lo) / np.log1p(rel_tol) - 1e-9)) - 1  # points that close it in one round
+        n = max(1, min(n, need))
+        if n == 1:
+            return [float(np.sqrt(lo * hi))]
+        return [float(lo * (hi / lo) ** (j / (n + 1))) for j in range(1, n + 1)]
+    base = cache[lo] if lo is not None else cache[hi]
+    u = _scaling_utilisation(base)
+    guess = base["scale"] / u if u > 0 else base["scale"] * 4
+    step = 1 + rel_tol
+    if lo is not None:  # only passing so far: jump to the prediction, at least +rel_tol
+        s = max(guess * 0.995, lo * step)
+        ok = lambda x: x >= lo * step * (1 - 1e-12)  # noqa: E731
+    else:
+        s = min(guess * 0.995, hi / step)
+        ok = lambda x: x <= hi / step * (1 + 1e-12)  # noqa: E731
+    out = [s]
+    m = 1
+    while len(out) < n and m <= 4 * n:
+        for x in (s * step**m, s / step**m):
+            if len(out) < n and ok(x):
+                out.append(x)
+        m += 1
+    return sorted(float(x) for x in out)
+
+
 def _first_failed(v: dict) -> str:
-    failed = [c for c in v["checks"] if not c["pass"]]
+    """The most utilised failed capability check (tracking checks do not enter the verdict)."""
+    from sim.assess.feasibility import is_tracking
+
+    failed = [c for c in v["checks"] if not c["pass"] and not is_tracking(c)]
     return max(failed, key=lambda c: c["utilisation"])["name"] if failed else v["limiting"]
 
 

@@ -59,6 +59,10 @@ def verdict_lines(fe: dict, top: int = 6) -> list[str]:
     return lines
 
 
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}" + ("" if n == 1 else "s")
+
+
 def _floats(text: str, what: str) -> list[float]:
     try:
         vals = [float(x) for x in text.replace("x", ",").replace("X", ",").split(",") if x.strip()]
@@ -155,7 +159,7 @@ def cmd_feasibility(args) -> int:
                 print(
                     f"largest scale: {res['max_scale']:.3f}"
                     + (f" (fails at {up:.3f} on {res['limiting_above']})" if up else " (no failure found above it)")
-                    + f"; {res['max_scale_runs']} simulations"
+                    + f"; {_count(res['max_scale_runs'], 'simulation')} in {_count(res['max_scale_rounds'], 'round')}"
                 )
         print(f"wrote {out / 'feasibility.json'} and {out / 'report.md'}")
     return 0 if res["feasible"] else 1
