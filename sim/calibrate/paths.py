@@ -439,6 +439,19 @@ def residual_vector(pr: PathRun, model: dict | None) -> np.ndarray | None:
     return np.concatenate(parts)
 
 
+def residual_segments(prs) -> list:
+    """Positions of each compared column of each run in :func:`stacked`'s vector (each a
+    time series; :func:`residual_vector` stacks them as consecutive blocks)."""
+    from sim.calibrate.hac import blocks
+
+    lengths = []
+    for pr in prs:
+        ch = next(iter(pr.columns))
+        n = len(pr.recorded[ch][pr.rows])
+        lengths += [n] * sum(len(c) for c in pr.columns.values())
+    return blocks(lengths)
+
+
 def stacked(prs, models) -> np.ndarray | None:
     """Residuals of several runs stacked, each run weighted alike (sum of squares: the
     mean over runs of their NRMSE squared)."""

@@ -19,7 +19,10 @@ explains (the score). Sensor candidates need no replay: the sensor acts on the
 model's channels after the fact. *Refinement* (:func:`refine_job`): the best few,
 ``scipy.optimize.least_squares`` from the linearised estimate on a longer window
 (Jacobian by the same finite steps; a valve delay, realised as whole physics steps,
-by a scan of its grid), with the covariance ``s^2 (J^T J)^-1`` at the solution.
+by a scan of its grid), with the covariance ``(J^T J)^-1 Omega (J^T J)^-1`` at the
+solution, ``Omega`` from the residual's autocorrelation within each compared column of
+each window (:func:`sim.calibrate.hac.hac_sigma`: the residual is coloured, so
+``s^2 (J^T J)^-1`` would be too narrow).
 """
 
 from __future__ import annotations
@@ -414,7 +417,8 @@ def refine_job(job) -> Refined:
     from scipy.optimize import least_squares
 
     c, theta0, prs, base_models, ctx, max_nfev = job
-    from sim.calibrate.paths import stacked
+    from sim.calibrate.hac import hac_sigma
+    from sim.calibrate.paths import residual_segments, stacked
 
     r0 = stacked(prs, base_models)
     rss0 = float(r0 @ r0)
@@ -475,13 +479,9 @@ def refine_job(job) -> Refined:
     J = _jac(c, theta, r, prs, base_models, ctx)
     if J is None:
         return Refined(c, theta, np.full(len(theta), math.inf), float(r @ r), rss0, nfev, False, "replay diverged")
-    n, p = len(r), len(theta)
-    s2 = float(r @ r) / max(n - p, 1)
-    try:
-        cov = s2 * np.linalg.inv(J.T @ J)
-        sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    except np.linalg.LinAlgError:
-        sigma = np.full(p, math.inf)
+    # the residual is coloured (anti-alias filter, unmodelled dynamics): the covariance
+    # from its autocorrelation within each column of each window (sim.calibrate.hac)
+    sigma = hac_sigma(J, r, residual_segments(prs))
     return Refined(c, theta, sigma, float(r @ r), rss0, nfev, True)
 
 

@@ -6,7 +6,9 @@ and its shape parameters (the exponent of power-law damping). On the mechanical 
 every term is linear in its coefficient, so a set of terms is fitted by one weighted
 linear least squares over the fit runs (each run and DOF weighted by its recorded
 force, the NEES-UCSD paper's Eq. 14); a shape parameter is scanned on its grid and
-refined by a bounded scalar search, each point a linear least squares.
+refined by a bounded scalar search, each point a linear least squares. The parameters'
+standard deviations account for the residual's correlation in time within each run and
+DOF (:func:`sim.calibrate.hac.hac_sigma`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from sim.calibrate.hac import hac_sigma
 
 
 @dataclass
@@ -83,6 +87,23 @@ def _stack(mruns, terms):
         ys.append(mr.extra["y"])
         Xs.append(np.stack(cols, axis=1) if cols else np.zeros((mr.extra["y"].size, 0)))
     return np.concatenate(ys), np.concatenate(Xs, axis=0)
+
+
+def _segments(mruns) -> list:
+    """Positions in the stacked target (:func:`_stack`: per run, the fit rows by DOF,
+    row-major) of each run's DOF in time order, ``-1`` at the rows not in the fit."""
+    out, k0 = [], 0
+    for mr in mruns:
+        rows = np.asarray(mr.rows, bool)
+        k = mr.force.shape[1]
+        idx = np.flatnonzero(rows)
+        if idx.size:
+            span = rows[idx[0] : idx[-1] + 1]
+            order = np.where(span, np.cumsum(span) - 1, -1)
+            for j in range(k):
+                out.append(np.where(order >= 0, k0 + order * k + j, -1))
+        k0 += idx.size * k
+    return out
 
 
 def _solve(y, X):
@@ -184,12 +205,11 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
             Jcols.append(_shape_jacobian(mruns, t, theta[off[i]]))
     Jm = np.concatenate(Jcols, axis=1) if Jcols else X
     n, p = len(y), Jm.shape[1]
-    s2 = rss / max(n - p, 1)
-    try:
-        cov = s2 * np.linalg.inv(Jm.T @ Jm) if p else np.zeros((0, 0))
-        sd = np.sqrt(np.where(np.diag(cov) >= 0, np.diag(cov), np.inf))
-    except np.linalg.LinAlgError:
-        sd = np.full(p, np.inf)
+    # the residual is coloured (prefilter, unmodelled dynamics): the estimate's standard
+    # deviations from its autocorrelation within each run and DOF (sim.calibrate.hac)
+    q = _second_stack(mruns, terms, theta)
+    r = y - X @ theta - (q if q is not None else 0.0)
+    sd = hac_sigma(Jm, r, _segments(mruns)) if p else np.zeros(0)
     values, sigma = [], []
     js = X.shape[1]
     for i, t in enumerate(terms):
