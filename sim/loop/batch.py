@@ -163,11 +163,24 @@ def run_batch(
     return BatchRunner(sims, nthread=nthread).run(references, valve_commands=valve_commands, duration_s=duration_s)
 
 
+#: model sizes that do not size MjData (the names' text and the model's own buffer)
+_NOT_LAYOUT = ("nbuffer", "nnames", "nnames_map", "npaths", "ntext", "ntextdata", "ntuple", "ntupledata")
+
+
+def _layout(m) -> tuple:
+    """Every size of the model that sizes MjData (each ``n*`` integer: bodies, joints,
+    tendons, wraps, their Jacobians' nonzeros, ...). A tendon added by an effect at a DOF
+    (a spring, a damper) keeps nq, nv, nu and nbody but not ntendon, nwrap, nJten: such
+    models cannot share a batch (``mjb_setModels``)."""
+    return tuple(
+        (k, v) for k in sorted(dir(m)) if k.startswith("n") and k not in _NOT_LAYOUT and type(v := getattr(m, k)) is int
+    )
+
+
 def _batch_key(sim):
     """Simulations with equal keys can share one batch (same MjData layout, physics step
     and controller rate)."""
-    m = sim.m
-    return (m.nq, m.nv, m.nu, m.nbody, m.neq, sim.steps_per_tick, float(sim.dt))
+    return (_layout(sim.m), sim.steps_per_tick, float(sim.dt))
 
 
 def run_many(

@@ -216,12 +216,81 @@ def test_valve_delay_of_a_class_found(floor, tmp_path):
 
 @pytest.mark.slow
 def test_bulk_modulus_of_a_class_found(floor, tmp_path):
-    """Aerated oil in the lateral actuators: 0.7 GPa where the description says 1.0 GPa.
-    (At 0.6 GPa the open-loop replay is 145 % off and the search, linearised at 1.0 GPa,
-    took a lateral flow gain of 0.2 instead: a limit of the screening, docs/calibration.md.)"""
+    """Aerated oil in the lateral actuators: 0.7 GPa where the description says 1.0 GPa."""
     paths = _cgs_measured(tmp_path, [{"type": "bulk_modulus", "where": "class:lateral", "bulk_modulus_pa": 0.7e9}])
     res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
     _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.7e9)
+
+
+@pytest.mark.slow
+def test_bulk_modulus_far_from_the_model_found(floor, tmp_path, monkeypatch):
+    """0.6 GPa in the lateral actuators against a declared 1.0 GPa: the open-loop replay is
+    145 % off (issue #13). Calibrated twice: as it is, and with the bulk-modulus candidate
+    screened by the former step, 10 % up, whose linearisation at 1.0 GPa ranks a lateral flow
+    gain (55.8 %) far above any bulk modulus (12-13 %) and estimates 0.96 GPa, in a local
+    minimum of the residual. The best of each effect type is refined as well
+    (pathsearch.to_refine), from a line search along the screened direction
+    (pathsearch.line_search); the refined fits, compared by the residual they leave, name
+    the bulk modulus. Without either, the flow gain (0.20, 73.5 %) was added."""
+    from sim.calibrate import sensitivity as SE
+
+    paths = _cgs_measured(tmp_path, [{"type": "bulk_modulus", "where": "class:lateral", "bulk_modulus_pa": 0.6e9}])
+    res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
+    _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.6e9)
+    assert res.error_before > 1.0  # far from the model
+
+    stock = SE.candidates
+
+    def upward_step(*a, **k):
+        out = stock(*a, **k)
+        for c in out:
+            if c.type == "bulk_modulus":
+                c.step = 0.1 * c.neutral
+        return out
+
+    monkeypatch.setattr(SE, "candidates", upward_step)
+    res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
+    first = [c for c in res.candidates if c["round"] == 0]
+    best_screened = max(first, key=lambda c: c["linearised_score"])
+    assert best_screened["name"] == "valve_flow_gain", best_screened  # the linearisation ranks the wrong type first
+    _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.6e9)
+
+
+def test_the_best_of_each_type_is_refined():
+    """to_refine: the 3 best by linearised score, plus the best of every other (type, kind
+    of place) among the 20 best that explain >= 5 %; failed screens are left out."""
+    import numpy as np
+
+    from sim.calibrate.pathsearch import to_refine
+    from sim.calibrate.sensitivity import Candidate, Screen
+
+    def scr(t, where, score, ok=True):
+        one = np.array([1.0])
+        return Screen(Candidate(t, where, ("k",), one, one, -one, 2 * one, {"k": "1"}), score, one, ok)
+
+    sc = [
+        scr("valve_flow_gain", "class:lateral", 0.56),
+        scr("sensor_gain", "channel:actuator_force", 0.43),
+        scr("sensor_gain", "channel:actuator_force[4]", 0.17),
+        scr("sensor_gain", "channel:actuator_force[5]", 0.16),
+        scr("valve_delay", "class:lateral", 0.15, ok=False),
+        scr("bulk_modulus", "actuator:Y2", 0.133),
+        scr("bulk_modulus", "actuator:Y1", 0.132),
+        scr("bulk_modulus", "class:lateral", 0.123),
+        scr("valve_flow_gain", "actuator:Y1", 0.10),
+    ] + [scr("sensor_delay", f"channel:table_velocity[{j}]", 0.09 - 0.001 * j) for j in range(12)]
+    sc += [scr("leakage", "class:vertical", 0.06), scr("spring", "dof:x", 0.04)]
+    got = [(s.cand.type, s.cand.where) for s in to_refine(sc)]
+    assert got == [
+        ("valve_flow_gain", "class:lateral"),
+        ("sensor_gain", "channel:actuator_force"),
+        ("sensor_gain", "channel:actuator_force[4]"),
+        ("bulk_modulus", "actuator:Y2"),
+        ("bulk_modulus", "class:lateral"),
+        ("valve_flow_gain", "actuator:Y1"),
+        ("sensor_delay", "channel:table_velocity[0]"),
+    ]  # leakage is the 21st usable screen (beyond the 20), the spring below 5 %
+    assert [s.cand.where for s in to_refine(sc, n_top=1, pool=1)] == ["class:lateral"]
 
 
 @pytest.mark.slow

@@ -107,6 +107,26 @@ def test_open_loop_batch_and_run_many_equal_single_runs():
         run_many(sims, references=[None] * 3, valve_commands=vcs)
 
 
+def test_run_many_keeps_models_of_other_tendon_layouts_apart():
+    """A spring or damper at a DOF adds a tendon (nq, nv, nu, nbody unchanged): such a model
+    and the declared one gave ``mjb_setModels: ... does not give mjData the batch model's
+    layout`` in one batch (a calibration screening the whole library on the replay path).
+    run_many puts them in batches of their own, each result its own run's."""
+    sims = [_sim(), _sim(({"type": "spring", "where": "dof:x", "stiffness_n_m": 2e7},)), _sim()]
+    assert sims[0].m.ntendon != sims[1].m.ntendon and sims[0].m.nv == sims[1].m.nv
+    vcs = [_commands(20 + i, n=N_TICK) for i in range(3)]
+    singles = []
+    for s, vc in zip(sims, vcs):
+        s.reset()
+        singles.append(s.run(valve_command=vc))
+        s.reset()
+    counts: dict = {}
+    many = run_many(sims, valve_commands=vcs, nthread=1, counts=counts)
+    assert counts == {"batch": 3, "fallback": 0}
+    for a, b in zip(singles, many):
+        _same(a, b)
+
+
 def test_closed_loop_callback_checks_the_last_tick_as_the_loop_does():
     """The loop measures the gap (and checks) on the last tick whatever its number; the
     callback now does too (before, a run whose last tick was not a multiple of 8 had NaN
