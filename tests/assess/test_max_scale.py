@@ -93,3 +93,15 @@ def test_two_threads_find_the_same_scale_in_fewer_rounds(monkeypatch):
     # a scale run in a round with others (on a spare plan of the case) gives its own run's verdict
     alone = study.assess(study.Case(**{**_case().__dict__, "scale": par["max_scale"]}))
     assert [c["utilisation"] for c in alone["checks"]] == [c["utilisation"] for c in par["at_max"]["checks"]]
+
+
+def test_default_budget_is_six_rounds():
+    """With no budget given the search stops after 6 rounds (the one-at-a-time search's 6
+    runs with one thread); with two threads those 6 rounds close the bracket within
+    ``rel_tol`` on this case (6 runs one at a time leave it open wider)."""
+    seq = study.max_scale(_case(), nthread=1, rel_tol=REL_TOL)
+    par = study.max_scale(_case(), nthread=2, rel_tol=REL_TOL)
+    assert seq["max_scale_rounds"] == seq["max_scale_runs"] <= 6
+    assert par["max_scale_rounds"] <= 6 and par["max_scale_runs"] <= 12
+    assert par["max_scale_upper"] / par["max_scale"] <= 1 + REL_TOL
+    assert par["max_scale_upper"] / par["max_scale"] <= seq["max_scale_upper"] / seq["max_scale"]
