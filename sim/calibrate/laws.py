@@ -34,6 +34,8 @@ from typing import Callable
 
 import numpy as np
 
+from mjcf.description import DOFS6
+
 
 @dataclass(frozen=True)
 class Law:
@@ -212,9 +214,6 @@ add_law(
 )
 
 
-DOF6 = ("x", "y", "z", "rx", "ry", "rz")
-
-
 def cg_offset_force(r, m: float, c, u6, a6, g: float, *, second_order: bool = True) -> np.ndarray:
     """(n, 6) generalised force (x, y, z; rx, ry, rz about the platen's reference point O,
     world axes) that a payload of mass ``m`` whose centre of gravity sits at ``c + r``
@@ -261,7 +260,7 @@ def _cg_offset(u, v, a, s):
     (displacement) goes through the sensor prefilter ``s["_filt"]``, the inertial terms
     not (the recorded acceleration already did)."""
     dofs = list(s["_dofs"])
-    cols = [DOF6.index(d) for d in dofs]
+    cols = [DOFS6.index(d) for d in dofs]
     u6 = np.zeros((len(u), 6))
     a6 = np.zeros((len(a), 6))
     u6[:, cols] = u
@@ -281,7 +280,7 @@ def _cg_offset(u, v, a, s):
 def _cg_offset_second(u, v, a, s, values):
     """(n, k) the CG offset's second-order force m r x (alpha x r) at ``values`` (its
     parallel-axis inertia; :func:`cg_offset_force`)."""
-    cols = [DOF6.index(d) for d in s["_dofs"]]
+    cols = [DOFS6.index(d) for d in s["_dofs"]]
     a6 = np.zeros((len(a), 6))
     a6[:, cols] = a
     m, c, g = s["_payload"]
@@ -352,7 +351,6 @@ def usable(law: Law) -> bool:
 
 __all__ = [
     "DEADBAND",
-    "DOF6",
     "LAWS",
     "NOT_ON_MECHANICAL",
     "Law",

@@ -237,11 +237,11 @@ def _still_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.n
 
 def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None = None) -> list[MechRun]:
     """The mechanical-path records of ``runs`` against the declared ``desc`` (+ ``payload``)."""
+    from mjcf.description import DOFS6 as DOF6
     from sim.calibrate.laws import declared_forces
     from sim.control.tvc import dof_jacobian
     from sim.effects import build_model
 
-    DOF6 = ("x", "y", "z", "rx", "ry", "rz")
     tm = build_model(desc, payload)
     Me_all = tm.effective_mass_matrix()
     idx6 = [DOF6[j] for j in tm.platen_dof_index]
