@@ -46,15 +46,50 @@ class ValveNull:
         }
 
 
+def kinematic_jacobian(desc) -> np.ndarray:
+    """(n_act, 6) d(stroke)/d(pose) at home, by forward differences."""
+    from mjcf.description import actuator_strokes
+
+    eps = 1e-6
+    s0 = actuator_strokes(desc, np.zeros(6))
+    return np.stack([actuator_strokes(desc, eps * np.eye(6)[k]) - s0 for k in range(6)], axis=1) / eps
+
+
+def internal_basis(desc) -> np.ndarray:
+    """(n_act, k) orthonormal basis of the stroke-velocity directions the table cannot
+    take: the complement of the kinematic Jacobian's range (its left null space, the
+    directions of an internal force ``J^T f = 0``). k = 0 for a table with no more
+    actuators than the rank of its Jacobian; 6 on CGS (12 actuators, 6 DOF)."""
+    J = kinematic_jacobian(desc)
+    U, s, _ = np.linalg.svd(J)
+    r = int(np.sum(s > 1e-9 * max(float(s[0]), 1e-300))) if len(s) else 0
+    return U[:, r:]
+
+
 def stroke_velocity(run, desc) -> tuple[np.ndarray, str]:
     """Each actuator's stroke velocity (N, n_act), m/s, from what the record has:
     ``actuator_displacement`` (differentiated), else the table's velocity or displacement
-    through the actuators' kinematic Jacobian at home."""
-    from mjcf.description import DOFS6, actuator_strokes
+    through the actuators' kinematic Jacobian at home.
+
+    On an over-actuated table (more actuators than DOF: CGS, 12 for 6) the differentiated
+    actuator transducers are projected onto the motions the table can make (the range of
+    the kinematic Jacobian, i.e. the DOF velocity fitted to the 12 strokes by least squares
+    and mapped back): the actuators cannot move apart, so what the transducers show in
+    the other directions is their own noise. Unprojected, that noise (the displacement's
+    end-point noise over the record, ~10-25 um/s on 3 s CGS runs with 20 um transducers)
+    entered each actuator's null estimate and, replayed, drove an internal force of ~1 kN
+    (issue #13; docs/calibration.md)."""
+    from mjcf.description import DOFS6
 
     fs = run.sample_rate_hz
     if run.actuator_displacement is not None and np.all(np.isfinite(run.actuator_displacement)):
-        return np.gradient(run.actuator_displacement, 1.0 / fs, axis=0), "actuator_displacement (differentiated)"
+        v = np.gradient(run.actuator_displacement, 1.0 / fs, axis=0)
+        what = "actuator_displacement (differentiated)"
+        N = internal_basis(desc)
+        if N.shape[1]:
+            v = v - (v @ N) @ N.T
+            what += f", projected onto the table's {v.shape[1] - N.shape[1]} DOF motions"
+        return v, what
     if run.table_velocity is not None and np.all(np.isfinite(run.table_velocity)):
         q, what = run.table_velocity, "table_velocity"
     elif run.table_displacement is not None and np.all(np.isfinite(run.table_displacement)):
@@ -68,14 +103,7 @@ def stroke_velocity(run, desc) -> tuple[np.ndarray, str]:
     q6 = np.zeros((len(q), 6))
     for j, d in enumerate(run.dofs):
         q6[:, DOFS6.index(d)] = q[:, j]
-    eps = 1e-6
-    J = (
-        np.stack(
-            [actuator_strokes(desc, eps * np.eye(6)[k]) - actuator_strokes(desc, np.zeros(6)) for k in range(6)], axis=1
-        )
-        / eps
-    )  # (n_act, 6)
-    return q6 @ J.T, what + " through the kinematic Jacobian"
+    return q6 @ kinematic_jacobian(desc).T, what + " through the kinematic Jacobian"
 
 
 def estimate(run, desc, *, drift: bool = True) -> ValveNull:
@@ -121,4 +149,4 @@ def declared_null(desc) -> np.ndarray:
     return np.asarray(hp.per_actuator("valve_null_offset"), float)
 
 
-__all__ = ["ValveNull", "declared_null", "estimate", "stroke_velocity"]
+__all__ = ["ValveNull", "declared_null", "estimate", "internal_basis", "kinematic_jacobian", "stroke_velocity"]
