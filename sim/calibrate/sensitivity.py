@@ -6,9 +6,8 @@ effects (:mod:`sim.effects.hydraulic`) at each actuator and each class (the supp
 at the supply), the mechanical effects with a coefficient that vanishes (spring,
 viscous damping, power-law damping, Coulomb friction, added mass) at each DOF, actuator
 and class, and the sensor effects (:mod:`sim.effects.sensors`: gain, offset, delay,
-low-pass) on each compared channel and on each of its columns (on the replay path of an
-over-actuated table, no offset on the actuator forces and pressures: an internal force
-the motion does not show looks alike there, :func:`internal_force_free`).
+low-pass) on each compared channel and on each of its columns (what part of a load
+cell's offset an over-actuated table's replay can tell: :func:`internal_force_part`).
 
 *Screening* (:func:`screen`): from the current model (parameters at their *neutral*
 value, where the effect changes nothing: a flow-gain factor of 1, the description's
@@ -217,15 +216,10 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
                 )
             )
     fs = 1.0 / prs[0].dt
-    # an over-actuated table's static internal force (actuators pushing on each other) is
-    # not set by the motion on the replay path (see internal_force_free)
-    free = internal_force_free(cur) if prs[0].path == "replay" else ()
     for t in SENSOR:
         if t not in EFFECTS or (want and t not in want):
             continue
         for ch, cols in prs[0].columns.items():
-            if t == "sensor_offset" and ch in free:
-                continue
             for w in [f"channel:{ch}"] + [f"channel:{ch}[{j}]" for j in cols]:
                 if (t, w) in have:
                     continue
@@ -256,22 +250,24 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
     return out
 
 
-def internal_force_free(desc) -> tuple:
-    """The actuator channels whose static part the replay path cannot tell from a sensor
-    offset: on a table with more actuators than the rank of its kinematic Jacobian (CGS:
-    12 for 6 DOF) the actuators can hold a constant internal force against each other
-    that moves nothing, and the replay does not set it from the motion: it is what small
-    differences of the drive (each valve's null estimated from the motion, the recorded
-    command's quantisation) integrate to in actuators that cannot move apart (the
-    mechanism was not measured apart). On clean CGS runs X1 and X3 replay ~1 kN off
-    their recorded mean, alike in every run, which a load cell offset would absorb.
-    Empty for a table without such redundancy."""
-    from sim.control.tvc import dof_jacobian
+def internal_force_part(desc) -> np.ndarray:
+    """(n_act, n_act) projector onto the actuator forces that move nothing (``J^T f = 0``,
+    ``J`` the kinematic Jacobian at home): zero for a table with no more actuators than the
+    rank of its Jacobian; rank 6 on CGS (12 actuators, 6 DOF).
 
-    J = dof_jacobian(desc)
-    if np.linalg.matrix_rank(J) >= J.shape[0]:
-        return ()
-    return ("actuator_force", "pressure_a", "pressure_b")
+    A constant load-cell offset ``o`` (n_act) splits into this internal part ``P o`` and
+    the rest, a net wrench on the platen that the recorded motion contradicts. The internal
+    part reads like a constant internal force, which the replay (open loop, the hydraulics
+    reset at rest, the valve nulls' internal part held by the recorded commands,
+    :func:`sim.calibrate.valve_null.stroke_velocity`) starts at zero and keeps: a record
+    that starts from rest (as the simulated ones here) tells it apart; a record that starts
+    holding an internal force (a real table whose force-balance loop has settled) does not:
+    there the static internal part of the load-cells' offsets and that initial force are
+    one unknown. Measured in docs/calibration.md (issue #13)."""
+    from sim.calibrate.valve_null import internal_basis
+
+    N = internal_basis(desc)  # the same subspace: force f with J^T f = 0 <=> f orthogonal to range(J)
+    return N @ N.T
 
 
 # ------------------------------------------------------------------ sensor candidates
@@ -493,7 +489,7 @@ __all__ = [
     "SENSOR",
     "Screen",
     "candidates",
-    "internal_force_free",
+    "internal_force_part",
     "refine_job",
     "screen",
 ]
