@@ -47,12 +47,14 @@ class ValveNull:
 
 
 def kinematic_jacobian(desc) -> np.ndarray:
-    """(n_act, 6) d(stroke)/d(pose) at home, by forward differences."""
+    """(n_act, 6) d(stroke)/d(pose) at home, by central differences."""
     from mjcf.description import actuator_strokes
 
-    eps = 1e-6
-    s0 = actuator_strokes(desc, np.zeros(6))
-    return np.stack([actuator_strokes(desc, eps * np.eye(6)[k]) - s0 for k in range(6)], axis=1) / eps
+    h = 1e-6
+    I6 = np.eye(6)
+    return np.stack(
+        [actuator_strokes(desc, h * I6[k]) - actuator_strokes(desc, -h * I6[k]) for k in range(6)], axis=1
+    ) / (2 * h)
 
 
 def internal_basis(desc) -> np.ndarray:

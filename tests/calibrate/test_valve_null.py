@@ -65,3 +65,21 @@ def test_clean_replay_holds_no_internal_force(clean_run):
     mean = np.mean(pr.recorded["actuator_force"] - m["actuator_force"], axis=0)
     assert np.abs(mean).max() < 100.0, mean
     assert P.nrmse([pr], [m]) < 0.05  # 0.0560 before, 0.0477 after (the noise floor of this run)
+
+
+def test_the_internal_part_of_a_load_cell_offset():
+    """sensitivity.internal_force_part: a projector of rank 6 on CGS whose forces exert no
+    wrench on the platen; a horizontal cell's offset is 62.5 % internal (of its square), a
+    vertical one's 25 %; nothing on a table without redundancy."""
+    import mjcf
+    from sim.calibrate.sensitivity import internal_force_part
+    from sim.calibrate.valve_null import kinematic_jacobian
+
+    desc = mjcf.load_table("cgs")
+    P, J = internal_force_part(desc), kinematic_jacobian(desc)
+    assert np.allclose(P @ P, P, atol=1e-12) and np.allclose(P, P.T)
+    assert np.trace(P) == pytest.approx(6.0)
+    assert np.abs(J.T @ P).max() < 1e-6 * np.abs(J).max()
+    assert np.diag(P)[:8] == pytest.approx([0.625] * 8, abs=1e-9)
+    assert np.diag(P)[8:] == pytest.approx([0.25] * 4, abs=1e-9)
+    assert not internal_force_part(mjcf.load_table("lab")).any()
