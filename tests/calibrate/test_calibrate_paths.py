@@ -207,8 +207,9 @@ def test_leakage_of_a_class_found(floor, tmp_path):
 @pytest.mark.slow
 def test_valve_null_offset_of_one_actuator_found(floor, tmp_path):
     """X1's valve 1 % open at zero command (a torque-motor null shift). The replay path's
-    null estimate (from the motion) takes most of it, ~0.009: X1 pushes partly against
-    X2-X4, an internal force the motion does not show; the search adds the rest, and the
+    null estimate (from the motion) takes most of it, ~0.009: X1 pushes against X2-X4, an
+    internal force the motion does not show, held by the closed loop's commands against the
+    leakage (docs/calibration.md, issue #13); the search adds the rest, and the
     reported offset is the whole null (estimate + correction, pathsearch.null_total)."""
     paths = _cgs_measured(tmp_path, [{"type": "valve_null_offset", "where": "actuator:X1", "offset": 0.01}])
     res = S.calibrate(paths, path="replay", effects=["valve_null_offset", "valve_flow_gain"], workers=2)
