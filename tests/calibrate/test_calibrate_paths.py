@@ -389,6 +389,91 @@ def test_closed_loop_path_finds_an_accelerometer_gain(sensor_runs, tmp_path):
     assert res.error_after <= 0.2 * res.error_before or res.error_after < 0.08
 
 
+def test_closed_loop_clean_runs_add_nothing(clean_paths, tmp_path):
+    """The clean runs with only the reference and the motion: nothing is added on the
+    closed-loop path either, with the sensor types among the candidates (no sensor
+    candidate explains 5 % of its own columns there: at most 0.3 %)."""
+    (tmp_path / "ref").mkdir()
+    paths = _reference_only(clean_paths, tmp_path / "ref")
+    res = S.calibrate(paths, effects=EFFECTS + SENSORS, workers=2)
+    assert res.residual_path == "closed_loop"
+    assert res.effects_added == []
+    assert res.error_after == res.error_before
+    assert res.error_before < 0.03  # 1.64 %: no load cells here, the acceleration's noise floor
+
+
+@pytest.fixture(scope="module")
+def small_sensor_runs(tmp_path_factory):
+    """Two small sensor errors: Y1's load cell (column 4) 5 % high and the x accelerometer
+    3 % low. Each explains little of the pooled residual (2.3 % and 0.9 % on the replay
+    path) and much of its own column's (43 %, 38 %)."""
+    return _cgs_measured(
+        tmp_path_factory.mktemp("small"),
+        [
+            {"type": "sensor_gain", "where": "channel:actuator_force[4]", "gain": 1.05},
+            {"type": "sensor_gain", "where": "channel:table_acceleration[0]", "gain": 0.97},
+        ],
+    )
+
+
+def _deviation(res, where):
+    (e,) = [e for e in res.effects_added if e["where"] == where]
+    assert e["name"] == "sensor_gain"
+    return e["parameters"]["gain"] - 1.0
+
+
+def test_small_sensor_gains_found_on_their_own_columns(small_sensor_runs):
+    """Replay path: both found, each error (gain - 1) within 10 % of the planted one,
+    and nothing else (sensor candidates screened also by the share of their own columns'
+    residual, pathsearch.to_refine)."""
+    res = S.calibrate(small_sensor_runs, path="replay", effects=SENSORS, workers=2)
+    assert res.residual_path == "replay"
+    assert len(res.effects_added) == 2, res.effects_added
+    assert _deviation(res, "channel:actuator_force[4]") == pytest.approx(0.05, rel=0.10)
+    assert _deviation(res, "channel:table_acceleration[0]") == pytest.approx(-0.03, rel=0.10)
+    assert res.error_after < res.error_before
+
+
+def test_closed_loop_path_finds_a_small_accelerometer_gain(small_sensor_runs, tmp_path):
+    """The same runs with only the reference and the motion: the x accelerometer's 3 %
+    found on the closed-loop path (the load cell is not recorded there)."""
+    (tmp_path / "ref").mkdir()
+    res = S.calibrate(_reference_only(small_sensor_runs, tmp_path / "ref"), effects=SENSORS, workers=2)
+    assert res.residual_path == "closed_loop"
+    assert [e["where"] for e in res.effects_added] == ["channel:table_acceleration[0]"], res.effects_added
+    assert _deviation(res, "channel:table_acceleration[0]") == pytest.approx(-0.03, rel=0.10)
+
+
+def test_sensor_candidates_refined_by_their_own_columns():
+    """to_refine: a sensor candidate below the pooled 5 % is refined when it explains >= 5 %
+    of its own columns, the best of each (sensor type, kind of place) by that share."""
+    import numpy as np
+
+    from sim.calibrate.pathsearch import to_refine
+    from sim.calibrate.sensitivity import Candidate, Screen
+
+    def scr(t, where, score, own=None):
+        one = np.array([1.0])
+        c = Candidate(t, where, ("k",), one, one, -one, 2 * one, {"k": "1"}, sensor=own is not None)
+        return Screen(c, score, one, True, own)
+
+    sc = [
+        scr("valve_flow_gain", "class:lateral", 0.30),
+        scr("sensor_gain", "channel:actuator_force[4]", 0.023, own=0.43),
+        scr("sensor_gain", "channel:table_acceleration[0]", 0.009, own=0.38),
+        scr("sensor_gain", "channel:table_acceleration", 0.003, own=0.09),
+        scr("sensor_delay", "channel:actuator_force[2]", 0.005, own=0.04),
+        scr("sensor_offset", "channel:table_velocity[1]", 0.0, own=0.06),
+    ]
+    got = [(s.cand.type, s.cand.where) for s in to_refine(sc)]
+    assert got == [
+        ("valve_flow_gain", "class:lateral"),
+        ("sensor_gain", "channel:actuator_force[4]"),
+        ("sensor_gain", "channel:table_acceleration"),
+        ("sensor_offset", "channel:table_velocity[1]"),
+    ]  # the accelerometer's column: a sensor_gain column already in; the delay: 4 % of its column
+
+
 def test_cli_replay_path_writes_json_report_and_table(sensor_runs, tmp_path):
     from sim.cli import main
 
