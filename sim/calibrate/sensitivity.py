@@ -15,7 +15,9 @@ bulk modulus, no delay, zero force), one short replay per parameter with the par
 stepped gives the sensitivity ``S`` of the compared channels; the linearised least
 squares ``r0 + S d = min`` gives the step ``d`` and the share of the residual it
 explains (the score). Sensor candidates need no replay: the sensor acts on the
-model's channels after the fact. *Refinement* (:func:`refine_job`): the best few,
+model's channels after the fact; they are also scored by the share of the residual of
+the columns they act on (``Screen.own``: one column of the 18 of a 6-DOF table is a
+small share of the whole). *Refinement* (:func:`refine_job`): the best few,
 ``scipy.optimize.least_squares`` from the linearised estimate on a longer window
 (Jacobian by the same finite steps; a valve delay, realised as whole physics steps,
 by a scan of its grid), with the covariance ``(J^T J)^-1 Omega (J^T J)^-1`` at the
@@ -296,6 +298,8 @@ class Screen:
     score: float  # share of the residual sum of squares the linearised fit explains
     theta: np.ndarray  # the linearised estimate (clipped into the bounds)
     ok: bool = True
+    #: a sensor candidate's share of the residual of the columns it acts on (None: not a sensor)
+    own: float | None = None
 
 
 def linear_fit(r0, S) -> tuple[np.ndarray, float]:
@@ -339,11 +343,17 @@ def screen(cands, prs, base_models, ctx, workers=None, say=None, counts=None) ->
     out = []
     for ci, c in enumerate(cands):
         cols = []
+        own = None
         if c.sensor:
             th = c.neutral.copy()
             th[0] += c.step[0]
-            r1 = stacked(prs, [sensor_model(c, th, pr, m) for pr, m in zip(prs, base_models)])
+            stepped = [sensor_model(c, th, pr, m) for pr, m in zip(prs, base_models)]
+            r1 = stacked(prs, stepped)
             cols.append((r1 - r0) / c.step[0])
+            on = [pr.only(acts_on(c)) for pr in prs]
+            if all(p.columns for p in on):
+                r0o = stacked(on, base_models)
+                own = linear_fit(r0o, ((stacked(on, stepped) - r0o) / c.step[0])[:, None])[1]
         else:
             bad = False
             for p in c.screened:
@@ -359,8 +369,16 @@ def screen(cands, prs, base_models, ctx, workers=None, say=None, counts=None) ->
         d, score = linear_fit(r0, S)
         th = c.neutral.copy()
         th[list(c.screened)] += d
-        out.append(Screen(c, score, _inside(c, th)))
+        out.append(Screen(c, score, _inside(c, th), own=own))
     return out
+
+
+def acts_on(cand: Candidate):
+    """``keep(channel, column)``: the compared columns a sensor candidate acts on."""
+    from sim.effects.sensors import parse_channel
+
+    ch, col = parse_channel(cand.where)
+    return lambda c, j: c == ch and (col is None or j == col)
 
 
 # ------------------------------------------------------------------ refinement
@@ -488,6 +506,7 @@ __all__ = [
     "Refined",
     "SENSOR",
     "Screen",
+    "acts_on",
     "candidates",
     "internal_force_part",
     "refine_job",
