@@ -122,7 +122,10 @@ class BatchRunner:
             c0 = time.process_time()
             t0 = time.perf_counter()
             while True:
-                active = np.flatnonzero((done < ns) & np.array([c.C[CB.S_DONE] < 0 for c in ctxs]))
+                # stopped: diverged, or reset by MuJoCo after a bad state (which zeroes userdata,
+                # so the callback has stopped counting its steps)
+                live = np.array([c.C[CB.S_DONE] < 0 and c.C[CB.S_CALLS] >= dn * spt for c, dn in zip(ctxs, done)])
+                active = np.flatnonzero((done < ns) & live)
                 if not len(active):
                     break
                 k = int(min(chunk_ticks, (ns[active] - done[active]).min()))

@@ -48,25 +48,24 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-from hydraulics import _layout as HL
 from sim.errors import ScenarioError
 from sim.loop import _kernels as FL
+from sim.loop.divergence import CODE_RESET, CODE_WARN, NWARN_ALL, WARN_IDX, check_state, divergence_reason
 from sim.loop.mjlayout import field_offsets
-from sim.loop.simulation import CAUSE_STEP, GAP_LIMIT_M, RunResult
+from sim.loop.simulation import RunResult
 
 NUSERDATA = 2  #: userdata[0] = context address, userdata[1] = physics-step counter
 _FIELDS = ("qpos", "qvel", "qacc", "ctrl", "qfrc_applied", "xpos", "xmat", "userdata")
-
 # ---- context scalars
 # fmt: off
 (S_N, S_SPT, S_GAP_EVERY, S_RELIEF, S_PD, S_PB, S_DT, S_ZSS, S_AC, S_AN, S_DONE, S_PENDING, S_CODE, S_VALUE,
- S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ, S_VAPOUR, S_OPEN) = range(24)
-NS = 24
+ S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ, S_VAPOUR, S_OPEN, S_CALLS) = range(25)
+NS = 25
 # ---- context arrays (descriptor rows: address, dim0, dim1, dim2)
 ARRAYS = ("Q", "V", "ACC", "HSP", "HF", "HPA", "HPB", "HCMD", "EPS", "EGAS", "GAP",
           "SREF", "VREF", "VFF", "QA", "DA", "IDS", "CONSTS", "J", "JP", "NN", "GAINS", "CSTATE", "PLHP", "PLPREV",
           "CMD2", "X2", "V2", "X", "Y", "IC", "ICS", "BUF", "P", "G", "FRD", "FRFC", "ZFR", "AQ", "AD", "AF0",
-          "XMP", "GB1", "GB2", "GA1", "GA2", "VC")
+          "XMP", "GB1", "GB2", "GA1", "GA2", "VC", "W0")
 # fmt: on
 A = {name: i for i, name in enumerate(ARRAYS)}
 NCTX = NS + 4 * len(ARRAYS)
@@ -135,39 +134,6 @@ def _i2(C, i):
 def _i3(C, i):
     a, n0, n1, n2 = _d(C, i)
     return numba.carray(_ptr(a), (n0, n1, n2), np.int64)
-
-
-@numba.njit(**_J)
-def check_state(qpos, qvel, X, gap, relief, vapour):
-    """The divergence check of ``Simulation._check``, in its order, as a code: 0 fine;
-    2/9 chamber a/b pressures not finite; 1/8 positions/velocities not finite; 3 swivel
-    gap; 4/6 chamber a above relief/below vapour, 5/7 the same for chamber b; and the
-    value the message names (gap or pressure)."""
-    for r, code in ((HL.PA, 2), (HL.PB, 9)):
-        for s in range(X.shape[1]):
-            for i in range(X.shape[2]):
-                if not np.isfinite(X[r, s, i]):
-                    return code, 0.0
-    for v in qpos:
-        if not np.isfinite(v):
-            return 1, 0.0
-    for v in qvel:
-        if not np.isfinite(v):
-            return 8, 0.0
-    if gap > GAP_LIMIT_M:
-        return 3, gap
-    for r, above, below in ((HL.PA, 4, 6), (HL.PB, 5, 7)):
-        pmax, pmin = -np.inf, np.inf
-        for s in range(X.shape[1]):
-            for i in range(X.shape[2]):
-                p = X[r, s, i]
-                pmax = max(pmax, p)
-                pmin = min(pmin, p)
-        if pmax > relief:
-            return above, pmax
-        if pmin < vapour:
-            return below, pmin
-    return 0, 0.0
 
 
 @numba.njit(**_J)
@@ -310,10 +276,12 @@ def _tick_open(k, C, qpos, qvel, ctrl, qfa, qa, da, ids, cmd2, x2, v2, X, Y, IC,
 
 
 @numba.njit(**_J)
-def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud):
-    """One call of the control callback on one simulation (``C``: its context)."""
+def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud, wn):
+    """One call of the control callback on one simulation (``C``: its context; ``wn``:
+    its ``mjData.warning`` as int32 pairs)."""
     s = np.int64(ud[1])
     ud[1] = s + 1
+    C[S_CALLS] = s + 1  # MuJoCo's reset after a bad state zeroes userdata: the calls stop short
     if C[S_DONE] >= 0:  # stopped (diverged): leave the state alone
         return
     spt = np.int64(C[S_SPT])
@@ -326,12 +294,20 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud):
     pd = np.int64(C[S_PD])
     XMP = _f2(C, A_XMP)
     X = _f3(C, A_X)
+    W0 = _i1(C, A_W0)
     if s == 0:
         for r in range(9):
             XMP[pb, r] = xmat[pb, r]
+        for i in range(WARN_IDX.shape[0]):  # MuJoCo's warning counts at the start (a reused MjData: not 0)
+            W0[i] = wn[2 * WARN_IDX[i]]
     if j == 0 and C[S_PENDING] > 0:  # the check of the previous tick, on the state after its steps
         C[S_PENDING] = 0.0
         code, val = check_state(qpos, qvel, X, C[S_VALUE], C[S_RELIEF], C[S_VAPOUR])
+        if code == 0 or code >= 3:  # as Simulation._check: a MuJoCo warning after the finite state, before the rest
+            for i in range(WARN_IDX.shape[0]):
+                if wn[2 * WARN_IDX[i]] > W0[i]:
+                    code = CODE_WARN + i
+                    break
         if code:
             C[S_CODE] = code
             C[S_VALUE] = val
@@ -443,8 +419,15 @@ A_Q, A_V, A_ACC, A_HSP, A_HF, A_HPA, A_HPB, A_HCMD, A_EPS, A_EGAS, A_GAP = range
     11, 25
 )
 A_CMD2, A_X2, A_V2, A_X, A_Y, A_IC, A_ICS, A_BUF, A_P, A_G, A_FRD, A_FRFC, A_ZFR, A_AQ, A_AD, A_AF0 = range(25, 41)
-A_XMP, A_GB1, A_GB2, A_GA1, A_GA2, A_VC = range(41, 47)
-assert A_VC == A["VC"] and A_GA2 == A["GA2"] and A_XMP == A["XMP"] and A_CMD2 == A["CMD2"] and A_SREF == A["SREF"]
+A_XMP, A_GB1, A_GB2, A_GA1, A_GA2, A_VC, A_W0 = range(41, 48)
+assert (
+    A_W0 == A["W0"]
+    and A_VC == A["VC"]
+    and A_GA2 == A["GA2"]
+    and A_XMP == A["XMP"]
+    and A_CMD2 == A["CMD2"]
+    and A_SREF == A["SREF"]
+)
 
 
 # ------------------------------------------------------------------ MjData layout
@@ -455,7 +438,7 @@ _lock = threading.Lock()
 # byte offsets of the mjData array pointers, set by control_callback before compiling
 # _callback (numba freezes them as constants: they depend only on the MuJoCo build, pinned
 # in pyproject.toml, so the compiled callback is cached on disk)
-O_QPOS = O_QVEL = O_QACC = O_CTRL = O_QFA = O_XPOS = O_XMAT = O_UD = O_NUD = 0
+O_QPOS = O_QVEL = O_QACC = O_CTRL = O_QFA = O_XPOS = O_XMAT = O_UD = O_NUD = O_WARN = 0
 
 
 @numba.njit(**_J)
@@ -485,20 +468,21 @@ def _callback(m, d):
         xpos,
         xmat,
         ud,
+        numba.carray(_ptr(base + O_WARN), (2 * NWARN_ALL,), np.int32),
     )
 
 
 def control_callback():
     """The compiled ``mjcb_control`` (numba ``cfunc``), built (or loaded from numba's
     cache) on first use."""
-    global _cfunc, O_QPOS, O_QVEL, O_QACC, O_CTRL, O_QFA, O_XPOS, O_XMAT, O_UD, O_NUD
+    global _cfunc, O_QPOS, O_QVEL, O_QACC, O_CTRL, O_QFA, O_XPOS, O_XMAT, O_UD, O_NUD, O_WARN
     with _lock:
         if _cfunc is not None:
             return _cfunc
         off = field_offsets(_FIELDS)
         O_QPOS, O_QVEL, O_QACC, O_CTRL = off["qpos"], off["qvel"], off["qacc"], off["ctrl"]
         O_QFA, O_XPOS, O_XMAT, O_UD = off["qfrc_applied"], off["xpos"], off["xmat"], off["userdata"]
-        O_NUD = off["nuserdata"]
+        O_NUD, O_WARN = off["nuserdata"], off["warning"]
         _cfunc = numba.cfunc(
             types.void(types.voidptr, types.voidptr), nopython=True, nogil=True, boundscheck=False, cache=True
         )(_callback)
@@ -620,6 +604,7 @@ class Context:
         arr["AQ"], arr["AD"] = np.asarray(tm.air_qadr, np.int64), np.asarray(tm.air_dadr, np.int64)
         arr["AF0"] = np.asarray(tm.air_preload, dtype=float)
         arr["XMP"] = np.zeros((m.nbody, 9))
+        arr["W0"] = np.zeros(len(WARN_IDX), dtype=np.int64)
         arr["GB1"], arr["GB2"] = sim._g_b1.astype(np.int64), sim._g_b2.astype(np.int64)
         arr["GA1"], arr["GA2"] = np.ascontiguousarray(sim._g_a1), np.ascontiguousarray(sim._g_a2)
         C = np.zeros(NCTX)
@@ -632,7 +617,11 @@ class Context:
         C[S_OPEN] = 0.0 if valve_command is None else 1.0
         C[S_NQ], C[S_NV], C[S_NA], C[S_NBODY] = m.nq, m.nv, m.nu, m.nbody
         for name, a in arr.items():
-            want = np.int64 if name in ("QA", "DA", "IDS", "IC", "ICS", "FRD", "AQ", "AD", "GB1", "GB2") else np.float64
+            want = (
+                np.int64
+                if name in ("QA", "DA", "IDS", "IC", "ICS", "FRD", "AQ", "AD", "GB1", "GB2", "W0")
+                else np.float64
+            )
             if a.dtype != want or not a.flags.c_contiguous:
                 raise ValueError(f"context array {name}: {a.dtype}, contiguous {a.flags.c_contiguous}")
             o = NS + 4 * A[name]
@@ -647,11 +636,23 @@ class Context:
 
     def result(self, wall_s: float, final_state) -> RunResult:
         """The :class:`RunResult` of the finished run (``final_state``: qpos, qvel after
-        the last step, for the last tick's pending check)."""
+        the last step, for the last tick's pending check, and MuJoCo's warning counters
+        (``mjData.warning.number``) where the route has them: a single run does, a batch
+        keeps its MjData to itself)."""
         C, arr, sim = self.C, self.arrays, self.sim
         rate = sim.gains.rate_hz
+        spt = int(C[S_SPT])
+        if C[S_DONE] < 0 and C[S_CALLS] < self.n * spt:  # MuJoCo reset the simulation (userdata zeroed)
+            k = max(int(C[S_CALLS]) - 1, 0) // spt
+            C[S_CODE], C[S_VALUE], C[S_TICK], C[S_DONE] = CODE_RESET, 0.0, k, k + 1
+            if len(final_state) > 2:  # the route has the counters: which warning
+                rose = np.flatnonzero(np.asarray(final_state[2])[WARN_IDX] > arr["W0"])
+                C[S_CODE] = CODE_WARN + int(rose[0]) if len(rose) else CODE_RESET
         if C[S_DONE] < 0 and C[S_PENDING] > 0:  # the last tick's check, as the loop does after it
             code, val = check_state(final_state[0], final_state[1], arr["X"], C[S_VALUE], C[S_RELIEF], C[S_VAPOUR])
+            if (code == 0 or code >= 3) and len(final_state) > 2:  # MuJoCo's warning counters, when the route has them
+                rose = np.flatnonzero(np.asarray(final_state[2])[WARN_IDX] > arr["W0"])
+                code = CODE_WARN + int(rose[0]) if len(rose) else code
             if code:
                 C[S_CODE], C[S_VALUE], C[S_DONE] = code, val, self.n
         n_done = self.n if C[S_DONE] < 0 else int(C[S_DONE])
@@ -659,31 +660,7 @@ class Context:
         if C[S_DONE] >= 0:
             tk = int(C[S_TICK]) / rate
             code, val = int(C[S_CODE]), float(C[S_VALUE])
-            at = f"simulation diverged at t = {tk:.4f} s"
-            step = f"physics step {sim.dt * 1e3:.3g} ms"
-            hp = sim.hp
-            side = {2: "a", 9: "b", 4: "a", 5: "b", 6: "a", 7: "b"}.get(code, "")
-            reason = {  # the words of Simulation._check, so both routes stop with the same reason
-                2: f"{at}: the hydraulic state is not finite: NaN/Inf in the chamber {side} pressures; {CAUSE_STEP} "
-                f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})",
-                9: f"{at}: the hydraulic state is not finite: NaN/Inf in the chamber {side} pressures; {CAUSE_STEP} "
-                f"(the oil columns are the stiffest part: check bulk modulus and dead volumes; {step})",
-                1: f"{at}: the mechanical state is not finite: NaN/Inf in the platen/linkage positions (qpos); "
-                f"{CAUSE_STEP} ({step})",
-                8: f"{at}: the mechanical state is not finite: NaN/Inf in the velocities (qvel); {CAUSE_STEP} ({step})",
-                3: (
-                    f"{at}: a swivel opened by {val * 1e3:.3g} mm (limit {GAP_LIMIT_M * 1e3:.3g} mm): the "
-                    f"loop closure failed; {CAUSE_STEP} ({step}), or a motion beyond the linkages' reach"
-                ),
-                4: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa above the relief pressure "
-                f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
-                5: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa above the relief pressure "
-                f"{hp.relief_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
-                6: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa below the vapour pressure "
-                f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
-                7: f"{at}: chamber {side} pressure {val / 1e6:.4g} MPa below the vapour pressure "
-                f"{hp.vapour_pressure_pa / 1e6:.4g} MPa; {CAUSE_STEP} ({step})",
-            }[code]
+            reason = divergence_reason(code, val, tk, sim)
         t0 = time.perf_counter()
         ch = sim._derive(arr["Q"][:n_done], arr["V"][:n_done], arr["ACC"][:n_done])
         for key, name in (
@@ -766,7 +743,7 @@ def run_callback(
             done += k
         wall = time.perf_counter() - t0
     d2.userdata[0] = 0.0
-    return ctx.result(wall, (d2.qpos, d2.qvel))
+    return ctx.result(wall, (d2.qpos, d2.qvel, d2.warning.number))
 
 
 STATE_SPEC = int(mujoco.mjtState.mjSTATE_INTEGRATION) & ~int(mujoco.mjtState.mjSTATE_USERDATA)
@@ -787,7 +764,6 @@ __all__ = [
     "NUSERDATA",
     "accepts",
     "callback_model",
-    "check_state",
     "control_callback",
     "copy_state",
     "coupled_step",

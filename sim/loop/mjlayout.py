@@ -16,7 +16,9 @@ _offsets = None
 def field_offsets(fields: tuple) -> dict:
     """Byte offsets of the array pointers of ``fields`` in MuJoCo's ``mjData`` struct,
     found by matching each field's address (from the binding) in the struct's memory,
-    and of ``nuserdata`` in ``mjModel`` (key ``"nuserdata"``)."""
+    of ``nuserdata`` in ``mjModel`` (key ``"nuserdata"``), and of the first warning counter
+    (``warning[0].number``, key ``"warning"``: the counters are inside the struct, not
+    behind a pointer)."""
     global _offsets
     if _offsets is not None:
         return _offsets
@@ -67,6 +69,12 @@ def field_offsets(fields: tuple) -> dict:
     if len(hits) != 1:
         raise RuntimeError("mjModel field nuserdata: not found once in the struct")
     out["nuserdata"] = int(hits[0]) * 4
+    # the warning counters sit in the struct itself (mjWarningStat warning[mjNWARNING]): the
+    # offset of warning[0].number, the same in both MjData
+    ow = [dd.warning.number.ctypes.data - dd._address for dd in (d, d2)]
+    if ow[0] != ow[1] or not 0 <= ow[0] < size:
+        raise RuntimeError("mjData field warning: not at one offset in the struct")
+    out["warning"] = int(ow[0])
     _offsets = out
     return out
 

@@ -179,6 +179,39 @@ def test_callback_stops_where_the_loop_stops(scenario):
     _same(loop, res)
 
 
+def test_callback_stops_where_the_loop_stops_when_mujoco_resets(scenario):
+    """Actuator forces 1e12 times too large: MuJoCo's accelerations pass its limit in the
+    first step, it warns (mjWARN_BADQACC) and resets the whole MjData, userdata included, so
+    the callback loses the simulation. The single route reads the warning counter, the batch
+    sees the callback stop counting steps: both stop at the loop's tick, the single route
+    with the loop's reason (before: a full-length run, stopped by the swivel gap at its end)."""
+    p = _plan(scenario)
+    sim, ref = p.sim, p.reference
+    for a in sim.tm.spec.actuators:  # the callback compiles its model from the spec
+        g = np.array(a.gear)
+        g[0] *= 1e12
+        a.gear = g
+    sim.m.actuator_gear[:, 0] *= 1e12
+    sim.reset()
+    loop = sim.run(reference=ref)
+    assert loop.incomplete_reason and "mjWARN_BADQACC" in loop.incomplete_reason
+    assert len(loop.t) < 5
+    sim.reset()
+    cb = run_callback(sim, ref)
+    # the tick's gap: the loop measures it after the tick's steps (on the state MuJoCo reset
+    # to), the callback inside the tick's last step (on the state before the reset)
+    assert loop.extras["loop_gap"][-1] < 1e-9 < 1e-3 < cb.extras["loop_gap"][-1]
+    loop.extras["loop_gap"] = loop.extras["loop_gap"][:-1]
+    cb.extras["loop_gap"] = cb.extras["loop_gap"][:-1]
+    _same(loop, cb)
+    sim.reset()
+    res = BatchRunner([sim, sim], nthread=1).run([ref, ref])
+    for r in res:
+        assert len(r.t) == len(loop.t)
+        assert r.incomplete_reason.startswith(loop.incomplete_reason.split(":")[0])  # same time
+        assert "MuJoCo reset the state" in r.incomplete_reason
+
+
 def test_run_many_groups_batches_and_keeps_the_order(scenario):
     """run_many: the shared route for N simulations. With group=2, three simulations
     (other bulk modulus / mass) make two batches; each result equals its own loop run,
