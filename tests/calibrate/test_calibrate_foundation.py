@@ -15,6 +15,7 @@ calibrated with all five types."""
 from __future__ import annotations
 
 import copy
+import json
 import tomllib
 
 import numpy as np
@@ -71,10 +72,30 @@ def test_foundation_mode_in_the_band_found(floor, tmp_path):  # noqa: F811
 
 
 @pytest.mark.slow
-def test_foundation_mode_above_the_band_found(floor, tmp_path):  # noqa: F811
+def test_foundation_mode_above_the_band_found_from_the_cli(floor, tmp_path, capsys):  # noqa: F811
+    """A 20 Hz foundation, through ``shaketable calibrate``: the held mass and damping are
+    printed, reported and written as held (no interval)."""
+    from types import SimpleNamespace
+
+    from sim.cli import main
+
     paths = _cgs_measured(tmp_path, [_foundation(20.0)])
-    res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
-    _found_and_written(res, floor, 20.0, tmp_path)
+    out = tmp_path / "cli"
+    rc = main(
+        ["calibrate", *paths, "--path", "replay", "--effects", ",".join(EFFECTS), "--workers", "2", "--out", str(out)]
+    )
+    assert rc == 0
+    printed = capsys.readouterr().out
+    assert "added foundation_mode at table: frequency_hz = 20" in printed
+    assert "mass_kg = 6.4e+06 kg (held at the description's value)" in printed
+    js = json.loads((out / "calibration.json").read_text())
+    _check(SimpleNamespace(**js), floor, "foundation_mode", "table", "frequency_hz", 20.0)
+    assert (
+        "| foundation_mode | table | damping_ratio | 0.05 1 | held at the description's value |"
+        in (out / "report.md").read_text()
+    )
+    (ent,) = [x for x in tomllib.loads((out / "cgs_calibrated.toml").read_text())["effect"]]
+    assert ent["type"] == "foundation_mode" and ent["frequency_hz"] == pytest.approx(20.0, rel=0.10)
 
 
 @pytest.mark.slow
