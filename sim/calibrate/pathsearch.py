@@ -140,13 +140,13 @@ def line_search(top, prs, base_models, ctx, workers=None, counts=None) -> dict:
     pts, jobs = [], []
     for s in top:
         c = s.cand
-        if c.sensor or c.grid is not None or len(c.names) != 1:
+        if c.sensor or c.grid is not None or (len(c.names) != 1 and c.line is None):
             continue
         d = float(s.theta[0] - c.neutral[0])
         sign = math.copysign(1.0, d) if d != 0 else math.copysign(1.0, c.step[0])
         cand_pts = [s.theta] + [_inside(c, c.neutral + sign * k * abs(c.step)) for k in LINE_STEPS]
         if c.line is not None:  # its own points (a foundation mode: a grid of frequencies through the band)
-            cand_pts = [s.theta] + [_inside(c, np.array([x])) for x in c.line]
+            cand_pts = [s.theta] + [_inside(c, np.array([x, *c.neutral[1:]])) for x in c.line]
         for th in cand_pts:
             pts.append((s, th))
             jobs += [pr.job(raw, src, payload, list(accepted) + [c.entry(th)]) for pr in prs]

@@ -61,6 +61,9 @@ FOUNDATION_MIN_HZ = 1.0
 #: pointed to the rigid bound, and 21-60 Hz fit worse than none); measured on CGS: the
 #: refinement from the nearest point of this grid reaches 12 Hz and 20 Hz
 FOUNDATION_LINE_RATIO = 2.0**0.25
+#: fit the foundation's damping ratio as a second parameter (from the declared value; the
+#: screening steps only the frequency), else hold it at the description's value
+FOUNDATION_FIT_DAMPING = True
 #: the force a mechanical candidate's screening step adds: this share of the mean
 #: actuator's capability A_a p_s (assumed: 1 %, the order of the seal friction of a
 #: servo-actuator, docs/effects.md; large enough to stand above round-off, small enough
@@ -101,8 +104,7 @@ class Candidate:
             out = {"frequency_hz": self.ref["f_ref"] / math.sqrt(s) if s > 0 else math.inf}
             if self.ref.get("fz_ref"):
                 out["frequency_z_hz"] = self.ref["fz_ref"] / math.sqrt(s) if s > 0 else math.inf
-            out.update({k: float(v) for k, v in zip(self.names[1:], theta[1:])})
-            return {**out, **self.ref["held"]}
+            return {**out, **self.ref["held"], **{k: float(v) for k, v in zip(self.names[1:], theta[1:])}}
         return {k: float(v) for k, v in zip(self.names, theta)}
 
     def sigmas(self, theta, sigma) -> dict:
@@ -287,7 +289,7 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
     return out
 
 
-def foundation_candidate(desc, dt: float) -> Candidate:
+def foundation_candidate(desc, dt: float, fit_damping: bool | None = None) -> Candidate:
     """The foundation mode (``where = "table"``) as one candidate parameter that is neutral
     at the declared model: the compliance ``s = (f_ref / f)^2`` of the reaction mass's
     spring (``f_ref``: the description's ``[foundation] frequency_hz``, x; on CGS 30 Hz,
@@ -307,21 +309,21 @@ def foundation_candidate(desc, dt: float) -> Candidate:
     fz = float(fo.frequency_hz[2])
     f_max = 1.0 / (2 * math.pi * dt)
     s0 = 1.0 if spring else 0.0
+    z0 = float(fo.damping_ratio[0])
+    fit_damping = FOUNDATION_FIT_DAMPING if fit_damping is None else fit_damping
+    held = {"mass_kg": float(fo.mass_kg)} | ({} if fit_damping else {"damping_ratio": z0})
+    extra = 1 if fit_damping else 0  # the damping ratio: from the declared value, in [0, 1] (an underdamped mode)
     return Candidate(
         "foundation_mode",
         "table",
-        ("frequency_hz",),
-        np.array([s0]),
-        np.array([0.25]),  # from rigid: a foundation at 2 f_ref (60 Hz on CGS), above the runs' band
-        np.array([min(s0, (f_ref / f_max) ** 2) if spring else (f_ref / f_max) ** 2]),
-        np.array([(f_ref / FOUNDATION_MIN_HZ) ** 2]),
+        ("frequency_hz",) + ("damping_ratio",) * extra,
+        np.array([s0] + [z0] * extra),
+        np.array([0.25] + [0.01] * extra),  # from rigid: a foundation at 2 f_ref (60 Hz on CGS), above the band
+        np.array([min(s0, (f_ref / f_max) ** 2) if spring else (f_ref / f_max) ** 2] + [0.0] * extra),
+        np.array([(f_ref / FOUNDATION_MIN_HZ) ** 2] + [1.0] * extra),
         {"frequency_hz": "Hz", "frequency_z_hz": "Hz", "mass_kg": "kg", "damping_ratio": "1"},
         line=tuple((f_ref / f) ** 2 for f in _geometric(2.0 * f_ref, FOUNDATION_MIN_HZ, FOUNDATION_LINE_RATIO)),
-        ref={
-            "f_ref": f_ref,
-            "fz_ref": fz if spring and abs(fz - f_ref) > 1e-9 * f_ref else None,
-            "held": {"mass_kg": float(fo.mass_kg), "damping_ratio": float(fo.damping_ratio[0])},
-        },
+        ref={"f_ref": f_ref, "fz_ref": fz if spring and abs(fz - f_ref) > 1e-9 * f_ref else None, "held": held},
     )
 
 
