@@ -290,14 +290,17 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
 
 
 def foundation_candidate(desc, dt: float, fit_damping: bool | None = None) -> Candidate:
-    """The foundation mode (``where = "table"``) as one candidate parameter that is neutral
-    at the declared model: the compliance ``s = (f_ref / f)^2`` of the reaction mass's
-    spring (``f_ref``: the description's ``[foundation] frequency_hz``, x; on CGS 30 Hz,
-    assumed), ``s = 0`` a rigid (fixed) foundation, ``s = 1`` a declared spring foundation.
-    Below the mode the foundation's motion under the actuator forces goes as ``s``, so the
-    screening's linearisation holds near the neutral value. The mass and damping ratio are
-    held at the description's ``[foundation]`` values: a reaction mass's weight is known from
-    its drawings (CGS 6400 t, Table A), its soil spring is not. Searched from
+    """The foundation mode (``where = "table"``) as a candidate whose screened parameter is
+    neutral at the declared model: the compliance ``s = (f_ref / f)^2`` of the reaction
+    mass's spring (``f_ref``: the description's ``[foundation] frequency_hz``, x; on CGS
+    30 Hz, assumed), ``s = 0`` a rigid (fixed) foundation, ``s = 1`` a declared spring
+    foundation. Below the mode the foundation's motion under the actuator forces goes as
+    ``s``, so the screening's linearisation holds near the neutral value. The damping ratio
+    is a second parameter (``fit_damping``, default :data:`FOUNDATION_FIT_DAMPING`), from
+    the description's value (not screened: at ``s = 0`` it changes nothing); the mass is
+    held at the description's ``[foundation] mass_kg``: a reaction mass's weight is known
+    from its drawings (CGS 6400 t, Table A), its soil spring is not (and the mode's
+    frequency and mass are not told apart by the motion alone). Searched from
     :data:`FOUNDATION_MIN_HZ` up to ``1 / (2 pi dt)``: a spring of frequency f is integrated
     explicitly (MuJoCo's implicitfast treats damping, not stiffness, implicitly) and is
     stable for ``2 pi f dt < 2`` (measured on CGS at dt = 1/2048 s: 660 Hz ran, 700 Hz
