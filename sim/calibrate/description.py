@@ -158,7 +158,8 @@ class TomlText:
         return out
 
     def set_effect(self, entry: dict, *, comments: dict | None = None) -> str:
-        """Add ``entry`` as an ``[[effect]]`` (after the last one, or at the end), or rewrite
+        """Add ``entry`` as an ``[[effect]]`` (after the last one, or at the end; a
+        ``foundation_mode`` before the first, :func:`sim.calibrate.sensitivity.build_order`), or rewrite
         the entry with the same ``type``, ``where`` and ``name`` in place (its comments kept).
         ``comments``: key -> source comment. Returns ``"added"`` or ``"replaced"``."""
         if "type" not in entry or "where" not in entry:
@@ -187,7 +188,11 @@ class TomlText:
                         self.lines[j] = _line(k, format_value(v), c)
                 return "replaced"
         new = ["", "[[effect]]"] + [_line(k, format_value(v), comments.get(k)) for k, v in entry.items()]
-        if blocks:
+        if blocks and entry["type"] == "foundation_mode":
+            # before the first: it must be built before the DOF effects that make tendons
+            at = blocks[0][0]
+            self.lines[at:at] = new[1:] + [""]
+        elif blocks:
             at = blocks[-1][1]
             self.lines[at:at] = new
         else:

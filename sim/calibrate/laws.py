@@ -307,7 +307,7 @@ add_law(
 NOT_ON_MECHANICAL = {
     "foundation_mode": "the actuators push off the foundation, so its motion is not in the force "
     "the platen needs for its recorded motion (docs/calibration.md); calibrate runs with valve "
-    "commands on the replay path (--path replay)",
+    "commands on the replay path (--path replay), where it is a candidate",
 }
 
 

@@ -262,7 +262,9 @@ def _setup(job):
 
     raw = copy.deepcopy(raw)
     if extra:
-        raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in extra]
+        from sim.calibrate.sensitivity import build_order
+
+        raw["effect"] = build_order(list(raw.get("effect", [])) + [dict(e) for e in extra])
     try:  # a candidate's value the model refuses (a supply drop below the return): no model
         desc = parse_table(raw, src=src)
         tm = build_model(desc, payload)

@@ -138,7 +138,8 @@ def line_search(top, prs, base_models, ctx, workers=None, counts=None) -> dict:
     for each replayed one-parameter candidate (no valve delay: its grid is scanned in the
     refinement), the parameter at ``LINE_STEPS`` screening steps from its neutral value in
     the direction of the linearised estimate (clipped into its bounds), and the linearised
-    estimate itself; the point with the smallest residual starts the refinement. Far from
+    estimate itself (a candidate with its own ``line`` of points: those); the point with
+    the smallest residual starts the refinement. Far from
     the model the linearisation falls short of a strongly nonlinear effect (a bulk modulus
     stepped up 10 % from 1.0 GPa put 0.6 GPa at 0.96 GPa, where a local minimum of the
     residual held the least squares) and a local refinement from it stays there.
@@ -150,11 +151,13 @@ def line_search(top, prs, base_models, ctx, workers=None, counts=None) -> dict:
     pts, jobs = [], []
     for s in top:
         c = s.cand
-        if c.sensor or c.grid is not None or len(c.names) != 1:
+        if c.sensor or c.grid is not None or (len(c.names) != 1 and c.line is None):
             continue
         d = float(s.theta[0] - c.neutral[0])
         sign = math.copysign(1.0, d) if d != 0 else math.copysign(1.0, c.step[0])
         cand_pts = [s.theta] + [_inside(c, c.neutral + sign * k * abs(c.step)) for k in LINE_STEPS]
+        if c.line is not None:  # its own points (a foundation mode: a grid of frequencies through the band)
+            cand_pts = [s.theta] + [_inside(c, np.array([x, *c.neutral[1:]])) for x in c.line]
         for th in cand_pts:
             pts.append((s, th))
             jobs += [pr.job(raw, src, payload, list(accepted) + [c.entry(th)]) for pr in prs]

@@ -535,7 +535,12 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
         entry = {"type": e["name"], "where": e["where"], **e["parameters"], "source": tag}
         if "label" in e:  # one of several terms of a law at a place (a specimen's modes)
             entry = {"type": e["name"], "where": e["where"], "name": e["label"], **e["parameters"], "source": tag}
-        comments = {k: f"+/-{e['uncertainty'][k]:.3g} {e['units'][k]} (95 %)" for k in e["parameters"]}
+        comments = {
+            k: f"+/-{e['uncertainty'][k]:.3g} {e['units'][k]} (95 %)"
+            if k in e["uncertainty"]
+            else "held at the description's value, not fitted"
+            for k in e["parameters"]
+        }
         doc.set_effect(entry, comments=comments)
     toml_path = out / f"{result.table}_calibrated.toml"
     doc.save(toml_path)

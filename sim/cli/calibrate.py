@@ -139,7 +139,10 @@ def cmd_calibrate(args) -> int:
     print(f"held-out NRMSE {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} % ({res.holdout_note})")
     for e in res.effects_added:
         vals = ", ".join(
-            f"{k} = {v:.6g} +/- {e['uncertainty'][k]:.2g} {e['units'][k]}" for k, v in e["parameters"].items()
+            f"{k} = {v:.6g} +/- {e['uncertainty'][k]:.2g} {e['units'][k]}"
+            if e["uncertainty"].get(k) is not None
+            else f"{k} = {v:.6g} {e['units'][k]} (held at the description's value)"
+            for k, v in e["parameters"].items()
         )
         print(f"  added {e['name']} at {e['where']}: {vals}")
     if res.unexplained:

@@ -172,6 +172,8 @@ def _effects_figure(plt, res, out) -> str:
     labels, rel, err = [], [], []
     for e in res.effects_added:
         for p, v in e["parameters"].items():
+            if e["uncertainty"].get(p) is None:  # held at the description's value (no interval)
+                continue
             labels.append(f"{e['name']} {e['where']}\n{p}")
             rel.append(1.0)
             err.append(abs(e["uncertainty"][p] / v) if v else np.inf)
@@ -209,9 +211,9 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
         L += ["| effect | where | parameter | value | 95 % interval |", "|---|---|---|---|---|"]
         for e in res.effects_added:
             for p, v in e["parameters"].items():
-                L.append(
-                    f"| {e['name']} | {e['where']} | {p} | {v:.6g} {e['units'][p]} | +/-{e['uncertainty'][p]:.3g} |"
-                )
+                u = e["uncertainty"].get(p)
+                iv = f"+/-{u:.3g}" if u is not None else "held at the description's value"
+                L.append(f"| {e['name']} | {e['where']} | {p} | {v:.6g} {e['units'][p]} | {iv} |")
     else:
         L.append("None: no candidate passed the acceptance tests.")
     L += [
