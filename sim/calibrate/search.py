@@ -129,7 +129,8 @@ def candidate_laws(effects=None) -> list:
                 f"--effects: '{nolaw[0]}' has no force law for the mechanical path; "
                 f"the mechanical path can try {', '.join(sorted(LAWS))}"
             )
-    return [LAWS[k] for k in sorted(LAWS) if usable(LAWS[k]) and (not effects or k in effects)]
+    # a name takes its variants too (coulomb_friction: also growing with the stroke or the load)
+    return [LAWS[k] for k in sorted(LAWS) if usable(LAWS[k]) and (not effects or {k, LAWS[k].name} & set(effects))]
 
 
 def load_effect_file(path) -> None:
@@ -349,6 +350,8 @@ def calibrate(
             n_have = sum(1 for t in cur.terms if (t.law.type, t.where) == (law.type, w))
             if n_have >= getattr(law, "repeats", 1):
                 continue
+            if any((t.law.name, t.where) == (law.name, w) and t.law.type != law.type for t in cur.terms):
+                continue  # one entry of an effect per place: a variant of one already there is not added beside it
             new = fit_terms(mfit, cur.terms + [Term(law, w, index=n_have)], refine="last")
             n_fits += 1
             scored.append((1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0, law, w, new))
@@ -364,8 +367,9 @@ def calibrate(
             tried.append(
                 {
                     "round": rnd,
-                    "name": law.type,
+                    "name": law.name,
                     "where": w,
+                    **({"options": dict(law.options)} if law.options else {}),
                     "explained_fraction": expl,
                     "parameters": new.values[i],
                     "uncertainty": unc,
@@ -405,7 +409,7 @@ def calibrate(
                 tried.append(
                     {
                         "round": "backward",
-                        "name": t.law.type,
+                        "name": t.law.name,
                         "where": t.where,
                         "explained_fraction": (rest.rss - cur.rss) / rest.rss if rest.rss > 0 else 0.0,
                         "parameters": cur.values[i],
@@ -423,8 +427,9 @@ def calibrate(
         _, _, unc = param_report(t, cur.values[i], cur.sigma[i])
         added.append(
             {
-                "name": t.law.type,
+                "name": t.law.name,
                 "where": t.where,
+                **({"options": dict(t.law.options)} if t.law.options else {}),
                 **({"label": f"{t.law.type} {t.index + 1}"} if getattr(t.law, "repeats", 1) > 1 else {}),
                 "parameters": cur.values[i],
                 "uncertainty": unc,
@@ -532,7 +537,8 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
     tag = "calibrated: shaketable calibrate " + " ".join(Path(p).name for p in run_names)
     doc = TomlText.read(result.table_source)
     for e in result.effects_added:
-        entry = {"type": e["name"], "where": e["where"], **e["parameters"], "source": tag}
+        opts = e.get("options", {})  # a variant of the effect (friction growing with the stroke)
+        entry = {"type": e["name"], "where": e["where"], **opts, **e["parameters"], "source": tag}
         if "label" in e:  # one of several terms of a law at a place (a specimen's modes)
             entry = {"type": e["name"], "where": e["where"], "name": e["label"], **e["parameters"], "source": tag}
         comments = {k: f"+/-{e['uncertainty'][k]:.3g} {e['units'][k]} (95 %)" for k in e["parameters"]}
