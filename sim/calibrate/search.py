@@ -423,6 +423,54 @@ def calibrate(
                 )
                 cur, e_ho, dropped = rest, e_rest, True
                 break
+    # A term whose nesting parameter ended at the simpler law's value once the later terms
+    # were in (a load-growing friction that stood in for the damping, its coefficient now
+    # 0 +/- its interval) is that simpler law: replaced by it (at the same place, named as
+    # the simpler law's candidates name it), when the held-out error stays within the margin.
+    from sim.calibrate.laws import LAWS
+
+    demoted = True
+    while demoted:
+        demoted = False
+        for i, t in enumerate(cur.terms):
+            for name, (at, simpler) in t.law.nested.items():
+                s95 = Z95 * cur.sigma[i].get(name, math.inf)
+                if simpler not in LAWS or abs(cur.values[i][name] - at) > s95:
+                    continue
+                law2 = LAWS[simpler]
+                w2 = _same_place(mfit[0], t.where, places(desc, law2.places, pl is not None))
+                if w2 is None or any((u.law.name, u.where) == (law2.name, w2) for u in cur.terms):
+                    continue
+                alt = fit_terms(mfit, cur.terms[:i] + [Term(law2, w2)] + cur.terms[i + 1 :])
+                n_fits += 1
+                e_alt = nrmse_runs(mho, predict(mho, alt))
+                if e_alt > (1 + margin) * e_ho:
+                    continue
+                why = (
+                    f"replaced by {simpler} at {w2}: {name} = {cur.values[i][name]:.4g} +/-{s95:.3g} holds {at:g} "
+                    f"(held-out {e_ho:.4f} -> {e_alt:.4f})"
+                )
+                say(f"  {t.law.type:18s} {t.where:14s} {why}")
+                tried.append(
+                    {
+                        "round": "backward",
+                        "name": t.law.name,
+                        "where": t.where,
+                        **({"options": dict(t.law.options)} if t.law.options else {}),
+                        "explained_fraction": 0.0,
+                        "parameters": cur.values[i],
+                        "uncertainty": {k: Z95 * v for k, v in cur.sigma[i].items()},
+                        "holdout_error": e_alt,
+                        "bic_change": alt.bic - cur.bic,
+                        "flatness": flatness(mfit, alt.residuals),
+                        "accepted": False,
+                        "reason": why,
+                    }
+                )
+                cur, e_ho, demoted = alt, e_alt, True
+                break
+            if demoted:
+                break
     for i, t in enumerate(cur.terms):
         _, _, unc = param_report(t, cur.values[i], cur.sigma[i])
         added.append(
@@ -504,6 +552,19 @@ def _calibrate_path(runs, ho_given, desc, pl, path, effects, margin, workers, sa
         timing=timing,
         **out,
     )
+
+
+def _same_place(mr, where, wheres) -> str | None:
+    """The first of ``wheres`` whose force maps into DOF space as ``where``'s does (on a
+    uni-axial table ``dof:x`` for ``actuator:E``), else None."""
+    m0 = np.atleast_2d(mr.place_motion(where)[3]).astype(float)
+    m0 = m0 / (np.linalg.norm(m0) or 1.0)
+    for w in wheres:
+        m = np.atleast_2d(mr.place_motion(w)[3]).astype(float)
+        m = m / (np.linalg.norm(m) or 1.0)
+        if m.shape == m0.shape and min(np.abs(m - m0).max(), np.abs(m + m0).max()) < 1e-6:
+            return w
+    return None
 
 
 def distinct_places(mr, wheres) -> list:
