@@ -7,7 +7,9 @@ motion) is then explained by linear least squares on the column ``basis``. This 
 is the hook the effect contract (:mod:`sim.effects.base`) does not have yet: a registry
 of :class:`Law` objects keyed by effect type (``coulomb_friction``, ``viscous_damping``,
 ``power_damping``, ``spring``, ``added_mass``, ``payload_mode``, ``cg_offset``: the names of
-the effect library), plus the
+the effect library; ``coulomb_friction_displacement`` and ``coulomb_friction_load``: dry
+friction growing with the stroke or the load, written as ``coulomb_friction`` with its
+``grows_with``), plus the
 older platen effects of :mod:`sim.effects.registry` (``platen_spring``,
 ``platen_coulomb``, ``platen_power_damping``) so that a description's *declared*
 effects enter the model's force. A law with a nonlinear shape parameter (the exponent
@@ -77,6 +79,19 @@ class Law:
     #: quadratic form in them (the fit tabulates it per product of two coefficients),
     #: taken at the current coefficients and the solve repeated to a fixed point
     second_order: Callable | None = None
+    #: the effect type an accepted term is written as (None: ``type``) and the options
+    #: written with it: a variant of one effect (dry friction growing with the stroke) has
+    #: its own law under its own key
+    effect: str | None = None
+    options: dict = field(default_factory=dict)
+    #: the basis needs the load at the place (``s["_load"]``: the recorded actuator force's
+    #: magnitude, N, per actuator of the place)
+    load: bool = False
+
+    @property
+    def name(self) -> str:
+        """The effect type the law's terms are reported and written as."""
+        return self.effect or self.type
 
     @property
     def linears(self) -> tuple:
@@ -133,6 +148,48 @@ add_law(
         "force_n",
         _coulomb,
         what="dry friction F sign(v) (with the table's pre-sliding law, if it has one)",
+    )
+)
+#: m/s: below it a dry friction whose level changes is linear in the velocity (the
+#: effect's ``linear_below_m_s`` default; such a friction is applied every physics step by
+#: :meth:`sim.effects.mechanical.CoulombFriction.advance`, without the table's pre-sliding law)
+LINEAR_BELOW_M_S = 1e-3
+
+
+def _coulomb_growing(u, v, a, s, grows):
+    """[sign, sign x grows]: the level ``force_n + coefficient * grows`` of a dry friction
+    that grows with |displacement| or with the load, as the effect applies it."""
+    c = np.clip(np.asarray(v, float) / LINEAR_BELOW_M_S, -1.0, 1.0)
+    return [c, c * grows]
+
+
+add_law(
+    Law(
+        "coulomb_friction_displacement",
+        {"force_n": ("N", 0.0, np.inf), "coefficient": ("N/m", 0.0, np.inf)},
+        ("force_n", "coefficient"),
+        lambda u, v, a, s: _coulomb_growing(u, v, a, s, np.abs(u)),
+        what="dry friction growing with the stroke from home (force_n + coefficient |x|) sign(v)",
+        nested={"coefficient": (0.0, "coulomb_friction")},
+        effect="coulomb_friction",
+        options={"grows_with": "displacement"},
+    )
+)
+add_law(
+    Law(
+        "coulomb_friction_load",
+        {"force_n": ("N", 0.0, np.inf), "coefficient": ("1", 0.0, np.inf)},
+        ("force_n", "coefficient"),
+        lambda u, v, a, s: _coulomb_growing(u, v, a, s, s["_load"]),
+        # at an actuator: seal friction rising with the force it carries; at a DOF the load is
+        # the weight on the bearings, constant but for the vertical acceleration's few per
+        # cent, so its coefficient cannot be told from the level there: not offered
+        places=("actuator", "class"),
+        what="seal friction growing with the actuator's force (force_n + coefficient |F|) sign(v)",
+        nested={"coefficient": (0.0, "coulomb_friction")},
+        effect="coulomb_friction",
+        options={"grows_with": "load"},
+        load=True,
     )
 )
 add_law(
@@ -322,6 +379,11 @@ def declared_forces(entry: dict):
 
     kind = entry.get("type")
     where = "dof:" + str(entry.get("dof", "x"))
+    grows = entry.get("grows_with", "none")
+    if kind == "coulomb_friction" and grows != "none" and float(entry.get("coefficient", 0.0)) > 0:
+        kind = f"coulomb_friction_{grows}"  # its own law (a level that changes: per step)
+        if "where" in entry and "force_n" in entry and LAWS[kind].acts_at(str(entry["where"])):
+            return LAWS[kind], str(entry["where"]), {k: float(entry[k]) for k in LAWS[kind].params}
     if kind == "platen_coulomb" and entry.get("presliding_m"):
         return LAWS["coulomb_friction"], where, {"force_n": float(entry["force_n"])}
     if kind == "platen_power_damping":
@@ -345,13 +407,14 @@ def usable(law: Law) -> bool:
     """A law is a candidate when its type is not registered, or registered with the same keys."""
     from sim.effects.base import EFFECTS
 
-    cls = EFFECTS.get(law.type)
+    cls = EFFECTS.get(law.name)
     return cls is None or set(law.params) <= set(getattr(cls, "SPEC", {}))
 
 
 __all__ = [
     "DEADBAND",
     "LAWS",
+    "LINEAR_BELOW_M_S",
     "NOT_ON_MECHANICAL",
     "Law",
     "add_law",

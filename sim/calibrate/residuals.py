@@ -108,6 +108,17 @@ class MechRun:
             + (" (payload: only with a declared payload)" if kind == "payload" else "")
         )
 
+    def place_load(self, where: str) -> np.ndarray:
+        """The recorded force's magnitude (N) of the actuators of an ``actuator:`` (n,) or
+        ``class:`` (n, m) place: the load a seal friction grows with."""
+        kind, _, name = where.partition(":")
+        f = self.extra["actuator_force"]
+        if kind == "actuator":
+            return np.abs(f[:, self.actuators.index(name)])
+        if kind == "class":
+            return np.abs(f[:, self.classes[name]])
+        raise CalibrationError(f"where = '{where}': a load is read at actuator: or class: places")
+
     def column(self, law, where: str, shape: dict) -> np.ndarray:
         """(n, k) generalised force of a one-coefficient ``law`` with unit coefficient at ``where``."""
         return self.columns(law, where, shape)[0]
@@ -291,6 +302,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             payload=pay,
         )
         mr.force = mr.filt(f @ J)
+        mr.extra["actuator_force"] = f
         other = joints.force(u, v, r.dt)
         for law, where, vals in declared:
             other = other + sum(vals[k] * Q for k, Q in zip(law.linears, _raw_columns(mr, law, where, vals)))
@@ -330,7 +342,10 @@ def _law_args(mr, shape) -> dict:
 def _raw_columns(mr, law, where, shape) -> list:
     """The law's unfiltered DOF-space force per linear coefficient (list of (n, k))."""
     u, v, a, m = mr.place_motion(where)
-    b = np.asarray(law.basis(u, v, a, _law_args(mr, shape)), float)
+    s = _law_args(mr, shape)
+    if getattr(law, "load", False):
+        s["_load"] = mr.place_load(where)
+    b = np.asarray(law.basis(u, v, a, s), float)
     bs = [b] if len(law.linears) == 1 else list(b)
     return [x[:, None] * m[None, :] if x.ndim == 1 else x @ m for x in bs]
 

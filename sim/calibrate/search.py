@@ -129,7 +129,8 @@ def candidate_laws(effects=None) -> list:
                 f"--effects: '{nolaw[0]}' has no force law for the mechanical path; "
                 f"the mechanical path can try {', '.join(sorted(LAWS))}"
             )
-    return [LAWS[k] for k in sorted(LAWS) if usable(LAWS[k]) and (not effects or k in effects)]
+    # a name takes its variants too (coulomb_friction: also growing with the stroke or the load)
+    return [LAWS[k] for k in sorted(LAWS) if usable(LAWS[k]) and (not effects or {k, LAWS[k].name} & set(effects))]
 
 
 def load_effect_file(path) -> None:
@@ -349,6 +350,8 @@ def calibrate(
             n_have = sum(1 for t in cur.terms if (t.law.type, t.where) == (law.type, w))
             if n_have >= getattr(law, "repeats", 1):
                 continue
+            if any((t.law.name, t.where) == (law.name, w) and t.law.type != law.type for t in cur.terms):
+                continue  # one entry of an effect per place: a variant of one already there is not added beside it
             new = fit_terms(mfit, cur.terms + [Term(law, w, index=n_have)], refine="last")
             n_fits += 1
             scored.append((1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0, law, w, new))
@@ -364,8 +367,9 @@ def calibrate(
             tried.append(
                 {
                     "round": rnd,
-                    "name": law.type,
+                    "name": law.name,
                     "where": w,
+                    **({"options": dict(law.options)} if law.options else {}),
                     "explained_fraction": expl,
                     "parameters": new.values[i],
                     "uncertainty": unc,
@@ -405,7 +409,7 @@ def calibrate(
                 tried.append(
                     {
                         "round": "backward",
-                        "name": t.law.type,
+                        "name": t.law.name,
                         "where": t.where,
                         "explained_fraction": (rest.rss - cur.rss) / rest.rss if rest.rss > 0 else 0.0,
                         "parameters": cur.values[i],
@@ -419,12 +423,61 @@ def calibrate(
                 )
                 cur, e_ho, dropped = rest, e_rest, True
                 break
+    # A term whose nesting parameter ended at the simpler law's value once the later terms
+    # were in (a load-growing friction that stood in for the damping, its coefficient now
+    # 0 +/- its interval) is that simpler law: replaced by it (at the same place, named as
+    # the simpler law's candidates name it), when the held-out error stays within the margin.
+    from sim.calibrate.laws import LAWS
+
+    demoted = True
+    while demoted:
+        demoted = False
+        for i, t in enumerate(cur.terms):
+            for name, (at, simpler) in t.law.nested.items():
+                s95 = Z95 * cur.sigma[i].get(name, math.inf)
+                if simpler not in LAWS or abs(cur.values[i][name] - at) > s95:
+                    continue
+                law2 = LAWS[simpler]
+                w2 = _same_place(mfit[0], t.where, places(desc, law2.places, pl is not None))
+                if w2 is None or any((u.law.name, u.where) == (law2.name, w2) for u in cur.terms):
+                    continue
+                alt = fit_terms(mfit, cur.terms[:i] + [Term(law2, w2)] + cur.terms[i + 1 :])
+                n_fits += 1
+                e_alt = nrmse_runs(mho, predict(mho, alt))
+                if e_alt > (1 + margin) * e_ho:
+                    continue
+                why = (
+                    f"replaced by {simpler} at {w2}: {name} = {cur.values[i][name]:.4g} +/-{s95:.3g} holds {at:g} "
+                    f"(held-out {e_ho:.4f} -> {e_alt:.4f})"
+                )
+                say(f"  {t.law.type:18s} {t.where:14s} {why}")
+                tried.append(
+                    {
+                        "round": "backward",
+                        "name": t.law.name,
+                        "where": t.where,
+                        **({"options": dict(t.law.options)} if t.law.options else {}),
+                        "explained_fraction": 0.0,
+                        "parameters": cur.values[i],
+                        "uncertainty": {k: Z95 * v for k, v in cur.sigma[i].items()},
+                        "holdout_error": e_alt,
+                        "bic_change": alt.bic - cur.bic,
+                        "flatness": flatness(mfit, alt.residuals),
+                        "accepted": False,
+                        "reason": why,
+                    }
+                )
+                cur, e_ho, demoted = alt, e_alt, True
+                break
+            if demoted:
+                break
     for i, t in enumerate(cur.terms):
         _, _, unc = param_report(t, cur.values[i], cur.sigma[i])
         added.append(
             {
-                "name": t.law.type,
+                "name": t.law.name,
                 "where": t.where,
+                **({"options": dict(t.law.options)} if t.law.options else {}),
                 **({"label": f"{t.law.type} {t.index + 1}"} if getattr(t.law, "repeats", 1) > 1 else {}),
                 "parameters": cur.values[i],
                 "uncertainty": unc,
@@ -501,6 +554,19 @@ def _calibrate_path(runs, ho_given, desc, pl, path, effects, margin, workers, sa
     )
 
 
+def _same_place(mr, where, wheres) -> str | None:
+    """The first of ``wheres`` whose force maps into DOF space as ``where``'s does (on a
+    uni-axial table ``dof:x`` for ``actuator:E``), else None."""
+    m0 = np.atleast_2d(mr.place_motion(where)[3]).astype(float)
+    m0 = m0 / (np.linalg.norm(m0) or 1.0)
+    for w in wheres:
+        m = np.atleast_2d(mr.place_motion(w)[3]).astype(float)
+        m = m / (np.linalg.norm(m) or 1.0)
+        if m.shape == m0.shape and min(np.abs(m - m0).max(), np.abs(m + m0).max()) < 1e-6:
+            return w
+    return None
+
+
 def distinct_places(mr, wheres) -> list:
     """Places whose force maps into DOF space differently (a uni-axial table's actuators
     and classes all push along x: one place, ``dof:x``, stands for them)."""
@@ -532,7 +598,8 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
     tag = "calibrated: shaketable calibrate " + " ".join(Path(p).name for p in run_names)
     doc = TomlText.read(result.table_source)
     for e in result.effects_added:
-        entry = {"type": e["name"], "where": e["where"], **e["parameters"], "source": tag}
+        opts = e.get("options", {})  # a variant of the effect (friction growing with the stroke)
+        entry = {"type": e["name"], "where": e["where"], **opts, **e["parameters"], "source": tag}
         if "label" in e:  # one of several terms of a law at a place (a specimen's modes)
             entry = {"type": e["name"], "where": e["where"], "name": e["label"], **e["parameters"], "source": tag}
         comments = {

@@ -103,6 +103,27 @@ CASES = {
     "viscous_dof_x": [{"type": "viscous_damping", "where": "dof:x", "damping_n_s_m": 2.0e5}],
     "power_dof_y": [{"type": "power_damping", "where": "dof:y", "coefficient": 1.0e5, "exponent": 0.6}],
     "spring_dof_z": [{"type": "spring", "where": "dof:z", "stiffness_n_m": 2.0e7}],
+    # dry friction growing with |y| (a bearing loaded as the platen moves off centre; 1 MN/m
+    # doubles the level at 6 mm) and a seal's growing with the force X2 carries (0.2: 6 kN at
+    # 30 kN); assumed, of the order of the constant levels above
+    "coulomb_grows_displacement_y": [
+        {
+            "type": "coulomb_friction",
+            "where": "dof:y",
+            "force_n": 6000.0,
+            "grows_with": "displacement",
+            "coefficient": 1.0e6,
+        }
+    ],
+    "coulomb_grows_load_X2": [
+        {
+            "type": "coulomb_friction",
+            "where": "actuator:X2",
+            "force_n": 4000.0,
+            "grows_with": "load",
+            "coefficient": 0.2,
+        }
+    ],
     "payload_mode_x": [
         {"type": "payload_mode", "where": "dof:x", "mass_kg": 5000.0, "frequency_hz": 8.0, "damping_ratio": 0.05}
     ],
@@ -224,6 +245,10 @@ def test_planted_effect_recovered(case, cases):
         truth = p[k]
         assert e["parameters"][k] == pytest.approx(truth, rel=0.10), (k, e["parameters"], truth)
         assert 0 < e["uncertainty"][k] < 0.1 * abs(e["parameters"][k])
+        if p.get("grows_with"):  # the variant is named, and its growth within 10 %
+            assert e["options"] == {"grows_with": p["grows_with"]}, e
+            assert e["parameters"]["coefficient"] == pytest.approx(p["coefficient"], rel=0.10), e["parameters"]
+            assert 0 < e["uncertainty"]["coefficient"] < 0.1 * e["parameters"]["coefficient"]
         if p["type"] == "power_damping":
             assert e["parameters"]["exponent"] == pytest.approx(p["exponent"], abs=0.06)
         if p["type"] == "cg_offset":  # the offset's other components: y within 10 %, z within 2 cm
