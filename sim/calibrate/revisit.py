@@ -234,17 +234,15 @@ def revisit_accepted(items, st, ctx, rnd, say=None) -> tuple[list, dict, list]:
             why = (
                 f"joint refit with the {len(items) - 1} other accepted effect(s) on the refinement windows "
                 f"(residual {out['rss0']:.4g} -> {out['rss']:.4g}): {a['cand'].values(a['theta'])} -> "
-                f"{b['cand'].values(b['theta'])}; held-out {st['e_ho']:.4f} -> {w['e_ho']:.4f}"
+                f"{b['cand'].values(b['theta'])}; held-out {st['e_ho']:.5f} -> {w['e_ho']:.5f}"
             )
             rows.append(row(b, "refitted", why, {"holdout_error": w["e_ho"], "flatness": w["flat"]}))
-        n_par = st["n_par"]
         st.update(w)
-        st["bic_change_refit"] = _bic(w["rss"], N, n_par) - _bic(st["rss"], N, n_par)
         items = new
     else:
         why = "joint refit: no parameter moved" if not moved else "joint refit not kept: "
         if moved:
-            why += "a whole-run replay diverged" if w is None else f"held-out {st['e_ho']:.4f} -> {w['e_ho']:.4f} rises"
+            why += "a whole-run replay diverged" if w is None else f"held-out {st['e_ho']:.5f} -> {w['e_ho']:.5f} rises"
         rows += [row(a, "refit_not_kept", why) for a in items]
     say(f"  revisit: {rows[-1]['reason']}")
 
