@@ -11,7 +11,9 @@ down, parameters off their bounds with finite 95 % intervals that exclude the ne
 value, residual whiter). A sensor candidate, which changes only its own channel or
 column of the model, is judged on those columns (:func:`judge_sensor`; pooled over the
 18 columns of a 6-DOF table a clear error on one column moves the held-out error by less
-than the margin). The first that passes is added; repeated while one passes. A valve
+than the margin). The first that passes is added; repeated while one passes. From the
+second acceptance on, the accepted effects are refitted jointly and each earlier one is
+dropped if the others do as well without it (:mod:`sim.calibrate.revisit`). A valve
 null offset found on the replay path is reported as the valve's whole null, the path's
 estimate plus the fitted correction (:func:`null_total`).
 """
