@@ -11,7 +11,9 @@ down, parameters off their bounds with finite 95 % intervals that exclude the ne
 value, residual whiter). A sensor candidate, which changes only its own channel or
 column of the model, is judged on those columns (:func:`judge_sensor`; pooled over the
 18 columns of a 6-DOF table a clear error on one column moves the held-out error by less
-than the margin). The first that passes is added; repeated while one passes. A valve
+than the margin). The first that passes is added; repeated while one passes. From the
+second acceptance on, the accepted effects are refitted jointly and each earlier one is
+dropped if the others do as well without it (:mod:`sim.calibrate.revisit`). A valve
 null offset found on the replay path is reported as the valve's whole null, the path's
 estimate plus the fitted correction (:func:`null_total`).
 """
@@ -186,6 +188,7 @@ def calibrate_path(
     """The search on ``path``; returns the fields of a
     :class:`sim.calibrate.search.CalibrationResult` as a dict."""
     from sim.calibrate import paths as P
+    from sim.calibrate.revisit import revisit_accepted
     from sim.calibrate.search import UNEXPLAINED_FRACTION, Z95, accept_numbers
     from sim.calibrate.sensitivity import candidates, refine_job, screen, sensor_model
     from sim.parallel import map_jobs
@@ -232,9 +235,11 @@ def calibrate_path(
     flat = P.flatness(pfit, mfit)
     say(f"{path} path: {len(pfit)} fit runs, {len(pho)} held out; held-out NRMSE {e_ho0:.4f}")
     tried, added = [], []
+    items: list = []  # the accepted effects: {"cand", "theta", "unc"}, in the order accepted
+    dropped: set = set()  # (type, where) dropped by a backward pass: not tried again
     for rnd in range(max_rounds):
         ctx = (raw, src, payload, list(accepted))
-        cands = candidates(desc, payload, wscr, accepted, mot, effects)
+        cands = [c for c in candidates(desc, payload, wscr, accepted, mot, effects) if c.key not in dropped]
         t = time.perf_counter()
         sc = screen(cands, wscr, mscr, ctx, workers=workers, say=say, counts=routes)
         tm["screen_s"] += time.perf_counter() - t
@@ -328,18 +333,20 @@ def calibrate_path(
         if winner is None:
             break
         rf, unc, mfit, mho, e_ho, rss, n_par, flat = winner
-        entry = rf.cand.entry(rf.theta)
-        accepted.append(entry)
-        found = {
-            "name": rf.cand.type,
-            "where": rf.cand.where,
-            "parameters": rf.cand.values(rf.theta),
-            "uncertainty": unc,
-            "units": dict(rf.cand.units),
-        }
-        if path == "replay" and rf.cand.type == "valve_null_offset":
-            found.update(null_total(rf.cand, rf.theta, unc, pfit, desc))
-        added.append(found)
+        items.append({"cand": rf.cand, "theta": np.array(rf.theta, float), "unc": unc})
+        if len(items) >= 2:  # the accepted effects revisited: joint refit, backward pass (sim.calibrate.revisit)
+            t = time.perf_counter()
+            st = {"mfit": mfit, "mho": mho, "e_ho": e_ho, "rss": rss, "n_par": n_par, "flat": flat}
+            ctx_r = (pfit, pho, wref, (raw, src, payload), N, margin, workers, routes)
+            items, st, rows = revisit_accepted(items, st, ctx_r, rnd, say)
+            mfit, mho, e_ho, rss, n_par, flat = (st[k] for k in ("mfit", "mho", "e_ho", "rss", "n_par", "flat"))
+            tried.extend(rows)
+            dropped |= {(r["name"], r["where"]) for r in rows if r["revisited"] == "dropped"}
+            tm["revisit_s"] = tm.get("revisit_s", 0.0) + time.perf_counter() - t
+            tm["revisit_replays"] = tm.get("revisit_replays", 0) + st["replays"]
+            tm["replays"] += st["replays"]
+        accepted = [a["cand"].entry(a["theta"]) for a in items]
+        added = [_found(a, path, pfit, desc) for a in items]
         mscr, mref = sims([wscr, wref], accepted)
     per = {}
     for p, m0, m1 in zip(pho, mho0, mho):
@@ -360,6 +367,15 @@ def calibrate_path(
         "per_channel": per,
         "series": {"kind": "path", "holdout": pho, "before": mho0, "after": mho, "fit": pfit, "fit_after": mfit},
     }
+
+
+def _found(a, path, pfit, desc) -> dict:
+    """The ``effects_added`` entry of an accepted effect ``{"cand", "theta", "unc"}``."""
+    c, th, unc = a["cand"], a["theta"], a["unc"]
+    found = {"name": c.type, "where": c.where, "parameters": c.values(th), "uncertainty": unc, "units": dict(c.units)}
+    if path == "replay" and c.type == "valve_null_offset":
+        found.update(null_total(c, th, unc, pfit, desc))
+    return found
 
 
 def null_total(cand, theta, unc, pfit, desc) -> dict:

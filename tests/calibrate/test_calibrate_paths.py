@@ -322,6 +322,36 @@ def test_two_effects_at_once_hydraulic_and_mechanical(floor, tmp_path):
     assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor
 
 
+@pytest.mark.slow
+def test_a_wrong_effect_accepted_first_is_dropped(floor, tmp_path, monkeypatch):
+    """The lateral valves flowing 20 % short, with the first round offered only the sensor
+    gains (monkeypatched): the lateral velocity sensor reading 0.798 stands in for the
+    flow gain and passes on its column. In the next round the flow gain is added (0.822,
+    with the sensor gain held); the joint refit (sim.calibrate.revisit) takes the sensor
+    gain back to 1.000 and the flow gain to 0.800, and the backward pass drops the
+    sensor gain. Without the revisit both stayed (effects_added: the sensor gain 0.798
+    and the flow gain 0.822)."""
+    from sim.calibrate import sensitivity as SE
+
+    stock = SE.candidates
+
+    def sensors_first(desc, payload, prs, accepted, mot, effects=None):
+        out = stock(desc, payload, prs, accepted, mot, effects)
+        return [c for c in out if c.sensor] if not accepted else out
+
+    monkeypatch.setattr(SE, "candidates", sensors_first)
+    paths = _cgs_measured(tmp_path, [{"type": "valve_flow_gain", "where": "class:lateral", "factor": 0.8}])
+    res = S.calibrate(paths, path="replay", effects=["valve_flow_gain", "sensor_gain"], workers=2)
+    first = [c for c in res.candidates if c["round"] == 0 and c["accepted"]]
+    assert [(c["name"], c["where"]) for c in first] == [("sensor_gain", "channel:table_velocity[1]")], first
+    gone = [c for c in res.candidates if c.get("revisited") == "dropped"]
+    assert [(c["name"], c["where"]) for c in gone] == [("sensor_gain", "channel:table_velocity[1]")], gone
+    assert gone[0]["parameters"]["gain"] == pytest.approx(1.0, abs=0.02)  # refitted to no effect first
+    assert len(res.effects_added) == 1
+    _check(res, floor, "valve_flow_gain", "class:lateral", "factor", 0.8)
+    assert res.timing["revisit_replays"] > 0
+
+
 def _reference_only(paths, out):
     """The runs with only the reference and the table's motion (no valve commands, no
     forces or pressures): the closed-loop path is the one left."""
