@@ -336,6 +336,11 @@ def calibrate(
     e_ho = e_ho0
     flat = flatness(mfit, cur.residuals)
     say(f"{path} path: {len(fit_runs)} fit runs, {len(ho_runs)} held out; held-out NRMSE {e_ho0:.4f}")
+    # a law of the actuators' own loads needs each actuator's force: a record with an
+    # actuator's force zero throughout holds a total (the NEES-UCSD runs: column E the
+    # measured total, W zero), not each actuator's own
+    own_forces = not any(np.all(mr.extra["actuator_force"] == 0, axis=0).any() for mr in mfit)
+    laws = [law for law in laws if own_forces or not law.load]
     cands = [
         (law, w)
         for law in laws
@@ -439,7 +444,9 @@ def calibrate(
                     continue
                 law2 = LAWS[simpler]
                 w2 = _same_place(mfit[0], t.where, places(desc, law2.places, pl is not None))
-                if w2 is None or any((u.law.name, u.where) == (law2.name, w2) for u in cur.terms):
+                if w2 is None or any(
+                    (u.law.name, u.where) == (law2.name, w2) for j, u in enumerate(cur.terms) if j != i
+                ):
                     continue
                 alt = fit_terms(mfit, cur.terms[:i] + [Term(law2, w2)] + cur.terms[i + 1 :])
                 n_fits += 1

@@ -337,10 +337,14 @@ G0 = 9.81
 UCSD_PRESLIDING_M = 0.4e-3
 
 
-def ucsd_description(pressure_mpa: float = 13.8, path=UCSD_FILE, *, presliding_m: float | None = None):
+def ucsd_description(
+    pressure_mpa: float = 13.8, path=UCSD_FILE, *, presliding_m: float | None = None, effects: tuple = ()
+):
     """The LHPOST description at a hold-down pressure (0, 6.9, 13.8 MPa): K_e and F_mu;
-    ``presliding_m`` gives the platen friction a pre-sliding travel (e.g. :data:`UCSD_PRESLIDING_M`)."""
+    ``presliding_m`` gives the platen friction a pre-sliding travel (e.g. :data:`UCSD_PRESLIDING_M`);
+    ``effects``: ``[[effect]]`` entries added to it (an effect planted in the truth)."""
     raw = copy.deepcopy(R._raw(path))
+    raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in effects]
     hd = UCSD_HOLD_DOWN[float(pressure_mpa)]
     for e in raw["effect"]:
         if e["type"] == "platen_spring":
@@ -350,6 +354,7 @@ def ucsd_description(pressure_mpa: float = 13.8, path=UCSD_FILE, *, presliding_m
             if presliding_m is not None:
                 e["presliding_m"] = float(presliding_m)
     tag = "" if presliding_m is None else f", pre-sliding {presliding_m * 1e3:g} mm"
+    tag += f", {len(effects)} effect(s) planted" if effects else ""
     return parse_table(raw, f"{path} [hold-down {pressure_mpa:g} MPa{tag}]")
 
 
@@ -540,12 +545,14 @@ def ucsd_run_test(
     cycles: float = 2.0,
     out_dir=None,
     presliding_m: float | None = None,
+    effects: tuple = (),
 ) -> dict:
-    """Simulate one test on the LHPOST model and measure it (optionally write a run file)."""
+    """Simulate one test on the LHPOST model and measure it (optionally write a run file);
+    ``effects``: ``[[effect]]`` entries planted in the model (absent from ucsd.toml)."""
     from sim.loop.simulation import Simulation
     from sim.scenario.reference import Reference
 
-    desc = ucsd_description(pressure_mpa, presliding_m=presliding_m)
+    desc = ucsd_description(pressure_mpa, presliding_m=presliding_m, effects=effects)
     tm = build_model(desc)
     simu = Simulation(tm)
     mo = ucsd_motion(name, simu.gains.rate_hz, cycles=cycles, seed=seed)
@@ -620,13 +627,20 @@ def ucsd_programme(
     cycles: float = 2.0,
     presliding_m: float | None = None,
     progress=None,
+    effects: tuple = (),
 ) -> list[dict]:
     from functools import partial
 
     from sim.parallel import map_jobs
 
     fn = partial(
-        ucsd_run_test, pressure_mpa=pressure_mpa, seed=seed, out_dir=out_dir, cycles=cycles, presliding_m=presliding_m
+        ucsd_run_test,
+        pressure_mpa=pressure_mpa,
+        seed=seed,
+        out_dir=out_dir,
+        cycles=cycles,
+        presliding_m=presliding_m,
+        effects=tuple(effects),
     )
     return map_jobs(fn, names or ucsd_tests(), workers=workers, progress=progress)
 
