@@ -174,8 +174,9 @@ def revisit_accepted(items, st, ctx, rnd, say=None) -> tuple[list, dict, list]:
     how many replays the revisit ran) and the rows for ``candidates`` (``revisited``:
     ``refitted`` / ``refit_not_kept`` / ``kept`` / ``dropped``)."""
     from sim.calibrate import paths as P
-    from sim.calibrate.pathsearch import _acts_on, _bic
+    from sim.calibrate.pathsearch import _bic
     from sim.calibrate.search import Z95
+    from sim.calibrate.sensitivity import acts_on
 
     say = say or (lambda *_: None)
     pfit, pho, wref, base, N, margin, workers, counts = ctx
@@ -260,7 +261,7 @@ def revisit_accepted(items, st, ctx, rnd, say=None) -> tuple[list, dict, list]:
             p_rest = st["n_par"] - len(a["theta"])
             b_with, b_without = _bic(st["rss"], N, st["n_par"]), _bic(w["rss"], N, p_rest)
             if a["cand"].sensor:  # judged on the columns it acts on, as when it was added
-                keep = _acts_on(a["cand"])
+                keep = acts_on(a["cand"])
                 on = [p.only(keep) for p in pho]
                 e_with, e_without = P.nrmse(on, st["mho"]), P.nrmse(on, w["mho"])
             else:
