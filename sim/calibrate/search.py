@@ -411,20 +411,9 @@ def calibrate(
                     f"dropped: without it the held-out error is {e_ho:.4f} -> {e_rest:.4f} (within {100 * margin:g} %)"
                 )
                 say(f"  {t.law.type:18s} {t.where:14s} {why}")
+                expl = (rest.rss - cur.rss) / rest.rss if rest.rss > 0 else 0.0
                 tried.append(
-                    {
-                        "round": "backward",
-                        "name": t.law.name,
-                        "where": t.where,
-                        "explained_fraction": (rest.rss - cur.rss) / rest.rss if rest.rss > 0 else 0.0,
-                        "parameters": cur.values[i],
-                        "uncertainty": {},
-                        "holdout_error": e_rest,
-                        "bic_change": rest.bic - cur.bic,
-                        "flatness": flatness(mfit, rest.residuals),
-                        "accepted": False,
-                        "reason": why,
-                    }
+                    _backward_row(t, cur.values[i], {}, rest, cur, e_rest, expl, flatness(mfit, rest.residuals), why)
                 )
                 cur, e_ho, dropped = rest, e_rest, True
                 break
@@ -458,21 +447,9 @@ def calibrate(
                     f"(held-out {e_ho:.4f} -> {e_alt:.4f})"
                 )
                 say(f"  {t.law.type:18s} {t.where:14s} {why}")
+                unc95 = {k: Z95 * v for k, v in cur.sigma[i].items()}
                 tried.append(
-                    {
-                        "round": "backward",
-                        "name": t.law.name,
-                        "where": t.where,
-                        **({"options": dict(t.law.options)} if t.law.options else {}),
-                        "explained_fraction": 0.0,
-                        "parameters": cur.values[i],
-                        "uncertainty": {k: Z95 * v for k, v in cur.sigma[i].items()},
-                        "holdout_error": e_alt,
-                        "bic_change": alt.bic - cur.bic,
-                        "flatness": flatness(mfit, alt.residuals),
-                        "accepted": False,
-                        "reason": why,
-                    }
+                    _backward_row(t, cur.values[i], unc95, alt, cur, e_alt, 0.0, flatness(mfit, alt.residuals), why)
                 )
                 cur, e_ho, demoted = alt, e_alt, True
                 break
@@ -559,6 +536,25 @@ def _calibrate_path(runs, ho_given, desc, pl, path, effects, margin, workers, sa
         timing=timing,
         **out,
     )
+
+
+def _backward_row(t, values, unc, new, cur, e_new, explained, flat, why) -> dict:
+    """The ``candidates`` row of a term the backward pass dropped or replaced (``new``:
+    the fit without it or with its replacement, ``cur``: the fit before)."""
+    return {
+        "round": "backward",
+        "name": t.law.name,
+        "where": t.where,
+        **({"options": dict(t.law.options)} if t.law.options else {}),
+        "explained_fraction": explained,
+        "parameters": values,
+        "uncertainty": unc,
+        "holdout_error": e_new,
+        "bic_change": new.bic - cur.bic,
+        "flatness": flat,
+        "accepted": False,
+        "reason": why,
+    }
 
 
 def _same_place(mr, where, wheres) -> str | None:
