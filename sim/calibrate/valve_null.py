@@ -46,24 +46,14 @@ class ValveNull:
         }
 
 
-def kinematic_jacobian(desc) -> np.ndarray:
-    """(n_act, 6) d(stroke)/d(pose) at home, by central differences."""
-    from mjcf.description import actuator_strokes
-
-    h = 1e-6
-    I6 = np.eye(6)
-    return np.stack(
-        [actuator_strokes(desc, h * I6[k]) - actuator_strokes(desc, -h * I6[k]) for k in range(6)], axis=1
-    ) / (2 * h)
-
-
 def internal_basis(desc) -> np.ndarray:
     """(n_act, k) orthonormal basis of the stroke-velocity directions the table cannot
     take: the complement of the kinematic Jacobian's range (its left null space, the
     directions of an internal force ``J^T f = 0``). k = 0 for a table with no more
     actuators than the rank of its Jacobian; 6 on CGS (12 actuators, 6 DOF)."""
-    J = kinematic_jacobian(desc)
-    U, s, _ = np.linalg.svd(J)
+    from sim.control.tvc import dof_jacobian
+
+    U, s, _ = np.linalg.svd(dof_jacobian(desc))
     r = int(np.sum(s > 1e-9 * max(float(s[0]), 1e-300))) if len(s) else 0
     return U[:, r:]
 
@@ -105,7 +95,9 @@ def stroke_velocity(run, desc) -> tuple[np.ndarray, str]:
     q6 = np.zeros((len(q), 6))
     for j, d in enumerate(run.dofs):
         q6[:, DOFS6.index(d)] = q[:, j]
-    return q6 @ kinematic_jacobian(desc).T, what + " through the kinematic Jacobian"
+    from sim.control.tvc import dof_jacobian
+
+    return q6 @ dof_jacobian(desc).T, what + " through the kinematic Jacobian"
 
 
 def estimate(run, desc, *, drift: bool = True) -> ValveNull:
@@ -151,4 +143,4 @@ def declared_null(desc) -> np.ndarray:
     return np.asarray(hp.per_actuator("valve_null_offset"), float)
 
 
-__all__ = ["ValveNull", "declared_null", "estimate", "internal_basis", "kinematic_jacobian", "stroke_velocity"]
+__all__ = ["ValveNull", "declared_null", "estimate", "internal_basis", "stroke_velocity"]

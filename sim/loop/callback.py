@@ -294,16 +294,17 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud, wn):
     pd = np.int64(C[S_PD])
     XMP = _f2(C, A_XMP)
     X = _f3(C, A_X)
-    W0 = _i1(C, A_W0)
     if s == 0:
         for r in range(9):
             XMP[pb, r] = xmat[pb, r]
+        W0 = _i1(C, A_W0)
         for i in range(WARN_IDX.shape[0]):  # MuJoCo's warning counts at the start (a reused MjData: not 0)
             W0[i] = wn[2 * WARN_IDX[i]]
     if j == 0 and C[S_PENDING] > 0:  # the check of the previous tick, on the state after its steps
         C[S_PENDING] = 0.0
         code, val = check_state(qpos, qvel, X, C[S_VALUE], C[S_RELIEF], C[S_VAPOUR])
         if code == 0 or code >= 3:  # as Simulation._check: a MuJoCo warning after the finite state, before the rest
+            W0 = _i1(C, A_W0)
             for i in range(WARN_IDX.shape[0]):
                 if wn[2 * WARN_IDX[i]] > W0[i]:
                     code = CODE_WARN + i
@@ -634,6 +635,15 @@ class Context:
     def address(self) -> float:
         return float(self.C.ctypes.data)
 
+    def _warned(self, final_state) -> int:
+        """``CODE_WARN + i`` of the first MuJoCo warning of :data:`WARN_IDX` whose counter
+        rose during the run, from ``final_state[2]`` (``mjData.warning.number``) when the
+        route has it; else 0."""
+        if len(final_state) < 3:
+            return 0
+        rose = np.flatnonzero(np.asarray(final_state[2])[WARN_IDX] > self.arrays["W0"])
+        return CODE_WARN + int(rose[0]) if len(rose) else 0
+
     def result(self, wall_s: float, final_state) -> RunResult:
         """The :class:`RunResult` of the finished run (``final_state``: qpos, qvel after
         the last step, for the last tick's pending check, and MuJoCo's warning counters
@@ -644,15 +654,12 @@ class Context:
         spt = int(C[S_SPT])
         if C[S_DONE] < 0 and C[S_CALLS] < self.n * spt:  # MuJoCo reset the simulation (userdata zeroed)
             k = max(int(C[S_CALLS]) - 1, 0) // spt
-            C[S_CODE], C[S_VALUE], C[S_TICK], C[S_DONE] = CODE_RESET, 0.0, k, k + 1
-            if len(final_state) > 2:  # the route has the counters: which warning
-                rose = np.flatnonzero(np.asarray(final_state[2])[WARN_IDX] > arr["W0"])
-                C[S_CODE] = CODE_WARN + int(rose[0]) if len(rose) else CODE_RESET
+            # the warning that made MuJoCo reset it, where the route has the counters
+            C[S_CODE], C[S_VALUE], C[S_TICK], C[S_DONE] = self._warned(final_state) or CODE_RESET, 0.0, k, k + 1
         if C[S_DONE] < 0 and C[S_PENDING] > 0:  # the last tick's check, as the loop does after it
             code, val = check_state(final_state[0], final_state[1], arr["X"], C[S_VALUE], C[S_RELIEF], C[S_VAPOUR])
-            if (code == 0 or code >= 3) and len(final_state) > 2:  # MuJoCo's warning counters, when the route has them
-                rose = np.flatnonzero(np.asarray(final_state[2])[WARN_IDX] > arr["W0"])
-                code = CODE_WARN + int(rose[0]) if len(rose) else code
+            if code == 0 or code >= 3:  # MuJoCo's warning counters, when the route has them
+                code = self._warned(final_state) or code
             if code:
                 C[S_CODE], C[S_VALUE], C[S_DONE] = code, val, self.n
         n_done = self.n if C[S_DONE] < 0 else int(C[S_DONE])

@@ -26,10 +26,11 @@ def clean_run(tmp_path_factory):
 
 def test_internal_basis_of_cgs_and_of_a_single_actuator():
     import mjcf
-    from sim.calibrate.valve_null import internal_basis, kinematic_jacobian
+    from sim.calibrate.valve_null import internal_basis
+    from sim.control.tvc import dof_jacobian
 
     desc = mjcf.load_table("cgs")
-    N, J = internal_basis(desc), kinematic_jacobian(desc)
+    N, J = internal_basis(desc), dof_jacobian(desc)
     assert N.shape == (12, 6)
     assert np.allclose(N.T @ N, np.eye(6), atol=1e-9)
     assert np.abs(N.T @ J).max() < 1e-6 * np.abs(J).max()  # J^T f = 0: an internal force moves nothing
@@ -73,10 +74,10 @@ def test_the_internal_part_of_a_load_cell_offset():
     vertical one's 25 %; nothing on a table without redundancy."""
     import mjcf
     from sim.calibrate.sensitivity import internal_force_part
-    from sim.calibrate.valve_null import kinematic_jacobian
+    from sim.control.tvc import dof_jacobian
 
     desc = mjcf.load_table("cgs")
-    P, J = internal_force_part(desc), kinematic_jacobian(desc)
+    P, J = internal_force_part(desc), dof_jacobian(desc)
     assert np.allclose(P @ P, P, atol=1e-12) and np.allclose(P, P.T)
     assert np.trace(P) == pytest.approx(6.0)
     assert np.abs(J.T @ P).max() < 1e-6 * np.abs(J).max()
