@@ -37,16 +37,14 @@ import numpy as np
 
 from hydraulics.params import HydraulicsParamError
 from sim.calibrate.residuals import CalibrationError, check_finite
+from sim.calibrate.windows import QUIET_COLUMN, dof_weights, excited
 from sim.errors import UserError
 
 #: channels compared on these paths, in order of preference
 FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_velocity")
-#: a column whose recorded RMS is below this share of its channel's largest is left out
-#: (a DOF the run does not excite: its residual is noise over nothing). Assumed: 5 %,
-#: above the cross-talk of a 3-axis test into the rotations, below any DOF a test drives.
-QUIET_COLUMN = 0.05
-#: ... and so is a column whose RMS is below this many times its recorded noise, when the
-#: run says what its sensor model was (``meta.measurement``)
+#: a column is compared when the run excites it (:func:`sim.calibrate.windows.excited`:
+#: its RMS at least QUIET_COLUMN of its channel's largest, DOFs in actuator units) and its
+#: RMS is at least this many times its recorded noise, when the run says what its sensor model was (``meta.measurement``)
 NOISE_COLUMN = 3.0
 DOF_CHANNELS = ("table_displacement", "table_velocity", "table_acceleration")
 
@@ -68,6 +66,9 @@ class PathRun:
     conditioning: dict | None = None
     valve_null: dict | None = None
     bandpass: dict = field(default_factory=dict)  # channel -> band (Hz) it is compared in
+    #: columns not compared: channel -> places the run does not excite (:func:`sim.calibrate.windows.excited`)
+    not_excited: dict = field(default_factory=dict)
+    origin: tuple = ()  # a window's (start, first scored, stop) samples in its record
 
     @property
     def dt(self) -> float:
@@ -77,16 +78,26 @@ class PathRun:
     def n(self) -> int:
         return len(self.t)
 
-    def window(self, seconds: float | None) -> "PathRun":
-        """The first ``seconds`` of the run (all of it for None), scored over all its rows."""
-        if seconds is None or seconds >= self.t[-1]:
-            n = self.n
-        else:
-            n = max(int(round(seconds / self.dt)) + 1, 64)
-        rec = {c: x[:n] for c, x in self.recorded.items()}
+    def window(self, seconds: float | None, *, segments: int = 1, horizon_s: float | None = None) -> list:
+        """The windows of this run holding the most excitation (:func:`sim.calibrate.windows.choose`:
+        ``segments`` of ``seconds / segments`` each, anywhere in the record, each replayed
+        from a point where the record is at rest and scored over its own rows); all of it
+        for None."""
+        from sim.calibrate.windows import choose
+
+        chans = [self.drive] + [self.recorded[c][:, cols] for c, cols in self.columns.items()]
+        return [self.span(w) for w in choose(chans, 1.0 / self.dt, seconds, segments=segments, horizon_s=horizon_s)]
+
+    def span(self, w) -> "PathRun":
+        """Samples ``[w.start, w.stop)`` of the run (time from 0 at ``w.start``: the replay
+        starts there at rest), scored over ``[w.score_from, w.stop)``."""
+        a, b = w.start, w.stop
+        rows = slice(w.score_from - a, None)
+        rec = {c: x[a:b] for c, x in self.recorded.items()}
         out = copy.copy(self)
-        out.t, out.drive, out.recorded, out.rows = self.t[:n], self.drive[:n], rec, slice(None)
-        out.scale = _scales(rec, self.columns, slice(None))
+        out.t, out.drive, out.recorded, out.rows = self.t[a:b] - self.t[a], self.drive[a:b], rec, rows
+        out.scale = _scales(rec, self.columns, rows)
+        out.origin = (a, w.score_from, b)
         return out
 
     def job(self, raw, src, payload, extra) -> tuple:
@@ -145,10 +156,12 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
     from mjcf.description import DOFS6
     from sim.calibrate.replay import DISPLACEMENT_BAND_HZ
     from sim.calibrate.valve_null import declared_null, estimate
+    from sim.control.tvc import dof_jacobian
     from sim.signals.resample import bandpass
 
     out = []
     null0 = declared_null(desc) if path == "replay" else None
+    J6 = dof_jacobian(desc)
     for r in runs:
         chans = fit_channels(r)
         check_finite(r, chans + (["valve_command"] if path == "replay" else ["reference"]))
@@ -163,7 +176,7 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
             drive = np.zeros((r.n_samples, 6))
             for j, d in enumerate(r.dofs):
                 drive[:, DOFS6.index(d)] = r.reference[:, j]
-        rec, cols, bands = {}, {}, {}
+        rec, cols, bands, quiet = {}, {}, {}, {}
         meas = (r.meta.get("measurement") or {}).get("model")
         for c in chans:
             x = np.asarray(getattr(r, c), float)
@@ -175,11 +188,14 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
             noise = np.broadcast_to(
                 np.asarray(((meas or {}).get("channel", {}).get(c, {})).get("noise_rms", 0.0), float), rms.shape
             )
-            keep = [
-                j
-                for j in range(x.shape[1])
-                if rms[j] > QUIET_COLUMN * max(rms.max(), 1e-300) and rms[j] > NOISE_COLUMN * noise[j]
-            ]
+            # a DOF channel in actuator units (a rotation as the strokes it takes): one rule for
+            # both paths (sim.calibrate.windows.excited)
+            w = dof_weights(J6, r.dofs, "motion") if c.startswith("table_") else None
+            on = excited(rms, w) & (rms > NOISE_COLUMN * noise)
+            keep = [j for j in range(x.shape[1]) if on[j]]
+            names = r.dofs if c.startswith("table_") else r.actuators
+            if len(keep) < x.shape[1]:
+                quiet[c] = [names[j] for j in range(x.shape[1]) if not on[j]]
             if keep:
                 rec[c], cols[c] = x, keep
         if not rec:
@@ -204,6 +220,7 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
                 conditioning=meas,
                 valve_null=vn,
                 bandpass=bands,
+                not_excited=quiet,
             )
         )
     return out
@@ -578,6 +595,7 @@ def unexplained(prs, models, fraction: float) -> dict | None:
 
 __all__ = [
     "FIT_CHANNELS",
+    "QUIET_COLUMN",
     "PathRun",
     "column_errors",
     "condition",

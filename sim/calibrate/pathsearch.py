@@ -26,10 +26,18 @@ from pathlib import Path
 
 import numpy as np
 
-#: screening window: the first seconds of the first fit run (short: one replay per parameter)
+#: screening window (s): one window of the first fit run, where it holds the most
+#: excitation (sim.calibrate.windows.choose; short: one replay per parameter)
 SCREEN_S = 1.0
-#: refinement windows: the first seconds of every fit run (a few least-squares iterations per candidate)
+#: refinement windows (s): as much of every fit run, where it holds the most excitation
+#: (a few least-squares iterations per candidate) ...
 REFINE_S = 2.0
+#: ... in this many segments on a run at least LONG_RECORD_S long, one in each part of the
+#: REFINE_HORIZON_S after its quiet lead-in (each segment replays from the lead-in's end:
+#: a horizon further out would cost a replay of everything before it)
+REFINE_SEGMENTS = 2
+LONG_RECORD_S = 20.0
+REFINE_HORIZON_S = 4 * REFINE_S
 #: candidates refined per round (the best by their linearised score) ...
 N_REFINE = 3
 #: ... plus the best of every other effect type and place kind among this many best screened
@@ -178,6 +186,45 @@ def line_search(top, prs, base_models, ctx, workers=None, counts=None) -> dict:
     return out
 
 
+def search_windows(pfit) -> tuple[list, list]:
+    """The screening windows (the first fit run's) and the refinement windows (every fit
+    run's), chosen by the excitation they hold (:meth:`sim.calibrate.paths.PathRun.window`),
+    never by position: a record's first seconds may be its quiet lead-in."""
+    wscr = pfit[0].window(SCREEN_S)
+    wref = []
+    for p in pfit:
+        long = p.t[-1] >= LONG_RECORD_S
+        wref += p.window(REFINE_S, segments=REFINE_SEGMENTS, horizon_s=REFINE_HORIZON_S) if long else p.window(REFINE_S)
+    return wscr, wref
+
+
+def window_seconds(pfit, wscr, wref) -> dict:
+    """The cost of the windows (replayed seconds per screening replay and per refinement
+    evaluation, all windows) against the fixed first seconds they replace, and where they
+    sit in their records (s)."""
+
+    def fixed(s):
+        return sum(min(s, float(p.t[-1])) for p in pfit)
+
+    return {
+        "screen_window_replay_s": sum(float(w.t[-1]) for w in wscr),
+        "screen_window_replay_s_first_seconds": min(SCREEN_S, float(pfit[0].t[-1])),
+        "refine_windows_replay_s": sum(float(w.t[-1]) for w in wref),
+        "refine_windows_replay_s_first_seconds": fixed(REFINE_S),
+        "windows": [
+            {
+                "run": Path(w.name).name,
+                "stage": st,
+                "replayed_from_s": float(w.origin[0] * w.dt),
+                "scored_from_s": float(w.origin[1] * w.dt),
+                "to_s": float(w.origin[2] * w.dt),
+            }
+            for st, ws in (("screen", wscr), ("refine", wref))
+            for w in ws
+        ],
+    }
+
+
 def _bic(rss, n, p) -> float:
     return n * math.log(max(rss, 1e-300) / n) + p * math.log(n)
 
@@ -199,8 +246,8 @@ def calibrate_path(
     fit_runs, ho_runs, score_from, ho_note = _split(runs, ho_given)
     pfit = P.path_runs(fit_runs, desc, path)
     pho = P.path_runs(ho_runs, desc, path, score_from=score_from)
-    wscr = [pfit[0].window(SCREEN_S)]
-    wref = [p.window(REFINE_S) for p in pfit]
+    wscr, wref = search_windows(pfit)
+    tm.update(window_seconds(pfit, wscr, wref))
     raw, src = desc.raw, str(desc.source)
     mot = motion_rms(runs, desc)
     accepted: list = []
@@ -348,11 +395,7 @@ def calibrate_path(
         accepted = [a["cand"].entry(a["theta"]) for a in items]
         added = [_found(a, path, pfit, desc) for a in items]
         mscr, mref = sims([wscr, wref], accepted)
-    per = {}
-    for p, m0, m1 in zip(pho, mho0, mho):
-        e0, e1 = P.column_errors(p, m0), P.column_errors(p, m1)
-        for k in e0:
-            per[f"{Path(p.name).name}:{k}"] = {"before": e0[k], "after": e1[k]}
+    per, per_run, quiet = path_errors(pho, mho0, mho)
     if timing is not None:
         timing.update(tm)
         timing["replays_batch"], timing["replays_fallback"] = routes["batch"], routes["fallback"]
@@ -365,8 +408,27 @@ def calibrate_path(
         "candidates": tried,
         "unexplained": P.unexplained(pfit, mfit, UNEXPLAINED_FRACTION),
         "per_channel": per,
+        "per_run": per_run,
+        "not_excited": quiet,
         "series": {"kind": "path", "holdout": pho, "before": mho0, "after": mho, "fit": pfit, "fit_after": mfit},
     }
+
+
+def path_errors(pho, before, after) -> tuple[dict, dict, list]:
+    """Where the held-out error sits: per run and compared column (``"<run>:<channel>[<place>]"``
+    -> before/after), per run (pooled), and the ``"<run>:<channel>[<place>]"`` the runs do
+    not excite (:attr:`sim.calibrate.paths.PathRun.not_excited`), left out of both."""
+    from sim.calibrate import paths as P
+
+    per, per_run, quiet = {}, {}, []
+    for p, m0, m1 in zip(pho, before, after):
+        run = Path(p.name).name
+        per_run[run] = {"before": P.nrmse([p], [m0]), "after": P.nrmse([p], [m1])}
+        e0, e1 = P.column_errors(p, m0), P.column_errors(p, m1)
+        for k in e0:
+            per[f"{run}:{k}"] = {"before": e0[k], "after": e1[k]}
+        quiet += [f"{run}:{ch}[{place}]" for ch, places in p.not_excited.items() for place in places]
+    return per, per_run, quiet
 
 
 def _found(a, path, pfit, desc) -> dict:

@@ -68,6 +68,9 @@ class MechRun:
     #: gravity m/s^2), None without one (the ``payload`` place of the CG offset's law)
     payload: tuple | None = None
     extra: dict = field(default_factory=dict)
+    #: bool (k,): the DOFs the run excites (:func:`excited_dofs`); the others are left out
+    #: of the fit's weights and the pooled error, and reported as not excited
+    excited: np.ndarray | None = None
 
     @property
     def residual(self) -> np.ndarray:
@@ -310,8 +313,23 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
                 other = other + mr.second(law, where, vals, vals)
         mr.model = a @ Me.T + mr.filt(other)
         mr.rows = _still_rows(v, pre, r.dt)
+        mr.excited = excited_dofs(mr, J6)
         out.append(mr)
     return out
+
+
+def excited_dofs(mr, J6) -> np.ndarray:
+    """Bool (k,): the DOFs whose recorded generalised force (static part removed, over the
+    fit rows) reaches :data:`sim.calibrate.windows.QUIET_COLUMN` of the largest, a moment
+    and a force compared as the actuator forces that make them
+    (:func:`sim.calibrate.windows.dof_weights`). A DOF the test does not drive holds
+    cross-talk and noise: normalised by its own force its error is noise over nothing
+    (rz 292 % under a translational CGS test)."""
+    from sim.calibrate.windows import dof_weights, excited
+
+    F = mr.demean(mr.force)[mr.rows]
+    rms = np.sqrt(np.mean(F**2, axis=0)) if len(F) else np.zeros(len(mr.dofs))
+    return excited(rms, dof_weights(J6, mr.dofs, "force"))
 
 
 def _force_at_acceleration_instant(r) -> np.ndarray:
@@ -464,10 +482,12 @@ def joint_terms(tm, k_of) -> JointTerms:
 
 def nrmse_runs(mruns, residuals) -> float:
     """Pooled NRMSE of ``residuals`` (list of (n, k)) against the recorded force, each run
-    and DOF weighted alike (the paper's force weighting)."""
+    and excited DOF (:func:`excited_dofs`) weighted alike (the paper's force weighting)."""
     vals = []
     for mr, e in zip(mruns, residuals):
         for j in range(len(mr.dofs)):
+            if mr.excited is not None and not mr.excited[j]:
+                continue
             F = mr.demean(mr.force)[mr.rows, j]
             den = float(np.sum(F**2))
             if den > 0:
@@ -508,6 +528,7 @@ __all__ = [
     "check_path",
     "choose_path",
     "mechanical_runs",
+    "excited_dofs",
     "nrmse_runs",
     "places",
     "spectra",

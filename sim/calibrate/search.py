@@ -46,6 +46,10 @@ class CalibrationResult:
     unexplained: dict | None
     per_channel: dict  # holdout NRMSE per run and DOF, before and after
     timing: dict
+    #: held-out NRMSE per run (pooled over its excited columns), before and after
+    per_run: dict = field(default_factory=dict)
+    #: "<run>:<channel or DOF>" the held-out runs do not excite: left out of every error above
+    not_excited: list = field(default_factory=list)
     # arrays for the report (not in the JSON)
     series: dict = field(default_factory=dict, repr=False)
 
@@ -62,6 +66,8 @@ class CalibrationResult:
             "candidates",
             "unexplained",
             "per_channel",
+            "per_run",
+            "not_excited",
             "timing",
         )
         return {k: getattr(self, k) for k in keys}
@@ -470,10 +476,7 @@ def calibrate(
         )
     ho_res = predict(mho, cur)
     ho_res0 = [mr.residual for mr in mho]
-    per = {}
-    for mr, e0, e1 in zip(mho, ho_res0, ho_res):
-        for j, d in enumerate(mr.dofs):
-            per[f"{Path(mr.name).name}:{d}"] = {"before": _nrmse_col(mr, e0, j), "after": _nrmse_col(mr, e1, j)}
+    per, per_run, quiet = mechanical_errors(mho, ho_res0, ho_res)
     t3 = time.perf_counter()
     res = CalibrationResult(
         table=desc.name,
@@ -488,6 +491,8 @@ def calibrate(
         candidates=tried,
         unexplained=unexplained(mfit, cur.residuals),
         per_channel=per,
+        per_run=per_run,
+        not_excited=quiet,
         timing={
             "read_s": t1 - t0,
             "residuals_s": t2 - t1,
@@ -582,6 +587,24 @@ def distinct_places(mr, wheres) -> list:
         maps.append(m)
         out.append(w)
     return out
+
+
+def mechanical_errors(mho, before, after) -> tuple[dict, dict, list]:
+    """Where the held-out error sits: per run and excited DOF (``"<run>:<dof>"`` ->
+    before/after), per run (pooled over its excited DOFs), and the ``"<run>:<dof>"`` the
+    runs do not excite (:func:`sim.calibrate.residuals.excited_dofs`), left out of both."""
+    from sim.calibrate.residuals import nrmse_runs
+
+    per, per_run, quiet = {}, {}, []
+    for mr, e0, e1 in zip(mho, before, after):
+        run = Path(mr.name).name
+        per_run[run] = {"before": nrmse_runs([mr], [e0]), "after": nrmse_runs([mr], [e1])}
+        for j, d in enumerate(mr.dofs):
+            if mr.excited is not None and not mr.excited[j]:
+                quiet.append(f"{run}:{d}")
+                continue
+            per[f"{run}:{d}"] = {"before": _nrmse_col(mr, e0, j), "after": _nrmse_col(mr, e1, j)}
+    return per, per_run, quiet
 
 
 def _nrmse_col(mr, e, j) -> float:

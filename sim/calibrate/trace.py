@@ -58,6 +58,8 @@ class Fit:
 def _weights(mr) -> np.ndarray:
     F = mr.demean(mr.force)[mr.rows]
     den = np.sqrt(np.sum(F**2, axis=0))
+    if mr.excited is not None:  # a DOF the run does not excite: noise over nothing, left out
+        den = np.where(mr.excited, den, 0.0)
     return np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
 
 
@@ -341,6 +343,8 @@ def flatness(mruns, residuals) -> float:
     vals = []
     for mr, e in zip(mruns, residuals):
         for j in range(e.shape[1]):
+            if mr.excited is not None and not mr.excited[j]:
+                continue
             x = e[:, j][mr.rows]
             if np.any(x):
                 vals.append(spectral_flatness(x, 1.0 / mr.dt))

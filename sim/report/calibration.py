@@ -192,6 +192,31 @@ def _pct(x) -> str:
     return "-" if x is None else f"{100 * x:.2f} %"
 
 
+def _where_error_sits(res) -> list[str]:
+    """The held-out error per run and per channel / DOF, before and after, and the
+    channels / DOFs left out as not excited (noise over nothing)."""
+    L = ["## Where the error sits", ""]
+    per_run = getattr(res, "per_run", {}) or {}
+    if per_run:
+        L += ["| held-out run | before | after |", "|---|---|---|"]
+        L += [f"| `{k}` | {_pct(v['before'])} | {_pct(v['after'])} |" for k, v in per_run.items()]
+        L.append("")
+    if res.per_channel:
+        L += ["| run: channel or DOF | before | after |", "|---|---|---|"]
+        L += [f"| `{k}` | {_pct(v['before'])} | {_pct(v['after'])} |" for k, v in res.per_channel.items()]
+        L.append("")
+    quiet = getattr(res, "not_excited", []) or []
+    if quiet:
+        from sim.calibrate.windows import QUIET_COLUMN
+
+        L += [
+            f"Not excited (RMS below {100 * QUIET_COLUMN:g} % of the run's largest, DOFs in actuator units; "
+            "left out of every error above): " + ", ".join(f"`{q}`" for q in quiet) + ".",
+            "",
+        ]
+    return L
+
+
 def report_md(res, figs: list[str], toml_name: str) -> str:
     L = [f"# Calibration of `{res.table}`", ""]
     L.append(
@@ -206,6 +231,7 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
         f"**{100 * res.error_after:.2f} %** (calibrated).",
         "",
     ]
+    L += _where_error_sits(res)
     L += ["## Effects added", ""]
     if res.effects_added:
         L += ["| effect | where | parameter | value | 95 % interval |", "|---|---|---|---|---|"]
@@ -262,6 +288,20 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
             f"whole-run acceptance {tm['accept_s']:.1f} s; {tm['replays']} replays).",
             "",
         ]
+        if "screen_window_replay_s" in tm:
+            L += [
+                f"Windows (chosen by excitation): each screening replay {tm['screen_window_replay_s']:.2f} s "
+                f"(the first {tm['screen_window_replay_s_first_seconds']:.2f} s would be the fixed window), "
+                f"each refinement evaluation {tm['refine_windows_replay_s']:.2f} s over all fit runs "
+                f"(fixed: {tm['refine_windows_replay_s_first_seconds']:.2f} s); "
+                + "; ".join(
+                    f"{w['stage']} `{w['run']}` scored {w['scored_from_s']:.2f}-{w['to_s']:.2f} s "
+                    f"(replayed from {w['replayed_from_s']:.2f} s)"
+                    for w in tm.get("windows", [])
+                )
+                + ".",
+                "",
+            ]
     return "\n".join(L)
 
 

@@ -1,0 +1,219 @@
+"""Windows chosen by the excitation they hold, and columns left out when a test does not
+excite them (sim.calibrate.windows): a record's first seconds may be its quiet lead-in
+(a real earthquake record sits still for seconds), and a DOF a test does not drive holds
+noise over nothing."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from sim.calibrate.windows import SETTLE_S, Window, choose, dof_weights, excited, quiet_lead
+
+FS = 256.0
+
+
+def _burst(t, t_on, t_off, f_hz, rng, noise=0.01):
+    """(n, 2) drive and (n, 3) motion: sensor noise, and from ``t_on`` to ``t_off`` a sine
+    burst (0.3 s ramp) on the drive and the first motion column (the others stay still)."""
+    env = np.clip((t - t_on) / 0.3, 0, 1) * np.clip((t_off - t) / 0.3, 0, 1)
+    s = np.sin(2 * np.pi * f_hz * t) * env
+    drive = noise * rng.standard_normal((len(t), 2)) + s[:, None] * np.array([1.0, 0.4])
+    motion = noise * rng.standard_normal((len(t), 3))
+    motion[:, 0] += 3.0 * s
+    return drive, motion
+
+
+def _mean_square(x, a, b):
+    return float(np.mean(x[a:b] ** 2))
+
+
+def test_window_lands_in_the_strong_motion_after_a_quiet_lead_in():
+    """3 s of sensor noise, then 4 s of motion: the fixed first second holds nothing, the
+    chosen window the motion; it replays from SETTLE_S before the lead-in's end (the model's
+    rest state is the record's there) and costs about its own length, not the lead-in."""
+    t = np.arange(int(8 * FS)) / FS
+    drive, motion = _burst(t, 3.0, 7.0, 2.3, np.random.default_rng(1))
+    (w,) = choose([drive, motion], FS, 1.0)
+    assert 2.9 <= w.score_from / FS <= 3.2, w
+    assert w.stop - w.score_from == int(round(FS)) + 1
+    assert w.start / FS == pytest.approx(w.score_from / FS - SETTLE_S, abs=0.1)
+    assert w.replay_s <= 1.0 + SETTLE_S + 0.1
+    # what the fixed first second held: sensor noise only (< 0.1 % of the chosen window's)
+    fixed, chosen = _mean_square(motion[:, 0], 0, int(FS)), _mean_square(motion[:, 0], w.score_from, w.stop)
+    assert fixed < 1e-3 * chosen, (fixed, chosen)
+    assert quiet_lead([drive, motion], FS) / FS == pytest.approx(3.0, abs=0.1)
+
+
+def test_a_record_moving_from_its_start_keeps_its_first_window():
+    """Stationary motion from the first sample: the earliest strong window is the first
+    (the cheapest: nothing replayed before it), as the fixed window was."""
+    t = np.arange(int(6 * FS)) / FS
+    drive, motion = _burst(t, -1.0, 7.0, 3.1, np.random.default_rng(2))
+    (w,) = choose([drive, motion], FS, 1.0)
+    assert (w.start, w.score_from) == (0, 0)
+    assert choose([drive, motion], FS, None) == [Window(0, 0, len(t), FS)]
+
+
+def test_a_long_record_is_sampled_by_segments():
+    """Two bursts far apart after a quiet lead-in: two segments, one in each, each in its
+    burst's strong part, both replayed from the lead-in's end."""
+    t = np.arange(int(40 * FS)) / FS
+    rng = np.random.default_rng(3)
+    d1, m1 = _burst(t, 5.0, 12.0, 2.0, rng)
+    d2, m2 = _burst(t, 25.0, 35.0, 6.0, rng, noise=0.0)
+    drive, motion = d1 + d2, m1 + m2
+    ws = choose([drive, motion], FS, 2.0, segments=2)
+    assert len(ws) == 2
+    assert 5.0 <= ws[0].score_from / FS <= 11.0 and 24.5 <= ws[1].score_from / FS <= 34.0, ws
+    assert all(w.start / FS == pytest.approx(5.0 - SETTLE_S, abs=0.15) for w in ws)
+    for w in ws:  # each segment scored over its half of the budget, in strong motion
+        assert w.stop - w.score_from == int(round(FS)) + 1
+        assert _mean_square(motion[:, 0], w.score_from, w.stop) > 1.0
+
+
+def test_moments_and_rotations_compared_in_actuator_units():
+    """On CGS a moment is weighed as the actuator forces that make it (the lever arms
+    shrink it) and a rotation as the strokes it takes (they grow it); a column below
+    QUIET_COLUMN of the largest in those units is not excited."""
+    import mjcf
+    from sim.control.tvc import dof_jacobian
+
+    desc = mjcf.load_table("cgs")
+    J6 = dof_jacobian(desc)
+    wf, wm = dof_weights(J6, desc.dofs, "force"), dof_weights(J6, desc.dofs, "motion")
+    assert np.all(wf[3:] < 0.5 * wf[:3].min()) and np.all(wm[3:] > 2 * wm[:3].max())
+    # 70 kN on x, 15 kN m about z: in N it would pass, as actuator forces (lever arms) it does not
+    assert list(excited([70e3, 0, 0, 0, 0, 15e3], wf)) == [True] + [False] * 5
+    assert list(excited([70e3, 0, 0, 0, 0, 15e3])) == [True, False, False, False, False, True]
+
+
+# ------------------------------------------------------------------ the mechanical path
+@pytest.fixture(scope="module")
+def translational_cgs(tmp_path_factory):
+    """Two clean 2 s CGS runs, 3-axis translational random (1-30 Hz), closed loop,
+    measured through the built-in recorder model (seeded): the controller holds the
+    rotations, the moment about the vertical is cross-talk."""
+    import mjcf
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+    from sim.runs.build import build_runfile
+    from sim.runs.measure import load_sensors, measure_run
+    from sim.runs.runfile import read_run, write_run
+    from sim.scenario import motions as M
+    from sim.scenario.reference import reference_from_motions
+
+    desc = mjcf.load_table("cgs")
+    tm = build_model(desc)
+    out = tmp_path_factory.mktemp("translational")
+    runs = []
+    for seed in (7, 8):
+        mo = {
+            d: M.white_noise(
+                duration_s=2.0, sample_rate_hz=1024.0, band_hz=(1.0, 30.0), seed=(seed, k), rms_acceleration=r
+            )
+            for k, (d, r) in enumerate({"x": 1.0, "y": 1.0, "z": 0.8}.items())
+        }
+        ref = reference_from_motions(mo, 1024.0, 2.0)
+        res = Simulation(tm).run(reference=ref)
+        assert res.incomplete_reason is None
+        run = build_runfile(res, tm, source="simulated", reference=ref)
+        runs.append(read_run(write_run(out / f"cgs_{seed}.run.npz", measure_run(run, load_sensors(), seed=seed))))
+    return desc, runs
+
+
+def test_unexcited_rotation_left_out_of_the_pooled_mechanical_error(translational_cgs):
+    """A clean translational CGS case: rz (moment 2 % of the largest force in actuator
+    units) is reported as not excited and left out; the pooled error is that of the
+    excited DOFs (measured 13.6 %: translations 3 %, the moments about x and y 20 %, their
+    rotational acceleration's sensor noise), where pooling rz in gave 90 % (rz: 220 %)."""
+    from sim.calibrate import residuals as R
+    from sim.calibrate.search import mechanical_errors
+
+    desc, runs = translational_cgs
+    mrs = R.mechanical_runs(runs, desc, accel_lowpass_hz=None)  # the recorder has no extra conditioner
+    res = [mr.residual for mr in mrs]
+    per, per_run, quiet = mechanical_errors(mrs, res, res)
+    assert quiet == [f"cgs_{s}.run.npz:rz" for s in (7, 8)]
+    assert not any(k.endswith(":rz") for k in per)
+    pooled = R.nrmse_runs(mrs, res)
+    excited_errors = [v["before"] for v in per.values()]
+    assert pooled == pytest.approx(math.sqrt(np.mean(np.square(excited_errors))), rel=1e-9)
+    assert max(v["before"] for k, v in per.items() if k.split(":")[1] in "xyz") < 0.05
+    assert pooled < 0.2, pooled
+    for mr in mrs:
+        mr.excited = None  # the old normalisation: every DOF by its own force
+    assert R.nrmse_runs(mrs, res) > 4 * pooled
+
+
+# ------------------------------------------------------------------ the replay path
+LEAD_S, STRONG_S = 3.0, 2.0
+
+
+def _lab_with_quiet_lead(out, seed, effects):
+    """A `lab` run (uni-axial) closed loop: LEAD_S s at rest, then STRONG_S s of 1-20 Hz
+    random motion, with ``effects`` planted, measured through the built-in recorder model."""
+    import mjcf
+    from mjcf.description import parse_table
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+    from sim.runs.build import build_runfile
+    from sim.runs.measure import load_sensors, measure_run
+    from sim.runs.runfile import write_run
+    from sim.scenario import motions as M
+    from sim.scenario.reference import Reference
+
+    fs = 1024.0
+    mo = M.white_noise(
+        duration_s=STRONG_S, sample_rate_hz=fs, band_hz=(1.0, 20.0), seed=(seed, 0), rms_acceleration=1.0
+    )
+    n, k = int(round((LEAD_S + STRONG_S) * fs)) + 1, int(round(LEAD_S * fs))
+    D, V, A = (np.zeros((n, 6)) for _ in range(3))
+    m = min(n - k, len(mo.d))
+    for X, x in ((D, mo.d), (V, mo.v), (A, mo.a)):
+        X[k : k + m, 0] = x[:m]
+    ref = Reference(t=np.arange(n) / fs, d=D, v=V, a=A)
+    base = mjcf.load_table("lab")
+    raw = copy.deepcopy(base.raw)
+    raw["effect"] = list(raw.get("effect", [])) + [dict(e) for e in effects]
+    tm = build_model(parse_table(raw, src=base.source))
+    res = Simulation(tm).run(reference=ref)
+    assert res.incomplete_reason is None
+    run = build_runfile(res, tm, source="simulated", reference=ref)
+    return str(write_run(out / f"lab_{seed}.run.npz", measure_run(run, load_sensors(), seed=seed)))
+
+
+def test_replay_path_finds_a_flow_gain_behind_a_quiet_lead_in(tmp_path):
+    """The lab table's valve flow 15 % short, on records that sit still for 3 s: on the
+    fixed first second the screening explained nothing and put the flow gain at an absurd
+    0.28; on the chosen window it explains 99 % and the search recovers 0.85."""
+    import mjcf
+    from sim.calibrate import paths as P
+    from sim.calibrate import search as S
+    from sim.calibrate import sensitivity as SE
+    from sim.calibrate.pathsearch import MIN_SCORE, motion_rms
+    from sim.runs.runfile import read_run
+
+    plant = [{"type": "valve_flow_gain", "where": "actuator:A", "factor": 0.85}]
+    paths = [_lab_with_quiet_lead(tmp_path, seed, plant) for seed in (3, 4)]
+    desc = mjcf.load_table("lab")
+    raw, src = desc.raw, str(desc.source)
+    run = read_run(paths[0])
+    (pr,) = P.path_runs([run], desc, "replay")
+    fs = 1.0 / pr.dt
+    scores = []
+    for w in (pr.span(Window(0, 0, int(fs) + 1, fs)), pr.window(1.0)[0]):
+        cands = SE.candidates(desc, None, [w], [], motion_rms([run], desc), ["valve_flow_gain"])
+        (sc,) = SE.screen(cands, [w], [P.simulate_job(w.job(raw, src, None, []))], (raw, src, None, []), workers=1)
+        scores.append(sc.score)
+    assert scores[0] < MIN_SCORE < 0.9 < scores[1], scores
+    res = S.calibrate(paths, path="replay", effects=["valve_flow_gain", "bulk_modulus"], workers=1)
+    assert [(e["name"], e["where"]) for e in res.effects_added] == [("valve_flow_gain", "class:main")]
+    e = res.effects_added[0]
+    assert abs(e["parameters"]["factor"] - 0.85) < max(e["uncertainty"]["factor"], 0.002), e
+    assert res.error_after < 0.5 * res.error_before
+    screen = [w for w in res.timing["windows"] if w["stage"] == "screen"]
+    assert screen and all(w["scored_from_s"] >= LEAD_S - 0.1 for w in screen), res.timing["windows"]
