@@ -78,7 +78,13 @@ class PathRun:
     def n(self) -> int:
         return len(self.t)
 
-    def window(self, seconds: float | None, *, segments: int = 1, horizon_s: float | None = None) -> list:
+    def window(self, seconds: float | None) -> "PathRun":
+        """The ``seconds`` of this run holding the most excitation, replayed from a point
+        where the record is at rest and scored over its own rows (:meth:`windows`); all of
+        it for None."""
+        return self.windows(seconds)[0]
+
+    def windows(self, seconds: float | None, *, segments: int = 1, horizon_s: float | None = None) -> list:
         """The windows of this run holding the most excitation (:func:`sim.calibrate.windows.choose`:
         ``segments`` of ``seconds / segments`` each, anywhere in the record, each replayed
         from a point where the record is at rest and scored over its own rows); all of it

@@ -3,7 +3,8 @@
 Per round: the residual of the current model (the declared description plus the effects
 accepted so far) on the fit runs; every candidate of the library
 (:func:`sim.calibrate.sensitivity.candidates`) screened on short windows of the fit runs
-(one replay per parameter, on the batch route of :func:`sim.calibrate.paths.simulate_many`);
+(where they hold the most excitation, never their first seconds: :func:`search_windows`;
+one replay per parameter, on the batch route of :func:`sim.calibrate.paths.simulate_many`);
 the best few refined by nonlinear least squares on longer windows; then, best first,
 each judged on the whole runs by the rules of the mechanical path
 (:func:`sim.calibrate.search.accept_numbers`: held-out error down by the margin, BIC
@@ -190,11 +191,13 @@ def search_windows(pfit) -> tuple[list, list]:
     """The screening windows (the first fit run's) and the refinement windows (every fit
     run's), chosen by the excitation they hold (:meth:`sim.calibrate.paths.PathRun.window`),
     never by position: a record's first seconds may be its quiet lead-in."""
-    wscr = pfit[0].window(SCREEN_S)
+    wscr = [pfit[0].window(SCREEN_S)]
     wref = []
     for p in pfit:
         long = p.t[-1] >= LONG_RECORD_S
-        wref += p.window(REFINE_S, segments=REFINE_SEGMENTS, horizon_s=REFINE_HORIZON_S) if long else p.window(REFINE_S)
+        wref += (
+            p.windows(REFINE_S, segments=REFINE_SEGMENTS, horizon_s=REFINE_HORIZON_S) if long else [p.window(REFINE_S)]
+        )
     return wscr, wref
 
 

@@ -18,7 +18,8 @@ explains (the score). Sensor candidates need no replay: the sensor acts on the
 model's channels after the fact; they are also scored by the share of the residual of
 the columns they act on (``Screen.own``: one column of the 18 of a 6-DOF table is a
 small share of the whole). *Refinement* (:func:`refine_job`): the best few,
-``scipy.optimize.least_squares`` from the linearised estimate on a longer window
+``scipy.optimize.least_squares`` from the linearised estimate on longer windows (both
+chosen by the excitation they hold: :func:`sim.calibrate.windows.choose`)
 (Jacobian by the same finite steps; a valve delay, realised as whole physics steps,
 by a scan of its grid), with the covariance ``(J^T J)^-1 Omega (J^T J)^-1`` at the
 solution, ``Omega`` from the residual's autocorrelation within each compared column of

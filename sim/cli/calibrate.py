@@ -137,6 +137,8 @@ def cmd_calibrate(args) -> int:
         print(json_text(js, indent=2))
         return 0
     print(f"held-out NRMSE {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} % ({res.holdout_note})")
+    if res.not_excited:
+        print(f"  not excited, left out of the error: {', '.join(res.not_excited)}")
     for e in res.effects_added:
         vals = ", ".join(
             f"{k} = {v:.6g} +/- {e['uncertainty'][k]:.2g} {e['units'][k]}"

@@ -205,7 +205,7 @@ def test_replay_path_finds_a_flow_gain_behind_a_quiet_lead_in(tmp_path):
     (pr,) = P.path_runs([run], desc, "replay")
     fs = 1.0 / pr.dt
     scores = []
-    for w in (pr.span(Window(0, 0, int(fs) + 1, fs)), pr.window(1.0)[0]):
+    for w in (pr.span(Window(0, 0, int(fs) + 1, fs)), pr.window(1.0)):
         cands = SE.candidates(desc, None, [w], [], motion_rms([run], desc), ["valve_flow_gain"])
         (sc,) = SE.screen(cands, [w], [P.simulate_job(w.job(raw, src, None, []))], (raw, src, None, []), workers=1)
         scores.append(sc.score)
