@@ -250,7 +250,7 @@ def unexplained(mruns, residuals, kind: str = "mechanical") -> dict | None:
         Ps, cohs, f = [], [], None
         for mr, e in zip(mruns, residuals):
             x = e[:, j]
-            if not np.any(x):
+            if not np.any(x) or (mr.excited is not None and not mr.excited[j]):  # noise over nothing
                 continue
             s = spectra(x, 1.0 / mr.dt, {"u": mr.u[:, j], "v": mr.v[:, j], "a": mr.a[:, j]})
             if f is not None and len(s["f"]) != len(f):

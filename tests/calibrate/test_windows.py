@@ -217,3 +217,34 @@ def test_replay_path_finds_a_flow_gain_behind_a_quiet_lead_in(tmp_path):
     assert res.error_after < 0.5 * res.error_before
     screen = [w for w in res.timing["windows"] if w["stage"] == "screen"]
     assert screen and all(w["scored_from_s"] >= LEAD_S - 0.1 for w in screen), res.timing["windows"]
+
+
+def test_report_says_where_the_error_sits_and_what_was_not_excited():
+    """report.md lists the held-out error per run and per channel / DOF, before and after,
+    and the columns left out as not excited; calibration.json carries the same."""
+    from sim.calibrate.search import CalibrationResult
+    from sim.report.calibration import report_md
+
+    res = CalibrationResult(
+        table="cgs",
+        table_source="cgs.toml",
+        runs=["a.run.npz", "b.run.npz"],
+        holdout=["b.run.npz"],
+        holdout_note="held out: b.run.npz",
+        residual_path="mechanical",
+        error_before=0.031,
+        error_after=0.022,
+        effects_added=[],
+        candidates=[],
+        unexplained=None,
+        per_channel={"b.run.npz:x": {"before": 0.031, "after": 0.022}},
+        timing={"total_s": 1.0, "read_s": 0.1, "residuals_s": 0.2, "search_s": 0.7, "least_squares_fits": 3},
+        per_run={"b.run.npz": {"before": 0.031, "after": 0.022}},
+        not_excited=["b.run.npz:rz"],
+    )
+    md = report_md(res, [], "cgs_calibrated.toml")
+    assert "## Where the error sits" in md
+    assert "| `b.run.npz` | 3.10 % | 2.20 % |" in md and "| `b.run.npz:x` | 3.10 % | 2.20 % |" in md
+    assert "Not excited" in md and "`b.run.npz:rz`" in md
+    js = res.to_json()
+    assert js["not_excited"] == ["b.run.npz:rz"] and js["per_run"]["b.run.npz"]["after"] == 0.022
