@@ -44,7 +44,8 @@ from sim.errors import UserError
 FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_velocity")
 #: a column is compared when the run excites it (:func:`sim.calibrate.windows.excited`:
 #: its RMS at least QUIET_COLUMN of its channel's largest, DOFs in actuator units) and its
-#: RMS is at least this many times its recorded noise, when the run says what its sensor model was (``meta.measurement``)
+#: RMS is at least this many times its recorded noise, when the run says what its sensor
+#: model was (``meta.measurement``)
 NOISE_COLUMN = 3.0
 DOF_CHANNELS = ("table_displacement", "table_velocity", "table_acceleration")
 
