@@ -34,7 +34,7 @@ def figures(res, out: Path) -> list[str]:
     x = _error_bars(ax, res, keys)
     ax.set_xticks(x, keys, rotation=30, ha="right", fontsize=8)
     ax.set_ylabel("held-out force NRMSE (%)")
-    ax.set_title(f"held-out error {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} %")
+    ax.set_title(_title(res))
     ax.legend()
     fig.tight_layout()
     fig.savefig(out / "holdout_error.png", dpi=110)
@@ -99,6 +99,12 @@ def figures(res, out: Path) -> list[str]:
     return names
 
 
+def _title(res) -> str:
+    b = getattr(res, "baseline", None)
+    tail = f" (linear ARX baseline {100 * b['holdout_error']:.2f} %)" if b else ""
+    return f"held-out error {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} %{tail}"
+
+
 def _error_bars(ax, res, keys) -> np.ndarray:
     """Held-out error per run and column: declared model, calibrated, and the linear ARX
     baseline when there is one; returns the bar groups' positions."""
@@ -118,7 +124,7 @@ def _bars(plt, res, out, ylabel) -> str:
     x = _error_bars(ax, res, keys)
     ax.set_xticks(x, keys, rotation=60, ha="right", fontsize=6)
     ax.set_ylabel(ylabel)
-    ax.set_title(f"held-out error {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} %")
+    ax.set_title(_title(res))
     ax.legend()
     fig.tight_layout()
     fig.savefig(out / "holdout_error.png", dpi=110)

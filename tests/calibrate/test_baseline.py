@@ -200,3 +200,18 @@ def test_replay_path_baseline_scored_like_the_replay(lab_runs):
     assert b["band"]["after"] < b["band"]["baseline"]
     assert B.flag(e, b) is None
     assert b["holdout_error"] == pytest.approx(math.sqrt(np.mean([v**2 for v in b["per_channel"].values()])))
+
+
+def test_calibrate_on_the_replay_path_reports_the_acceleration_band(lab_runs, tmp_path):
+    """Through the command on the replay path: the 0-20 Hz acceleration row before /
+    after / baseline in calibration.json and report.md, and no flag (the truth wins)."""
+    out = tmp_path / "out"
+    argv = ["calibrate", *lab_runs, "--table", "lab", "--path", "replay", "--effects", "sensor_gain"]
+    assert main(argv + ["--workers", "1", "--out", str(out), "--json"]) == 0
+    js = json.loads((out / "calibration.json").read_text(), parse_constant=lambda c: pytest.fail(c))
+    band = js["baseline"]["band"]
+    assert band["band_hz"] == [0.0, 20.0] and band["after"] < band["baseline"]
+    assert js["beats_baseline"] is True and js["error_after"] < js["baseline"]["holdout_error"]
+    assert js["timing"]["baseline_s"] > 0
+    md = (out / "report.md").read_text()
+    assert "| table_acceleration 0-20 Hz |" in md and "FLAG" not in md
