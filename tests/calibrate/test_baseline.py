@@ -215,3 +215,34 @@ def test_calibrate_on_the_replay_path_reports_the_acceleration_band(lab_runs, tm
     assert js["timing"]["baseline_s"] > 0
     md = (out / "report.md").read_text()
     assert "| table_acceleration 0-20 Hz |" in md and "FLAG" not in md
+
+
+def _friction_record(seed: int, n: int = 4000) -> B.Record:
+    """A light mode (poles 0.95 +/- 0.22i, |p| = 0.975) driven by a band-limited input, plus
+    a dry-friction-like term as large as the linear part's RMS on the sign of the input."""
+    rng = np.random.default_rng(seed)
+    b, a = butter(2, 0.05)
+    u = lfilter(b, a, rng.normal(size=(n, 1)), axis=0)
+    u[:REST] = 0.0
+    w = np.zeros(n)
+    w[1:] = u[:-1, 0]
+    y = lfilter([1.0], [1.0, -1.9, 0.95], w)
+    y = y + np.std(y) * np.sign(u[:, 0])
+    return B.Record(name=f"f{seed}", u=u, ys={"y": y}, fit=np.ones(n, bool))
+
+
+def test_output_error_refinement_beats_least_squares_under_friction():
+    """What a linear model cannot explain (the friction) is large and coloured: least
+    squares biases the poles and its free run suffers; the output-error refinement is
+    chosen on the fit records and predicts the held-out record better (measured: 0.360
+    against the best least-squares ARX's 0.413)."""
+    r1, r2, ho = (_friction_record(s) for s in (1, 2, 3))
+    m, _ = B.fit_column([r1, r2], "y")
+    assert m.estimator == "output_error" and m.stable()
+    grams = B._split_grams([r1, r2], ["y"])
+    G_train = sum(B._key_block(g[1], 0) for g in grams)
+    G_all = G_train + sum(B._key_block(g[2], 0) for g in grams)
+    ranked, _ = B._rank_arx(list(zip([r1, r2], grams)), "y", 1, G_train, G_all - G_train)
+    _e, _kind, na, nb, nk, _m = min(ranked, key=lambda c: c[0])
+    ls = B._solve(G_all, 1, na, nb, nk)
+    assert _nrmse(ho.ys["y"], m.simulate(ho.u)) < 0.92 * _nrmse(ho.ys["y"], ls.simulate(ho.u))
