@@ -52,6 +52,10 @@ class CalibrationResult:
     not_excited: list = field(default_factory=list)
     # arrays for the report (not in the JSON)
     series: dict = field(default_factory=dict, repr=False)
+    #: the linear ARX baseline on the same fit and held-out runs (:mod:`sim.calibrate.baseline`)
+    baseline: dict | None = None
+    #: the calibrated model's held-out error is below the baseline's (None: no baseline)
+    beats_baseline: bool | None = None
 
     def to_json(self) -> dict:
         keys = (
@@ -68,6 +72,8 @@ class CalibrationResult:
             "per_channel",
             "per_run",
             "not_excited",
+            "baseline",
+            "beats_baseline",
             "timing",
         )
         return {k: getattr(self, k) for k in keys}
@@ -325,7 +331,8 @@ def calibrate(
     pl = mjcf.load_payload(pay) if pay and pay != "none" else None  # "none": the specimen is not declared
     path = check_path(all_runs, path) if path else choose_path(all_runs)
     if path != "mechanical":
-        return _calibrate_path(all_runs[: len(run_paths)], ho_given, desc, pl, path, effects, margin, workers, say, t0)
+        res = _calibrate_path(all_runs[: len(run_paths)], ho_given, desc, pl, path, effects, margin, workers, say, t0)
+        return _with_baseline(res, say)
     laws = candidate_laws(effects)
     if not effects:  # laws for a specimen that is there but not declared: only when told so
         laws = [w for w in laws if w.when == "always" or (w.when == "undeclared_specimen" and payload == "none")]
@@ -509,6 +516,16 @@ def calibrate(
             "fit_after": cur.residuals,
         },
     )
+    return _with_baseline(res, say)
+
+
+def _with_baseline(res: CalibrationResult, say) -> CalibrationResult:
+    """``res`` with the linear ARX baseline fitted on its fit runs and scored on its
+    held-out runs (:func:`sim.calibrate.baseline.attach`)."""
+    from sim.calibrate.baseline import attach
+
+    attach(res)
+    say(f"linear ARX baseline (free run): held-out NRMSE {res.baseline['holdout_error']:.4f}")
     return res
 
 

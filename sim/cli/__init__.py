@@ -122,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
     from sim.cli import view as view_cli
 
     run_cli.add_parsers(sub)  # run, replay
-    calibrate_cli.add_parsers(sub)  # calibrate RUN... (--strategy search|scale), calibrate TABLE (masses), fit (alias)
+    calibrate_cli.add_parsers(sub)  # calibrate RUN..., calibrate TABLE (masses); `fit` removed (one line)
     feasibility_cli.add_parsers(sub)  # will it work on this table, and the largest scale
     geometry_cli.add_parsers(sub)  # geometric nonlinearity
     view_cli.add_parsers(sub)  # rerun recordings of run files
@@ -134,6 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
     from sim.cli import sweep as sweep_cli
 
     sweep_cli.add_parsers(sub)  # many runs of one scenario (grid / random, local batch or Dask)
+    sub.metavar = "{" + ",".join(k for k in sub.choices if k not in calibrate_cli.REMOVED_COMMANDS) + "}"
     return p
 
 

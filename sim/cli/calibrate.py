@@ -1,11 +1,13 @@
-"""``shaketable calibrate``: runs -> what the model lacks, by a strategy: ``search``
-(``sim.calibrate.search``: effects of the library on the residual) or ``scale``
-(``sim.calibrate.fit.calibrate_scale``: global scale factors on the replay, formerly
-``shaketable fit``, which stays as an alias); a table name (or ``--masses``) -> the
-effective-mass calibration of the table's unpublished masses (``mjcf.calibrate``)."""
+"""``shaketable calibrate``: runs -> what the model lacks (``sim.calibrate.search``:
+effects of the library on the residual, against a linear ARX baseline); a table name (or
+``--masses``) -> the effective-mass calibration of the table's unpublished masses
+(``mjcf.calibrate``). ``--strategy scale`` and ``shaketable fit`` (global scale factors
+on the replay) were removed (issue #23: the scale fit added 12.5 t to a 0.84 t table);
+both now stop with a one-line error that says what to run instead."""
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from sim.errors import UserError
@@ -64,52 +66,25 @@ def _effects(args):
     return [x.strip() for x in args.effects.split(",") if x.strip()] if args.effects else None
 
 
-def cmd_scale(args, run_paths) -> int:
-    """``calibrate RUN... --strategy scale`` (and the ``fit`` alias)."""
-    from sim.calibrate.fit import calibrate_scale, write_scale_outputs
-    from sim.report.calibration_scale import write_scale_report
-    from sim.runs.files import out_dir
-
-    log = None if args.json else (lambda m: print(m, flush=True))
-    res = calibrate_scale(
-        run_paths,
-        table=args.table,
-        payload=args.payload,
-        holdout=getattr(args, "holdout", None) or None,
-        effects=_effects(args),
-        rounds=args.rounds,
-        log=log,
-    )
-    out = out_dir(args.out)
-    js = write_scale_outputs(res, out, run_paths)
-    write_scale_report(res, out, Path(js["calibrated_table_file"]).name)
-    if args.json:
-        print(json_text(js, indent=2))
-        return 0
-    print(f"held-out replay error {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} % ({res.holdout_note})")
-    for e in res.effects_added:
-        for k, v in e["parameters"].items():
-            print(f"  added {e['name']}: {k} = {v:.6g} +/- {e['uncertainty'][k]:.2g} {e['units'][k]} ({e['what']})")
-    if not res.effects_added:
-        print("  added nothing (no knob lowered the held-out error by the margin off its bounds)")
-    print(f"  wrote {out / 'calibration.json'}, {out / 'report.md'}, {js['calibrated_table_file']}")
-    return 0
+#: commands kept only to say they were removed (left out of the command list)
+REMOVED_COMMANDS = ("fit",)
+#: what `--strategy scale` and `fit` say now
+REMOVED = (
+    "was removed (its global scale factors fitted absurd values: 12.5 t added to a 0.84 t table, "
+    "issue #23); use `shaketable calibrate RUN... --out DIR`"
+)
 
 
 def cmd_fit(args) -> int:
-    """``shaketable fit RUN``: an alias of ``calibrate RUN --strategy scale``."""
-    if not args.json:  # (stdout: stderr is for the one-line errors)
-        print("note: `shaketable fit RUN` is `shaketable calibrate RUN --strategy scale`")
-    return cmd_scale(args, [args.run])
+    """``shaketable fit``: removed."""
+    raise UserError(f"shaketable fit {REMOVED}")
 
 
 def cmd_calibrate(args) -> int:
     if _is_masses(args):
         return cmd_masses(args)
-    if args.strategy == "scale":
-        if not args.out:
-            raise UserError("calibrate RUN... --strategy scale: give --out DIR for calibration.json and the table")
-        return cmd_scale(args, args.inputs)
+    if args.strategy not in (None, "search"):  # `search` was the default: still accepted
+        raise UserError(f"calibrate --strategy {args.strategy} {REMOVED}")
     from sim.calibrate.search import calibrate, write_outputs
     from sim.report.calibration import write_report
     from sim.runs.files import out_dir
@@ -139,6 +114,7 @@ def cmd_calibrate(args) -> int:
     print(f"held-out NRMSE {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} % ({res.holdout_note})")
     if res.not_excited:
         print(f"  not excited, left out of the error: {', '.join(res.not_excited)}")
+    _print_baseline(res)
     for e in res.effects_added:
         vals = ", ".join(
             f"{k} = {v:.6g} +/- {e['uncertainty'][k]:.2g} {e['units'][k]}"
@@ -155,6 +131,18 @@ def cmd_calibrate(args) -> int:
         )
     print(f"  wrote {out / 'calibration.json'}, {out / 'report.md'}, {js['calibrated_table_file']}")
     return 0
+
+
+def _print_baseline(res) -> None:
+    from sim.calibrate.baseline import flag
+
+    b = res.baseline
+    if not b:
+        return
+    print(f"  linear ARX baseline (fit runs, free run): held-out NRMSE {100 * b['holdout_error']:.2f} %")
+    line = flag(res.error_after, b)
+    if line:
+        print("  FLAG: " + line)
 
 
 def add_parsers(sub) -> None:
@@ -195,26 +183,15 @@ def add_parsers(sub) -> None:
         "published effective masses (the first argument is a table)",
     )
     c.add_argument("--write", action="store_true", help="--masses: rewrite the calibrated values in the table file")
-    c.add_argument(
-        "--strategy",
-        choices=("search", "scale"),
-        default="search",
-        help="search: effects of the library on the residual (default); scale: global scale "
-        "factors of the description on the replay of the recorded valve commands (was `fit`)",
-    )
-    c.add_argument("--rounds", type=int, default=2, help="--strategy scale: knobs to add at most (default 2)")
+    c.add_argument("--strategy", help=argparse.SUPPRESS)  # removed: `scale` stops with one line (REMOVED)
     c.add_argument("--json", action="store_true")
     c.set_defaults(func=cmd_calibrate)
 
-    f = sub.add_parser("fit", help="alias of `calibrate RUN --strategy scale` (global scale factors on the replay)")
-    f.add_argument("run", help="a measured .run.npz with valve_command")
-    f.add_argument("--table", help="table (default: the description the run carries, else its meta.table)")
-    f.add_argument("--payload", help="payload (default: the description the run carries; 'none' for a bare table)")
-    f.add_argument("--effects", help="comma-separated knobs (default: all)")
-    f.add_argument("--rounds", type=int, default=2, help="knobs to add at most (default 2)")
-    f.add_argument("--out", default="out", help="output folder")
-    f.add_argument("--json", action="store_true")
+    # removed: any arguments, one line (REMOVED), exit 2; no help line (and left out of the
+    # command list, sim.cli.build_parser)
+    f = sub.add_parser("fit", add_help=False, prefix_chars="\x00")  # every word an argument, -h too
+    f.add_argument("rest", nargs="*")
     f.set_defaults(func=cmd_fit)
 
 
-__all__ = ["add_parsers", "cmd_calibrate", "cmd_fit", "cmd_scale"]
+__all__ = ["add_parsers", "cmd_calibrate", "cmd_fit"]

@@ -1,6 +1,6 @@
 """Progress of long commands on stderr: a bar on a terminal, one line per stage in a log.
 
-Every long command (run, replay, characterize, fit) reports through :class:`Progress`:
+Every long command (run, replay, characterize) reports through :class:`Progress`:
 ``stage(text)`` starts a stage (one line, on a terminal or in a log alike);
 ``count(done, total)`` reports finished jobs of a stage: on a terminal a bar rewritten
 in place, elsewhere (a log, a CI job) one line per finished job, so a log is never

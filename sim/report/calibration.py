@@ -31,12 +31,10 @@ def figures(res, out: Path) -> list[str]:
     # 1. held-out error per run and DOF
     keys = list(res.per_channel)
     fig, ax = plt.subplots(figsize=(max(5, 1.2 * len(keys) + 2), 3.6))
-    x = np.arange(len(keys))
-    ax.bar(x - 0.2, [100 * res.per_channel[k]["before"] for k in keys], 0.4, label="declared model")
-    ax.bar(x + 0.2, [100 * res.per_channel[k]["after"] for k in keys], 0.4, label="calibrated")
+    x = _error_bars(ax, res, keys)
     ax.set_xticks(x, keys, rotation=30, ha="right", fontsize=8)
     ax.set_ylabel("held-out force NRMSE (%)")
-    ax.set_title(f"held-out error {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} %")
+    ax.set_title(_title(res))
     ax.legend()
     fig.tight_layout()
     fig.savefig(out / "holdout_error.png", dpi=110)
@@ -101,15 +99,32 @@ def figures(res, out: Path) -> list[str]:
     return names
 
 
+def _title(res) -> str:
+    b = getattr(res, "baseline", None)
+    tail = f" (linear ARX baseline {100 * b['holdout_error']:.2f} %)" if b else ""
+    return f"held-out error {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} %{tail}"
+
+
+def _error_bars(ax, res, keys) -> np.ndarray:
+    """Held-out error per run and column: declared model, calibrated, and the linear ARX
+    baseline when there is one; returns the bar groups' positions."""
+    x = np.arange(len(keys))
+    base = (getattr(res, "baseline", None) or {}).get("per_channel")
+    w = 0.27 if base else 0.4
+    ax.bar(x - w / (1 if base else 2), [100 * res.per_channel[k]["before"] for k in keys], w, label="declared model")
+    ax.bar(x + (0 if base else w / 2), [100 * res.per_channel[k]["after"] for k in keys], w, label="calibrated")
+    if base:
+        ax.bar(x + w, [100 * base.get(k, np.nan) for k in keys], w, label="linear ARX baseline")
+    return x
+
+
 def _bars(plt, res, out, ylabel) -> str:
     keys = list(res.per_channel)
     fig, ax = plt.subplots(figsize=(min(max(5, 0.5 * len(keys) + 2), 24), 3.8))
-    x = np.arange(len(keys))
-    ax.bar(x - 0.2, [100 * res.per_channel[k]["before"] for k in keys], 0.4, label="declared model")
-    ax.bar(x + 0.2, [100 * res.per_channel[k]["after"] for k in keys], 0.4, label="calibrated")
+    x = _error_bars(ax, res, keys)
     ax.set_xticks(x, keys, rotation=60, ha="right", fontsize=6)
     ax.set_ylabel(ylabel)
-    ax.set_title(f"held-out error {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} %")
+    ax.set_title(_title(res))
     ax.legend()
     fig.tight_layout()
     fig.savefig(out / "holdout_error.png", dpi=110)
@@ -232,6 +247,7 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
         "",
     ]
     L += _where_error_sits(res)
+    L += baseline_md(res)
     L += ["## Effects added", ""]
     if res.effects_added:
         L += ["| effect | where | parameter | value | 95 % interval |", "|---|---|---|---|---|"]
@@ -305,6 +321,38 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
     return "\n".join(L)
 
 
+def baseline_md(res) -> list[str]:
+    """The held-out errors before / after / of the linear ARX baseline, pooled and per run
+    and column, and the flag when the calibrated model does not beat the baseline."""
+    from sim.calibrate.baseline import flag
+
+    b = getattr(res, "baseline", None)
+    if not b:
+        return []
+    L = ["## Against a linear baseline", ""]
+    line = flag(res.error_after, b)
+    if line:
+        L += [f"**FLAG: {line}.**", ""]
+    L += [
+        f"Baseline: {b['model']} (inputs: {b['inputs']}; orders chosen per column on the fit runs, "
+        f"{b['skipped_unstable']} unstable candidates skipped). Same fit runs, same held-out runs, same NRMSE.",
+        "",
+        "| held out | declared model | calibrated | linear ARX baseline |",
+        "|---|---|---|---|",
+        f"| pooled NRMSE | {_pct(res.error_before)} | {_pct(res.error_after)} | {_pct(b['holdout_error'])} |",
+    ]
+    band = b.get("band")
+    if band:
+        lo, hi = band["band_hz"]
+        L.append(
+            f"| {band['channel']} {lo:g}-{hi:g} Hz | {_pct(band['before'])} | {_pct(band['after'])} | "
+            f"{_pct(band['baseline'])} |"
+        )
+    for k, v in res.per_channel.items():
+        L.append(f"| {k} | {_pct(v['before'])} | {_pct(v['after'])} | {_pct(b['per_channel'].get(k))} |")
+    return L + [""]
+
+
 def write_report(res, out, toml_name: str) -> list[str]:
     """Figures and ``report.md`` into ``out``; returns the files written."""
     out = Path(out)
@@ -313,4 +361,4 @@ def write_report(res, out, toml_name: str) -> list[str]:
     return figs + ["report.md"]
 
 
-__all__ = ["figures", "path_figures", "report_md", "write_report"]
+__all__ = ["baseline_md", "figures", "path_figures", "report_md", "write_report"]

@@ -417,7 +417,14 @@ ARGS = {
     "geometry unknown table": (["geometry", "nosuch"], ["no table named 'nosuch'"]),
     "calibrate missing file": (["calibrate", "nofile.toml"], ["nofile.toml", "no such file"]),
     "model payload is a scenario": (["model", "ucsd", "--payload", "SCEN"], ["missing field 'payload'"]),
-    "fit unknown effect": (["fit", "x.run.npz", "--effects", "nope"], ["x.run.npz", "does not exist"]),
+    "fit removed": (
+        ["fit", "x.run.npz", "--effects", "nope"],
+        ["shaketable fit was removed", "shaketable calibrate RUN"],
+    ),
+    "calibrate strategy scale removed": (
+        ["calibrate", "x.run.npz", "--strategy", "scale"],
+        ["--strategy scale was removed", "shaketable calibrate RUN... --out DIR"],
+    ),
 }
 
 
@@ -426,7 +433,7 @@ def test_bad_arguments(case, tmp_path, capsys, monkeypatch):
     argv, fragments = ARGS[case]
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "out"
-    if argv[0] in ("run", "fit", "characterize"):
+    if argv[0] in ("run", "fit", "calibrate", "characterize"):
         argv = argv + ["--out", str(out)]
     if "SCEN" in argv:
         (tmp_path / "s.toml").write_text(SINE)
