@@ -73,12 +73,7 @@ def load_runs(paths, table=None):
     from sim.runs.runfile import read_run
 
     runs = [read_run(p) for p in paths]
-    tables = {r.meta["table"] for r in runs}
-    if table is None and len(tables) > 1:
-        raise CalibrationError(
-            f"runs come from different tables ({', '.join(sorted(tables))}): "
-            "calibrate the runs of one table at a time (or give --table)"
-        )
+    check_one_table(runs)
     rates = {float(r.sample_rate_hz) for r in runs}
     if len(rates) > 1:
         raise CalibrationError(
@@ -86,6 +81,20 @@ def load_runs(paths, table=None):
             "resample the runs to one rate"
         )
     return runs
+
+
+def check_one_table(runs) -> None:
+    """One-line error when the runs name different tables (``meta.table``): one
+    calibration is of one table, and ``--table`` does not make runs of another one its
+    records (it only replaces the description they are replayed through)."""
+    first = runs[0]
+    other = next((r for r in runs[1:] if r.meta["table"] != first.meta["table"]), None)
+    if other is not None:
+        raise CalibrationError(
+            f"{other.name}: runs of different tables (meta.table '{other.meta['table']}' here, "
+            f"'{first.meta['table']}' in {first.name}); calibrate the runs of one table at a time "
+            "(--table replaces the description they are replayed through, not the table they were recorded on)"
+        )
 
 
 def _check_names(paths, holdout):
@@ -292,9 +301,9 @@ def calibrate(
     docstring. ``path``: force a residual path (default: chosen by the channels every
     run has, :func:`sim.calibrate.residuals.choose_path`); ``workers``: processes of the
     replay and closed-loop searches (default: every core)."""
-    import mjcf
     from sim.calibrate.residuals import PATHS, check_path, choose_path, mechanical_runs, nrmse_runs, places
     from sim.calibrate.trace import Term, fit_terms, flatness, predict
+    from sim.runs.runfile import payload_of, table_of
 
     say = log or (lambda *_: None)
     t0 = time.perf_counter()
@@ -308,15 +317,14 @@ def calibrate(
         raise CalibrationError(f"--path {path}: give one of {', '.join(PATHS)}")
     all_runs = load_runs(list(run_paths) + list(holdout or []), table)
     runs, ho_given = all_runs[: len(run_paths)], all_runs[len(run_paths) :]
-    desc = mjcf.load_table(table or runs[0].meta["table"])
+    desc = table_of(runs[0], table)  # --table, else the description the run carries, else the stock file
     for r in all_runs:
         if list(r.actuators) != list(desc.actuator_names):
             raise CalibrationError(
                 f"{r.name}: actuators {r.actuators} do not match table '{desc.name}' "
                 f"({list(desc.actuator_names)}); give --table"
             )
-    pay = payload if payload is not None else runs[0].meta.get("payload")
-    pl = mjcf.load_payload(pay) if pay and pay != "none" else None  # "none": the specimen is not declared
+    pl = payload_of(runs[0], payload)  # "none": the specimen is not declared
     path = check_path(all_runs, path) if path else choose_path(all_runs)
     if path != "mechanical":
         return _calibrate_path(all_runs[: len(run_paths)], ho_given, desc, pl, path, effects, margin, workers, say, t0)

@@ -357,12 +357,11 @@ def _check_uniaxial(run) -> None:
     uni-axial table's run files carry those columns as exact zeros). The model sums the
     actuator forces as one force along x: for a multi-axis table that sum is meaningless
     and the fit returns negative masses or stiffnesses."""
-    import mjcf
     from mjcf.errors import MjcfError
+    from sim.runs.runfile import table_of
 
-    table = run.meta.get("table")
     try:
-        desc = mjcf.load_table(table)
+        desc = table_of(run)  # the description the run carries, else the stock one it names
     except MjcfError:  # a measured run of a table without a description here: judge by its data
         desc = None
     if desc is not None and list(desc.dofs) != ["x"]:
