@@ -309,7 +309,7 @@ def calibrate_scale(
     import time
 
     from sim.calibrate.residuals import CalibrationError
-    from sim.calibrate.search import HOLDOUT_MARGIN, Z95, CalibrationResult, _check_names, load_runs
+    from sim.calibrate.search import HOLDOUT_MARGIN, Z95, CalibrationResult, _check_names, holdout_not_enough, load_runs
     from sim.runs.runfile import payload_of, table_of
 
     margin = HOLDOUT_MARGIN if margin is None else margin
@@ -408,7 +408,7 @@ def calibrate_scale(
                 e_new, per_new = mean_score(r2, ho_parts)
                 row["holdout_error"] = e_new
                 if not e_new <= (1 - margin) * ho_cur:
-                    row["reason"] = f"held-out error {ho_cur:.4f} -> {e_new:.4f} falls by less than {100 * margin:g} %"
+                    row["reason"] = holdout_not_enough(ho_cur, e_new, margin)
                 else:
                     row["accepted"] = True
                     accepted = (c, v, s_fit, e_new, r2)

@@ -229,11 +229,22 @@ def accept(cur, new, e_ho_cur, e_ho_new, flat_cur, flat_new, term, margin=HOLDOU
     return ok, why, unc
 
 
+def holdout_not_enough(before: float, after: float, margin: float) -> str:
+    """Why a held-out error ``before -> after`` does not pass the margin, in the words of
+    what it did: it rose, stayed, or fell by less than the margin."""
+    change = f"held-out error {before:.4f} -> {after:.4f}"
+    if after > before:
+        return f"{change} rose (by {100 * (after / before - 1):.3g} %)" if before > 0 else f"{change} rose"
+    if after == before:
+        return f"{change} did not change"
+    return f"{change} falls by less than {100 * margin:g} %"
+
+
 def accept_numbers(e_ho_cur, e_ho_new, bic_cur, bic_new, flat_cur, flat_new, margin=HOLDOUT_MARGIN):
     """``(accepted, reason)`` by the tests every path shares (parameters checked apart):
     held-out error down by ``margin`` of itself, BIC down, residual whiter."""
     if not e_ho_new <= (1 - margin) * e_ho_cur:
-        return False, f"held-out error {e_ho_cur:.4f} -> {e_ho_new:.4f} falls by less than {100 * margin:g} %"
+        return False, holdout_not_enough(e_ho_cur, e_ho_new, margin)
     if not bic_new < bic_cur:
         return False, f"BIC does not improve ({bic_cur:.1f} -> {bic_new:.1f})"
     if not flat_new > flat_cur:
@@ -637,6 +648,7 @@ __all__ = [
     "check_effect_names",
     "candidate_laws",
     "load_effect_file",
+    "holdout_not_enough",
     "load_runs",
     "split_holdout",
     "unexplained",
