@@ -306,6 +306,20 @@ def identify(
     )
 
 
+def holdout_errors(res: Identified, records: list[Record]) -> dict:
+    """The identified model ``res`` scored on records it was not fitted to: per record,
+    the normalised force error of Eq. 2 with ``res``'s parameters,
+    sqrt(int (F - R y)^2 dt / int F^2 dt) (the measure ``per_test_error`` gives the fit's
+    own records)."""
+    y = np.array([res.M_e_kg, res.K_e_N_per_m, res.C_e, res.F_mu_N])
+    out = {}
+    for r in records:
+        R = regressors(r, res.alpha)
+        e = np.sum(r.target**2) * r.dt
+        out[r.name] = float(math.sqrt(np.sum((r.target - R @ y) ** 2) * r.dt / e)) if e > 0 else float("nan")
+    return out
+
+
 def scan_alpha(records, alphas=None, **kw) -> list[Identified]:
     """eps and parameters for alpha in (0, 1] (the paper's Fig. 3; alpha = 0 would make the
     viscous term a second Coulomb term, a singular system)."""
