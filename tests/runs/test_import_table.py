@@ -128,7 +128,7 @@ def test_the_run_carries_the_maps_table_and_payload(imported):
     }
 
 
-def test_replay_identify_calibrate_view_need_no_table(imported, tmp_path, capsys):
+def test_replay_identify_calibrate_need_no_table(imported, tmp_path, capsys):
     """Each command rebuilds td3 + frame2 from the run (no stock table of that name exists)."""
     run = str(imported["run"])
     assert main(["replay", run, "--out", str(tmp_path / "rep")]) == 0
@@ -145,10 +145,9 @@ def test_replay_identify_calibrate_view_need_no_table(imported, tmp_path, capsys
     assert main(["calibrate", run, "--holdout", str(second), "--out", str(out), "--path", "mechanical"]) == 0
     calibrated = (out / "td3_calibrated.toml").read_text()
     assert calibrated.startswith((imported["lab"] / "td3.toml").read_text().splitlines()[0])  # the file, comments kept
-    assert main(["view", run, "--rrd", str(tmp_path / "v.rrd")]) == 0
 
 
-def test_view_draws_specimen_sensors_under_the_payload(imported, tmp_path):
+def test_view_needs_no_table_and_draws_specimen_sensors_under_the_payload(imported, tmp_path):
     import rerun as rr
 
     assert main(["view", str(imported["run"]), "--rrd", str(tmp_path / "v.rrd")]) == 0
