@@ -70,6 +70,7 @@ from sim.report.rerun_scene import (  # noqa: F401
     _Scene,
     _scene,
     body_entity,
+    specimen_sensor_marks,
 )
 from sim.report.rerun_series import (  # noqa: F401
     _C_ACH,
@@ -556,6 +557,15 @@ class RrdTarget:
                 rr.Arrows3D(
                     origins=p, vectors=np.array([0.5 * a.direction for a, _ in items]), colors=(255, 215, 0), radii=0.02
                 ),
+                static=True,
+            )
+
+        # the specimen's sensors, on the floor (or the platen) that carries each
+        for ent, (p, d, labels) in specimen_sensor_marks(tm, run.meta.get("specimen_sensors"), ents).items():
+            rec.log(
+                ent,
+                rr.Points3D(p, radii=0.05, colors=(0, 200, 200), labels=labels, show_labels=False),
+                rr.Arrows3D(origins=p, vectors=0.5 * d, colors=(0, 200, 200), radii=0.02),
                 static=True,
             )
 

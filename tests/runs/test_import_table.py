@@ -153,7 +153,8 @@ def test_view_needs_no_table_and_draws_specimen_sensors_under_the_payload(import
     assert main(["view", str(imported["run"]), "--rrd", str(tmp_path / "v.rrd")]) == 0
     reader = rr.chunk.RrdReader(str(tmp_path / "v.rrd"))
     paths = {c.entity_path for c in reader.store().stream()}
-    assert "/payload/sensors/F2/acceleration" in paths
+    assert "/payload/sensors/F2/acceleration" in paths  # the series
+    assert "/table/payload/floor2/specimen_sensors" in paths  # the sensor, on the floor at 1.6 m
 
 
 def test_replay_gives_the_floors_acceleration_by_height(imported):
@@ -213,3 +214,22 @@ def test_conditioning_of_one_channel_must_agree(tmp_path):
     (lab / "map.toml").write_text(text)
     with pytest.raises(UserError, match="declare different conditioning for channel specimen_acceleration"):
         import_file(lab / "export.csv", load_map(lab / "map.toml"))
+
+
+def test_the_carried_text_wins_over_an_edited_table_file(tmp_path):
+    """The run keeps the table it was imported with: after the lab edits td3.toml, the
+    run still rebuilds the old text (its source then the run itself), and a calibrated
+    copy starts from that text, not from the edited file."""
+    from sim.runs.runfile import source_text, table_of, write_run
+
+    lab = lab_folder(tmp_path, duration_s=1.0)
+    run = import_file(lab / "export.csv", load_map(lab / "map.toml")).run
+    path = write_run(tmp_path / "r.run.npz", run)
+    run = read_run(path)
+    assert table_of(run).source == str((lab / "td3.toml").resolve())  # unchanged: the file itself
+    old = (lab / "td3.toml").read_text()
+    (lab / "td3.toml").write_text(old.replace("mass_kg = 1140.0", "mass_kg = 2000.0", 1))
+    desc = table_of(run)
+    assert desc.source == f"{path} [meta.table_description]"
+    assert desc.raw["platen"]["mass_kg"] == 1140.0
+    assert source_text(desc.source) == old
