@@ -58,7 +58,9 @@ class TomlText:
 
     @classmethod
     def read(cls, path) -> "TomlText":
-        return cls(Path(path).read_text(), str(path))
+        from sim.runs.runfile import source_text  # a file, or the text a run carries
+
+        return cls(source_text(str(path)), str(path))
 
     @property
     def text(self) -> str:

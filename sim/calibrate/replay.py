@@ -247,6 +247,9 @@ def replay(
         meta["valve_null"] = vn
     if src.reference is not None:
         chans["reference"] = np.asarray(src.reference[:n], float).copy()
+    if src.meta.get("specimen_sensors"):
+        meta["specimen_sensors"] = list(src.meta["specimen_sensors"])
+        chans["specimen_acceleration"] = _specimen_at_record(res, pl, meta["specimen_sensors"], t_rec[:n], notes)
     run = RunFile(t=np.asarray(src.t[:n], float).copy(), meta=meta, extras=extras, **chans)
     if res.incomplete_reason:
         run.mark_incomplete(res.incomplete_reason)
@@ -283,6 +286,20 @@ def replay(
         not_compared=not_compared(src, run),
         hold=hold,
     )
+
+
+def _specimen_at_record(res, payload, sensors, t_rec, notes) -> np.ndarray:
+    """The model's specimen sensors (:func:`sim.runs.specimen.specimen_accelerations`) at
+    the record's instants ``t_rec``; a note for each sensor the model cannot give."""
+    from sim.runs.specimen import specimen_accelerations
+    from sim.signals.resample import interpolate
+
+    acc = res.channels["table_acceleration"]
+    arr, why = specimen_accelerations(res.t, acc, res.extras.get("payload_qpos"), payload, sensors)
+    notes.extend(why)
+    if len(res.t) == len(t_rec) and np.allclose(res.t, t_rec):
+        return arr
+    return interpolate(res.t, arr, t_rec)
 
 
 def run_at_record(tm, t_rec, valve_command, dofs, *, hold: str = "zoh", progress: bool = False):

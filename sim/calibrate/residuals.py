@@ -441,6 +441,20 @@ class JointTerms:
         return gen @ T
 
 
+def _tendon_jacobian(m, d) -> np.ndarray:
+    """The tendons' Jacobian (ntendon, nv), dense: MuJoCo 4 stores ``ten_J`` in its
+    compressed-row form (``m.ten_J_rownnz``, ``rowadr``, ``colind``), not ntendon x nv
+    (a shear-frame payload's tendons: 8 entries, not 4 x 6)."""
+    import mujoco
+
+    J = np.asarray(d.ten_J, float)
+    if J.size == m.ntendon * m.nv:
+        return J.reshape(m.ntendon, m.nv)
+    dense = np.zeros((m.ntendon, m.nv))
+    mujoco.mju_sparse2dense(dense, J, m.ten_J_rownnz, m.ten_J_rowadr, m.ten_J_colind)
+    return dense
+
+
 def joint_terms(tm, k_of) -> JointTerms:
     import mujoco
 
@@ -461,7 +475,7 @@ def joint_terms(tm, k_of) -> JointTerms:
     fr_force = np.asarray(getattr(tm, "friction_force", []), dtype=float)
     TT = tK = tD = tFL = None
     if m.ntendon:
-        TT = np.array(d.ten_J, float).reshape(m.ntendon, m.nv) @ T
+        TT = _tendon_jacobian(m, d) @ T
         tK = np.array(m.tendon_stiffness, float).reshape(m.ntendon, -1)[:, 0]
         tD = np.array(m.tendon_damping, float).reshape(m.ntendon, -1)[:, 0]
         tFL = np.array(m.tendon_frictionloss, float)

@@ -85,12 +85,7 @@ def load_runs(paths, table=None):
     from sim.runs.runfile import read_run
 
     runs = [read_run(p) for p in paths]
-    tables = {r.meta["table"] for r in runs}
-    if table is None and len(tables) > 1:
-        raise CalibrationError(
-            f"runs come from different tables ({', '.join(sorted(tables))}): "
-            "calibrate the runs of one table at a time (or give --table)"
-        )
+    check_one_table(runs)
     rates = {float(r.sample_rate_hz) for r in runs}
     if len(rates) > 1:
         raise CalibrationError(
@@ -98,6 +93,20 @@ def load_runs(paths, table=None):
             "resample the runs to one rate"
         )
     return runs
+
+
+def check_one_table(runs) -> None:
+    """One-line error when the runs name different tables (``meta.table``): one
+    calibration is of one table, and ``--table`` does not make runs of another one its
+    records (it only replaces the description they are replayed through)."""
+    first = runs[0]
+    other = next((r for r in runs[1:] if r.meta["table"] != first.meta["table"]), None)
+    if other is not None:
+        raise CalibrationError(
+            f"{other.name}: runs of different tables (meta.table '{other.meta['table']}' here, "
+            f"'{first.meta['table']}' in {first.name}); calibrate the runs of one table at a time "
+            "(--table replaces the description they are replayed through, not the table they were recorded on)"
+        )
 
 
 def _check_names(paths, holdout):
@@ -232,11 +241,22 @@ def accept(cur, new, e_ho_cur, e_ho_new, flat_cur, flat_new, term, margin=HOLDOU
     return ok, why, unc
 
 
+def holdout_not_enough(before: float, after: float, margin: float) -> str:
+    """Why a held-out error ``before -> after`` does not pass the margin, in the words of
+    what it did: it rose, stayed, or fell by less than the margin."""
+    change = f"held-out error {before:.4f} -> {after:.4f}"
+    if after > before:
+        return f"{change} rose (by {100 * (after / before - 1):.3g} %)" if before > 0 else f"{change} rose"
+    if after == before:
+        return f"{change} did not change"
+    return f"{change} falls by less than {100 * margin:g} %"
+
+
 def accept_numbers(e_ho_cur, e_ho_new, bic_cur, bic_new, flat_cur, flat_new, margin=HOLDOUT_MARGIN):
     """``(accepted, reason)`` by the tests every path shares (parameters checked apart):
     held-out error down by ``margin`` of itself, BIC down, residual whiter."""
     if not e_ho_new <= (1 - margin) * e_ho_cur:
-        return False, f"held-out error {e_ho_cur:.4f} -> {e_ho_new:.4f} falls by less than {100 * margin:g} %"
+        return False, holdout_not_enough(e_ho_cur, e_ho_new, margin)
     if not bic_new < bic_cur:
         return False, f"BIC does not improve ({bic_cur:.1f} -> {bic_new:.1f})"
     if not flat_new > flat_cur:
@@ -304,9 +324,9 @@ def calibrate(
     docstring. ``path``: force a residual path (default: chosen by the channels every
     run has, :func:`sim.calibrate.residuals.choose_path`); ``workers``: processes of the
     replay and closed-loop searches (default: every core)."""
-    import mjcf
     from sim.calibrate.residuals import PATHS, check_path, choose_path, mechanical_runs, nrmse_runs, places
     from sim.calibrate.trace import Term, fit_terms, flatness, predict
+    from sim.runs.runfile import payload_of, table_of
 
     say = log or (lambda *_: None)
     t0 = time.perf_counter()
@@ -320,15 +340,14 @@ def calibrate(
         raise CalibrationError(f"--path {path}: give one of {', '.join(PATHS)}")
     all_runs = load_runs(list(run_paths) + list(holdout or []), table)
     runs, ho_given = all_runs[: len(run_paths)], all_runs[len(run_paths) :]
-    desc = mjcf.load_table(table or runs[0].meta["table"])
+    desc = table_of(runs[0], table)  # --table, else the description the run carries, else the stock file
     for r in all_runs:
         if list(r.actuators) != list(desc.actuator_names):
             raise CalibrationError(
                 f"{r.name}: actuators {r.actuators} do not match table '{desc.name}' "
                 f"({list(desc.actuator_names)}); give --table"
             )
-    pay = payload if payload is not None else runs[0].meta.get("payload")
-    pl = mjcf.load_payload(pay) if pay and pay != "none" else None  # "none": the specimen is not declared
+    pl = payload_of(runs[0], payload)  # "none": the specimen is not declared
     path = check_path(all_runs, path) if path else choose_path(all_runs)
     if path != "mechanical":
         res = _calibrate_path(all_runs[: len(run_paths)], ho_given, desc, pl, path, effects, margin, workers, say, t0)
@@ -669,6 +688,7 @@ __all__ = [
     "check_effect_names",
     "candidate_laws",
     "load_effect_file",
+    "holdout_not_enough",
     "load_runs",
     "split_holdout",
     "unexplained",

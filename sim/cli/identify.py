@@ -47,6 +47,13 @@ def add_parsers(sub) -> None:
         "velocity noise); e.g. 0.001 for the LHPOST (4 x its velocity noise). Default 0",
     )
     p.add_argument("--no-trim", action="store_true", help="keep the rest before and after the motion")
+    p.add_argument(
+        "--holdout",
+        nargs="+",
+        metavar="RUN",
+        default=[],
+        help="runs NOT fitted: the identified model is scored on them (its normalised force error per run)",
+    )
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_identify)
 
@@ -58,16 +65,12 @@ def cmd_identify(args) -> int:
         raise UserError(f"--alpha must be in (0, 2] (got {args.alpha:g})")
     if args.deadband < 0:
         raise UserError(f"--deadband must be >= 0 (got {args.deadband:g})")
-    recs = []
-    for path in args.runs:
-        if not Path(path).is_file():
-            raise UserError(f"{path}: no such run file")
-        r = I.record_from_run(path)
-        recs.append(
-            I.prepare(
-                r, trim=None if args.no_trim else 0.01, accel_lowpass_hz=args.accel_lowpass, deadband_m_s=args.deadband
-            )
-        )
+    fitted = {str(Path(p).resolve()) for p in args.runs}
+    both = [h for h in args.holdout if str(Path(h).resolve()) in fitted]
+    if both:
+        raise UserError(f"{both[0]}: is both a fitted run and a --holdout run; hold out runs that are not fitted")
+    recs = _records(args, args.runs)
+    held = _records(args, args.holdout)
     try:
         res = I.identify(recs, args.alpha, weights=args.weights, ce_fixed=args.ce)
     except Exception as e:  # singular normal equations: no motion, or a constant velocity sign
@@ -75,10 +78,13 @@ def cmd_identify(args) -> int:
             f"the least squares has no unique solution for these runs ({e}); give tests with motion in both directions"
         ) from None
     scan = I.scan_alpha(recs, weights=args.weights, ce_fixed=args.ce) if args.scan_alpha else []
+    ho = I.holdout_errors(res, held)
     for w in res.warnings():
         print(f"warning: {w}", file=sys.stderr)
     if args.json:
         out = {k: v for k, v in res.as_dict().items()}
+        if held:
+            out["holdout_error"] = ho
         if scan:
             out["alpha_scan"] = [{"alpha": s.alpha, "error": s.error} for s in scan]
         print(json_text(out, indent=1))
@@ -94,6 +100,24 @@ def cmd_identify(args) -> int:
     print(f"  error = {res.error:10.4f} (normalised force error, Eq. 2)")
     for name, e in res.per_test_error.items():
         print(f"    {e:8.4f}  {name}")
+    if held:
+        print("  held out (not fitted): normalised force error with these parameters")
+        for name, e in ho.items():
+            print(f"    {e:8.4f}  {name}")
     for s in scan:
         print(f"  alpha {s.alpha:.1f}: error {s.error:.4f}")
     return 0
+
+
+def _records(args, paths) -> list:
+    """The prepared least-squares records of run files (one-line error for a missing file)."""
+    from sim.identify import least_squares as I
+
+    recs = []
+    for path in paths:
+        if not Path(path).is_file():
+            raise UserError(f"{path}: no such run file")
+        r = I.record_from_run(path)
+        trim = None if args.no_trim else 0.01
+        recs.append(I.prepare(r, trim=trim, accel_lowpass_hz=args.accel_lowpass, deadband_m_s=args.deadband))
+    return recs

@@ -21,7 +21,8 @@ def cmd_import(args) -> int:
         print(f"{r['file']} -> {r['run_file']}")
         print(
             f"  {r['samples']} samples at {r['sample_rate_hz']:g} Hz ({r['rate_from']}), "
-            f"{r['duration_s']:.3f} s, table {r['table']}"
+            f"{r['duration_s']:.3f} s, table {r['table']} ({r['table_path']})"
+            + (f", payload {r['payload']}" if r["payload"] else "")
         )
         for ch, cols in r["ranges_si"].items():
             txt = ", ".join(

@@ -91,8 +91,10 @@ def add_parsers(sub) -> None:
     v.add_argument("run", help="a .run.npz file")
     v.add_argument("--rrd", metavar="FILE", help="write the recording to FILE.rrd")
     v.add_argument("--compare", metavar="OTHER", help="a second .run.npz laid beside the first (with residuals)")
-    v.add_argument("--table", help="table model (default: the run's meta.table)")
-    v.add_argument("--payload", help="payload (default: the run's meta.payload; 'none' for a bare table)")
+    v.add_argument("--table", help="table (default: the description the run carries, else its meta.table)")
+    v.add_argument(
+        "--payload", help="payload (default: the description the run carries, else its meta.payload; 'none': bare)"
+    )
     v.add_argument(
         "--rate",
         type=_rate,

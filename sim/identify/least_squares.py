@@ -306,6 +306,20 @@ def identify(
     )
 
 
+def holdout_errors(res: Identified, records: list[Record]) -> dict:
+    """The identified model ``res`` scored on records it was not fitted to: per record,
+    the normalised force error of Eq. 2 with ``res``'s parameters,
+    sqrt(int (F - R y)^2 dt / int F^2 dt) (the measure ``per_test_error`` gives the fit's
+    own records)."""
+    y = np.array([res.M_e_kg, res.K_e_N_per_m, res.C_e, res.F_mu_N])
+    out = {}
+    for r in records:
+        R = regressors(r, res.alpha)
+        e = np.sum(r.target**2) * r.dt
+        out[r.name] = float(math.sqrt(np.sum((r.target - R @ y) ** 2) * r.dt / e)) if e > 0 else float("nan")
+    return out
+
+
 def scan_alpha(records, alphas=None, **kw) -> list[Identified]:
     """eps and parameters for alpha in (0, 1] (the paper's Fig. 3; alpha = 0 would make the
     viscous term a second Coulomb term, a singular system)."""
@@ -357,12 +371,11 @@ def _check_uniaxial(run) -> None:
     uni-axial table's run files carry those columns as exact zeros). The model sums the
     actuator forces as one force along x: for a multi-axis table that sum is meaningless
     and the fit returns negative masses or stiffnesses."""
-    import mjcf
     from mjcf.errors import MjcfError
+    from sim.runs.runfile import table_of
 
-    table = run.meta.get("table")
     try:
-        desc = mjcf.load_table(table)
+        desc = table_of(run)  # the description the run carries, else the stock one it names
     except MjcfError:  # a measured run of a table without a description here: judge by its data
         desc = None
     if desc is not None and list(desc.dofs) != ["x"]:

@@ -24,6 +24,7 @@ What goes in (entity paths follow the model):
 ``plots/model/loop_gap``                    largest swivel opening of the model (finite samples only)
 ``plots/compare/<same sub-path>``           the compare run's series (not its reference), on this run's time
 ``plots/residual/<same sub-path>``          ``run - compare`` per series (with a compare run)
+``payload/sensors/<name>/acceleration``     a specimen sensor (``specimen_acceleration``); ``<name> (compare)``
 ==========================================  ==========================================================
 
 Time is the run's own time on the timeline ``time`` (a duration in s). Each body's geoms are
@@ -69,6 +70,7 @@ from sim.report.rerun_scene import (  # noqa: F401
     _Scene,
     _scene,
     body_entity,
+    specimen_sensor_marks,
 )
 from sim.report.rerun_series import (  # noqa: F401
     _C_ACH,
@@ -83,6 +85,7 @@ from sim.report.rerun_series import (  # noqa: F401
     _Group,
     _reference_acceleration,
     _role_colors,
+    _specimen_groups,
     series_stride,
 )
 from sim.report.rerun_worker import (  # noqa: F401
@@ -254,6 +257,9 @@ def blueprint(run, compare=None, *, tm=None):
     ]
     if run.accelerometers is not None:
         tabs.append(rrb.Grid(ts("accelerometers", "accelerometers", compare_too=False), name="accelerometers"))
+    if getattr(run, "specimen_acceleration", None) is not None:  # under the payload, not plots/
+        specimen = rrb.TimeSeriesView(name="specimen sensors", origin="/", contents=["payload/sensors/**"])
+        tabs.append(rrb.Grid(specimen, name="specimen"))
     if compare is not None:
         tabs.append(
             rrb.Grid(
@@ -433,6 +439,7 @@ class RrdTarget:
                     [str(d) for d in run.dofs],
                     run.accelerometers is not None,
                     compare is not None,
+                    run.specimen_acceleration is not None,
                 ),
                 "ops": ops.calls,
             }
@@ -553,6 +560,15 @@ class RrdTarget:
                 static=True,
             )
 
+        # the specimen's sensors, on the floor (or the platen) that carries each
+        for ent, (p, d, labels) in specimen_sensor_marks(tm, run.meta.get("specimen_sensors"), ents).items():
+            rec.log(
+                ent,
+                rr.Points3D(p, radii=0.05, colors=(0, 200, 200), labels=labels, show_labels=False),
+                rr.Arrows3D(origins=p, vectors=0.5 * d, colors=(0, 200, 200), radii=0.02),
+                static=True,
+            )
+
         # display frames
         pose_src = run.table_displacement if run.table_displacement is not None else run.reference
         if pose_src is None or pose_src.shape[1] != 6:
@@ -663,6 +679,8 @@ class RrdTarget:
                 _role_colors(roles, "residual"),
                 g.values[idx][:, pick] - other,
             )
+        for g in _specimen_groups(run, compare):  # payload/sensors/<name>/acceleration
+            self._send_group(rr, rec, t, g.sub, g.labels, g.unit, None, g.values[idx])
 
     @staticmethod
     def _send_group(rr, rec, t, ent, labels, unit, colors, values) -> None:

@@ -311,4 +311,29 @@ def _body_poses(
     return pos, quat
 
 
-# ---------------------------------------------------------------------- blueprint
+def specimen_sensor_marks(tm, sensors, ents: dict) -> dict:
+    """Where the run's specimen sensors (``meta.specimen_sensors``) sit in the scene:
+    ``{entity: (positions (k, 3), directions (k, 3), labels)}``, each under the body that
+    carries it (a shear frame's floor at the sensor's height, or the platen at height 0;
+    :func:`sim.runs.specimen.sensor_place`), in that body's frame. A sensor the model has
+    no floor for is not drawn."""
+    import mujoco
+
+    from sim.runs.specimen import sensor_place
+
+    out: dict = {}
+    payload = getattr(tm, "payload", None)
+    for s in sensors or []:
+        place = sensor_place(payload, float(s["height_m"])) if payload is not None else None
+        if place is None:
+            continue
+        name = "platen" if place == 0 else f"floor{place}"
+        b = mujoco.mj_name2id(tm.model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if b < 0 or b not in ents:
+            continue
+        pos = [0.0, 0.0, float(s["height_m"])] if place == 0 else [0.0, 0.0, 0.0]
+        p, d, lab = out.setdefault(ents[b] + "/specimen_sensors", ([], [], []))
+        p.append(pos)
+        d.append([float(x) for x in s["direction"]])
+        lab.append(str(s["name"]))
+    return {k: (np.array(p), np.array(d), lab) for k, (p, d, lab) in out.items()}

@@ -98,6 +98,25 @@ def _channel_groups(run) -> list[_Group]:
     return out
 
 
+def _specimen_groups(run, compare=None) -> list[_Group]:
+    """The specimen's sensors (``specimen_acceleration``), each drawn under the payload,
+    ``payload/sensors/<name>/acceleration`` (not under plots/): the run's series and,
+    when the compare run has a sensor of that name, its series beside it."""
+    if run.specimen_acceleration is None:
+        return []
+    theirs = {}
+    if compare is not None and compare.specimen_acceleration is not None:
+        for j, nm in enumerate(compare.column_names("specimen_acceleration")):
+            theirs[nm] = _aligned(run, compare.t, np.asarray(compare.specimen_acceleration, float)[:, [j]])[:, 0]
+    out = []
+    for j, nm in enumerate(run.column_names("specimen_acceleration")):
+        labels, roles, cols = [nm], ["achieved"], [np.asarray(run.specimen_acceleration, float)[:, j]]
+        if nm in theirs:
+            labels, roles, cols = labels + [f"{nm} (compare)"], roles + [None], cols + [theirs[nm]]
+        out.append(_Group(f"payload/sensors/{nm}/acceleration", "m/s²", labels, roles, np.column_stack(cols)))
+    return out
+
+
 def _role_colors(roles: list, kind: str) -> list | None:
     """One colour per column: the role's colour for this run, shades of orange / red for the
     compare run and the residual; None when the viewer should pick (one channel per actuator)."""

@@ -88,10 +88,14 @@ def _execute(job: dict) -> None:
 
     rr = _rerun()
     rec = rr.RecordingStream(job["application_id"], recording_id=job["recording_id"])
-    acts, dofs, has_acc, has_cmp = job["blueprint"]
-    bp = blueprint(
-        SimpleNamespace(actuators=acts, dofs=dofs, accelerometers=() if has_acc else None), True if has_cmp else None
+    acts, dofs, has_acc, has_cmp, has_spec = job["blueprint"]
+    shape = SimpleNamespace(
+        actuators=acts,
+        dofs=dofs,
+        accelerometers=() if has_acc else None,
+        specimen_acceleration=() if has_spec else None,
     )
+    bp = blueprint(shape, True if has_cmp else None)
     sinks = []
     if job.get("file"):
         try:

@@ -13,7 +13,6 @@ raises one line naming the file, the row or column and the fix.
 
 from __future__ import annotations
 
-import csv
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -21,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.errors import UserError
+from sim.runs.exports import _err, _read_csv, _read_mat, _read_tdms, uniform_time
 
 G = 9.80665  #: standard gravity, m/s^2 (unit "g")
 IN = 0.0254
@@ -49,6 +48,7 @@ DIMENSION = {
     "table_velocity": ("velocity",),
     "table_acceleration": ("acceleration",),
     "accelerometers": ("acceleration",),
+    "specimen_acceleration": ("acceleration",),
 }
 COLUMN_KEYS = {
     "name",
@@ -64,8 +64,15 @@ COLUMN_KEYS = {
     "area_m2",
     "position_m",
     "direction",
+    "sensor",
+    "height_m",
+    "delay_s",
+    "lowpass_hz",
+    "lowpass_order",
     "note",
 }
+#: keys that only a specimen_acceleration column takes
+SPECIMEN_KEYS = ("sensor", "height_m")
 SOURCE_KEYS = {
     "table",
     "time_column",
@@ -99,6 +106,8 @@ class ColumnMap:
     unit: str
     position: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
     direction: list = field(default_factory=lambda: [1.0, 0.0, 0.0])
+    height_m: float | None = None  #: specimen sensors: height above the platen's top surface
+    conditioning: dict | None = None  #: the channel's declared recorder chain (meta channel_conditioning)
 
 
 @dataclass
@@ -115,10 +124,6 @@ class ImportMap:
     description: str
     command_hold: str = "zoh"
     derive_velocity: bool = False
-
-
-def _err(where: str, problem: str, fix: str) -> UserError:
-    return UserError(" ".join(f"{where}: {problem}; {fix}".split()))
 
 
 def load_map(path, table: str | None = None) -> ImportMap:
@@ -142,10 +147,14 @@ def load_map(path, table: str | None = None) -> ImportMap:
             f"unknown key '{bad[0]}'",
             f"[source] keys are {', '.join(sorted(SOURCE_KEYS))}; columns go in [[column]]",
         )
-    table = table or src.get("table")
+    if not table:
+        table = _map_file(p, src, "table")
     if not isinstance(table, str) or not table:
         raise _err(str(p), "names no table", 'add [source] table = "NAME" (a file in scenarios/tables) or give --table')
     desc = mjcf.load_table(table)
+    payload = _map_file(p, src, "payload")
+    if payload is not None:
+        mjcf.load_payload(payload)  # checked now: nothing is converted through a bad payload
     tcol, fs = src.get("time_column"), src.get("sample_rate_hz")
     if (tcol is None) == (fs is None):
         raise _err(
@@ -164,97 +173,7 @@ def load_map(path, table: str | None = None) -> ImportMap:
         raise _err(str(p), "has no [[column]] entries", "add one [[column]] per exported column (docs/import.md)")
     cols, seen = [], {}
     for i, c in enumerate(cols_raw, start=1):
-        where = f"{p} [[column]] #{i}" + (f" ('{c.get('name')}')" if isinstance(c, dict) and "name" in c else "")
-        if not isinstance(c, dict):
-            raise _err(where, "is not a table", "write it as [[column]] with keys")
-        extra = sorted(set(c) - COLUMN_KEYS)
-        if extra:
-            raise _err(where, f"unknown key '{extra[0]}'", f"keys are {', '.join(sorted(COLUMN_KEYS))}")
-        name, ch, unit = c.get("name"), c.get("channel"), c.get("unit")
-        if not isinstance(name, str) or not name:
-            raise _err(where, "has no name", "set name = the column's header in the export")
-        if ch not in DIMENSION:
-            raise _err(where, f"channel {ch!r} is not a run-file channel", f"use one of {', '.join(DIMENSION)}")
-        if ch in ACTUATOR:
-            target, kind, known = c.get("actuator"), "actuator", list(desc.actuator_names)
-        elif ch in DOF:
-            target, kind, known = c.get("dof"), "dof", list(desc.dofs)
-        else:
-            target, kind, known = c.get("accelerometer"), "accelerometer", None
-        if not isinstance(target, str) or (known is not None and target not in known):
-            raise _err(
-                where,
-                f"{kind} {target!r} is not one of table '{desc.name}' ({desc.source}): "
-                f"{', '.join(known) if known else 'any name'}",
-                f"set {kind} = one of them, or describe the table's {kind}s in its description",
-            )
-        if (ch, target) in seen:
-            raise _err(
-                where,
-                f"maps {ch} {target} again (also column '{seen[(ch, target)]}')",
-                "keep one column per channel and target",
-            )
-        seen[(ch, target)] = name
-        dims = DIMENSION[ch]
-        dim = next((d for d in dims if unit in UNITS[d]), None)
-        if dim is None:
-            known_u = ", ".join(u for d in dims for u in UNITS[d])
-            raise _err(where, f"unit {unit!r} is not known for {ch}", f"use one of {known_u}")
-        factor = UNITS[dim][unit]
-        if factor is None:  # volts or mA over full scale
-            fsv = c.get("full_scale")
-            if isinstance(fsv, bool) or not isinstance(fsv, (int, float)) or fsv == 0:
-                raise _err(
-                    where,
-                    f"unit {unit} needs full_scale (the {unit} at full rated opening)",
-                    f"add full_scale = 10.0 (e.g. +/-10 {unit} = +/-100 %)",
-                )
-            factor = 1.0 / float(fsv)
-        if ch == "actuator_force" and dim == "pressure":
-            area = c.get("area_m2")
-            if area == "table":
-                a = desc.actuators[list(desc.actuator_names).index(target)]
-                if a.cls.area_a_m2 != a.cls.area_b_m2:
-                    raise _err(
-                        where,
-                        f"table '{desc.name}' actuator {target} has unequal areas "
-                        f"({a.cls.area_a_m2:g}, {a.cls.area_b_m2:g} m^2): one differential pressure "
-                        "is not its force",
-                        "export both chamber pressures (pressure_a, pressure_b)",
-                    )
-                area = a.cls.area_a_m2
-            if isinstance(area, bool) or not isinstance(area, (int, float)) or not area > 0:
-                raise _err(
-                    where,
-                    f"a differential pressure ({unit}) as actuator_force needs the piston area",
-                    'add area_m2 = the piston area in m^2, or area_m2 = "table" (from the description)',
-                )
-            factor *= float(area)
-        nums = {}
-        for key, default in (("scale", 1.0), ("offset", 0.0), ("sign", 1.0)):
-            v = c.get(key, default)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise _err(where, f"{key} must be a number (got {v!r})", f"set {key} = a number")
-            nums[key] = float(v)
-        if nums["sign"] not in (1.0, -1.0):
-            raise _err(where, f"sign must be 1 or -1 (got {nums['sign']:g})", "set sign = 1 or -1")
-        cm = ColumnMap(
-            name=name,
-            channel=ch,
-            target=target,
-            factor=nums["sign"] * nums["scale"] * factor,
-            offset=nums["offset"],
-            unit=unit,
-        )
-        if ch == "accelerometers":
-            for key in ("position_m", "direction"):
-                v = c.get(key, getattr(cm, key.split("_")[0] if key == "position_m" else key))
-                if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) for x in v)):
-                    raise _err(
-                        where, f"{key} must be 3 numbers (got {v!r})", f"set {key} = [x, y, z] in the table frame"
-                    )
-                setattr(cm, "position" if key == "position_m" else "direction", [float(x) for x in v])
-        cols.append(cm)
+        cols.append(_column(c, f"{p} [[column]] #{i}", desc, seen))
     delim = src.get("delimiter")
     hold = src.get("command_hold", "zoh")
     if hold not in ("zoh", "linear"):
@@ -277,11 +196,185 @@ def load_map(path, table: str | None = None) -> ImportMap:
         sample_rate_hz=None if fs is None else float(fs),
         delimiter=delim,
         skip_rows=skip,
-        payload=src.get("payload"),
+        payload=payload,
         description=str(src.get("description", "")),
         command_hold=hold,
         derive_velocity=_bool(src, "derive_velocity", str(p)),
     )
+
+
+def _column(c, where: str, desc, seen: dict) -> "ColumnMap":
+    """One ``[[column]]`` entry of a map, checked: its channel, target, unit and SI factor."""
+    where += f" ('{c.get('name')}')" if isinstance(c, dict) and "name" in c else ""
+    if not isinstance(c, dict):
+        raise _err(where, "is not a table", "write it as [[column]] with keys")
+    extra = sorted(set(c) - COLUMN_KEYS)
+    if extra:
+        raise _err(where, f"unknown key '{extra[0]}'", f"keys are {', '.join(sorted(COLUMN_KEYS))}")
+    name, ch, unit = c.get("name"), c.get("channel"), c.get("unit")
+    if not isinstance(name, str) or not name:
+        raise _err(where, "has no name", "set name = the column's header in the export")
+    if ch not in DIMENSION:
+        raise _err(where, f"channel {ch!r} is not a run-file channel", f"use one of {', '.join(DIMENSION)}")
+    if ch in ACTUATOR:
+        target, kind, known = c.get("actuator"), "actuator", list(desc.actuator_names)
+    elif ch in DOF:
+        target, kind, known = c.get("dof"), "dof", list(desc.dofs)
+    elif ch == "specimen_acceleration":
+        target, kind, known = c.get("sensor"), "sensor", None
+    else:
+        target, kind, known = c.get("accelerometer"), "accelerometer", None
+    stray = [k for k in SPECIMEN_KEYS if k in c] if ch != "specimen_acceleration" else []
+    if stray:
+        raise _err(
+            where,
+            f"{stray[0]} is for a specimen sensor, not a {ch} column",
+            'set channel = "specimen_acceleration" (a sensor on the specimen) or drop ' + stray[0],
+        )
+    if ch == "specimen_acceleration" and (not isinstance(target, str) or not target):
+        raise _err(where, f"sensor {target!r} is not a name", 'set sensor = the sensor\'s name, e.g. "F1"')
+    if not isinstance(target, str) or (known is not None and target not in known):
+        raise _err(
+            where,
+            f"{kind} {target!r} is not one of table '{desc.name}' ({desc.source}): "
+            f"{', '.join(known) if known else 'any name'}",
+            f"set {kind} = one of them, or describe the table's {kind}s in its description",
+        )
+    if (ch, target) in seen:
+        raise _err(
+            where,
+            f"maps {ch} {target} again (also column '{seen[(ch, target)]}')",
+            "keep one column per channel and target",
+        )
+    seen[(ch, target)] = name
+    dims = DIMENSION[ch]
+    dim = next((d for d in dims if unit in UNITS[d]), None)
+    if dim is None:
+        known_u = ", ".join(u for d in dims for u in UNITS[d])
+        raise _err(where, f"unit {unit!r} is not known for {ch}", f"use one of {known_u}")
+    factor = UNITS[dim][unit]
+    if factor is None:  # volts or mA over full scale
+        fsv = c.get("full_scale")
+        if isinstance(fsv, bool) or not isinstance(fsv, (int, float)) or fsv == 0:
+            raise _err(
+                where,
+                f"unit {unit} needs full_scale (the {unit} at full rated opening)",
+                f"add full_scale = 10.0 (e.g. +/-10 {unit} = +/-100 %)",
+            )
+        factor = 1.0 / float(fsv)
+    if ch == "actuator_force" and dim == "pressure":
+        area = c.get("area_m2")
+        if area == "table":
+            a = desc.actuators[list(desc.actuator_names).index(target)]
+            if a.cls.area_a_m2 != a.cls.area_b_m2:
+                raise _err(
+                    where,
+                    f"table '{desc.name}' actuator {target} has unequal areas "
+                    f"({a.cls.area_a_m2:g}, {a.cls.area_b_m2:g} m^2): one differential pressure "
+                    "is not its force",
+                    "export both chamber pressures (pressure_a, pressure_b)",
+                )
+            area = a.cls.area_a_m2
+        if isinstance(area, bool) or not isinstance(area, (int, float)) or not area > 0:
+            raise _err(
+                where,
+                f"a differential pressure ({unit}) as actuator_force needs the piston area",
+                'add area_m2 = the piston area in m^2, or area_m2 = "table" (from the description)',
+            )
+        factor *= float(area)
+    nums = {}
+    for key, default in (("scale", 1.0), ("offset", 0.0), ("sign", 1.0)):
+        v = c.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise _err(where, f"{key} must be a number (got {v!r})", f"set {key} = a number")
+        nums[key] = float(v)
+    if nums["sign"] not in (1.0, -1.0):
+        raise _err(where, f"sign must be 1 or -1 (got {nums['sign']:g})", "set sign = 1 or -1")
+    cm = ColumnMap(
+        name=name,
+        channel=ch,
+        target=target,
+        factor=nums["sign"] * nums["scale"] * factor,
+        offset=nums["offset"],
+        unit=unit,
+    )
+    if ch == "accelerometers":
+        for key in ("position_m", "direction"):
+            v = c.get(key, getattr(cm, key.split("_")[0] if key == "position_m" else key))
+            if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) for x in v)):
+                raise _err(where, f"{key} must be 3 numbers (got {v!r})", f"set {key} = [x, y, z] in the table frame")
+            setattr(cm, "position" if key == "position_m" else "direction", [float(x) for x in v])
+    if ch == "specimen_acceleration":
+        _specimen_fields(c, cm, where)
+    cm.conditioning = _conditioning(c, where)
+    return cm
+
+
+def _specimen_fields(c: dict, cm: "ColumnMap", where: str) -> None:
+    """``height_m`` (above the platen's top surface, m) and ``direction`` of a specimen sensor."""
+    h = c.get("height_m")
+    if isinstance(h, bool) or not isinstance(h, (int, float)) or not math.isfinite(h) or h < 0:
+        raise _err(
+            where,
+            f"a specimen sensor needs height_m >= 0, m above the platen's top surface (got {h!r})",
+            "set height_m = the sensor's height, e.g. 0.8 for a first floor 0.8 m up",
+        )
+    d = c.get("direction", cm.direction)
+    if not (
+        isinstance(d, list)
+        and len(d) == 3
+        and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in d)
+        and any(x != 0 for x in d)
+    ):
+        raise _err(where, f"direction must be 3 numbers, not all zero (got {d!r})", "set direction = [1, 0, 0] for +x")
+    n = math.sqrt(sum(float(x) ** 2 for x in d))
+    cm.height_m, cm.direction = float(h), [float(x) / n for x in d]
+
+
+def _conditioning(c: dict, where: str) -> dict | None:
+    """A column's declared recorder chain (``delay_s``, ``lowpass_hz``, ``lowpass_order``),
+    as meta ``channel_conditioning`` holds it, or None when the column declares none."""
+    if not any(k in c for k in ("delay_s", "lowpass_hz", "lowpass_order")):
+        return None
+    delay, fc, order = c.get("delay_s", 0.0), c.get("lowpass_hz"), c.get("lowpass_order")
+    if isinstance(delay, bool) or not isinstance(delay, (int, float)) or not math.isfinite(delay) or delay < 0:
+        raise _err(where, f"delay_s must be a number >= 0, s (got {delay!r})", "set delay_s = the conditioner's delay")
+    if fc is not None and (isinstance(fc, bool) or not isinstance(fc, (int, float)) or not fc > 0):
+        raise _err(where, f"lowpass_hz must be a positive number (got {fc!r})", "set lowpass_hz = the cut-off in Hz")
+    if fc is None and order is not None:
+        raise _err(
+            where, "lowpass_order without lowpass_hz", "give the low-pass's cut-off lowpass_hz, or drop the order"
+        )
+    if fc is not None and (isinstance(order, bool) or not isinstance(order, int) or order < 1):
+        raise _err(
+            where,
+            f"lowpass_hz needs lowpass_order, a whole number >= 1 (got {order!r})",
+            "set lowpass_order = the filter's poles, e.g. 4 for a 4-pole Butterworth",
+        )
+    return {"delay_s": float(delay), "lowpass_hz": None if fc is None else float(fc), "lowpass_order": order or 0}
+
+
+def _map_file(map_path: Path, src: dict, key: str):
+    """``[source] table`` / ``payload`` of a map: a bare name (``"lab"``) is the stock
+    description of that name (scenarios/tables, scenarios/payloads); a file name or path
+    (``"td3.toml"``, ``"../tables/td3.toml"``) is read from the MAP's folder (an absolute
+    path as it is), so a map works from any working folder."""
+    v = src.get(key)
+    if v is None or not isinstance(v, str) or not v:
+        return v
+    if not (v.endswith(".toml") or "/" in v or "\\" in v):
+        return v
+    path = Path(v).expanduser()
+    if not path.is_absolute():
+        path = map_path.resolve().parent / path
+    if not path.is_file():
+        raise _err(
+            str(map_path),
+            f"[source] {key} = {v!r} is {path}, which does not exist (a path in a map is read from the map's folder)",
+            f"give the {key} file's path relative to the map's folder, an absolute path, "
+            f'or a stock {key}\'s bare name (e.g. "lab")',
+        )
+    return str(path)
 
 
 def _bool(src: dict, key: str, where: str) -> bool:
@@ -289,169 +382,6 @@ def _bool(src: dict, key: str, where: str) -> bool:
     if not isinstance(v, bool):
         raise _err(where, f"[source] {key} must be true or false (got {v!r})", f"set {key} = true or false")
     return v
-
-
-# ------------------------------------------------------------------ reading exports
-def _read_csv(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
-    try:
-        text = path.read_text(errors="strict")
-    except OSError as e:
-        raise _err(str(path), f"cannot be read ({e.strerror})", "give an existing export file") from None
-    except UnicodeDecodeError:
-        raise _err(str(path), "is not a text file", "export as CSV text (or give a .mat file)") from None
-    lines = text.splitlines()[mp.skip_rows :]
-    if not lines:
-        raise _err(str(path), "is empty", "export with a header line and the samples")
-    delim = mp.delimiter
-    if delim is None:
-        delim = max((",", ";", "\t"), key=lines[0].count)
-    rows = csv.reader(lines, delimiter=delim)
-    header = [h.strip() for h in next(rows)]
-    missing = [w for w in wanted if w not in header]
-    if missing:
-        raise _err(
-            f"{path} (map {mp.path})",
-            f"has no column '{missing[0]}' (header: {', '.join(header)})",
-            "fix the column's name in the map or export that column",
-        )
-    idx = {w: header.index(w) for w in wanted}
-    out = {w: [] for w in wanted}
-    for ln, row in enumerate(rows, start=mp.skip_rows + 2):
-        if not row or all(not x.strip() for x in row):
-            continue
-        if len(row) != len(header):
-            raise _err(
-                str(path),
-                f"line {ln} has {len(row)} fields but the header has {len(header)}",
-                "fix or cut the ragged line (a truncated export?)",
-            )
-        for w, j in idx.items():
-            cell = row[j].strip()
-            if cell == "":
-                out[w].append(math.nan)  # missing sample (the format's NaN)
-                continue
-            try:
-                out[w].append(float(cell))
-            except ValueError:
-                raise _err(
-                    str(path),
-                    f"line {ln} column '{w}' holds {cell!r}, not a number",
-                    "fix the cell, or skip_rows the lines above the header in the map",
-                ) from None
-    if not out[wanted[0]]:
-        raise _err(str(path), "has a header but no samples", "export the samples too")
-    return {w: np.asarray(v, float) for w, v in out.items()}
-
-
-def _read_mat(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
-    from scipy.io import loadmat
-
-    try:
-        data = loadmat(str(path), squeeze_me=True)
-    except (OSError, ValueError, NotImplementedError) as e:
-        raise _err(
-            str(path),
-            f"cannot be read as a MAT-file ({' '.join(str(e).split())})",
-            "save it with MATLAB's save -v7 (or export CSV)",
-        ) from None
-    out = {}
-    for w in wanted:
-        if w not in data:
-            have = ", ".join(k for k in data if not k.startswith("__"))
-            raise _err(
-                f"{path} (map {mp.path})",
-                f"has no variable '{w}' (variables: {have})",
-                "fix the column's name in the map or save that variable",
-            )
-        a = np.asarray(data[w])
-        if a.ndim != 1 or not np.issubdtype(a.dtype, np.number):
-            raise _err(
-                str(path),
-                f"variable '{w}' has shape {a.shape} and type {a.dtype}",
-                "save each channel as a numeric vector",
-            )
-        out[w] = a.astype(float)
-    n = {len(v) for v in out.values()}
-    if len(n) != 1:
-        raise _err(str(path), "variables of different lengths", "save every channel over the same samples")
-    return out
-
-
-def _read_tdms(path: Path, mp: ImportMap, wanted: list[str]) -> dict:
-    """Channels of an NI TDMS file (npTDMS) by name: ``"channel"`` when the name is
-    unique over the file's groups, else ``"group/channel"``."""
-    try:
-        from nptdms import TdmsFile
-    except ImportError:
-        raise _err(
-            str(path), "is a TDMS file and npTDMS is not installed", "pip install nptdms (or export CSV)"
-        ) from None
-    try:
-        f = TdmsFile.read(str(path))
-    except Exception as e:  # npTDMS raises ValueError, KeyError, struct.error ... on a damaged file
-        raise _err(
-            str(path), f"cannot be read as a TDMS file ({' '.join(str(e).split())[:120]})", "export it again (or CSV)"
-        ) from None
-    by_name: dict[str, list] = {}
-    for g in f.groups():
-        for c in g.channels():
-            by_name.setdefault(f"{g.name}/{c.name}", []).append(c)
-            by_name.setdefault(c.name, []).append(c)
-    if not by_name:  # npTDMS reads a file without TDMS segments as an empty one
-        raise _err(str(path), "cannot be read as a TDMS file (no channels in it)", "export it again (or CSV)")
-    out = {}
-    for w in wanted:
-        found = by_name.get(w, [])
-        if len(found) != 1:
-            have = ", ".join(k for k in by_name if "/" in k)
-            problem = (
-                f"has no channel '{w}' (channels: {have})"
-                if not found
-                else f"has {len(found)} channels named '{w}' (in different groups)"
-            )
-            raise _err(f"{path} (map {mp.path})", problem, "name the column 'group/channel' in the map")
-        a = np.asarray(found[0][:])
-        if a.ndim != 1 or not np.issubdtype(a.dtype, np.number):
-            raise _err(str(path), f"channel '{w}' holds {a.dtype} data", "record each channel as numbers")
-        out[w] = a.astype(float)
-    if len({len(v) for v in out.values()}) != 1:
-        raise _err(str(path), "channels of different lengths", "record every channel over the same samples")
-    return out
-
-
-def uniform_time(t: np.ndarray, where: str) -> tuple[float, float]:
-    """(t0, sample rate) of a time column that is a uniform grid up to its rounding;
-    one-line error naming the first bad sample otherwise."""
-    if len(t) < 2:
-        raise _err(where, "has fewer than 2 samples", "export a longer record")
-    if not np.all(np.isfinite(t)):
-        i = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise _err(where, f"time column is empty or not finite at sample {i}", "export every sample's time")
-    d = np.diff(t)
-    if np.any(d <= 0):
-        i = int(np.flatnonzero(d <= 0)[0]) + 1
-        raise _err(
-            where,
-            f"time is not increasing at sample {i} (t = {t[i]:.6g} s after {t[i - 1]:.6g} s)",
-            "export one continuous record per file, sorted in time",
-        )
-    n = len(t)
-    k = np.arange(n)
-    slope, t0 = np.polyfit(k, t, 1)
-    dev = np.abs(t - (t0 + slope * k))
-    tol = 0.02 * slope + 1e-5
-    if dev.max() > tol:
-        i = int(np.argmax(dev))
-        raise _err(
-            where,
-            f"time step is not uniform (sample {i} is {dev[i] * 1e3:.3g} ms off the {slope * 1e3:.6g} ms grid)",
-            "export at a fixed sample rate, without gaps",
-        )
-    fs = 1.0 / slope
-    nice = round(fs, 3)
-    if abs(nice - fs) <= 1e-6 * fs + 2e-5 / (slope * n) * fs:
-        fs = nice
-    return float(t[0]), float(fs)
 
 
 @dataclass
@@ -481,14 +411,18 @@ def import_file(path, mp: ImportMap) -> Imported:
         t0, fs = 0.0, mp.sample_rate_hz
     t = np.arange(n) / fs
     desc = mjcf.load_table(mp.table)
+    payload = mjcf.load_payload(mp.payload) if mp.payload else None
     acts, dofs = list(desc.actuator_names), list(desc.dofs)
     accs = list(dict.fromkeys(c.target for c in mp.columns if c.channel == "accelerometers"))
+    specs = [c for c in mp.columns if c.channel == "specimen_acceleration"]
     chans = {}
     for c in mp.columns:
         if c.channel in ACTUATOR:
             names = acts
         elif c.channel in DOF:
             names = dofs
+        elif c.channel == "specimen_acceleration":
+            names = [s.target for s in specs]
         else:
             names = accs
         arr = chans.setdefault(c.channel, np.full((n, len(names)), np.nan))
@@ -515,7 +449,7 @@ def import_file(path, mp: ImportMap) -> Imported:
         "dofs": dofs,
         "source": "measured",
         "description": mp.description or f"imported from {path.name}",
-        "payload": mp.payload,
+        "payload": payload.name if payload is not None else None,
         "accelerometers": acc_meta,
         "imported_from": str(path),
         "import_map": mp.path,
@@ -523,6 +457,12 @@ def import_file(path, mp: ImportMap) -> Imported:
         "command_hold": mp.command_hold,
         "derived_channels": derived,
     }
+    if specs:  # docs/run-file.md: one entry per specimen_acceleration column, in order
+        meta["specimen_sensors"] = [{"name": c.target, "height_m": c.height_m, "direction": c.direction} for c in specs]
+    cond = channel_conditioning(mp)
+    if cond:
+        meta["channel_conditioning"] = cond
+    meta.update(_carried_descriptions(desc, payload))
     run = RunFile(t=t, meta=meta, **chans)
     if run.valve_command is None and run.reference is None:
         raise _err(
@@ -532,6 +472,40 @@ def import_file(path, mp: ImportMap) -> Imported:
         )
     run.validate()
     return Imported(run=run, source=str(path), report=_report(run, mp, path))
+
+
+def channel_conditioning(mp: ImportMap) -> dict:
+    """Meta ``channel_conditioning`` from the map's columns: per channel, what the map
+    declares of its recorder chain. The columns of one channel share one entry (one
+    conditioner model per channel, as the run file states it), so two columns of a
+    channel that declare different chains are an error."""
+    out, by = {}, {}
+    for c in mp.columns:
+        if c.conditioning is None:
+            continue
+        have = out.setdefault(c.channel, c.conditioning)
+        if have != c.conditioning:
+            raise _err(
+                mp.path,
+                f"columns '{by[c.channel]}' and '{c.name}' declare different conditioning for channel {c.channel}",
+                "the run file keeps one per channel: declare the same delay_s, lowpass_hz and lowpass_order",
+            )
+        by.setdefault(c.channel, c.name)
+    return out
+
+
+def _carried_descriptions(desc, payload) -> dict:
+    """The table (and payload) the run was recorded on, carried in its meta (docs/run-file.md):
+    every command rebuilds the model from these, with no --table; ``table_path`` is
+    information only (the file's absolute path at import)."""
+    from sim.runs.runfile import description_meta
+
+    meta = description_meta("table", desc.source, desc.raw)
+    meta["table_path"] = str(Path(desc.source).resolve())
+    if payload is not None:
+        meta.update(description_meta("payload", payload.source, payload.raw))
+        meta["payload_path"] = str(Path(payload.source).resolve())
+    return meta
 
 
 def _report(run, mp: ImportMap, path: Path) -> dict:
@@ -565,6 +539,8 @@ def _report(run, mp: ImportMap, path: Path) -> dict:
         "duration_s": run.duration_s,
         "time_origin_s": run.meta["time_origin_s"],
         "table": run.meta["table"],
+        "table_path": run.meta["table_path"],
+        "payload": run.meta.get("payload"),
         "derived_channels": run.meta["derived_channels"],
         "ranges_si": ranges,
         "paths": paths,
@@ -600,7 +576,7 @@ def export_csv(run, map_path, path) -> Path:
     column rounded to 1e-5 s). Used for the worked example and the round-trip test."""
     from sim.runs.files import write_text_atomic
 
-    mp = load_map(map_path, run.meta["table"])
+    mp = load_map(map_path)  # the map's own table, as the import reads it back
     if mp.time_column is None:
         raise _err(mp.path, "has no time_column", "export_csv writes one: add [source] time_column")
     cols = [mp.time_column] + [c.name for c in mp.columns]

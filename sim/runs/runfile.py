@@ -10,6 +10,7 @@ units (m, rad, N, Pa, m/s^2; valve and spool channels as a fraction of rated ope
 | actuator | valve_command, spool_position, actuator_displacement, actuator_force, pressure_a, pressure_b | ``meta["actuators"]`` |
 | DOF | reference, table_displacement, table_velocity, table_acceleration | ``meta["dofs"]`` |
 | accelerometer | accelerometers | ``meta["accelerometers"][i]["name"]`` (if given) |
+| specimen | specimen_acceleration | ``meta["specimen_sensors"][i]["name"]`` |
 
 Missing samples are NaN, never zero. Readers that need a channel pass it in
 ``require=``; a NaN there is an error that names the channel, the first bad sample and
@@ -50,6 +51,8 @@ ACTUATOR_CHANNELS = (
 )
 DOF_CHANNELS = ("reference", "table_displacement", "table_velocity", "table_acceleration")
 ACCELEROMETER_CHANNELS = ("accelerometers",)
+#: accelerometers on the specimen (a payload's floors), placed by height above the platen
+SPECIMEN_CHANNELS = ("specimen_acceleration",)
 #: Every optional channel, in the order of the format table.
 CHANNELS = (
     "valve_command",
@@ -63,6 +66,7 @@ CHANNELS = (
     "table_velocity",
     "table_acceleration",
     "accelerometers",
+    "specimen_acceleration",
 )
 #: At least one of these must be present (what drives the plant or the controller).
 INPUT_CHANNELS = ("valve_command", "reference")
@@ -103,6 +107,9 @@ class RunFile:
     table_velocity: np.ndarray | None = None
     table_acceleration: np.ndarray | None = None
     accelerometers: np.ndarray | None = None
+    #: (N, n_spec) m/s^2: absolute acceleration along each specimen sensor's direction,
+    #: gravity removed; sensors in ``meta["specimen_sensors"]``
+    specimen_acceleration: np.ndarray | None = None
     path: str | None = field(default=None, kw_only=True)
     #: Project extension channels, stored as ``x_<name>`` arrays with one row per sample
     #: (e.g. supply_pressure, loop_gap). Readers of the plain format may ignore them.
@@ -202,6 +209,8 @@ class RunFile:
                 arr = self.channel(channel)
                 return [f"acc{i}" for i in range(arr.shape[1])]
             return names
+        if channel in SPECIMEN_CHANNELS:
+            return [str(s.get("name", f"s{i}")) for i, s in enumerate(self.meta.get("specimen_sensors") or [])]
         raise _error(self.name, f"has no channel kind {channel!r}", f"channels are {', '.join(CHANNELS)}")
 
     def column(self, channel: str, column_name: str) -> np.ndarray:
@@ -270,6 +279,7 @@ def _validate_meta(meta: Any, name: str) -> None:
     acc = meta.get("accelerometers")
     if acc is not None and not isinstance(acc, list):
         raise _error(name, "meta accelerometers is not a list", "make it a list of {name, position, direction} objects")
+    _validate_specimen_sensors(meta.get("specimen_sensors"), name)
     inc = meta.get("incomplete", False)
     if not isinstance(inc, bool):
         raise _error(name, f"meta incomplete {inc!r} is not true/false", "set it to true or false")
@@ -279,6 +289,27 @@ def _validate_meta(meta: Any, name: str) -> None:
             "is marked incomplete without an incomplete_reason",
             "add meta incomplete_reason with why the run stopped",
         )
+
+
+def _validate_specimen_sensors(spec: Any, name: str) -> None:
+    """``meta.specimen_sensors``: a list of {name, height_m, direction} (docs/run-file.md)."""
+    if spec is None:
+        return
+    fix = 'make it a list of {"name": "F1", "height_m": 0.8, "direction": [1, 0, 0]} objects'
+    if not isinstance(spec, list):
+        raise _error(name, "meta specimen_sensors is not a list", fix)
+    for i, s in enumerate(spec):
+        ok = (
+            isinstance(s, dict)
+            and isinstance(s.get("name"), str)
+            and isinstance(s.get("height_m"), (int, float))
+            and not isinstance(s.get("height_m"), bool)
+            and isinstance(s.get("direction"), list)
+            and len(s["direction"]) == 3
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in s["direction"])
+        )
+        if not ok:
+            raise _error(name, f"meta specimen_sensors[{i}] is not a {{name, height_m, direction}} object", fix)
 
 
 def _validate_time(t: Any, fs: float, name: str) -> None:
@@ -323,6 +354,9 @@ def _expected_columns(channel: str, meta: dict, arr: np.ndarray) -> tuple[int | 
         return len(meta["actuators"]), "actuators in meta actuators"
     if channel in DOF_CHANNELS:
         return len(meta["dofs"]), "DOFs in meta dofs"
+    if channel in SPECIMEN_CHANNELS:
+        spec = meta.get("specimen_sensors")
+        return (len(spec) if isinstance(spec, list) else 0), "sensors in meta specimen_sensors"
     acc = meta.get("accelerometers")
     return (len(acc) if acc is not None else None), "accelerometers in meta accelerometers"
 
@@ -596,6 +630,46 @@ def _carried(run: RunFile, kind: str):
     return raw
 
 
+def carried_label(run: RunFile, kind: str) -> str:
+    """The source label of a description parsed from ``meta.{kind}_description``."""
+    return f"{run.name} [meta.{kind}_description]"
+
+
+def source_text(source: str) -> str:
+    """The text of a description's ``source``: the file's text, or, for a description
+    carried in a run (:func:`carried_label`), the text the run carries. One-line error
+    when neither can be read."""
+    import re
+
+    p = Path(source)
+    if p.is_file():
+        return p.read_text(encoding="utf-8")
+    m = re.fullmatch(r"(.+) \[meta\.(table|payload)_description\]", str(source))
+    if m and Path(m.group(1)).is_file():
+        text = read_run(m.group(1)).meta.get(f"{m.group(2)}_description")
+        if isinstance(text, str) and text:
+            return text
+    raise RunFileError(
+        _one_line(f"{source}: the description's text cannot be read; give the table's .toml file with --table")
+    )
+
+
+def _same_file(run: RunFile, kind: str) -> str | None:
+    """``meta.{kind}_path`` when that file still holds the carried text (same SHA-256):
+    the description then keeps its file as its source (a calibrated copy keeps the
+    file's comments)."""
+    import hashlib
+
+    path, digest = run.meta.get(f"{kind}_path"), run.meta.get(f"{kind}_sha256")
+    if not isinstance(path, str) or not isinstance(digest, str):
+        return None
+    try:
+        data = Path(path).read_bytes()
+    except OSError:
+        return None
+    return path if hashlib.sha256(data).hexdigest() == digest else None
+
+
 def table_of(run: RunFile, override: str | None = None):
     """The table description ``run`` was made with: ``override`` (a name or path) if
     given, else the text carried in ``meta.table_description``, else the stock table
@@ -608,7 +682,7 @@ def table_of(run: RunFile, override: str | None = None):
     raw = _carried(run, "table")
     if raw is None:
         return mjcf.load_table(run.meta["table"])
-    return parse_table(raw, f"{run.name} [meta.table_description]")
+    return parse_table(raw, _same_file(run, "table") or carried_label(run, "table"))
 
 
 def payload_of(run: RunFile, override: str | None = None):
@@ -622,7 +696,7 @@ def payload_of(run: RunFile, override: str | None = None):
         return None if override.strip().lower() in ("", "none") else mjcf.load_payload(override)
     raw = _carried(run, "payload")
     if raw is not None:
-        return parse_payload(raw, f"{run.name} [meta.payload_description]")
+        return parse_payload(raw, _same_file(run, "payload") or carried_label(run, "payload"))
     name = run.meta.get("payload")
     return mjcf.load_payload(name) if isinstance(name, str) and name.strip().lower() not in ("", "none") else None
 
@@ -635,9 +709,11 @@ __all__ = [
     "FORMAT",
     "INPUT_CHANNELS",
     "RunFile",
+    "SPECIMEN_CHANNELS",
     "description_meta",
     "payload_of",
     "read_run",
+    "source_text",
     "table_of",
     "write_run",
 ]

@@ -400,6 +400,116 @@ def test_identify_refuses_a_multi_axis_run(tmp_path, capsys):
     )
 
 
+# ---------------------------------------------------------------- column maps (shaketable import)
+LAB_MAP = """[source]
+table = "td3.toml"
+payload = "specimen/frame2.toml"
+time_column = "time"
+
+[[column]]
+name = "drive"
+channel = "valve_command"
+actuator = "A"
+unit = "V"
+full_scale = 10.0
+
+[[column]]
+name = "disp"
+channel = "table_displacement"
+dof = "x"
+unit = "mm"
+
+[[column]]
+name = "Acc 2F"
+channel = "specimen_acceleration"
+sensor = "F2"
+height_m = 1.6
+unit = "m/s^2"
+"""
+
+
+def _lab(tmp_path, map_text=LAB_MAP) -> tuple[Path, Path]:
+    """A lab folder: the lab table as td3.toml, its specimen in specimen/, the map and a
+    short export whose header writes the floor sensor as ' Acc 2F'. Returns (map, csv)."""
+    lab = tmp_path / "lab"
+    (lab / "specimen").mkdir(parents=True)
+    (lab / "td3.toml").write_text((ROOT / "scenarios/tables/lab.toml").read_text().replace('"lab"', '"td3"', 1))
+    (lab / "specimen/frame2.toml").write_text((ROOT / "scenarios/payloads/lab_2storey.toml").read_text())
+    (lab / "map.toml").write_text(map_text)
+    t = np.arange(64) / 204.8
+    rows = ["time, drive, disp, Acc 2F"] + [f"{x:.5f}, {np.sin(x):.5f}, {np.cos(x):.5f}, 0.1" for x in t]
+    (lab / "export.csv").write_text("\n".join(rows) + "\n")
+    return lab / "map.toml", lab / "export.csv"
+
+
+# (edit of the map, fragments of the one-line message)
+MAPS = {
+    "table file missing": (
+        ('table = "td3.toml"', 'table = "tables/td9.toml"'),
+        ["[source] table = 'tables/td9.toml'", "does not exist", "map's folder"],
+    ),
+    "payload file missing": (
+        ('payload = "specimen/frame2.toml"', 'payload = "frame.toml"'),
+        ["[source] payload = 'frame.toml'", "does not exist", "relative to the map's folder"],
+    ),
+    "header not found": (
+        ('name = "Acc 2F"', 'name = "Acc 3F"'),
+        ["no column 'Acc 3F'", "' Acc 2F'", "compared with leading and trailing spaces stripped"],
+    ),
+    "specimen sensor without height": (("height_m = 1.6\n", ""), ["height_m", "above the platen"]),
+    "height on a table channel": (
+        ('dof = "x"\n', 'dof = "x"\nheight_m = 0.5\n'),
+        ["height_m is for a specimen sensor"],
+    ),
+    "lowpass without order": (("height_m = 1.6\n", "height_m = 1.6\nlowpass_hz = 50.0\n"), ["lowpass_order"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(MAPS))
+def test_bad_map(case, tmp_path, capsys):
+    (old, new), fragments = MAPS[case]
+    assert old in LAB_MAP, old
+    mp, csv = _lab(tmp_path, LAB_MAP.replace(old, new, 1))
+    where = str(csv) if case == "header not found" else str(mp)
+    _expect_user_error(
+        ["import", str(csv), "--map", str(mp), "--out", str(tmp_path / "out")],
+        capsys,
+        tmp_path / "out",
+        fragments + [where],
+    )
+    assert not (tmp_path / "out").exists()
+
+
+def test_map_paths_resolve_from_the_maps_folder(tmp_path, monkeypatch):
+    """The positive case of 'table file missing': the same relative paths, read from the
+    map's folder while the import runs elsewhere."""
+    mp, csv = _lab(tmp_path)
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    assert main(["import", str(csv), "--map", str(mp), "--out", "runs"]) == 0
+    meta = json.loads(str(np.load(tmp_path / "elsewhere/runs/export.run.npz")["meta"]))
+    assert meta["table"] == "td3" and meta["table_path"] == str((tmp_path / "lab/td3.toml").resolve())
+    assert meta["payload"] == "lab_2storey" and meta["specimen_sensors"][0]["height_m"] == 1.6
+
+
+def test_calibrate_refuses_runs_of_two_tables_even_with_table(tmp_path, capsys):
+    """Runs whose files name different tables are not one table's records: --table
+    replaces the description they are replayed through, it does not make them so."""
+    paths = []
+    for table in ("ucsd", "cgs"):
+        a = _run_arrays()
+        a["meta"]["table"] = table
+        path = tmp_path / f"{table}.run.npz"
+        np.savez(path, meta=np.array(json.dumps(a.pop("meta"))), **a)
+        paths.append(str(path))
+    _expect_user_error(
+        ["calibrate", *paths, "--table", "ucsd", "--out", str(tmp_path / "out")],
+        capsys,
+        tmp_path / "out",
+        [paths[1], "different tables", "'cgs'", "'ucsd'", "one table at a time"],
+    )
+
+
 # ---------------------------------------------------------------- command-line values
 ARGS = {
     "negative duration": (["run", "harmonic_bare", "--duration", "-1"], ["--duration", "positive"]),
@@ -466,6 +576,8 @@ def test_corpus_is_large():
         + len(PAYLOADS)
         + len(RUNFILES)
         + 2
+        + len(MAPS)
+        + 1
         + len(ARGS)
     )
     assert n >= 40

@@ -2,6 +2,7 @@
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -180,3 +181,24 @@ def test_cli_identify_bad_input(tmp_path, capsys):
     assert main(["identify", p, "--model", "ucsd-ls"]) == 2
     err = capsys.readouterr().err.strip()
     assert ("NaN" in err or "finite" in err) and "\n" not in err
+
+
+def test_cli_identify_holdout_scores_runs_not_fitted(tmp_path, capsys):
+    """--holdout: the model fitted on runs a and d (two frequencies: one sine cannot tell
+    mass from stiffness) scores run b of the same table to round-off, and a run whose
+    force is 10 % larger at its normalised error, 0.1 / 1.1."""
+    a = synthetic("a", 0.1, 0.8)
+    b = synthetic("b", 0.2, 0.6)
+    pa = _write(tmp_path, a, "a.run.npz")
+    pd = _write(tmp_path, synthetic("d", 0.04, 0.4), "d.run.npz")
+    pb = _write(tmp_path, b, "b.run.npz")
+    f = np.column_stack([0.44 * b.force, 0.66 * b.force])
+    pc = _write(tmp_path, b, "c.run.npz", actuator_force=f)
+    assert main(["identify", pa, pd, "--model", "ucsd-ls", "--json", "--no-trim", "--holdout", pb, pc]) == 0
+    out = json.loads(capsys.readouterr().out)
+    ho = {Path(k).name: v for k, v in out["holdout_error"].items()}
+    assert ho["b.run.npz"] < 1e-6
+    assert ho["c.run.npz"] == pytest.approx(0.1 / 1.1, rel=1e-6)
+    assert pa not in out["holdout_error"] and out["error"] < 1e-6
+    assert main(["identify", pa, "--model", "ucsd-ls", "--holdout", pa]) == 2
+    assert "both a fitted run and a --holdout run" in capsys.readouterr().err

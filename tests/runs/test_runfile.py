@@ -28,8 +28,9 @@ def make_run(n=256, **over):
         "source": "simulated",
         "description": "unit test",
         "accelerometers": [{"name": f"A{i}", "position": [0.0, 0.0, 0.0], "direction": "x"} for i in range(3)],
+        "specimen_sensors": [{"name": f"F{i}", "height_m": 0.8 * i, "direction": [1.0, 0.0, 0.0]} for i in (1, 2)],
     }
-    cols = {"accelerometers": 3}
+    cols = {"accelerometers": 3, "specimen_acceleration": 2}
     chans = {}
     for c in CHANNELS:
         k = len(ACTS) if c in runfile.ACTUATOR_CHANNELS else cols.get(c, len(DOFS))
@@ -59,6 +60,7 @@ def test_round_trip_every_channel(tmp_path):
     np.testing.assert_array_equal(back.column("actuator_force", "Z3"), run.actuator_force[:, 10])
     np.testing.assert_array_equal(back.column("reference", "ry"), run.reference[:, 4])
     np.testing.assert_array_equal(back.column("accelerometers", "A2"), run.accelerometers[:, 2])
+    np.testing.assert_array_equal(back.column("specimen_acceleration", "F2"), run.specimen_acceleration[:, 1])
     # no temp files left beside it
     assert sorted(os.listdir(tmp_path)) == ["a.run.npz"]
 
