@@ -46,6 +46,8 @@ class CalibrationResult:
     unexplained: dict | None
     per_channel: dict  # holdout NRMSE per run and DOF, before and after
     timing: dict
+    #: the description's [unknown] values identified first (sim/calibrate/unknowns.py)
+    unknowns_identified: dict = field(default_factory=dict)
     # arrays for the report (not in the JSON)
     series: dict = field(default_factory=dict, repr=False)
 
@@ -63,6 +65,7 @@ class CalibrationResult:
             "unexplained",
             "per_channel",
             "timing",
+            "unknowns_identified",
         )
         return {k: getattr(self, k) for k in keys}
 
@@ -295,6 +298,7 @@ def calibrate(
     import mjcf
     from sim.calibrate.residuals import PATHS, check_path, choose_path, mechanical_runs, nrmse_runs, places
     from sim.calibrate.trace import Term, fit_terms, flatness, predict
+    from sim.calibrate.unknowns import identify as identify_unknowns
 
     say = log or (lambda *_: None)
     t0 = time.perf_counter()
@@ -318,8 +322,11 @@ def calibrate(
     pay = payload if payload is not None else runs[0].meta.get("payload")
     pl = mjcf.load_payload(pay) if pay and pay != "none" else None  # "none": the specimen is not declared
     path = check_path(all_runs, path) if path else choose_path(all_runs)
+    desc, unk = identify_unknowns(all_runs[: len(run_paths)], ho_given, desc, pl, workers=workers, say=say)
     if path != "mechanical":
-        return _calibrate_path(all_runs[: len(run_paths)], ho_given, desc, pl, path, effects, margin, workers, say, t0)
+        res = _calibrate_path(all_runs[: len(run_paths)], ho_given, desc, pl, path, effects, margin, workers, say, t0)
+        res.unknowns_identified = unk
+        return res
     laws = candidate_laws(effects)
     if not effects:  # laws for a specimen that is there but not declared: only when told so
         laws = [w for w in laws if w.when == "always" or (w.when == "undeclared_specimen" and payload == "none")]
@@ -503,6 +510,7 @@ def calibrate(
             "fit_before": [mr.residual for mr in mfit],
             "fit_after": cur.residuals,
         },
+        unknowns_identified=unk,
     )
     return res
 
@@ -595,6 +603,7 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
     """``calibration.json`` and ``<table>_calibrated.toml`` (the original with every
     comment kept and the accepted ``[[effect]]`` entries, sourced) into ``out``."""
     from sim.calibrate.description import TomlText
+    from sim.calibrate.unknowns import write_identified
     from sim.runs.files import write_json_atomic
 
     out = Path(out)
@@ -612,6 +621,7 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
             for k in e["parameters"]
         }
         doc.set_effect(entry, comments=comments)
+    write_identified(doc, result.unknowns_identified, tag)
     toml_path = out / f"{result.table}_calibrated.toml"
     doc.save(toml_path)
     js = result.to_json()
