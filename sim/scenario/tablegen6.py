@@ -221,7 +221,7 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
     if not name or not name.replace("_", "").replace("-", "").isalnum():
         raise ScenarioError(f"table name {name!r} must be letters, digits, '-' or '_'; choose another NAME")
     can = ("moving_mass_kg", "supply_pressure_pa", "valve_rated_flow_m3_s", "valve_bandwidth_hz", "bulk_modulus_pa")
-    inputs, unknowns = labvalues.resolve(inputs, src, can, {"n_actuators": 1})
+    inputs, unknowns = labvalues.resolve(inputs, src, can, {})  # no actuator count yet: a mass needs its range
     kind = inputs.get("layout")
     if kind is None:
         raise ScenarioError(f"{src}: missing 'layout' ({LAB_KEYS6['layout'][0]})")
