@@ -135,7 +135,7 @@ class Limits:
     velocity_m_s: np.ndarray  #: (3,)
     acceleration_m_s2: np.ndarray  #: (3,)
     max_specimen_kg: float | None  #: None: the rating is unknown (``max_specimen_kg = "unknown"``)
-    overturning_moment_n_m: float
+    overturning_moment_n_m: float | None  #: None: the rating is unknown (``"unknown"``)
     frequency_range_hz: np.ndarray
 
 
@@ -327,7 +327,9 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         velocity_m_s=li.vec("velocity_m_s", 3, nonneg=True),
         acceleration_m_s2=li.vec("acceleration_m_s2", 3, nonneg=True),
         max_specimen_kg=None if li.raw("max_specimen_kg") == "unknown" else li.num("max_specimen_kg", nonneg=True),
-        overturning_moment_n_m=li.num("overturning_moment_n_m", nonneg=True),
+        overturning_moment_n_m=None
+        if li.raw("overturning_moment_n_m") == "unknown"
+        else li.num("overturning_moment_n_m", nonneg=True),
         frequency_range_hz=li.vec("frequency_range_hz", 2, nonneg=True),
     )
     li.done()

@@ -300,7 +300,7 @@ def run_checks(res, tm, hp, ref) -> tuple[list[dict], dict]:
         q = flow_demand(res, hp)
         checks.append(check("oil_flow", float(np.max(q)) if n else 0.0, hp.pump_flow_m3_s, "m^3/s"))
     resp = specimen_response(res, tm)
-    if resp is not None and desc.limits.overturning_moment_n_m > 0:
+    if resp is not None and (desc.limits.overturning_moment_n_m is None or desc.limits.overturning_moment_n_m > 0):
         checks.append(
             check(
                 "overturning_moment",

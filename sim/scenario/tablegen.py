@@ -53,6 +53,7 @@ LAB_KEYS = {
     "bulk_modulus_pa": ("effective oil + hose bulk modulus (default 1.0 GPa)", False),
     "leakage_m3_s_pa": ("cross-port leakage coefficient across the piston (default none)", False),
     "max_specimen_kg": ("rated specimen mass (default: unknown, feasibility does not rate it)", False),
+    "overturning_moment_n_m": ("rated overturning moment (default: unknown, feasibility does not rate it)", False),
     **CONTROL_KEYS,
     "platen_size_m": ("platen length x width x thickness", False),
     "title": ("a one-line title", False),
@@ -194,13 +195,17 @@ def control_lines(f, fl, inputs: dict, given: dict, src: str, *, kp, kp_src, tau
 
 
 def specimen_rating(f, inputs: dict, given: dict, src: str) -> list[str]:
-    """The ``max_specimen_kg`` line: the lab's rating, else ``"unknown"`` (feasibility then
-    says the rating is unknown instead of refusing a specimen heavier than the platen: a
-    table's rating is set by its supports, bearings and overturning capacity, none of
-    which the lab's numbers give)."""
-    if "max_specimen_kg" in inputs:
-        return [f"max_specimen_kg = {f(_num(inputs, 'max_specimen_kg', src))}   # {given['max_specimen_kg']}"]
-    return ['max_specimen_kg = "unknown"         # unknown: the lab gave no rating (feasibility does not rate it)']
+    """The ``max_specimen_kg`` and ``overturning_moment_n_m`` lines: the lab's ratings,
+    else ``"unknown"`` (feasibility then says the rating is unknown instead of refusing a
+    specimen heavier than the platen: a table's ratings are set by its supports,
+    bearings and actuators' side loads, none of which the lab's other numbers give)."""
+    out = []
+    for key in ("max_specimen_kg", "overturning_moment_n_m"):
+        if key in inputs:
+            out.append(f"{key} = {f(_num(inputs, key, src))}   # {given[key]}")
+        else:
+            out.append(f'{key} = "unknown"   # unknown: the lab gave no rating (feasibility does not rate it)')
+    return out
 
 
 def _dead_volume(inputs, src, *, n_act, beta, A, s, m, lab):
@@ -347,7 +352,6 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
         "/ piston area",
         f"acceleration_m_s2 = [{f(a_max)}, 0.0, 0.0]   # derived: n A (2/3 supply) / moving mass (bare)",
         *specimen_rating(f, inputs, given, src),
-        f"overturning_moment_n_m = {f(m * 9.81)}   # assumed: a specimen of the moving mass at 1 m height and 1 g",
         f"frequency_range_hz = [0.0, {f(min(f_oil, fv))}]   # derived: up to the oil column or valve bandwidth",
         "",
         "[platen]",

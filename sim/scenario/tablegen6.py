@@ -58,6 +58,7 @@ LAB_KEYS6 = {
     "bulk_modulus_pa": ("effective oil + hose bulk modulus (default 1.0 GPa)", False),
     "kfb": ("force-balance gain on the redundant actuators' fighting forces (default 0.05)", False),
     "max_specimen_kg": ("rated specimen mass (default: unknown, feasibility does not rate it)", False),
+    "overturning_moment_n_m": ("rated overturning moment (default: unknown, feasibility does not rate it)", False),
     "static_supports": (
         "true: pneumatic supports carry the dead weight (default for 4h4v); false: the actuators",
         False,
@@ -330,9 +331,6 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
         "rated drop / A) / |d stroke / d DOF|",
         f"acceleration_m_s2 = {fl(a_lim)}   # derived: sum |d stroke / d DOF| A (2/3 supply) / moving mass (bare; z less g)",
         *specimen_rating(f, inputs, given, src),
-        f"overturning_moment_n_m = {f((m_spec or m) * 9.81)}   # assumed: "
-        + ("max specimen" if m_spec else "a specimen of the moving mass")
-        + " at 1 m height and 1 g",
         f"frequency_range_hz = [0.0, {f(min(min(f_oil), fv))}]   # derived: up to the lowest oil column or the valve bandwidth",
         "",
         "[platen]",

@@ -108,3 +108,28 @@ def test_calibrate_writes_the_identified_value_into_the_description(case, tmp_pa
     assert mjcf.load_table(out / "labu_calibrated.toml").raw["fluid"]["bulk_modulus_pa"] == pytest.approx(
         d["value"], rel=1e-5
     )
+
+
+def test_one_dead_volume_of_both_chambers_is_one_parameter(tmp_path):
+    """The lab gives one dead volume: both chambers' keys carry its range and nominal and
+    are fitted as one value (no simulation)."""
+    import mjcf
+    from sim.calibrate.unknowns import parameters, with_values
+
+    lab = tmp_path / "lab.toml"
+    lab.write_text(
+        (ROOT / "scenarios/lab_example/lab_table.toml").read_text()
+        + 'dead_volume_m3 = { unknown = [1e-4, 9e-4] }\nbulk_modulus_pa = "unknown"\n'
+    )
+    out = tmp_path / "t.toml"
+    assert main(["table", "new", "t", "--from", str(lab), "--out", str(out)]) == 0
+    desc = mjcf.load_table(out)
+    ps = {p.keys: p for p in parameters(desc)}
+    dv = ps[("actuator_class.main.dead_volume_a_m3", "actuator_class.main.dead_volume_b_m3")]
+    assert (dv.lo, dv.hi) == (1e-4, 9e-4) and dv.nominal == pytest.approx(3e-4, rel=1e-5)
+    assert ("fluid.bulk_modulus_pa",) in ps and len(ps) == 2
+    raw = with_values(desc.raw, [dv], [5e-4])
+    assert (
+        raw["actuator_class"]["main"]["dead_volume_a_m3"] == raw["actuator_class"]["main"]["dead_volume_b_m3"] == 5e-4
+    )
+    assert desc.raw["actuator_class"]["main"]["dead_volume_a_m3"] == pytest.approx(3e-4, rel=1e-5)  # a copy

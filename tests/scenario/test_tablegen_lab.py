@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import tomllib
 
+import numpy as np
 import pytest
 
 import mjcf
@@ -137,7 +138,7 @@ def test_specimen_rating_is_unknown_unless_given_and_feasibility_says_so(tmp_pat
     rc, out = _new(tmp_path, "")
     assert rc == 0
     desc = mjcf.load_table(out)
-    assert desc.limits.max_specimen_kg is None
+    assert desc.limits.max_specimen_kg is None and desc.limits.overturning_moment_n_m is None
     heavy = RigidPayload(
         name="heavy",
         mass_kg=2000.0,  # more than the 840 kg platen: no reason to refuse without a rating
@@ -149,6 +150,31 @@ def test_specimen_rating_is_unknown_unless_given_and_feasibility_says_so(tmp_pat
     checks = specimen_checks(desc, heavy)
     v = verdict(checks)
     assert v["feasible"] and any("rating is unknown" in w for w in v["warnings"])
+    from sim.assess.feasibility import check
+
+    c = check("overturning_moment", 2000 * 9.81 * 0.5, desc.limits.overturning_moment_n_m, "N m")
+    assert c["pass"] and "rating is unknown" in c["note"]
     rc, out2 = _new(tmp_path, "max_specimen_kg = 1500.0\n", name="td2")
     v2 = verdict(specimen_checks(mjcf.load_table(out2), heavy))
     assert not v2["feasible"] and v2["failed"] == ["specimen_mass"]
+
+
+def test_a_heavy_specimen_on_a_guided_uniaxial_table_gets_its_oil_column():
+    """Feasibility's specimen interaction on a platen on bearings: the model's mass matrix
+    is over its one DOF (it raised a shape error on the uni-axial lab table before)."""
+    from mjcf.description import RigidPayload
+    from sim.assess.specimen import interaction
+
+    desc = mjcf.load_table("lab")
+    heavy = RigidPayload(
+        name="heavy",
+        mass_kg=2000.0,
+        com_m=np.array([0.0, 0.0, 0.5]),
+        inertia_kg_m2=np.array([400.0, 400.0, 300.0]),
+        footprint_m=np.array([1.0, 1.0]),
+        height_m=1.0,
+    )
+    oil = interaction(desc, heavy)["oil_columns_hz"]
+    assert list(oil) == ["x"]
+    # k / (m + 2000 kg) against k / m with m = 1200 kg: the column drops by sqrt(1200 / 3200)
+    assert oil["x"] == pytest.approx(36.04 * math.sqrt(1200 / 3200), rel=0.03), oil
