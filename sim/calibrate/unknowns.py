@@ -60,7 +60,8 @@ class Parameter:
         return math.log(v) if self.log else v / self.hi
 
     def to_v(self, z: float) -> float:
-        return math.exp(z) if self.log else z * self.hi
+        v = math.exp(z) if self.log else z * self.hi
+        return min(max(v, self.lo), self.hi)  # exp(log(hi)) may round past hi: the loader refuses that
 
     @property
     def bounds(self) -> tuple[float, float]:

@@ -133,3 +133,14 @@ def test_one_dead_volume_of_both_chambers_is_one_parameter(tmp_path):
         raw["actuator_class"]["main"]["dead_volume_a_m3"] == raw["actuator_class"]["main"]["dead_volume_b_m3"] == 5e-4
     )
     assert desc.raw["actuator_class"]["main"]["dead_volume_a_m3"] == pytest.approx(3e-4, rel=1e-5)  # a copy
+
+
+def test_a_value_at_its_bound_stays_inside_the_declared_range():
+    """exp(log(HI)) rounds past HI for some HI: the loader would refuse the description
+    the fit then builds (it did, for a valve time constant at the top of its range)."""
+    from sim.calibrate.unknowns import Parameter
+
+    hi = 0.00795775
+    p = Parameter(("servovalve.tau_s",), 0.00106103, hi, 0.0029)
+    assert math.exp(math.log(hi)) > hi  # the rounding this guards against
+    assert p.to_v(p.bounds[1]) == hi and p.lo <= p.to_v(p.bounds[0]) <= hi

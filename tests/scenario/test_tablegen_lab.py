@@ -178,3 +178,13 @@ def test_a_heavy_specimen_on_a_guided_uniaxial_table_gets_its_oil_column():
     assert list(oil) == ["x"]
     # k / (m + 2000 kg) against k / m with m = 1200 kg: the column drops by sqrt(1200 / 3200)
     assert oil["x"] == pytest.approx(36.04 * math.sqrt(1200 / 3200), rel=0.03), oil
+
+
+def test_kdp_zero_from_the_command_line(tmp_path):
+    out = tmp_path / "t.toml"
+    args = ["table", "new", "t", "--moving-mass", "840", "--piston-area", "3e-3", "--half-stroke", "0.1"]
+    args += ["--supply-pressure", "20.7e6", "--valve-flow", "1e-3", "--valve-bandwidth", "60", "--kdp", "0"]
+    assert main([*args, "--recorder-rate", "204.8", "--out", str(out)]) == 0
+    desc = mjcf.load_table(out)
+    assert desc.raw["controller"]["kdp"] == 0.0 and desc.recorder_rate_hz == 204.8
+    assert "# lab: the command line" in _line(out.read_text(), "controller", "kdp")
