@@ -31,6 +31,7 @@ class ClosedLoopOutcome:
     source: str
     model_tracking: dict
     record_tracking: dict
+    residual_nrmse: dict = field(default_factory=dict)  #: model against record, per channel and column
     notes: list = field(default_factory=list)
 
     @property
@@ -45,6 +46,7 @@ class ClosedLoopOutcome:
             "incomplete_reason": self.result.incomplete_reason,
             "realtime_factor": float(self.result.realtime_factor),
             "tracking": {"model": self.model_tracking, "record": self.record_tracking},
+            "residual_nrmse": self.residual_nrmse,
             "notes": self.notes,
         }
 
@@ -80,7 +82,7 @@ def closed_loop_replay(source, *, table: str | None = None, payload: str | None 
     carried or given table and payload); a :class:`ClosedLoopOutcome`."""
     from mjcf.description import DOFS6
     from sim.calibrate.paths import _closed_loop_setup
-    from sim.calibrate.replay import record_channels
+    from sim.calibrate.replay import record_channels, residuals
     from sim.effects import build_model
     from sim.runs.build import build_runfile
     from sim.runs.runfile import RunFile, payload_of, read_run, table_of
@@ -118,7 +120,13 @@ def closed_loop_replay(source, *, table: str | None = None, payload: str | None 
         if x is None
     ]
     return ClosedLoopOutcome(
-        run=run, result=res, source=name, model_tracking=model, record_tracking=record, notes=notes
+        run=run,
+        result=res,
+        source=name,
+        model_tracking=model,
+        record_tracking=record,
+        residual_nrmse=residuals(src, run),
+        notes=notes,
     )
 
 

@@ -145,11 +145,14 @@ def cmd_replay_closed_loop(args) -> int:
         print(json_text(summary, indent=2))
         return 0 if rep.complete else 3
     print(f"ran {args.run}'s reference closed loop through the model -> {path}")
-    print("  tracking (against the reference)   model            record")
+    print(f"  {'tracking against the reference':30s} {'model':>10s}   {'record':>10s}")
     for dof, m in rep.model_tracking.items():
         r = rep.record_tracking.get(dof, {})
         for k in ("nrmse_displacement", "nrmse_acceleration", "pga_ratio"):
             print(f"  {dof} {k:28s} {m[k]:10.4f}   {r.get(k, float('nan')):10.4f}")
+    for ch, cols in rep.residual_nrmse.items():
+        vals = ", ".join(f"{k} {100 * v:.2f}%" if np.isfinite(v) else f"{k} -" for k, v in cols.items())
+        print(f"  {ch} NRMSE model against record: {vals}")
     for note in rep.notes:
         print(f"  note: {note}")
     if rep.result.incomplete_reason:

@@ -53,6 +53,8 @@ def test_closed_loop_replay_writes_a_run_with_both_trackings(lab_run, tmp_path, 
     assert model["nrmse_acceleration"] == pytest.approx(record["nrmse_acceleration"], rel=0.02, abs=1e-3)
     assert model["pga_ratio"] == pytest.approx(record["pga_ratio"], rel=0.02)
     assert 0 < record["nrmse_displacement"] < 0.5  # a tracking figure, not a zero by construction
+    # ... and its motion is the record's
+    assert summary["residual_nrmse"]["table_displacement"]["x"] < 0.01
     assert "tracking" in capsys.readouterr().out
 
 
