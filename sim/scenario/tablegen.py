@@ -260,6 +260,93 @@ def _lab_numbers(name: str, inputs: dict, src: str):
     )
 
 
+def _platen_size(inputs: dict, platen: float, src: str, lab: str):
+    """([length, width, thickness], its source): the lab's, else an aluminium plate of the mass."""
+    size = inputs.get("platen_size_m")
+    if size is None:
+        side = math.sqrt(platen / (2700.0 * 0.1))
+        return [side, side, 0.1], f"assumed: square aluminium plate 0.1 m thick of the platen mass ({side:.2f} m side)"
+    if not (isinstance(size, list) and len(size) == 3 and all(isinstance(v, (int, float)) and v > 0 for v in size)):
+        raise ScenarioError(f"{src}: 'platen_size_m' must be 3 positive numbers [length, width, thickness] in m")
+    return [float(v) for v in size], lab
+
+
+def _header(title: str, lab: str, unknowns: bool) -> list[str]:
+    """The comment lines at the top of a generated uni-axial description."""
+    return [
+        f"# {title}",
+        "#",
+        "# Written by `shaketable table new` from the lab's numbers (sim/scenario/tablegen.py).",
+        "# Every number is SI, with its source on the line:",
+        f'#   "{lab}"    the lab\'s number,',
+        '#   "derived: ..."  computed from the lab\'s numbers (the formula is given),',
+        '#   "assumed: ..."  a default with its reason: replace it when you know better, or',
+        "#                   calibrate it against a record (docs/lab-example.md).",
+        *(
+            ['#   "unknown: ..."  a number the lab does not know: its nominal, identified by calibrate in [unknown].']
+            if unknowns
+            else []
+        ),
+        "# Frame: origin at the centre of the platen's top surface, x along the actuators.",
+        "",
+    ]
+
+
+def _class_lines(f, given: dict, *, s, A, dead, dead_src, leak, k_oil, rod) -> list[str]:
+    """The ``[actuator_class.main]`` lines of a generated uni-axial description."""
+    cushion = min(0.005, 0.1 * s)
+    return [
+        "[actuator_class.main]",
+        f"half_stroke_m = {f(s)}   # {given['half_stroke_m']}",
+        f"area_a_m2 = {f(A)}   # {given['piston_area_m2']}",
+        f"area_b_m2 = {f(A)}   # assumed: double-ended (equal areas)",
+        f"dead_volume_a_m3 = {f(dead)}   # {dead_src}",
+        f"dead_volume_b_m3 = {f(dead)}   # as chamber a",
+        f"leakage_cross_m3_s_pa = {f(leak)}   # "
+        + given.get("leakage_m3_s_pa", "assumed: none (calibrate from a record)"),
+        "leakage_external_m3_s_pa = 0.0      # assumed: none",
+        "seal_friction_n = 0.0               # assumed: none (calibrate from a record)",
+        "seal_viscous_n_s_m = 0.0            # assumed: none",
+        f"cushion_length_m = {f(cushion)}   # assumed: end cushion travel, min(5 mm, 10 % of the half-stroke)",
+        f"cushion_stiffness_n_m = {f(100 * k_oil)}   # assumed: end stop 100 x the oil-column stiffness",
+        f"cylinder_mass_kg = {f(2 * rod)}   # assumed: twice the rod (on the fixed foundation: drawing only)",
+        f"cylinder_length_m = {f(2 * s + 0.3)}   # assumed: stroke + 0.3 m (drawing size)",
+        f"cylinder_radius_m = {f(max(0.03, 1.5 * math.sqrt(A / math.pi)))}   # assumed: 1.5 x the piston radius",
+        f"rod_mass_kg = {f(rod)}   # assumed: 5 % of the moving mass shared by the rods",
+        f"rod_length_m = {f(2 * s + 0.3)}   # assumed: as the cylinder",
+        f"rod_radius_m = {f(max(0.01, 0.5 * math.sqrt(A / math.pi)))}   # assumed: half the piston radius",
+        "",
+    ]
+
+
+def _actuator_entries(f, n_act: int, size, s: float) -> list[str]:
+    """The ``[[actuator]]`` entries: horizontal, side by side at the platen's -x edge."""
+    a_, b_, h_ = size
+    L = max(1.0, 4 * s)
+    out = []
+    for i in range(n_act):
+        y = (i - (n_act - 1) / 2) * min(0.5, b_ / max(n_act, 1))
+        out += [
+            "[[actuator]]",
+            f'name = "{"A" if n_act == 1 else f"A{i + 1}"}"',
+            'class = "main"',
+            f"base_m = [{f(-a_ / 2 - L)}, {f(y)}, {f(-h_ / 2)}]   # assumed: horizontal, {L:g} m swivel to swivel",
+            f"platen_m = [{f(-a_ / 2)}, {f(y)}, {f(-h_ / 2)}]   # assumed: at the platen's -x edge, mid-thickness",
+            "",
+        ]
+    return out
+
+
+def _accelerometer_entry() -> list[str]:
+    return [
+        "[[accelerometer]]",
+        'name = "AX"',
+        "position_m = [0.0, 0.0, 0.0]        # assumed: platen centre",
+        "direction = [1.0, 0.0, 0.0]         # assumed: along the table axis",
+        "",
+    ]
+
+
 def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
     """TOML text of a uni-axial table description named ``name`` from the lab's
     ``inputs`` (keys of :data:`LAB_KEYS`, any of :data:`sim.scenario.labvalues.UNKNOWABLE`
@@ -294,26 +381,13 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
         f"derived: displacement loop at min(oil column, valve bandwidth) / 5 = {min(f_oil, fv) / 5:.2f} Hz (2 pi f)",
     )
     kp = _num(inputs, "kp_per_s", src) if "kp_per_s" in inputs else 2 * math.pi * min(f_oil, fv) / 5
-    size = inputs.get("platen_size_m")
-    if size is None:
-        side = math.sqrt(platen / (2700.0 * 0.1))
-        size = [side, side, 0.1]
-        size_src = f"assumed: square aluminium plate 0.1 m thick of the platen mass ({side:.2f} m side)"
-    else:
-        if not (isinstance(size, list) and len(size) == 3 and all(isinstance(v, (int, float)) and v > 0 for v in size)):
-            raise ScenarioError(f"{src}: 'platen_size_m' must be 3 positive numbers [length, width, thickness] in m")
-        size = [float(v) for v in size]
-        size_src = lab
-    a_, b_, h_ = size
+    (a_, b_, h_), size_src = _platen_size(inputs, platen, src, lab)
     inertia = [platen * (b_**2 + h_**2) / 12, platen * (a_**2 + h_**2) / 12, platen * (a_**2 + b_**2) / 12]
     # performance limits derived from the hydraulics
     v_max = q * math.sqrt(max(ps - 0.3e6, 0.0) / drop) / A  # each valve feeds its own actuator
     a_max = n_act * A * ps * 2.0 / 3.0 / m
-    cushion = min(0.005, 0.1 * s)
-    stroke_lim = s - cushion
+    stroke_lim = s - min(0.005, 0.1 * s)  # less the end cushion travel (_class_lines)
     k_oil = 2 * n_act * beta * A * A / V
-    L = max(1.0, 4 * s)
-    ys = [(i - (n_act - 1) / 2) * min(0.5, b_ / max(n_act, 1)) for i in range(n_act)]
     title = inputs.get("title", f"{name}: uni-axial table ({n_act} actuator{'s' if n_act > 1 else ''})")
     if not isinstance(title, str):
         raise ScenarioError(f"{src}: 'title' must be text")
@@ -324,21 +398,7 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
     sensors, controller = control_lines(f, f, inputs, given, src, kp=kp, kp_src=kp_src, tau=tau)
     ps_hi = unknowns["supply_pressure_pa"].hi if "supply_pressure_pa" in unknowns else None
     out = [
-        f"# {title}",
-        "#",
-        "# Written by `shaketable table new` from the lab's numbers (sim/scenario/tablegen.py).",
-        "# Every number is SI, with its source on the line:",
-        f'#   "{lab}"    the lab\'s number,',
-        '#   "derived: ..."  computed from the lab\'s numbers (the formula is given),',
-        '#   "assumed: ..."  a default with its reason: replace it when you know better, or',
-        "#                   calibrate it against a record (docs/lab-example.md).",
-        *(
-            ['#   "unknown: ..."  a number the lab does not know: its nominal, identified by calibrate in [unknown].']
-            if unknowns
-            else []
-        ),
-        "# Frame: origin at the centre of the platen's top surface, x along the actuators.",
-        "",
+        *_header(title, lab, bool(unknowns)),
         "[table]",
         f'name = "{name}"',
         f'title = "{title}"',
@@ -373,49 +433,10 @@ def uniaxial(name: str, inputs: dict, *, src: str = "the command line") -> str:
             beta=beta,
             ps_hi=ps_hi,
         ),
-        "[actuator_class.main]",
-        f"half_stroke_m = {f(s)}   # {given['half_stroke_m']}",
-        f"area_a_m2 = {f(A)}   # {given['piston_area_m2']}",
-        f"area_b_m2 = {f(A)}   # assumed: double-ended (equal areas)",
-        f"dead_volume_a_m3 = {f(dead)}   # {dead_src}",
-        f"dead_volume_b_m3 = {f(dead)}   # as chamber a",
-        f"leakage_cross_m3_s_pa = {f(leak)}   # "
-        + given.get("leakage_m3_s_pa", "assumed: none (calibrate from a record)"),
-        "leakage_external_m3_s_pa = 0.0      # assumed: none",
-        "seal_friction_n = 0.0               # assumed: none (calibrate from a record)",
-        "seal_viscous_n_s_m = 0.0            # assumed: none",
-        f"cushion_length_m = {f(cushion)}   # assumed: end cushion travel, min(5 mm, 10 % of the half-stroke)",
-        f"cushion_stiffness_n_m = {f(100 * k_oil)}   # assumed: end stop 100 x the oil-column stiffness",
-        f"cylinder_mass_kg = {f(2 * rod)}   # assumed: twice the rod (on the fixed foundation: drawing only)",
-        f"cylinder_length_m = {f(2 * s + 0.3)}   # assumed: stroke + 0.3 m (drawing size)",
-        f"cylinder_radius_m = {f(max(0.03, 1.5 * math.sqrt(A / math.pi)))}   # assumed: 1.5 x the piston radius",
-        f"rod_mass_kg = {f(rod)}   # assumed: 5 % of the moving mass shared by the rods",
-        f"rod_length_m = {f(2 * s + 0.3)}   # assumed: as the cylinder",
-        f"rod_radius_m = {f(max(0.01, 0.5 * math.sqrt(A / math.pi)))}   # assumed: half the piston radius",
-        "",
+        *_class_lines(f, given, s=s, A=A, dead=dead, dead_src=dead_src, leak=leak, k_oil=k_oil, rod=rod),
     ]
-    for i, y in enumerate(ys):
-        nm = "A" if n_act == 1 else f"A{i + 1}"
-        out += [
-            "[[actuator]]",
-            f'name = "{nm}"',
-            'class = "main"',
-            f"base_m = [{f(-a_ / 2 - L)}, {f(y)}, {f(-h_ / 2)}]   # assumed: horizontal, {L:g} m swivel to swivel",
-            f"platen_m = [{f(-a_ / 2)}, {f(y)}, {f(-h_ / 2)}]   # assumed: at the platen's -x edge, mid-thickness",
-            "",
-        ]
-    out += [
-        *sensors,
-        "",
-        "[[accelerometer]]",
-        'name = "AX"',
-        "position_m = [0.0, 0.0, 0.0]        # assumed: platen centre",
-        "direction = [1.0, 0.0, 0.0]         # assumed: along the table axis",
-        "",
-        "# MTS 469D-style controller (sim/control/tvc.py).",
-        *controller,
-        "",
-    ]
+    out += _actuator_entries(f, n_act, (a_, b_, h_), s)
+    out += [*sensors, "", *_accelerometer_entry(), "# MTS 469D-style controller (sim/control/tvc.py).", *controller, ""]
     ranges, lab_of = labvalues.description_ranges(unknowns, ["main"], n_act * rod)
     return labvalues.mark("\n".join(out), ranges, unknowns, lab_of)
 
