@@ -192,6 +192,30 @@ def _pct(x) -> str:
     return "-" if x is None else f"{100 * x:.2f} %"
 
 
+def _unknowns_md(rep: dict | None) -> list[str]:
+    """The section on the description's ``[unknown]`` values (sim/calibrate/unknowns.py)."""
+    if not rep:
+        return []
+    L = ["## Values the lab did not know (identified first)", "", rep["note"] + "."]
+    if rep.get("values"):
+        L += [
+            "",
+            f"Held-out NRMSE with the nominals {_pct(rep['holdout_error_nominal'])}, with these values "
+            f"{_pct(rep['holdout_error_identified'])} ({rep['path']} path).",
+            "",
+            "| key | range | nominal | identified | 95 % interval |",
+            "|---|---|---|---|---|",
+        ]
+        for k, d in rep["values"].items():
+            lo, hi = d["interval_95"]
+            L.append(
+                f"| `{k}` | {d['range'][0]:.4g}-{d['range'][1]:.4g} | {d['nominal']:.4g} | {d['value']:.4g}"
+                + (" (at its bound)" if d["at_bound"] else "")
+                + f" | {lo:.4g}-{hi:.4g} |"
+            )
+    return L + [""]
+
+
 def report_md(res, figs: list[str], toml_name: str) -> str:
     L = [f"# Calibration of `{res.table}`", ""]
     L.append(
@@ -206,6 +230,7 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
         f"**{100 * res.error_after:.2f} %** (calibrated).",
         "",
     ]
+    L += _unknowns_md(getattr(res, "unknowns_identified", None))
     L += ["## Effects added", ""]
     if res.effects_added:
         L += ["| effect | where | parameter | value | 95 % interval |", "|---|---|---|---|---|"]

@@ -98,6 +98,7 @@ def test_calibrate_writes_the_identified_value_into_the_description(case, tmp_pa
     js = json.loads((out / "calibration.json").read_text())
     d = js["unknowns_identified"]["values"]["fluid.bulk_modulus_pa"]
     assert d["interval_95"][0] <= TRUE_BETA <= d["interval_95"][1]
+    assert "| `fluid.bulk_modulus_pa` |" in (out / "report.md").read_text()
     text = (out / "labu_calibrated.toml").read_text()
     line = next(x for x in text.splitlines() if x.startswith("bulk_modulus_pa"))
     assert "calibrated:" in line and float(re.match(r"bulk_modulus_pa = (\S+)", line).group(1)) == pytest.approx(
