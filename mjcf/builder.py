@@ -520,7 +520,7 @@ def build(desc: TableDescription, payload: Payload | None = None, options: Build
         if total > sp.capacity_kg:
             raise DescriptionError(
                 f"the static supports would carry {total / 1000:.1f} t but their capacity is "
-                f"{sp.capacity_kg / 1000:.1f} t; use a lighter payload (max specimen {desc.limits.max_specimen_kg / 1000:.0f} t)"
+                f"{sp.capacity_kg / 1000:.1f} t; use a lighter payload" + _rated(desc.limits.max_specimen_kg)
             )
         for i, f in enumerate(loads, start=1):
             p0 = f / sp.piston_area_m2
@@ -591,6 +591,11 @@ def write_xml(tm, out_dir: str | Path) -> tuple[Path, Path]:
             f"cannot write the scene to {out}: {e.strerror}; choose a writable --xml folder"
         ) from None
     return table_xml, scene_xml
+
+
+def _rated(max_specimen_kg) -> str:
+    """`` (max specimen X t)`` of a table that rates its specimens, else nothing."""
+    return "" if max_specimen_kg is None else f" (max specimen {max_specimen_kg / 1000:.0f} t)"
 
 
 __all__ = ["BuildOptions", "build", "build_spec", "write_xml", "payload_mass"]

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcf.errors import DescriptionError
+from mjcf.unknowns import parse_unknowns
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 TABLES_DIR = REPO_ROOT / "scenarios" / "tables"
@@ -133,8 +134,8 @@ class Limits:
     rotation_rad: np.ndarray  #: (3,) half-range rx, ry, rz
     velocity_m_s: np.ndarray  #: (3,)
     acceleration_m_s2: np.ndarray  #: (3,)
-    max_specimen_kg: float
-    overturning_moment_n_m: float
+    max_specimen_kg: float | None  #: None: the rating is unknown (``max_specimen_kg = "unknown"``)
+    overturning_moment_n_m: float | None  #: None: the rating is unknown (``"unknown"``)
     frequency_range_hz: np.ndarray
 
 
@@ -239,6 +240,9 @@ class TableDescription:
     effects: tuple = ()  #: [[effect]] entries (sim/effects/registry.py), validated when the model is built
     friction_model: str = "coulomb"  #: "coulomb" (MuJoCo frictionloss) or "presliding" (sim/loop/simulation.py)
     friction_presliding_m: float = 1e-4  #: pre-sliding displacement of the "presliding" model
+    #: ``[unknown]``: dotted key -> (LO, HI) of the values the lab does not know (mjcf/unknowns.py)
+    unknowns: dict = field(default_factory=dict)
+    accelerometer_filter_order: int = 4  #: poles of the accelerometers' analog conditioner (Butterworth)
 
     @property
     def actuator_names(self) -> tuple[str, ...]:
@@ -322,8 +326,10 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         rotation_rad=li.vec("rotation_rad", 3, nonneg=True),
         velocity_m_s=li.vec("velocity_m_s", 3, nonneg=True),
         acceleration_m_s2=li.vec("acceleration_m_s2", 3, nonneg=True),
-        max_specimen_kg=li.num("max_specimen_kg", nonneg=True),
-        overturning_moment_n_m=li.num("overturning_moment_n_m", nonneg=True),
+        max_specimen_kg=None if li.raw("max_specimen_kg") == "unknown" else li.num("max_specimen_kg", nonneg=True),
+        overturning_moment_n_m=None
+        if li.raw("overturning_moment_n_m") == "unknown"
+        else li.num("overturning_moment_n_m", nonneg=True),
         frequency_range_hz=li.vec("frequency_range_hz", 2, nonneg=True),
     )
     li.done()
@@ -440,6 +446,11 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
     se.num("accelerometer_range_m_s2", positive=True)
     bw = se.num("accelerometer_bandwidth_hz", positive=True)
     rate = se.num("recorder_rate_hz", positive=True)
+    order = se.raw("accelerometer_filter_order", 4)
+    if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= 8:
+        raise DescriptionError(
+            f"{src}: 'sensors.accelerometer_filter_order' must be a whole number 1..8 (got {order!r})"
+        )
     se.done()
     accs = []
     acc_names = set()
@@ -477,6 +488,8 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
     effects = top.raw("effect", [])
     if not isinstance(effects, list) or not all(isinstance(e, dict) for e in effects):
         raise DescriptionError(f"{src}: '[[effect]]' entries must be tables")
+    if top.has("unknown"):
+        top.raw("unknown")  # checked by mjcf.unknowns.parse_unknowns below
     top.done()
 
     desc = TableDescription(
@@ -498,6 +511,8 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
         effects=tuple(effects),
         friction_model=fmodel,
         friction_presliding_m=fpre,
+        unknowns=parse_unknowns(data, src),
+        accelerometer_filter_order=order,
     )
     check_stroke_reach(desc)
     return desc

@@ -47,7 +47,19 @@ TOLERANCES = {
 
 
 def check(name, demand, capacity, unit) -> dict:
-    """One check; a zero capacity with a positive demand is an infinite utilisation."""
+    """One check; a zero capacity with a positive demand is an infinite utilisation; a
+    capacity of None (a rating the table file says is unknown) is no check: its
+    utilisation is NaN, it passes, and its ``note`` says so (a verdict warning)."""
+    if capacity is None:
+        return {
+            "name": name,
+            "demand": float(demand),
+            "capacity": float("nan"),
+            "unit": unit,
+            "utilisation": float("nan"),
+            "pass": True,
+            "note": f"{name}: the table's rating is unknown (its file says so): {float(demand):.4g} {unit} not checked",
+        }
     demand, capacity = float(demand), float(capacity)
     if capacity > 0:
         u = demand / capacity
@@ -82,7 +94,7 @@ def verdict(checks: list[dict], warnings: list[str] | None = None) -> dict:
     lim = max(finite, key=lambda c: c["utilisation"]) if finite else None
     failed = [c["name"] for c in cap if not c["pass"]]
     tfailed = [c["name"] for c in checks if is_tracking(c) and not c["pass"]]
-    warns = list(warnings or [])
+    warns = list(warnings or []) + [c["note"] for c in checks if c.get("note")]
     if tfailed:
         warns.append(
             "tracking outside tolerance (" + ", ".join(tfailed) + "): drive iterations "
@@ -288,7 +300,7 @@ def run_checks(res, tm, hp, ref) -> tuple[list[dict], dict]:
         q = flow_demand(res, hp)
         checks.append(check("oil_flow", float(np.max(q)) if n else 0.0, hp.pump_flow_m3_s, "m^3/s"))
     resp = specimen_response(res, tm)
-    if resp is not None and desc.limits.overturning_moment_n_m > 0:
+    if resp is not None and (desc.limits.overturning_moment_n_m is None or desc.limits.overturning_moment_n_m > 0):
         checks.append(
             check(
                 "overturning_moment",

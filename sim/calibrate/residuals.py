@@ -286,7 +286,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
                     f"{r.name}: the accelerometer low-pass {accel_lowpass_hz:g} Hz is above the "
                     f"Nyquist frequency {0.5 / r.dt:g} Hz; give --accel-lowpass none"
                 )
-            pre = analog_lowpass(accel_lowpass_hz, 1.0 / r.dt)
+            pre = analog_lowpass(accel_lowpass_hz, 1.0 / r.dt, desc.accelerometer_filter_order)
         mr = MechRun(
             name=r.name,
             dt=r.dt,

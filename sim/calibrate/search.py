@@ -50,6 +50,8 @@ class CalibrationResult:
     per_run: dict = field(default_factory=dict)
     #: "<run>:<channel or DOF>" the held-out runs do not excite: left out of every error above
     not_excited: list = field(default_factory=list)
+    #: the description's [unknown] values identified first (sim/calibrate/unknowns.py)
+    unknowns_identified: dict = field(default_factory=dict)
     # arrays for the report (not in the JSON)
     series: dict = field(default_factory=dict, repr=False)
     #: the linear ARX baseline on the same fit and held-out runs (:mod:`sim.calibrate.baseline`)
@@ -75,6 +77,7 @@ class CalibrationResult:
             "baseline",
             "beats_baseline",
             "timing",
+            "unknowns_identified",
         )
         return {k: getattr(self, k) for k in keys}
 
@@ -326,6 +329,7 @@ def calibrate(
     replay and closed-loop searches (default: every core)."""
     from sim.calibrate.residuals import PATHS, check_path, choose_path, mechanical_runs, nrmse_runs, places
     from sim.calibrate.trace import Term, fit_terms, flatness, predict
+    from sim.calibrate.unknowns import identify as identify_unknowns
     from sim.runs.runfile import payload_of, table_of
 
     say = log or (lambda *_: None)
@@ -349,8 +353,10 @@ def calibrate(
             )
     pl = payload_of(runs[0], payload)  # "none": the specimen is not declared
     path = check_path(all_runs, path) if path else choose_path(all_runs)
+    desc, unk = identify_unknowns(all_runs[: len(run_paths)], ho_given, desc, pl, workers=workers, say=say)
     if path != "mechanical":
         res = _calibrate_path(all_runs[: len(run_paths)], ho_given, desc, pl, path, effects, margin, workers, say, t0)
+        res.unknowns_identified = unk
         return _with_baseline(res, say)
     laws = candidate_laws(effects)
     if not effects:  # laws for a specimen that is there but not declared: only when told so
@@ -534,6 +540,7 @@ def calibrate(
             "fit_before": [mr.residual for mr in mfit],
             "fit_after": cur.residuals,
         },
+        unknowns_identified=unk,
     )
     return _with_baseline(res, say)
 
@@ -654,6 +661,7 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
     """``calibration.json`` and ``<table>_calibrated.toml`` (the original with every
     comment kept and the accepted ``[[effect]]`` entries, sourced) into ``out``."""
     from sim.calibrate.description import TomlText
+    from sim.calibrate.unknowns import write_identified
     from sim.runs.files import write_json_atomic
 
     out = Path(out)
@@ -671,6 +679,7 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
             for k in e["parameters"]
         }
         doc.set_effect(entry, comments=comments)
+    write_identified(doc, result.unknowns_identified, tag)
     toml_path = out / f"{result.table}_calibrated.toml"
     doc.save(toml_path)
     js = result.to_json()

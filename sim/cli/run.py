@@ -127,10 +127,45 @@ def _print_summary(s: dict, command_wall_s: float | None = None) -> None:
         print(f"  wrote {s['measured_run_file']} (through the sensor model)")
 
 
+def cmd_replay_closed_loop(args) -> int:
+    """``replay --closed-loop``: the record's reference through the model's controller."""
+    from sim.calibrate.closed_replay import closed_loop_replay
+    from sim.runs.runfile import write_run
+
+    prog = _progress(args)
+    prog.stage(f"running {args.run}'s reference closed loop")
+    rep = closed_loop_replay(args.run, table=args.table, payload=args.payload, progress=prog.enabled and prog.tty)
+    out = out_dir(args.out)  # after the run: a run or description it refuses leaves nothing behind
+    stem = Path(args.run).name[: -len(".run.npz")] if args.run.endswith(".run.npz") else Path(args.run).stem
+    path = out / f"{stem}.closedloop.run.npz"
+    write_run(path, rep.run)
+    summary = {"schema": SCHEMA, "run_file": str(path), **rep.summary()}
+    write_json_atomic(out / "replay_summary.json", summary)
+    if args.json:
+        print(json_text(summary, indent=2))
+        return 0 if rep.complete else 3
+    print(f"ran {args.run}'s reference closed loop through the model -> {path}")
+    print(f"  {'tracking against the reference':30s} {'model':>10s}   {'record':>10s}")
+    for dof, m in rep.model_tracking.items():
+        r = rep.record_tracking.get(dof, {})
+        for k in ("nrmse_displacement", "nrmse_acceleration", "pga_ratio"):
+            print(f"  {dof} {k:28s} {m[k]:10.4f}   {r.get(k, float('nan')):10.4f}")
+    for ch, cols in rep.residual_nrmse.items():
+        vals = ", ".join(f"{k} {100 * v:.2f}%" if np.isfinite(v) else f"{k} -" for k, v in cols.items())
+        print(f"  {ch} NRMSE model against record: {vals}")
+    for note in rep.notes:
+        print(f"  note: {note}")
+    if rep.result.incomplete_reason:
+        print(f"error: {rep.result.incomplete_reason}", file=sys.stderr)
+    return 0 if rep.complete else 3
+
+
 def cmd_replay(args) -> int:
     from sim.calibrate.replay import replay
     from sim.runs.runfile import write_run
 
+    if args.closed_loop:
+        return cmd_replay_closed_loop(args)
     prog = _progress(args)
     prog.stage(f"replaying {args.run} open loop")
     bias = "none" if args.no_bias else args.bias  # None: estimated for a measured run
@@ -203,8 +238,10 @@ def add_parsers(sub) -> None:
     r.add_argument("--measure-seed", type=int, default=0, help="seed of the measurement noise (default 0)")
     r.set_defaults(func=cmd_run)
 
-    p = sub.add_parser("replay", help="replay a run file's valve commands open loop through the model")
-    p.add_argument("run", help="a .run.npz file with valve_command")
+    p = sub.add_parser(
+        "replay", help="replay a run file's valve commands open loop (or its reference closed loop) through the model"
+    )
+    p.add_argument("run", help="a .run.npz file with valve_command (--closed-loop: with reference)")
     p.add_argument("--table", help="table (default: the description the run carries, else its meta.table)")
     p.add_argument("--payload", help="payload (default: the description the run carries; 'none' for a bare table)")
     p.add_argument("--out", default="out", help="output folder")
@@ -227,6 +264,13 @@ def add_parsers(sub) -> None:
         help="command onto the model's ticks: zero-order hold (the record is the controller's DAC "
         "rate) or linear (a slower recorder sampled the drive); default the run's "
         "meta.command_hold, else zoh",
+    )
+    p.add_argument(
+        "--closed-loop",
+        dest="closed_loop",
+        action="store_true",
+        help="run the record's reference through the model's controller instead (needs a reference); "
+        "writes <run>.closedloop.run.npz with the model's and the record's tracking figures",
     )
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_replay)

@@ -14,6 +14,9 @@ FLAGS = {  # flag -> key of sim.scenario.tablegen.LAB_KEYS
     "actuators": "n_actuators",
     "oil_column": "oil_column_hz",
     "kp": "kp_per_s",
+    "kdp": "kdp",
+    "controller_rate": "controller_rate_hz",
+    "recorder_rate": "recorder_rate_hz",
 }
 
 
@@ -36,7 +39,12 @@ def cmd_table_new(args) -> int:
         else f"uni-axial, {inputs.get('n_actuators', 1)} actuator(s)"
     )
     print(
-        f"wrote {path} ({what}); every number not given is marked assumed: or derived: in the file",
+        f"wrote {path} ({what}); every number not given is marked assumed: or derived: in the file"
+        + (
+            "; the values given as unknown are marked unknown: and listed under [unknown]"
+            if "[unknown]" in path.read_text()
+            else ""
+        ),
         file=sys.stderr,
     )
     print(path)
@@ -65,6 +73,9 @@ def add_parsers(sub) -> None:
     n.add_argument("--actuators", type=int, metavar="N", help="actuators side by side (default 1)")
     n.add_argument("--oil-column", dest="oil_column", type=float, metavar="HZ", help="measured oil-column frequency")
     n.add_argument("--kp", type=float, metavar="1/S", help="displacement loop gain")
+    n.add_argument("--kdp", type=float, metavar="GAIN", help="delta-P gain (0: none)")
+    n.add_argument("--controller-rate", dest="controller_rate", type=float, metavar="HZ", help="divides 2048 Hz")
+    n.add_argument("--recorder-rate", dest="recorder_rate", type=float, metavar="HZ", help="data recorder rate")
     n.set_defaults(func=cmd_table_new)
 
 

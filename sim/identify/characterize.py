@@ -201,6 +201,11 @@ def linear_oil_columns(desc, payload=None) -> dict:
     k = hp.bulk_modulus_pa * (hp.area_a_m2**2 / Va + hp.area_b_m2**2 / Vb)
     K = J.T @ np.diag(k) @ J
     M = build_model(desc, payload).effective_mass_matrix()
+    dofs = DOFS
+    if M.shape[0] < len(DOFS):  # a guided platen (bearings): the model's mass matrix is over its own DOFs
+        dofs = tuple(d for d in DOFS if d in desc.dofs)
+        idx = [DOFS.index(d) for d in dofs]
+        K = K[np.ix_(idx, idx)]
     w2, phi = scipy.linalg.eigh(K, M)
     share = phi * (M @ phi)  # (dof, mode): kinetic-energy shares, columns sum to 1
     out = {}
@@ -209,8 +214,8 @@ def linear_oil_columns(desc, payload=None) -> dict:
         order = np.argsort(-np.abs(share[kdof]))
         j = next(j for j in order if j not in used)
         used.add(j)
-        out[DOFS[kdof]] = float(np.sqrt(max(w2[j], 0.0)) / (2 * np.pi))
-    return {d: out[d] for d in DOFS}
+        out[dofs[kdof]] = float(np.sqrt(max(w2[j], 0.0)) / (2 * np.pi))
+    return {d: out[d] for d in dofs}
 
 
 # ---------------------------------------------------------------- one test (worker side)

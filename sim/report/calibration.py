@@ -232,6 +232,30 @@ def _where_error_sits(res) -> list[str]:
     return L
 
 
+def _unknowns_md(rep: dict | None) -> list[str]:
+    """The section on the description's ``[unknown]`` values (sim/calibrate/unknowns.py)."""
+    if not rep:
+        return []
+    L = ["## Values the lab did not know (identified first)", "", rep["note"] + "."]
+    if rep.get("values"):
+        L += [
+            "",
+            f"Held-out NRMSE with the nominals {_pct(rep['holdout_error_nominal'])}, with these values "
+            f"{_pct(rep['holdout_error_identified'])} ({rep['path']} path).",
+            "",
+            "| key | range | nominal | identified | 95 % interval |",
+            "|---|---|---|---|---|",
+        ]
+        for k, d in rep["values"].items():
+            lo, hi = d["interval_95"]
+            L.append(
+                f"| `{k}` | {d['range'][0]:.4g}-{d['range'][1]:.4g} | {d['nominal']:.4g} | {d['value']:.4g}"
+                + (" (at its bound)" if d["at_bound"] else "")
+                + f" | {lo:.4g}-{hi:.4g} |"
+            )
+    return L + [""]
+
+
 def report_md(res, figs: list[str], toml_name: str) -> str:
     L = [f"# Calibration of `{res.table}`", ""]
     L.append(
@@ -248,6 +272,7 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
     ]
     L += _where_error_sits(res)
     L += baseline_md(res)
+    L += _unknowns_md(getattr(res, "unknowns_identified", None))
     L += ["## Effects added", ""]
     if res.effects_added:
         L += ["| effect | where | parameter | value | 95 % interval |", "|---|---|---|---|---|"]

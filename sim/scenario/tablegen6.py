@@ -29,7 +29,15 @@ import math
 import numpy as np
 
 from sim.errors import ScenarioError
-from sim.scenario.tablegen import BULK_MODULUS_PA, DEAD_FRACTION, _num, common_sections
+from sim.scenario.tablegen import (
+    BULK_MODULUS_PA,
+    CONTROL_KEYS,
+    DEAD_FRACTION,
+    _num,
+    common_sections,
+    control_lines,
+    specimen_rating,
+)
 
 #: What a lab gives for a 6-DOF table: key -> (meaning, required). SI units.
 LAB_KEYS6 = {
@@ -45,11 +53,12 @@ LAB_KEYS6 = {
     "vertical_piston_area_m2": ("piston area of the vertical actuators, if not piston_area_m2", False),
     "vertical_half_stroke_m": ("half-stroke of the vertical actuators, if not half_stroke_m", False),
     "valve_rated_drop_pa": ("pressure drop of the rated flow (default 6.9 MPa, 1000 psi)", False),
-    "controller_rate_hz": ("controller and recorder tick (must divide 2048 Hz; default 1024)", False),
+    **CONTROL_KEYS,
     "kp_per_s": ("displacement loop gain, one number or 6 (default from the oil columns)", False),
-    "kdp": ("differential-pressure gain (default 0.3)", False),
+    "bulk_modulus_pa": ("effective oil + hose bulk modulus (default 1.0 GPa)", False),
     "kfb": ("force-balance gain on the redundant actuators' fighting forces (default 0.05)", False),
-    "max_specimen_kg": ("rated specimen mass (default: the moving mass)", False),
+    "max_specimen_kg": ("rated specimen mass (default: unknown, feasibility does not rate it)", False),
+    "overturning_moment_n_m": ("rated overturning moment (default: unknown, feasibility does not rate it)", False),
     "static_supports": (
         "true: pneumatic supports carry the dead weight (default for 4h4v); false: the actuators",
         False,
@@ -203,12 +212,17 @@ def _fit_limits(base, plat, usable, a, b):
 
 def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
     """TOML text of a 6-DOF table description named ``name`` from the lab's ``inputs``
-    (keys of :data:`LAB_KEYS6`)."""
+    (keys of :data:`LAB_KEYS6`; the moving mass, supply pressure, valve rated flow and
+    bandwidth and bulk modulus possibly unknown, :mod:`sim.scenario.labvalues`)."""
+    from sim.scenario import labvalues
+
     unknown = sorted(set(inputs) - set(LAB_KEYS6))
     if unknown:
         raise ScenarioError(f"{src}: unknown key '{unknown[0]}' for --kind 6dof; known: {', '.join(LAB_KEYS6)}")
     if not name or not name.replace("_", "").replace("-", "").isalnum():
         raise ScenarioError(f"table name {name!r} must be letters, digits, '-' or '_'; choose another NAME")
+    can = ("moving_mass_kg", "supply_pressure_pa", "valve_rated_flow_m3_s", "valve_bandwidth_hz", "bulk_modulus_pa")
+    inputs, unknowns = labvalues.resolve(inputs, src, can, {})  # no actuator count yet: a mass needs its range
     kind = inputs.get("layout")
     if kind is None:
         raise ScenarioError(f"{src}: missing 'layout' ({LAB_KEYS6['layout'][0]})")
@@ -222,18 +236,14 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
     q = _num(inputs, "valve_rated_flow_m3_s", src)
     fv = _num(inputs, "valve_bandwidth_hz", src)
     drop = _num(inputs, "valve_rated_drop_pa", src, default=6.9e6)
-    rate = _num(inputs, "controller_rate_hz", src, default=1024.0)
-    if abs(2048.0 / rate - round(2048.0 / rate)) > 1e-9:
-        raise ScenarioError(
-            f"{src}: 'controller_rate_hz' {rate:g} must divide the 2048 Hz physics rate (e.g. 1024, 512)"
-        )
-    kdp = _num(inputs, "kdp", src, default=0.3)
+    beta = _num(inputs, "bulk_modulus_pa", src, default=BULK_MODULUS_PA)
     kfb = _num(inputs, "kfb", src, positive=False, default=0.05)
     if kfb < 0:
         raise ScenarioError(f"{src}: 'kfb' must be >= 0 (got {kfb:g})")
-    m_spec = _num(inputs, "max_specimen_kg", src, default=m)
+    m_spec = _num(inputs, "max_specimen_kg", src) if "max_specimen_kg" in inputs else None
     lab = f"lab: {src}"
     given = {k: lab for k in inputs}
+    given.update({k: u.comment() for k, u in unknowns.items()})
     names, cls, base, plat, layout_note = _layout(kind, inputs, (a, b, h), s_h, s_v, src)
     supports = inputs.get("static_supports", kind == "4h4v")
     if not isinstance(supports, bool):
@@ -260,10 +270,7 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
         in_src = "derived: uniform solid box of the platen mass and size, m (b^2 + h^2) / 12 etc. (a welded box is stiffer in inertia: give inertia_kg_m2 if known)"
     # oil columns: k_i = 2 beta A^2 / V per actuator, V = A s (1 + dead fraction); DOF stiffness J^T diag(k) J
     k_act = np.array(
-        [
-            2 * BULK_MODULUS_PA * classes[c]["A"] ** 2 / (classes[c]["A"] * classes[c]["s"] * (1 + DEAD_FRACTION))
-            for c in cls
-        ]
+        [2 * beta * classes[c]["A"] ** 2 / (classes[c]["A"] * classes[c]["s"] * (1 + DEAD_FRACTION)) for c in cls]
     )
     K = J.T @ (k_act[:, None] * J)
     Mref = np.diag([m, m, m, inertia[0] + m * com[2] ** 2, inertia[1] + m * com[2] ** 2, inertia[2]])
@@ -323,9 +330,7 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
         f"velocity_m_s = {fl(v_lim)}   # derived: min over actuators of (rated flow at supply - 0.3 MPa over the "
         "rated drop / A) / |d stroke / d DOF|",
         f"acceleration_m_s2 = {fl(a_lim)}   # derived: sum |d stroke / d DOF| A (2/3 supply) / moving mass (bare; z less g)",
-        f"max_specimen_kg = {f(m_spec)}   # "
-        + given.get("max_specimen_kg", "assumed: the moving mass (the lab's rating may differ)"),
-        f"overturning_moment_n_m = {f(m_spec * 9.81)}   # assumed: max specimen at 1 m height and 1 g",
+        *specimen_rating(f, inputs, given, src),
         f"frequency_range_hz = [0.0, {f(min(min(f_oil), fv))}]   # derived: up to the lowest oil column or the valve bandwidth",
         "",
         "[platen]",
@@ -334,7 +339,18 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
         f"mass_kg = {f(platen)}   # derived: moving mass ({given['moving_mass_kg']}) - {n_act} rods (assumed below)",
         f"inertia_kg_m2 = {fl(inertia)}   # {in_src}",
         "",
-        *common_sections(f, given, ps=ps, q=q, drop=drop, fv=fv, pump_flow=q_pump, swept_total=swept_all),
+        *common_sections(
+            f,
+            given,
+            ps=ps,
+            q=q,
+            drop=drop,
+            fv=fv,
+            pump_flow=q_pump,
+            swept_total=swept_all,
+            beta=beta,
+            ps_hi=unknowns["supply_pressure_pa"].hi if "supply_pressure_pa" in unknowns else None,
+        ),
     ]
     for c, cd in classes.items():
         A, s = cd["A"], cd["s"]
@@ -343,7 +359,7 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
             "vertical_piston_area_m2" if cd["vert"] and "vertical_piston_area_m2" in given else "piston_area_m2"
         ]
         s_src = given["vertical_half_stroke_m" if cd["vert"] and "vertical_half_stroke_m" in given else "half_stroke_m"]
-        k1 = 2 * BULK_MODULUS_PA * A * A / (A * s * (1 + DEAD_FRACTION))
+        k1 = 2 * beta * A * A / (A * s * (1 + DEAD_FRACTION))
         out += [
             f"[actuator_class.{c}]",
             f"half_stroke_m = {f(s)}   # {s_src}",
@@ -379,7 +395,7 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
             "",
         ]
     if supports:
-        cap = 1.2 * (m + m_spec)
+        cap = 1.2 * (m + (m_spec or m))
         area = cap * 9.81 / (4 * SUPPORT_PRESSURE_PA)
         p_bare = m * 9.81 / (4 * area)
         vol = 1.4 * p_bare * area * area * 4 / (m * (2 * math.pi * SUPPORT_HZ) ** 2)
@@ -388,7 +404,8 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
             "# Four pneumatic static supports carry the dead weight (as on the CGS table), so that the",
             "# vertical actuators start unloaded; set static_supports = false under [lab] if yours carry it.",
             "[supports]",
-            f"capacity_kg = {f(cap)}   # assumed: 1.2 x (moving mass + max specimen)",
+            f"capacity_kg = {f(cap)}   # assumed: 1.2 x (moving mass + "
+            + ("max specimen)" if m_spec else "a specimen of the moving mass; the rating is unknown)"),
             f"positions_m = [[{f(-sx)}, {f(-sy)}, {f(-h)}], [{f(sx)}, {f(-sy)}, {f(-h)}], [{f(-sx)}, {f(sy)}, {f(-h)}], "
             f"[{f(sx)}, {f(sy)}, {f(-h)}]]   # assumed: under the platen, a quarter of its size from the centre",
             f"piston_area_m2 = {f(area)}   # derived: capacity weight / (4 x {SUPPORT_PRESSURE_PA:g} Pa, assumed design pressure)",
@@ -404,13 +421,20 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
             f"piston_length_m = {f(0.5 * h + 0.2)}   # assumed: drawing size",
             "",
         ]
-    out += [
-        "[sensors]",
-        "accelerometer_range_m_s2 = 98.1     # assumed: +/-10 g",
-        "accelerometer_bandwidth_hz = 1000.0 # assumed: flat well beyond the table's band",
-        f"recorder_rate_hz = {f(rate)}   # " + given.get("controller_rate_hz", "assumed: 1024 Hz (the model's tick)"),
-        "",
-    ]
+    sensors, controller = control_lines(
+        f,
+        fl,
+        inputs,
+        given,
+        src,
+        kp=kp,
+        kp_src=kp_src,
+        tau=1 / (2 * math.pi * fv),
+        kdp_why="assumed: dP stabilisation of the oil columns (the CGS description's)",
+        kfb=f"kfb = {f(kfb)}   # "
+        + given.get("kfb", "assumed: force balance of the redundant actuators (the CGS description's)"),
+    )
+    out += [*sensors, ""]
     for nm, d in (("AX", "1.0, 0.0, 0.0"), ("AY", "0.0, 1.0, 0.0"), ("AZ", "0.0, 0.0, 1.0")):
         out += [
             "[[accelerometer]]",
@@ -421,17 +445,7 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
         ]
     out += [
         "# MTS 469D-style controller (sim/control/tvc.py).",
-        "[controller]",
-        f"rate_hz = {f(rate)}   # " + given.get("controller_rate_hz", "assumed: 1024 Hz"),
-        f"kp_per_s = {fl(kp)}   # {kp_src}",
-        "kff_velocity = 1.0                  # assumed: full velocity feed-forward",
-        f"kff_acceleration_s = {f(1 / (2 * math.pi * fv))}   # derived: the valve's tau (cancels its lag)",
-        "kff_jerk_s2 = 0.0                   # assumed: none",
-        f"kdp = {f(kdp)}   # "
-        + given.get("kdp", "assumed: dP stabilisation of the oil columns (the CGS description's)"),
-        "dp_highpass_hz = 1.0                # assumed: high-pass on dP (no static error)",
-        f"kfb = {f(kfb)}   # "
-        + given.get("kfb", "assumed: force balance of the redundant actuators (the CGS description's)"),
+        *controller,
         "",
         "# Dry friction in the loop with a pre-sliding travel (Dahl form): no friction is declared above,",
         "# a calibrated effect uses it.",
@@ -440,7 +454,8 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
         "presliding_m = 0.5e-3               # assumed: 0.5 mm, the CGS description's value",
         "",
     ]
-    return "\n".join(out)
+    ranges, lab_of = labvalues.description_ranges(unknowns, list(classes), n_act * rod)
+    return labvalues.mark("\n".join(out), ranges, unknowns, lab_of)
 
 
 def _pt(p):

@@ -242,6 +242,18 @@ TABLES = {
     "bad dofs": (('dofs = ["x", "y", "z", "rx", "ry", "rz"]', 'dofs = ["x", "q"]'), ["'table.dofs'"]),
     "bad foundation mode": (('mode = "fixed"', 'mode = "floating"'), ["'foundation.mode'"]),
     "missing section": (("[fluid]", "[fluids]"), ["fluid"]),
+    "unknown value out of its range": (
+        ("[fluid]", '[unknown]\n"fluid.bulk_modulus_pa" = [1.2e9, 1.8e9]\n\n[fluid]'),
+        ["[unknown] 'fluid.bulk_modulus_pa'", "nominal 1e+09", "outside"],
+    ),
+    "unknown range reversed": (
+        ("[fluid]", '[unknown]\n"fluid.bulk_modulus_pa" = [1.8e9, 0.5e9]\n\n[fluid]'),
+        ["[unknown] 'fluid.bulk_modulus_pa'", "LO must be below HI"],
+    ),
+    "unknown key of nothing": (
+        ("[fluid]", '[unknown]\n"fluid.bulk_modulus" = [0.5e9, 1.8e9]\n\n[fluid]'),
+        ["[unknown] 'fluid.bulk_modulus'", "names no value"],
+    ),
 }
 
 
