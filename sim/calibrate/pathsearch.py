@@ -441,7 +441,10 @@ def judge_sensor(cand, pfit, pho, cur, new, bics, margin) -> tuple[bool, str, di
 
 
 def param_check(rf, z95) -> tuple[bool, str, dict]:
-    """Off the bounds, a finite 95 % interval, the neutral value (no effect) outside it."""
+    """Off the bounds (:func:`sim.calibrate.acceptance.bound_hit`, the mechanical path's
+    test), a finite 95 % interval, the neutral value (no effect) outside it."""
+    from sim.calibrate.acceptance import bound_hit
+
     c = rf.cand
     sig = c.sigmas(rf.theta, rf.sigma)
     vals = c.values(rf.theta)
@@ -450,9 +453,7 @@ def param_check(rf, z95) -> tuple[bool, str, dict]:
         th, s = float(rf.theta[i]), float(rf.sigma[i])
         if not math.isfinite(s) or not math.isfinite(sig[k]):
             return False, f"{k}: no finite confidence interval", unc
-        tol = 1e-3 * abs(c.step[i])
-        lo, hi = c.lower[i], c.upper[i]
-        if (math.isfinite(lo) and th - lo <= tol) or (math.isfinite(hi) and hi - th <= tol):
+        if bound_hit(th, c.lower[i], c.upper[i], 1e-3 * abs(c.step[i])):
             return False, f"{k} = {vals[k]:.4g} {c.units[k]} at its bound", unc
         if i in c.screened and abs(th - c.neutral[i]) <= z95 * s:
             return False, f"{k} = {vals[k]:.4g} {c.units[k]}: its 95 % interval includes the no-effect value", unc
