@@ -232,6 +232,14 @@ def force_peak_of_entry(name: str, params: dict, motion: tuple) -> float | None:
     return None
 
 
+def implausible_candidate(cand, values: dict, scale: TableScale, peaks: dict) -> str:
+    """:func:`implausible` of a replay or closed-loop candidate: its force at the place's
+    recorded peak motion ``peaks[where]`` = (u, v, a) (:func:`force_peak_of_entry`)."""
+    vals = {**cand.fixed, **values}
+    fp = force_peak_of_entry(cand.type, vals, peaks[cand.where]) if cand.where in peaks else None
+    return implausible(cand.type, cand.where, vals, scale, (cand.where, fp) if fp is not None else None)
+
+
 __all__ = [
     "COMPENSATION",
     "LARGE_GAIN",
@@ -240,6 +248,7 @@ __all__ = [
     "bound_hit",
     "force_peak_of_entry",
     "implausible",
+    "implausible_candidate",
     "nested_at_bound",
     "table_scale",
     "tie_break",
