@@ -66,16 +66,20 @@ def bound_hit(value: float, lo: float, hi: float, tol: float) -> str | None:
 
 
 def nested_at_bound(law, values: dict, limits: dict, sigma: dict | None = None) -> tuple[str, float] | None:
-    """``(name, value)`` of the first parameter of ``law`` at a bound, with the value it is
-    held at there, or None: at its range's bound or (a scanned one) its scan's limit
-    ``limits[name]``, or, for a linear coefficient beside others (dry friction's constant
-    part beside its growing part), with its 95 % interval (``sigma``) reaching its bound
-    (:func:`linear_holds_bound`). A linear coefficient can be held only at 0 beside another
-    one (:func:`sim.calibrate.laws.fixed_law`)."""
+    """``(name, value)`` of the first parameter of ``law`` at a bound of its range, with the
+    value it is held at there, or None; a linear coefficient beside others (dry friction's
+    constant part beside its growing part) also when its 95 % interval (``sigma``) reaches
+    its bound (:func:`linear_holds_bound`). A scanned parameter at its scan's limit
+    (``limits[name]``) inside its range is not held there: the limit is where the law stops
+    being itself (a power law's exponent towards 0 is dry friction) or where no record
+    tells (a mode's damping below 0.05 %); the candidate is refused. A linear coefficient
+    can be held only at 0 beside another one (:func:`sim.calibrate.laws.fixed_law`)."""
     for name, (_u, lo, hi) in law.params.items():
         v = values[name]
         if name in law.shape:
-            lo, hi = limits.get(name, (lo, hi))
+            a, b = limits.get(name, (lo, hi))
+            if bound_hit(v, a, b, 1e-3 * max(abs(v), 1e-12)) and not bound_hit(v, lo, hi, 1e-3 * max(abs(v), 1e-12)):
+                return None
         side = bound_hit(v, lo, hi, 1e-3 * max(abs(v), 1e-12))
         if side is None and sigma is not None and linear_holds_bound(law, name, v, sigma.get(name, math.inf)):
             side = "lower" if abs(v - lo) <= abs(v - hi) else "upper"

@@ -141,9 +141,12 @@ def forward_round(st: RoundState, cur, scored: list, rnd, say) -> tuple[list, tu
     for j, (_, _, _, row) in enumerate(passed):
         if j != k:
             row["accepted"] = False
-            row["reason"] = (
-                f"passed, not added: {win[3]['name']} at {win[3]['where']} has a held-out error within "
-                f"{100 * st.margin:g} % of it and a whiter residual, or explains more"
+            row["reason"] = f"passed, not added: {win[3]['name']} at {win[3]['where']} " + (
+                f"has a held-out error within {100 * st.margin:g} % of it and the whiter residual"
+                if j < k
+                else "explains more (judged first)"
+                if abs(row["holdout_error"] - win[1]) > st.margin * win[1]
+                else f"has a held-out error within {100 * st.margin:g} % of it and the whiter residual"
             )
     say(f"  ACCEPTED {win[3]['name']} at {win[3]['where']}")
     return rows, win[:3]

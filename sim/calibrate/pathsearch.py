@@ -295,7 +295,7 @@ def calibrate_path(
                 continue
             nested = refit_at_bound(rf, (wref, mref, ctx))
             if nested is not None:  # judged right after it: its parameter held at the bound
-                refined.insert(refined.index(rf) + 1, nested)
+                refined.insert(_index(refined, rf) + 1, nested)
             t = time.perf_counter()
             if rf.cand.sensor:
                 ms = [sensor_model(rf.cand, rf.theta, p, m) for p, m in zip(pfit + pho, mfit + mho)]
@@ -336,7 +336,7 @@ def calibrate_path(
                 winner = (rf, unc, mf, mh, e_new, rss_new, p_new, f_new)
                 break
         if winner is not None:  # the refined ones after it, for the record
-            for rf in refined[refined.index(winner[0]) + 1 :]:
+            for rf in refined[_index(refined, winner[0]) + 1 :]:
                 sc_of = next(s.score for s in top if s.cand.key == rf.cand.key)
                 why = f"refined, not judged: {winner[0].cand.type} {winner[0].cand.where} explains more and passed"
                 tried.append(_row(rnd, None, rf, None, why if rf.ok else rf.why, score=sc_of))
@@ -481,6 +481,11 @@ def param_check(rf, z95) -> tuple[bool, str, dict]:
         if i in c.screened and abs(th - c.neutral[i]) <= z95 * s:
             return False, f"{k} = {vals[k]:.4g} {c.units[k]}: its 95 % interval includes the no-effect value", unc
     return True, "", unc
+
+
+def _index(items: list, x) -> int:
+    """Position of ``x`` itself in ``items`` (a dataclass's == compares arrays)."""
+    return next(i for i, y in enumerate(items) if y is x)
 
 
 def refit_at_bound(rf, windows):
