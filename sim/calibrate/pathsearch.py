@@ -354,7 +354,8 @@ def calibrate_path(
             t = time.perf_counter()
             st = {"mfit": mfit, "mho": mho, "e_ho": e_ho, "rss": rss, "n_par": n_par, "flat": flat}
             ctx_r = (pfit, pho, wref, (raw, src, payload), N, margin, workers, routes)
-            items, st, rows = revisit_accepted(items, st, ctx_r, rnd, say)
+            plaus = lambda c, v: implausible_candidate(c, v, scale, peaks)  # noqa: E731
+            items, st, rows = revisit_accepted(items, st, ctx_r, rnd, say, implausible=plaus)
             mfit, mho, e_ho, rss, n_par, flat = (st[k] for k in ("mfit", "mho", "e_ho", "rss", "n_par", "flat"))
             tried.extend(rows)
             dropped |= {(r["name"], r["where"]) for r in rows if r["revisited"] == "dropped"}
