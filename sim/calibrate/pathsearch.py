@@ -52,9 +52,10 @@ MAX_NFEV = 6
 LINE_STEPS = (1, 2, 4, 8)
 
 
-def motion_rms(runs, desc) -> dict:
-    """place -> (u, v, a) RMS of the recorded motion (from the table channels, else the
-    reference), for the mechanical candidates' step sizes."""
+def motion_rms(runs, desc, stat: str = "rms") -> dict:
+    """place -> (u, v, a) RMS (``stat`` "peak": largest magnitude) of the recorded motion
+    (from the table channels, else the reference), for the mechanical candidates' step
+    sizes (and the plausibility test's forces)."""
     from mjcf.description import DOFS6
     from sim.control.tvc import dof_jacobian
 
@@ -76,15 +77,19 @@ def motion_rms(runs, desc) -> dict:
             six[k][:, DOFS6.index(d)] = x[:, j]
     J = dof_jacobian(desc)
     out = {}
-    rms = [np.sqrt(np.mean(x**2, axis=0)) for x in six]
+
+    def size(x):
+        return np.max(np.abs(x), axis=0) if stat == "peak" else np.sqrt(np.mean(x**2, axis=0))
+
+    rms = [size(x) for x in six]
     for d in desc.dofs:
         out[f"dof:{d}"] = tuple(float(x[DOFS6.index(d)]) for x in rms)
-    stroke = [np.sqrt(np.mean((x @ J.T) ** 2, axis=0)) for x in six]
+    stroke = [size(x @ J.T) for x in six]
     for i, name in enumerate(desc.actuator_names):
         out[f"actuator:{name}"] = tuple(float(x[i]) for x in stroke)
     for c in sorted({a_.cls.name for a_ in desc.actuators}):
         idx = [i for i, a_ in enumerate(desc.actuators) if a_.cls.name == c]
-        out[f"class:{c}"] = tuple(float(np.mean(x[idx])) for x in stroke)
+        out[f"class:{c}"] = tuple(float(np.max(x[idx]) if stat == "peak" else np.mean(x[idx])) for x in stroke)
     return out
 
 
@@ -238,6 +243,7 @@ def calibrate_path(
     """The search on ``path``; returns the fields of a
     :class:`sim.calibrate.search.CalibrationResult` as a dict."""
     from sim.calibrate import paths as P
+    from sim.calibrate.acceptance import implausible_candidate, table_scale
     from sim.calibrate.revisit import revisit_accepted
     from sim.calibrate.search import UNEXPLAINED_FRACTION, Z95, accept_numbers
     from sim.calibrate.sensitivity import candidates, refine_job, screen, sensor_model
@@ -253,6 +259,8 @@ def calibrate_path(
     tm.update(window_seconds(pfit, wscr, wref))
     raw, src = desc.raw, str(desc.source)
     mot = motion_rms(runs, desc)
+    peaks = motion_rms(runs, desc, stat="peak")  # the plausibility test's recorded motion
+    scale = table_scale(desc, payload)
     accepted: list = []
 
     def sims(prs_lists, extra):
@@ -325,11 +333,19 @@ def calibrate_path(
             )
         )
         winner = None
-        for rf in refined:  # best first, each on the whole runs
+        for rf in refined:  # best first, each on the whole runs (a nested refit is judged next)
             sc_of = next(s.score for s in top if s.cand.key == rf.cand.key)
             if not rf.ok:
                 tried.append(_row(rnd, None, rf, None, rf.why, score=sc_of))
                 continue
+            bad = implausible_candidate(rf.cand, rf.cand.values(rf.theta), scale, peaks)
+            if bad:  # refused before its whole-run replay: it stands in for something else
+                tried.append({**_row(rnd, None, rf, None, bad, score=sc_of), "compensation": True})
+                say(f"  {rf.cand.type:20s} {rf.cand.where:26s} ({bad})")
+                continue
+            nested = refit_at_bound(rf, (wref, mref, ctx))
+            if nested is not None:  # judged right after it: its parameter held at the bound
+                refined.insert(_index(refined, rf) + 1, nested)
             t = time.perf_counter()
             if rf.cand.sensor:
                 ms = [sensor_model(rf.cand, rf.theta, p, m) for p, m in zip(pfit + pho, mfit + mho)]
@@ -370,7 +386,7 @@ def calibrate_path(
                 winner = (rf, unc, mf, mh, e_new, rss_new, p_new, f_new)
                 break
         if winner is not None:  # the refined ones after it, for the record
-            for rf in refined[refined.index(winner[0]) + 1 :]:
+            for rf in refined[_index(refined, winner[0]) + 1 :]:
                 sc_of = next(s.score for s in top if s.cand.key == rf.cand.key)
                 why = f"refined, not judged: {winner[0].cand.type} {winner[0].cand.where} explains more and passed"
                 tried.append(_row(rnd, None, rf, None, why if rf.ok else rf.why, score=sc_of))
@@ -388,7 +404,8 @@ def calibrate_path(
             t = time.perf_counter()
             st = {"mfit": mfit, "mho": mho, "e_ho": e_ho, "rss": rss, "n_par": n_par, "flat": flat}
             ctx_r = (pfit, pho, wref, (raw, src, payload), N, margin, workers, routes)
-            items, st, rows = revisit_accepted(items, st, ctx_r, rnd, say)
+            plaus = lambda c, v: implausible_candidate(c, v, scale, peaks)  # noqa: E731
+            items, st, rows = revisit_accepted(items, st, ctx_r, rnd, say, implausible=plaus)
             mfit, mho, e_ho, rss, n_par, flat = (st[k] for k in ("mfit", "mho", "e_ho", "rss", "n_par", "flat"))
             tried.extend(rows)
             dropped |= {(r["name"], r["where"]) for r in rows if r["revisited"] == "dropped"}
@@ -437,7 +454,14 @@ def path_errors(pho, before, after) -> tuple[dict, dict, list]:
 def _found(a, path, pfit, desc) -> dict:
     """The ``effects_added`` entry of an accepted effect ``{"cand", "theta", "unc"}``."""
     c, th, unc = a["cand"], a["theta"], a["unc"]
-    found = {"name": c.type, "where": c.where, "parameters": c.values(th), "uncertainty": unc, "units": dict(c.units)}
+    found = {
+        "name": c.type,
+        "where": c.where,
+        "parameters": {**c.fixed, **c.values(th)},
+        "uncertainty": unc,
+        "units": dict(c.units),
+        **({"fixed": dict(c.fixed)} if c.fixed else {}),
+    }
     if path == "replay" and c.type == "valve_null_offset":
         found.update(null_total(c, th, unc, pfit, desc))
     return found
@@ -506,7 +530,10 @@ def judge_sensor(cand, pfit, pho, cur, new, bics, margin) -> tuple[bool, str, di
 
 
 def param_check(rf, z95) -> tuple[bool, str, dict]:
-    """Off the bounds, a finite 95 % interval, the neutral value (no effect) outside it."""
+    """Off the bounds (:func:`sim.calibrate.acceptance.bound_hit`, the mechanical path's
+    test), a finite 95 % interval, the neutral value (no effect) outside it."""
+    from sim.calibrate.acceptance import bound_hit
+
     c = rf.cand
     sig = c.sigmas(rf.theta, rf.sigma)
     vals = c.values(rf.theta)
@@ -515,13 +542,59 @@ def param_check(rf, z95) -> tuple[bool, str, dict]:
         th, s = float(rf.theta[i]), float(rf.sigma[i])
         if not math.isfinite(s) or not math.isfinite(sig[k]):
             return False, f"{k}: no finite confidence interval", unc
-        tol = 1e-3 * abs(c.step[i])
-        lo, hi = c.lower[i], c.upper[i]
-        if (math.isfinite(lo) and th - lo <= tol) or (math.isfinite(hi) and hi - th <= tol):
+        if bound_hit(th, c.lower[i], c.upper[i], 1e-3 * abs(c.step[i])):
             return False, f"{k} = {vals[k]:.4g} {c.units[k]} at its bound", unc
         if i in c.screened and abs(th - c.neutral[i]) <= z95 * s:
             return False, f"{k} = {vals[k]:.4g} {c.units[k]}: its 95 % interval includes the no-effect value", unc
     return True, "", unc
+
+
+def _index(items: list, x) -> int:
+    """Position of ``x`` itself in ``items`` (a dataclass's == compares arrays)."""
+    return next(i for i, y in enumerate(items) if y is x)
+
+
+def refit_at_bound(rf, windows):
+    """The nested candidate of a refined one with a parameter at its bound (beside others):
+    that parameter held there (:func:`fixed_candidate`), the rest refined again on the
+    refinement ``windows`` (``(prs, base models, ctx)``); None when no parameter is at a
+    bound or none would be left."""
+    from sim.calibrate.acceptance import bound_hit
+    from sim.calibrate.sensitivity import refine_job
+
+    c = rf.cand
+    for i in range(len(c.names)):
+        side = bound_hit(float(rf.theta[i]), c.lower[i], c.upper[i], 1e-3 * abs(c.step[i]))
+        c2 = fixed_candidate(c, i, float(c.lower[i] if side == "lower" else c.upper[i])) if side else None
+        if c2 is not None:
+            theta0 = np.delete(np.asarray(rf.theta, float), i)
+            return refine_job((c2, theta0, *windows[:2], windows[2], MAX_NFEV))
+    return None
+
+
+def fixed_candidate(c, i: int, value: float):
+    """Candidate ``c`` with its parameter ``i`` held at ``value`` (its entry then carries it
+    as a fixed key), or None where the rest cannot stand alone (one parameter; the
+    transformed first parameter of a sensor low-pass or a foundation mode)."""
+    import dataclasses
+
+    if len(c.names) < 2 or c.grid is not None or (i == 0 and c.type in ("sensor_lowpass", "foundation_mode")):
+        return None
+    keep = [j for j in range(len(c.names)) if j != i]
+    screened = tuple(keep.index(j) for j in c.screened if j != i)
+    if not screened:
+        return None
+    return dataclasses.replace(
+        c,
+        names=tuple(c.names[j] for j in keep),
+        neutral=c.neutral[keep],
+        step=c.step[keep],
+        lower=c.lower[keep],
+        upper=c.upper[keep],
+        screened=screened,
+        fixed={**c.fixed, c.names[i]: value},
+        line=None,
+    )
 
 
 def _row(rnd, s, rf, unc, why, score=None) -> dict:
@@ -533,7 +606,8 @@ def _row(rnd, s, rf, unc, why, score=None) -> dict:
         "where": c.where,
         "explained_fraction": rf.explained if rf is not None else s.score,
         "linearised_score": score if score is not None else s.score,
-        "parameters": c.values(theta),
+        "parameters": {**c.fixed, **c.values(theta)},
+        **({"fixed": dict(c.fixed)} if c.fixed else {}),
         "uncertainty": unc or {},
         "holdout_error": None,
         "bic_change": None,

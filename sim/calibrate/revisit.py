@@ -164,7 +164,7 @@ def drop_rule(e_with, e_without, bic_with, bic_without, margin) -> tuple[bool, s
     )
 
 
-def revisit_accepted(items, st, ctx, rnd, say=None) -> tuple[list, dict, list]:
+def revisit_accepted(items, st, ctx, rnd, say=None, implausible=None) -> tuple[list, dict, list]:
     """The joint refit and the backward pass after an acceptance. ``items``: the accepted
     effects ``{"cand", "theta", "unc"}`` in the order accepted (the newest last); ``st``:
     the current model's whole-run numbers (``mfit``, ``mho``: model channels of the fit
@@ -172,7 +172,9 @@ def revisit_accepted(items, st, ctx, rnd, say=None) -> tuple[list, dict, list]:
     ``ctx = (pfit, pho, wref, (raw, src, payload), N, margin, workers, counts)``.
     Returns the items left (refitted), the numbers of their model (with ``replays``:
     how many replays the revisit ran) and the rows for ``candidates`` (``revisited``:
-    ``refitted`` / ``refit_not_kept`` / ``kept`` / ``dropped``)."""
+    ``refitted`` / ``refit_not_kept`` / ``kept`` / ``dropped``). ``implausible``:
+    ``(cand, values) -> reason`` (empty: plausible); a joint refit that takes an effect
+    where the table cannot have it is not kept (sim.calibrate.acceptance)."""
     from sim.calibrate import paths as P
     from sim.calibrate.pathsearch import _bic
     from sim.calibrate.search import Z95
@@ -229,7 +231,8 @@ def revisit_accepted(items, st, ctx, rnd, say=None) -> tuple[list, dict, list]:
     # the joint refit of every accepted effect
     new, out = joint(items)
     moved = any(not np.array_equal(a["theta"], b["theta"]) for a, b in zip(items, new))
-    w = whole(new, [b["theta"] for b in new]) if moved else None
+    bad = next((x for b in new if implausible and (x := implausible(b["cand"], b["cand"].values(b["theta"])))), "")
+    w = whole(new, [b["theta"] for b in new]) if moved and not bad else None
     if w is not None and w["e_ho"] <= st["e_ho"]:
         for a, b in zip(items, new):
             why = (
@@ -242,7 +245,9 @@ def revisit_accepted(items, st, ctx, rnd, say=None) -> tuple[list, dict, list]:
         items = new
     else:
         why = "joint refit: no parameter moved" if not moved else "joint refit not kept: "
-        if moved:
+        if moved and bad:
+            why += bad
+        elif moved:
             why += "a whole-run replay diverged" if w is None else f"held-out {st['e_ho']:.5f} -> {w['e_ho']:.5f} rises"
         rows += [row(a, "refit_not_kept", why) for a in items]
     say(f"  revisit: {rows[-1]['reason']}")

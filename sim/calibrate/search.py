@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.calibrate.acceptance import holdout_not_enough
 from sim.calibrate.residuals import CalibrationError
 
 HOLDOUT_MARGIN = 0.05  #: the held-out NRMSE must fall by at least 5 % of itself
@@ -208,63 +209,60 @@ def _slice_run(r, a: int, b: int, label: str):
 
 
 # ------------------------------------------------------------------ acceptance
-def param_report(term, values: dict, sigma: dict) -> tuple[bool, str, dict]:
-    """Are the parameters off their bounds with a finite 95 % interval excluding zero?"""
-    unc = {name: Z95 * sigma.get(name, math.inf) for name in term.law.params}  # every one, also on a refusal
-    for name, (unit, lo, hi) in term.law.params.items():
+def param_report(term, values: dict, sigma: dict, limits: dict | None = None) -> tuple[bool, str, dict]:
+    """Are the parameters off their bounds (a scanned one: off its scan's limits,
+    ``limits``, default :func:`sim.calibrate.trace.scan_limits` without a record rate)
+    with a finite 95 % interval excluding zero?"""
+    from sim.calibrate.acceptance import bound_hit, linear_holds_bound
+
+    law = term.law
+    unc = {name: Z95 * sigma.get(name, math.inf) for name in law.params}  # every one, also on a refusal
+    for name, (unit, lo, hi) in law.params.items():
         v, s = values[name], sigma.get(name, math.inf)
         if not math.isfinite(s):
             return False, f"{name}: no finite confidence interval", unc
-        tol = 1e-3 * max(abs(v), 1e-12)
-        if (math.isfinite(lo) and v - lo <= tol) or (math.isfinite(hi) and hi - v <= tol) or not (lo <= v <= hi):
+        if bound_hit(v, lo, hi, 1e-3 * max(abs(v), 1e-12)):
             return False, f"{name} = {v:.4g} {unit} at or beyond its bounds [{lo:g}, {hi:g}]", unc
-        if name in term.law.shape:
-            grid = term.law.shape[name]
-            if v <= min(grid) + 1e-9 or v >= max(grid) - 1e-9:
-                return False, f"{name} = {v:.4g} at the edge of its scanned range", unc
-        elif abs(v) <= Z95 * s and len(term.law.linears) == 1:
+        if name in law.shape:
+            a, b = (limits or {}).get(name) or _limits(law, name)
+            if bound_hit(v, a, b, 1e-3 * max(abs(v), 1e-12)):
+                return False, f"{name} = {v:.4g} at the limit of its scan [{a:g}, {b:g}]", unc
+        elif abs(v) <= Z95 * s and len(law.linears) == 1:
             return False, f"{name} = {v:.4g} {unit}: its 95 % interval +/-{Z95 * s:.3g} includes zero", unc
-    lin = term.law.linears
+        elif linear_holds_bound(law, name, v, s):
+            return False, f"{name} = {v:.4g} +/-{Z95 * s:.3g} {unit} holds its bound: the nested law without it", unc
+    lin = law.linears
     if len(lin) > 1 and all(abs(values[k]) <= Z95 * sigma[k] for k in lin):
         # the components of one vector (a CG offset): one of them must differ from zero
         return False, f"{', '.join(lin)}: every 95 % interval includes zero", unc
-    for name, (at, simpler) in getattr(term.law, "nested", {}).items():
+    for name, (at, simpler) in getattr(law, "nested", {}).items():
         if abs(values[name] - at) <= Z95 * sigma.get(name, math.inf):
             return False, f"{name} = {values[name]:.4g} +/-{unc[name]:.3g} holds {at:g}: that is {simpler}", unc
     return True, "", unc
 
 
-def accept(cur, new, e_ho_cur, e_ho_new, flat_cur, flat_new, term, margin=HOLDOUT_MARGIN):
+def _limits(law, name) -> tuple[float, float]:
+    """A scanned parameter's limits without a record rate ("nyquist": unbounded)."""
+    grid = law.shape[name]
+    lo, hi = law.limits.get(name, (min(grid), max(grid)))
+    return float(lo), (math.inf if hi == "nyquist" else float(hi))
+
+
+def accept(cur, new, e_ho_cur, e_ho_new, flat_cur, flat_new, term, margin=HOLDOUT_MARGIN, limits=None):
     """``(accepted, reason, uncertainty)`` of adding ``term`` (fit ``new`` vs ``cur``)."""
     i = [t.key for t in new.terms].index(term.key)
-    ok, why, unc = param_report(new.terms[i], new.values[i], new.sigma[i])
+    ok, why, unc = param_report(new.terms[i], new.values[i], new.sigma[i], limits)
     if not ok:
         return False, why, unc
     ok, why = accept_numbers(e_ho_cur, e_ho_new, cur.bic, new.bic, flat_cur, flat_new, margin)
     return ok, why, unc
 
 
-def holdout_not_enough(before: float, after: float, margin: float) -> str:
-    """Why a held-out error ``before -> after`` does not pass the margin, in the words of
-    what it did: it rose, stayed, or fell by less than the margin."""
-    change = f"held-out error {before:.4f} -> {after:.4f}"
-    if after > before:
-        return f"{change} rose (by {100 * (after / before - 1):.3g} %)" if before > 0 else f"{change} rose"
-    if after == before:
-        return f"{change} did not change"
-    return f"{change} falls by less than {100 * margin:g} %"
-
-
 def accept_numbers(e_ho_cur, e_ho_new, bic_cur, bic_new, flat_cur, flat_new, margin=HOLDOUT_MARGIN):
-    """``(accepted, reason)`` by the tests every path shares (parameters checked apart):
-    held-out error down by ``margin`` of itself, BIC down, residual whiter."""
-    if not e_ho_new <= (1 - margin) * e_ho_cur:
-        return False, holdout_not_enough(e_ho_cur, e_ho_new, margin)
-    if not bic_new < bic_cur:
-        return False, f"BIC does not improve ({bic_cur:.1f} -> {bic_new:.1f})"
-    if not flat_new > flat_cur:
-        return False, f"residual no whiter (spectral flatness {flat_cur:.3f} -> {flat_new:.3f})"
-    return True, ""
+    """The numbers every path judges (:func:`sim.calibrate.acceptance.accept_numbers`)."""
+    from sim.calibrate.acceptance import accept_numbers as judge
+
+    return judge(e_ho_cur, e_ho_new, bic_cur, bic_new, flat_cur, flat_new, margin)
 
 
 # ------------------------------------------------------------------ what is left
@@ -327,6 +325,8 @@ def calibrate(
     docstring. ``path``: force a residual path (default: chosen by the channels every
     run has, :func:`sim.calibrate.residuals.choose_path`); ``workers``: processes of the
     replay and closed-loop searches (default: every core)."""
+    from sim.calibrate.acceptance import table_scale
+    from sim.calibrate.mechjudge import RoundState, forward_search
     from sim.calibrate.residuals import PATHS, check_path, choose_path, mechanical_runs, nrmse_runs, places
     from sim.calibrate.trace import Term, fit_terms, flatness, predict
     from sim.calibrate.unknowns import identify as identify_unknowns
@@ -369,6 +369,7 @@ def calibrate(
     mfit = mechanical_runs(fit_runs, desc, pl, accel_lowpass_hz=lp)
     mho = mechanical_runs(ho_runs, desc, pl, accel_lowpass_hz=lp)
     t2 = time.perf_counter()
+    scale = table_scale(desc, pl)
     cur = fit_terms(mfit, [])
     e_ho0 = nrmse_runs(mho, predict(mho, cur))
     e_ho = e_ho0
@@ -384,56 +385,10 @@ def calibrate(
         for law in laws
         for w in distinct_places(mfit[0], [p for p in places(desc, law.places, pl is not None) if law.acts_at(p)])
     ]
-    tried, added = [], []
-    n_fits = 0
-    for rnd in range(MAX_ROUNDS):
-        scored = []
-        for law, w in cands:
-            # a law that repeats at a place (a specimen's modes) offers its next term there
-            n_have = sum(1 for t in cur.terms if (t.law.type, t.where) == (law.type, w))
-            if n_have >= getattr(law, "repeats", 1):
-                continue
-            if any((t.law.name, t.where) == (law.name, w) and t.law.type != law.type for t in cur.terms):
-                continue  # one entry of an effect per place: a variant of one already there is not added beside it
-            new = fit_terms(mfit, cur.terms + [Term(law, w, index=n_have)], refine="last")
-            n_fits += 1
-            scored.append((1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0, law, w, new))
-        rank = {"dof": 0, "class": 1, "actuator": 2}
-        scored.sort(key=lambda s: (-round(s[0], 6), rank.get(s[2].split(":")[0], 3)))
-        accepted = None
-        for expl, law, w, new in scored:
-            e_new = nrmse_runs(mho, predict(mho, new))
-            f_new = flatness(mfit, new.residuals)
-            term = new.terms[-1]  # the candidate: added last
-            ok, why, unc = accept(cur, new, e_ho, e_new, flat, f_new, term, margin)
-            i = len(new.terms) - 1
-            tried.append(
-                {
-                    "round": rnd,
-                    "name": law.name,
-                    "where": w,
-                    **({"options": dict(law.options)} if law.options else {}),
-                    "explained_fraction": expl,
-                    "parameters": new.values[i],
-                    "uncertainty": unc,
-                    "holdout_error": e_new,
-                    "bic_change": new.bic - cur.bic,
-                    "flatness": f_new,
-                    "accepted": ok,
-                    "reason": why,
-                }
-            )
-            say(
-                f"  {law.type:18s} {w:14s} explains {100 * expl:6.2f} %  held-out {e_new:.4f}"
-                + ("  ACCEPTED" if ok else f"  ({why})")
-            )
-            if ok:
-                accepted = (new, e_new, f_new)
-                break
-        if accepted is None:
-            break
-        cur = fit_terms(mfit, accepted[0].terms)  # every shape parameter again, with the new term in
-        e_ho, flat = nrmse_runs(mho, predict(mho, cur)), flatness(mfit, cur.residuals)
+    st = RoundState(mfit, mho, e_ho, flat, margin, scale)
+    cur, tried, n_fits = forward_search(st, cur, cands, MAX_ROUNDS, say)
+    e_ho, flat = st.e_ho, st.flat
+    added = []
     # Backward: a term accepted early may be superseded by later ones (viscous damping
     # standing in for friction the flatness test kept out until a specimen's mode was in):
     # drop a term whose removal keeps the held-out error within the acceptance margin.
@@ -500,10 +455,11 @@ def calibrate(
                 "name": t.law.name,
                 "where": t.where,
                 **({"options": dict(t.law.options)} if t.law.options else {}),
-                **({"label": f"{t.law.type} {t.index + 1}"} if getattr(t.law, "repeats", 1) > 1 else {}),
+                **({"label": f"{t.law.name} {t.index + 1}"} if getattr(t.law, "repeats", 1) > 1 else {}),
+                **({"fixed": dict(t.law.fixed)} if t.law.fixed else {}),
                 "parameters": cur.values[i],
                 "uncertainty": unc,
-                "units": {k: u for k, (u, *_r) in t.law.params.items()},
+                "units": t.law.units,
             }
         )
     ho_res = predict(mho, cur)
@@ -675,6 +631,8 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
         comments = {
             k: f"+/-{e['uncertainty'][k]:.3g} {e['units'][k]} (95 %)"
             if k in e["uncertainty"]
+            else "fixed at its bound (the nested law), not fitted"
+            if k in e.get("fixed", {})
             else "held at the description's value, not fitted"
             for k in e["parameters"]
         }

@@ -138,8 +138,9 @@ def _joint_shape(mruns, terms, i) -> Term:
 
     t = terms[i]
     names = list(t.law.shape)
-    lo = np.array([min(t.law.shape[n]) for n in names], float)
-    hi = np.array([max(t.law.shape[n]) for n in names], float)
+    lims = [scan_limits(t.law, n, mruns) for n in names]
+    lo = np.array([x[0] for x in lims], float)
+    hi = np.array([x[1] for x in lims], float)
 
     def rss(x):
         trial = list(terms)
@@ -154,6 +155,41 @@ def _joint_shape(mruns, terms, i) -> Term:
     if not r.fun < r0:
         return t
     return Term(t.law, t.where, {**t.shape, **{n: float(v) for n, v in zip(names, np.clip(r.x, lo, hi))}}, t.index)
+
+
+#: steps a scan takes past its grid's edge, at most (geometric, the grid's own ratio there)
+MAX_EDGE_STEPS = 12
+
+
+def scan_limits(law, name: str, mruns) -> tuple[float, float]:
+    """How far the scan of shape parameter ``name`` may go: the law's physical limits
+    (``Law.limits``; "nyquist": 0.4 x the record rate), else its grid's range."""
+    grid = law.shape[name]
+    lo, hi = law.limits.get(name, (min(grid), max(grid)))
+    if hi == "nyquist":
+        hi = 0.4 / max(mr.dt for mr in mruns)
+    return float(lo), float(hi)
+
+
+def walk_edges(grid: list, vals: list, rss_at, limits) -> tuple[list, list]:
+    """The scan extended past its edge while the optimum sits there (a mode damped 0.3 %
+    below a grid that starts at 0.3 %), by the grid's own step there (geometric for a
+    positive grid), up to ``limits``; returns the grid and its residuals, sorted."""
+    grid, vals = [float(g) for g in grid], list(vals)
+    lo, hi = limits
+    for _ in range(MAX_EDGE_STEPS):
+        k = int(np.argmin(vals))
+        if len(grid) < 2 or 0 < k < len(grid) - 1:
+            break
+        a, b = (grid[0], grid[1]) if k == 0 else (grid[-1], grid[-2])
+        nxt = a * a / b if a > 0 and b > 0 else 2 * a - b
+        nxt = min(max(nxt, lo), hi)
+        if abs(nxt - a) <= 1e-9 * max(abs(a), 1e-12):
+            break  # at the limit
+        at = 0 if k == 0 else len(grid)
+        grid.insert(at, nxt)
+        vals.insert(at, rss_at(nxt))
+    return grid, vals
 
 
 def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
@@ -184,7 +220,7 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
                 val = t.shape[name]
                 k = int(np.searchsorted(grid, val))
                 grid = sorted({grid[max(k - 1, 0)], val, grid[min(k, len(grid) - 1)]})
-            vals = [rss_at(g) for g in grid]
+            grid, vals = walk_edges(grid, [rss_at(g) for g in grid], rss_at, scan_limits(t.law, name, mruns))
             k = int(np.argmin(vals))
             lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
             best = grid[k]
@@ -221,6 +257,7 @@ def fit_terms(mruns, terms: list, *, refine: str = "all") -> Fit:
             v[name] = float(val)
             s[name] = float(sd[js])
             js += 1
+        v.update(t.law.fixed)  # held at a bound (a nested law): a value, no interval
         values.append(v)
         sigma.append(s)
     residuals = _residuals(mruns, terms, theta)
@@ -351,4 +388,4 @@ def flatness(mruns, residuals) -> float:
     return float(np.mean(vals)) if vals else 0.0
 
 
-__all__ = ["Fit", "Term", "fit_terms", "flatness", "predict"]
+__all__ = ["Fit", "Term", "fit_terms", "flatness", "predict", "scan_limits", "walk_edges"]

@@ -256,6 +256,27 @@ def _unknowns_md(rep: dict | None) -> list[str]:
     return L + [""]
 
 
+def _compensation(res) -> list[str]:
+    """The candidates refused as compensation: effects the table cannot have (a force
+    above its actuators', a mass several times its moving mass, a valve flow or bandwidth
+    no servovalve has) that the fit reached for to stand in for something else."""
+    rows = [c for c in res.candidates if c.get("compensation")]
+    L = ["", "## Refused as compensation", ""]
+    if not rows:
+        return L + ["No candidate was refused as physically implausible."]
+    L += [
+        "These fitted the records but are not physically there: each stands in for something "
+        "the model lacks (docs/calibration.md, acceptance).",
+        "",
+        "| round | effect | where | parameters | why |",
+        "|---|---|---|---|---|",
+    ]
+    for c in rows:
+        pars = ", ".join(f"{k} = {v:.4g}" for k, v in c["parameters"].items())
+        L.append(f"| {c['round']} | {c['name']} | {c['where']} | {pars} | {c['reason']} |")
+    return L
+
+
 def report_md(res, figs: list[str], toml_name: str) -> str:
     L = [f"# Calibration of `{res.table}`", ""]
     L.append(
@@ -279,7 +300,13 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
         for e in res.effects_added:
             for p, v in e["parameters"].items():
                 u = e["uncertainty"].get(p)
-                iv = f"+/-{u:.3g}" if u is not None else "held at the description's value"
+                iv = (
+                    f"+/-{u:.3g}"
+                    if u is not None
+                    else "fixed at its bound (the nested law)"
+                    if p in e.get("fixed", {})
+                    else "held at the description's value"
+                )
                 L.append(f"| {e['name']} | {e['where']} | {p} | {v:.6g} {e['units'][p]} | {iv} |")
     else:
         L.append("None: no candidate passed the acceptance tests.")
@@ -297,6 +324,7 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
             f"| {c['round']} | {c['name']} | {c['where']} | {100 * c['explained_fraction']:.2f} % | "
             f"{_pct(c['holdout_error'])} | {'yes' if c['accepted'] else 'no'} | {c['reason']} |"
         )
+    L += _compensation(res)
     L += ["", "## Unexplained", ""]
     u = res.unexplained
     if u:

@@ -1,0 +1,190 @@
+"""One forward round of the mechanical path's search: each scored candidate judged by the
+rules of :mod:`sim.calibrate.acceptance` (plausibility against the table's scale, the
+parameter checks with the nested refit at a bound, the held-out numbers), and the one
+to add chosen among those that pass (:func:`sim.calibrate.acceptance.tie_break`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: candidates judged after the first that passes, for the tie-break (best explained first:
+#: a candidate whose held-out error is within the margin explains nearly as much)
+N_TIE = 5
+#: nested refits of one candidate at most (a parameter held at a bound, then another)
+MAX_NESTED = 2
+
+
+@dataclass
+class RoundState:
+    """What a candidate is judged against: the fit and held-out runs, the current model's
+    held-out error and residual flatness, the margin, the table's scale (None: no
+    plausibility test)."""
+
+    mfit: list
+    mho: list
+    e_ho: float
+    flat: float
+    margin: float
+    scale: object = None
+
+
+def term_force_peak(mruns, fit, i: int) -> tuple[str, float]:
+    """``("dof:<d>", N)``: the DOF along which term ``i`` of ``fit`` pushes hardest at the
+    recorded motion relative to nothing but its own peak (the largest |force| over the fit
+    rows of every run)."""
+    t = fit.terms[i]
+    coef = [fit.values[i][k] for k in t.law.linears]
+    best = ("", 0.0)
+    for mr in mruns:
+        F = sum(c * Q for c, Q in zip(coef, mr.columns(t.law, t.where, t.shape)))
+        peak = np.max(np.abs(mr.demean(F)[mr.rows]), axis=0)
+        j = int(np.argmax(peak))
+        if peak[j] > best[1]:
+            best = (f"dof:{mr.dofs[j]}", float(peak[j]))
+    return best
+
+
+def _verdict(st: RoundState, cur, new):
+    """``(ok, why, unc, e_new, f_new)`` of the last term of ``new`` against ``cur``."""
+    from sim.calibrate.acceptance import implausible
+    from sim.calibrate.residuals import nrmse_runs
+    from sim.calibrate.search import accept
+    from sim.calibrate.trace import flatness, predict, scan_limits
+
+    term, i = new.terms[-1], len(new.terms) - 1
+    e_new = nrmse_runs(st.mho, predict(st.mho, new))
+    f_new = flatness(st.mfit, new.residuals)
+    limits = {k: scan_limits(term.law, k, st.mfit) for k in term.law.shape}
+    ok, why, unc = accept(cur, new, st.e_ho, e_new, st.flat, f_new, term, st.margin, limits)
+    if st.scale is not None and all(np.isfinite(v) for v in new.values[i].values()):
+        bad = implausible(term.law.name, term.where, new.values[i], st.scale, term_force_peak(st.mfit, new, i))
+        if bad:
+            ok, why = False, bad
+    return ok, why, unc, e_new, f_new
+
+
+def judge(st: RoundState, cur, new, expl: float, rnd) -> tuple[list, list]:
+    """The ``candidates`` rows of one candidate (``new``: the current terms and it, last)
+    and the verdicts that passed, ``[(fit, e_new, f_new, row)]``: the candidate's own, or,
+    with a parameter at a bound, the nested law's (that parameter held there, the rest
+    refitted, judged by the same rules)."""
+    from sim.calibrate.acceptance import nested_at_bound
+    from sim.calibrate.laws import fixed_law
+    from sim.calibrate.trace import Term, fit_terms, scan_limits
+
+    rows, passed = [], []
+    for _ in range(MAX_NESTED + 1):
+        ok, why, unc, e_new, f_new = _verdict(st, cur, new)
+        row = candidate_row(rnd, new, cur, expl, unc, e_new, f_new, ok, why)
+        rows.append(row)
+        if ok:
+            passed.append((new, e_new, f_new, row))
+            break
+        t = new.terms[-1]
+        limits = {k: scan_limits(t.law, k, st.mfit) for k in t.law.shape}
+        fix = nested_at_bound(t.law, new.values[-1], limits, new.sigma[-1])
+        law2 = fixed_law(t.law, *fix) if fix else None
+        if law2 is None or why.startswith("compensation"):
+            break
+        new = fit_terms(st.mfit, cur.terms + [Term(law2, t.where, index=t.index)], refine="last")
+        expl = 1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0
+    return rows, passed
+
+
+def candidate_row(rnd, new, cur, expl, unc, e_new, f_new, ok, why) -> dict:
+    """The ``candidates`` row of the last term of ``new``."""
+    t, i = new.terms[-1], len(new.terms) - 1
+    return {
+        "round": rnd,
+        "name": t.law.name,
+        "where": t.where,
+        **({"options": dict(t.law.options)} if t.law.options else {}),
+        **({"fixed": dict(t.law.fixed)} if t.law.fixed else {}),
+        "explained_fraction": expl,
+        "parameters": new.values[i],
+        "uncertainty": unc,
+        "holdout_error": e_new,
+        "bic_change": new.bic - cur.bic,
+        "flatness": f_new,
+        "accepted": ok,
+        "reason": why,
+        **({"compensation": True} if why.startswith("compensation") else {}),
+    }
+
+
+def forward_round(st: RoundState, cur, scored: list, rnd, say) -> tuple[list, tuple | None]:
+    """Judge ``scored`` (``(explained, law, where, fit)``, best first) until one passes and
+    :data:`N_TIE` more are seen; returns the rows and the chosen ``(fit, e_new, f_new)``
+    (None: none passed)."""
+    from sim.calibrate.acceptance import tie_break
+
+    rows, passed, after = [], [], 0
+    for expl, law, w, new in scored:
+        rs, ps = judge(st, cur, new, expl, rnd)
+        rows += rs
+        passed += ps
+        for r in rs:
+            say(
+                f"  {law.type:18s} {w:14s} explains {100 * r['explained_fraction']:6.2f} %  held-out "
+                f"{r['holdout_error']:.4f}" + ("  passes" if r["accepted"] else f"  ({r['reason']})")
+            )
+        if passed:
+            after += 1
+            if after > N_TIE:
+                break
+    if not passed:
+        return rows, None
+    k = tie_break([(e, f) for _, e, f, _ in passed], st.margin)
+    win = passed[k]
+    for j, (_, _, _, row) in enumerate(passed):
+        if j != k:
+            row["accepted"] = False
+            row["reason"] = f"passed, not added: {win[3]['name']} at {win[3]['where']} " + (
+                f"has a held-out error within {100 * st.margin:g} % of it and the whiter residual"
+                if j < k
+                else "explains more (judged first)"
+                if abs(row["holdout_error"] - win[1]) > st.margin * win[1]
+                else f"has a held-out error within {100 * st.margin:g} % of it and the whiter residual"
+            )
+    say(f"  ACCEPTED {win[3]['name']} at {win[3]['where']}")
+    return rows, win[:3]
+
+
+def forward_search(st: RoundState, cur, cands: list, max_rounds: int, say) -> tuple:
+    """Rounds of the forward search from the fit ``cur`` over ``cands`` (``(law, where)``):
+    each round fits every candidate with the current terms, judges them best explained
+    first (:func:`forward_round`) and adds the chosen one; ``st`` follows the current
+    model. Returns ``(fit, rows, least-squares fits)``."""
+    from sim.calibrate.residuals import nrmse_runs
+    from sim.calibrate.trace import Term, fit_terms, flatness, predict
+
+    rows, n_fits = [], 0
+    rank = {"dof": 0, "class": 1, "actuator": 2}
+    for rnd in range(max_rounds):
+        scored = []
+        for law, w in cands:
+            # a law that repeats at a place (a specimen's modes) offers its next term there
+            # (a term held at a bound, a nested law, counts as its own law's: fixed_law's base)
+            n_have = sum(1 for t in cur.terms if ((t.law.base or t.law).type, t.where) == (law.type, w))
+            if n_have >= getattr(law, "repeats", 1):
+                continue
+            if any(
+                (t.law.name, t.where) == (law.name, w) and (t.law.base or t.law).type != law.type for t in cur.terms
+            ):
+                continue  # one entry of an effect per place: a variant of one already there is not added beside it
+            new = fit_terms(st.mfit, cur.terms + [Term(law, w, index=n_have)], refine="last")
+            n_fits += 1
+            scored.append((1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0, law, w, new))
+        scored.sort(key=lambda s: (-round(s[0], 6), rank.get(s[2].split(":")[0], 3)))
+        rs, win = forward_round(st, cur, scored, rnd, say)
+        rows += rs
+        if win is None:
+            break
+        cur = fit_terms(st.mfit, win[0].terms)  # every shape parameter again, with the new term in
+        st.e_ho, st.flat = nrmse_runs(st.mho, predict(st.mho, cur)), flatness(st.mfit, cur.residuals)
+    return cur, rows, n_fits
+
+
+__all__ = ["RoundState", "forward_round", "forward_search", "judge", "term_force_peak"]
