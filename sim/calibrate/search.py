@@ -307,6 +307,28 @@ def unexplained(mruns, residuals, kind: str = "mechanical") -> dict | None:
 
 
 # ------------------------------------------------------------------ the search
+def declared_model(run, table: str | None, payload: str | None):
+    """The table description and payload the calibration starts from: ``table`` /
+    ``payload`` when given (``payload="none"``: no specimen declared); else, for a run
+    imported from a lab's export, the descriptions the import carried into it (the lab's
+    declaration); else the stock ones its ``meta`` names. A simulated run's carried
+    description is the simulator's truth, effects planted in it included, not a
+    declaration: calibrating against it would find nothing to add."""
+    import mjcf
+    from sim.runs.runfile import payload_of, table_of
+
+    imported = "imported_from" in run.meta or "table_path" in run.meta
+    if table or imported:
+        desc = table_of(run, table)
+    else:
+        desc = mjcf.load_table(run.meta["table"])
+    if payload is not None or imported:
+        return desc, payload_of(run, payload)
+    name = run.meta.get("payload")
+    declared = isinstance(name, str) and name.strip().lower() not in ("", "none")
+    return desc, mjcf.load_payload(name) if declared else None
+
+
 def calibrate(
     run_paths,
     *,
@@ -330,7 +352,6 @@ def calibrate(
     from sim.calibrate.residuals import PATHS, check_path, choose_path, mechanical_runs, nrmse_runs, places
     from sim.calibrate.trace import Term, fit_terms, flatness, predict
     from sim.calibrate.unknowns import identify as identify_unknowns
-    from sim.runs.runfile import payload_of, table_of
 
     say = log or (lambda *_: None)
     t0 = time.perf_counter()
@@ -344,14 +365,13 @@ def calibrate(
         raise CalibrationError(f"--path {path}: give one of {', '.join(PATHS)}")
     all_runs = load_runs(list(run_paths) + list(holdout or []), table)
     runs, ho_given = all_runs[: len(run_paths)], all_runs[len(run_paths) :]
-    desc = table_of(runs[0], table)  # --table, else the description the run carries, else the stock file
+    desc, pl = declared_model(runs[0], table, payload)
     for r in all_runs:
         if list(r.actuators) != list(desc.actuator_names):
             raise CalibrationError(
                 f"{r.name}: actuators {r.actuators} do not match table '{desc.name}' "
                 f"({list(desc.actuator_names)}); give --table"
             )
-    pl = payload_of(runs[0], payload)  # "none": the specimen is not declared
     path = check_path(all_runs, path) if path else choose_path(all_runs)
     desc, unk = identify_unknowns(all_runs[: len(run_paths)], ho_given, desc, pl, workers=workers, say=say)
     if path != "mechanical":
