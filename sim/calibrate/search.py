@@ -116,10 +116,11 @@ def candidate_laws(effects=None) -> list:
     """The laws to try: every law whose effect type is usable (see
     :func:`sim.calibrate.laws.usable`), or those named in ``effects``."""
     from sim.calibrate.laws import LAWS, NOT_ON_MECHANICAL, usable
+    from sim.calibrate.timing import TIMING_EFFECTS
 
     if effects:
         check_effect_names(effects)
-        nolaw = [e for e in effects if e not in LAWS]
+        nolaw = [e for e in effects if e not in LAWS and e not in TIMING_EFFECTS]
         if nolaw and nolaw[0] in NOT_ON_MECHANICAL:
             raise CalibrationError(
                 f"--effects: '{nolaw[0]}' is not identifiable on the mechanical path: " + NOT_ON_MECHANICAL[nolaw[0]]
@@ -293,6 +294,7 @@ def calibrate(
     run has, :func:`sim.calibrate.residuals.choose_path`); ``workers``: processes of the
     replay and closed-loop searches (default: every core)."""
     import mjcf
+    from sim.calibrate import timing
     from sim.calibrate.residuals import PATHS, check_path, choose_path, mechanical_runs, nrmse_runs, places
     from sim.calibrate.trace import Term, fit_terms, flatness, predict
 
@@ -333,6 +335,7 @@ def calibrate(
     t2 = time.perf_counter()
     cur = fit_terms(mfit, [])
     e_ho0 = nrmse_runs(mho, predict(mho, cur))
+    mfit0, mho0 = mfit, mho  # the declared timing: the "before" of the report
     e_ho = e_ho0
     flat = flatness(mfit, cur.residuals)
     say(f"{path} path: {len(fit_runs)} fit runs, {len(ho_runs)} held out; held-out NRMSE {e_ho0:.4f}")
@@ -346,7 +349,7 @@ def calibrate(
         for law in laws
         for w in distinct_places(mfit[0], [p for p in places(desc, law.places, pl is not None) if law.acts_at(p)])
     ]
-    tried, added = [], []
+    tried, added, timed_added = [], [], []
     n_fits = 0
     for rnd in range(MAX_ROUNDS):
         scored = []
@@ -362,8 +365,18 @@ def calibrate(
             scored.append((1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0, law, w, new))
         rank = {"dof": 0, "class": 1, "actuator": 2}
         scored.sort(key=lambda s: (-round(s[0], 6), rank.get(s[2].split(":")[0], 3)))
+        timed = timing.round_candidates(mfit, mho, cur, e_ho, flat, margin, effects, timed_added)
         accepted = None
-        for expl, law, w, new in scored:
+        for expl, law, w, new in timing.merged(scored, timed):
+            if law is None:  # a timing candidate (sim.calibrate.timing), fitted and judged already
+                tried.append({"round": rnd, **new["row"]})
+                say(timing.log_line(new["row"]))
+                if new["accepted"]:
+                    timed_added.append(timing.added_entry(new["row"]))
+                    mfit, mho = new["mfit"], new["mho"]
+                    accepted = (new["fit"], new["e_ho"], new["flat"])
+                    break
+                continue
             e_new = nrmse_runs(mho, predict(mho, new))
             f_new = flatness(mfit, new.residuals)
             term = new.terms[-1]  # the candidate: added last
@@ -468,8 +481,9 @@ def calibrate(
                 "units": {k: u for k, (u, *_r) in t.law.params.items()},
             }
         )
+    added += timed_added
     ho_res = predict(mho, cur)
-    ho_res0 = [mr.residual for mr in mho]
+    ho_res0 = [mr.residual for mr in mho0]
     per = {}
     for mr, e0, e1 in zip(mho, ho_res0, ho_res):
         for j, d in enumerate(mr.dofs):
@@ -500,7 +514,7 @@ def calibrate(
             "holdout": mho,
             "before": ho_res0,
             "after": ho_res,
-            "fit_before": [mr.residual for mr in mfit],
+            "fit_before": [mr.residual for mr in mfit0],
             "fit_after": cur.residuals,
         },
     )
