@@ -1,0 +1,124 @@
+"""Sensor timing and conditioning on the mechanical path (sim/calibrate/timing.py):
+plant a sensor fault in "measured" runs with real-record artifacts, calibrate with
+defaults (the stock ucsd description, which declares 100 Hz accelerometer
+conditioners), recover it with the truth inside its 95 % interval; clean runs with the
+same artifacts add nothing. The runs' meta holds only what a recorder writes (its
+settings and the declared conditioning): the calibrator never sees the chain.
+
+The runs: NEES-UCSD table (scenarios/tables/ucsd.toml), band-limited white noise
+0.5-20 Hz, 1 m/s^2 RMS, 6 s after a 3 s quiet lead-in, three seeds (two fitted, one
+held out), measured through a 1024 Hz recorder with a 256 Hz anti-alias filter, a
+4-pole 100 Hz accelerometer conditioner, the accelerometer two samples late (declared),
+displacement and velocity 0.3 sample early (not declared), per-record offsets, drift
+and noise on every motion and force channel.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from sim.calibrate import search as S
+
+FS = 1024.0
+#: the artifacts of every run here (docs/sensors.md keys; sizes as the built-in recorder's noise)
+ARTIFACTS = {
+    "recorder": {"anti_alias_hz": 256.0, "anti_alias_order": 4, "digital": ["reference"], "lead_in_s": 3.0},
+    "channel": {
+        "table_acceleration": {
+            "lowpass_hz": 100.0,
+            "lowpass_order": 4,
+            "skew_s": -2.0 / FS,  # two samples late
+            "declared": True,  # the lab states its conditioner and the lag
+            "noise_rms": 0.0294,
+            "offset_rms": 0.05,
+            "drift_per_sqrt_s": 0.002,
+        },
+        "actuator_force": {"noise_rms": 1.0e3, "offset_rms": 2.0e3, "drift_per_sqrt_s": 100.0},
+        "table_displacement": {"noise_rms": 20e-6, "skew_s": 0.3 / FS, "offset_rms": 1e-3},
+        "table_velocity": {"noise_rms": 2.5e-4, "skew_s": 0.3 / FS},
+    },
+}
+
+
+def measured_runs(out, sensors, seeds=(1, 2, 3), seconds=6.0):
+    """ucsd runs under white noise, through ``sensors`` (a SENSORS.toml as a dict)."""
+    from mjcf import load_table
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+    from sim.runs.build import build_runfile
+    from sim.runs.measure import measure_run
+    from sim.runs.runfile import write_run
+    from sim.scenario import motions as M
+    from sim.scenario.reference import reference_from_motions
+
+    tm = build_model(load_table("ucsd"))
+    paths = []
+    for s in seeds:
+        mo = M.white_noise(
+            duration_s=seconds, sample_rate_hz=FS, band_hz=(0.5, 20.0), seed=(s, 0), rms_acceleration=1.0
+        )
+        ref = reference_from_motions({"x": mo}, FS, seconds)
+        res = Simulation(tm).run(reference=ref)
+        assert res.incomplete_reason is None
+        run = measure_run(build_runfile(res, tm, reference=ref), sensors, seed=s)
+        assert "measurement" not in run.meta and "force_lag_s" not in run.meta  # a recorder's meta only
+        paths.append(str(write_run(out / f"ucsd_{s}.run.npz", run)))
+    return paths
+
+
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory):
+    paths = measured_runs(tmp_path_factory.mktemp("clean"), ARTIFACTS)
+    return S.calibrate(paths)
+
+
+def test_clean_runs_with_every_artifact_add_nothing(clean):
+    assert clean.residual_path == "mechanical"
+    assert clean.effects_added == []
+    assert clean.error_before < 0.03  # the noise floor of these runs (2.17 % measured)
+    timing_rows = [c for c in clean.candidates if c["name"] in ("sensor_delay", "sensor_lowpass")]
+    assert len(timing_rows) == 5 and not any(c["accepted"] for c in timing_rows)
+
+
+def test_force_sensor_delay_found(clean, tmp_path):
+    """A load cell 4 ms late (the channel's sample taken 4 ms before its time stamp)."""
+    sensors = copy.deepcopy(ARTIFACTS)
+    sensors["channel"]["actuator_force"]["skew_s"] = -0.004
+    res = S.calibrate(measured_runs(tmp_path, sensors))
+    (e,) = res.effects_added
+    assert (e["name"], e["where"]) == ("sensor_delay", "channel:actuator_force")
+    d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
+    assert abs(d - 0.004) <= u  # the truth inside the 95 % interval (3.9989 +/- 0.0064 ms measured)
+    assert abs(d - 0.004) < 2e-5 and 0 < u < 5e-5
+    assert res.error_before > 10 * clean.error_before  # 0.308 against 0.0217
+    assert res.error_after <= 1.02 * clean.error_before
+
+
+def test_accelerometer_conditioner_mismatch_found(clean, tmp_path):
+    """The accelerometer's conditioner left at 30 Hz where the lab declares 100 Hz."""
+    sensors = copy.deepcopy(ARTIFACTS)
+    acc = sensors["channel"]["table_acceleration"]
+    acc.update(lowpass_hz=30.0, declared_lowpass_hz=100.0, declared_lowpass_order=4)
+    res = S.calibrate(measured_runs(tmp_path, sensors))
+    (e,) = res.effects_added
+    assert (e["name"], e["where"], e["options"]) == ("sensor_lowpass", "channel:table_acceleration", {"order": 4})
+    fc, u = e["parameters"]["cutoff_hz"], e["uncertainty"]["cutoff_hz"]
+    assert abs(fc - 30.0) <= u  # 29.989 +/- 0.012 Hz measured
+    assert abs(fc - 30.0) < 0.05 and 0 < u < 0.1
+    assert res.error_before > 10 * clean.error_before  # 0.764 against 0.0217
+    assert res.error_after <= 1.02 * clean.error_before
+
+
+def test_shift_is_a_delay_of_either_sign():
+    from sim.calibrate.timing import shift
+
+    dt = 1.0 / FS
+    t = np.arange(4096) * dt
+    x = np.sin(2 * np.pi * 7.0 * t)
+    for d in (0.0042, -0.0017):
+        y = shift(x, d, dt)
+        k = slice(64, -64)
+        np.testing.assert_allclose(y[k], np.sin(2 * np.pi * 7.0 * (t[k] - d)), atol=1e-6)
