@@ -308,7 +308,7 @@ def declared_conditioning(sensors: dict) -> dict:
             )
         delay = spec.get("declared_delay_s", -(skew[0] if isinstance(skew, list) else skew) if own else 0.0)
         fc = spec.get("declared_lowpass_hz", spec.get("lowpass_hz") if own else None)
-        order = spec.get("declared_lowpass_order", spec.get("lowpass_order", 2) if own else 2)
+        order = spec.get("declared_lowpass_order", spec.get("lowpass_order", 2))
         out[name] = {
             "delay_s": float(delay),
             "lowpass_hz": None if fc is None else float(fc),
