@@ -48,6 +48,7 @@ CHANNEL_NAMES = (
     "table_velocity",
     "table_acceleration",
     "accelerometers",
+    "specimen_acceleration",
 )
 
 _PLACE = re.compile(r"^([a-z_]+)(?:\[(\d+)\])?$")

@@ -10,6 +10,7 @@ units (m, rad, N, Pa, m/s^2; valve and spool channels as a fraction of rated ope
 | actuator | valve_command, spool_position, actuator_displacement, actuator_force, pressure_a, pressure_b | ``meta["actuators"]`` |
 | DOF | reference, table_displacement, table_velocity, table_acceleration | ``meta["dofs"]`` |
 | accelerometer | accelerometers | ``meta["accelerometers"][i]["name"]`` (if given) |
+| specimen | specimen_acceleration | ``meta["specimen_sensors"][i]["name"]`` |
 
 Missing samples are NaN, never zero. Readers that need a channel pass it in
 ``require=``; a NaN there is an error that names the channel, the first bad sample and
@@ -50,6 +51,8 @@ ACTUATOR_CHANNELS = (
 )
 DOF_CHANNELS = ("reference", "table_displacement", "table_velocity", "table_acceleration")
 ACCELEROMETER_CHANNELS = ("accelerometers",)
+#: accelerometers on the specimen (payload), named and placed by ``meta["specimen_sensors"]``
+SPECIMEN_CHANNELS = ("specimen_acceleration",)
 #: Every optional channel, in the order of the format table.
 CHANNELS = (
     "valve_command",
@@ -63,6 +66,7 @@ CHANNELS = (
     "table_velocity",
     "table_acceleration",
     "accelerometers",
+    "specimen_acceleration",
 )
 #: At least one of these must be present (what drives the plant or the controller).
 INPUT_CHANNELS = ("valve_command", "reference")
@@ -103,6 +107,7 @@ class RunFile:
     table_velocity: np.ndarray | None = None
     table_acceleration: np.ndarray | None = None
     accelerometers: np.ndarray | None = None
+    specimen_acceleration: np.ndarray | None = None
     path: str | None = field(default=None, kw_only=True)
     #: Project extension channels, stored as ``x_<name>`` arrays with one row per sample
     #: (e.g. supply_pressure, loop_gap). Readers of the plain format may ignore them.
@@ -196,6 +201,8 @@ class RunFile:
             return self.actuators
         if channel in DOF_CHANNELS:
             return self.dofs
+        if channel in SPECIMEN_CHANNELS:
+            return [str(s.get("name", f"spec{i}")) for i, s in enumerate(self.meta.get("specimen_sensors") or [])]
         if channel in ACCELEROMETER_CHANNELS:
             names = self.accelerometer_names
             if names is None:
@@ -270,6 +277,16 @@ def _validate_meta(meta: Any, name: str) -> None:
     acc = meta.get("accelerometers")
     if acc is not None and not isinstance(acc, list):
         raise _error(name, "meta accelerometers is not a list", "make it a list of {name, position, direction} objects")
+    spec = meta.get("specimen_sensors")
+    if spec is not None and not (
+        isinstance(spec, list)
+        and all(isinstance(x, dict) and {"name", "height_m", "direction"} <= set(x) for x in spec)
+    ):
+        raise _error(
+            name,
+            "meta specimen_sensors is not a list of {name, height_m, direction}",
+            "give one {name, height_m (above the platen's top), direction [dx, dy, dz]} per specimen_acceleration column",
+        )
     inc = meta.get("incomplete", False)
     if not isinstance(inc, bool):
         raise _error(name, f"meta incomplete {inc!r} is not true/false", "set it to true or false")
@@ -323,6 +340,8 @@ def _expected_columns(channel: str, meta: dict, arr: np.ndarray) -> tuple[int | 
         return len(meta["actuators"]), "actuators in meta actuators"
     if channel in DOF_CHANNELS:
         return len(meta["dofs"]), "DOFs in meta dofs"
+    if channel in SPECIMEN_CHANNELS:
+        return len(meta.get("specimen_sensors") or []), "specimen sensors in meta specimen_sensors"
     acc = meta.get("accelerometers")
     return (len(acc) if acc is not None else None), "accelerometers in meta accelerometers"
 
@@ -629,6 +648,7 @@ def payload_of(run: RunFile, override: str | None = None):
 
 __all__ = [
     "ACCELEROMETER_CHANNELS",
+    "SPECIMEN_CHANNELS",
     "ACTUATOR_CHANNELS",
     "CHANNELS",
     "DOF_CHANNELS",

@@ -28,8 +28,9 @@ def make_run(n=256, **over):
         "source": "simulated",
         "description": "unit test",
         "accelerometers": [{"name": f"A{i}", "position": [0.0, 0.0, 0.0], "direction": "x"} for i in range(3)],
+        "specimen_sensors": [{"name": f"F{i}", "height_m": 0.8 * i, "direction": [1, 0, 0]} for i in (1, 2)],
     }
-    cols = {"accelerometers": 3}
+    cols = {"accelerometers": 3, "specimen_acceleration": 2}
     chans = {}
     for c in CHANNELS:
         k = len(ACTS) if c in runfile.ACTUATOR_CHANNELS else cols.get(c, len(DOFS))
@@ -208,6 +209,10 @@ BAD_CASES = {
     "wrong_act_columns": (dict(pressure_b=np.zeros((N, 11))), "'pressure_b' has 11 columns but there are 12 actuators"),
     "wrong_dof_columns": (dict(table_velocity=np.zeros((N, 3))), "'table_velocity' has 3 columns but there are 6 DOFs"),
     "wrong_acc_columns": (dict(accelerometers=np.zeros((N, 5))), "'accelerometers' has 5 columns"),
+    "wrong_specimen_columns": (
+        dict(specimen_acceleration=np.zeros((N, 3))),
+        "'specimen_acceleration' has 3 columns but there are 2 specimen sensors",
+    ),
     "one_d_channel": (dict(reference=np.zeros(N)), "'reference' has shape (256,)"),
     "no_input": (dict(reference=None, valve_command=None), "neither valve_command nor reference"),
     "unknown_key": (dict(pressureA=np.zeros((N, 12))), "unknown array(s) pressureA"),
