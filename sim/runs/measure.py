@@ -292,13 +292,15 @@ def _digitised(x, spec, where, seed, ci) -> np.ndarray:
     return x
 
 
-def declared_conditioning(sensors: dict) -> dict:
+def declared_conditioning(sensors: dict, present=None) -> dict:
     """``meta.channel_conditioning`` (docs/run-file.md) of the channels whose sensor file
     marks their conditioning as known (``declared = true``: the channel's own conditioner
     and skew; ``declared_*``: what the lab believes, which may differ from the truth)."""
     out = {}
     for name, spec in sensors.get("channel", {}).items():
         if not (spec.get("declared") or any(k.startswith("declared_") for k in spec)):
+            continue
+        if present is not None and name not in present:
             continue
         own = bool(spec.get("declared"))
         skew = spec.get("skew_s", 0.0)
@@ -310,7 +312,7 @@ def declared_conditioning(sensors: dict) -> dict:
         fc = spec.get("declared_lowpass_hz", spec.get("lowpass_hz") if own else None)
         order = spec.get("declared_lowpass_order", spec.get("lowpass_order", 2))
         out[name] = {
-            "delay_s": float(delay),
+            "delay_s": float(delay) + 0.0,  # no "-0.0" in the meta
             "lowpass_hz": None if fc is None else float(fc),
             "lowpass_order": int(order),
         }
@@ -348,10 +350,11 @@ def measure_run(run, sensors: dict, seed: int = 0):
         for k, v in run.extras.items()
     }
     t = float(run.t[0]) + np.arange(n + n_lead) / fs if n else np.asarray(run.t)
-    return RunFile(t=t[::step].copy(), meta=_recorder_meta(run.meta, sensors, fs / step), extras=extras, **out)
+    meta = _recorder_meta(run.meta, sensors, fs / step, present=set(out))
+    return RunFile(t=t[::step].copy(), meta=meta, extras=extras, **out)
 
 
-def _recorder_meta(meta: dict, sensors: dict, rate: float) -> dict:
+def _recorder_meta(meta: dict, sensors: dict, rate: float, present=None) -> dict:
     """The measured run's meta: the simulated run's, less what only a simulator knows
     (``force_lag_s``, a ``measurement`` of an earlier measuring), plus the recorder's own
     settings and the declared conditioning."""
@@ -368,7 +371,7 @@ def _recorder_meta(meta: dict, sensors: dict, rate: float) -> dict:
             "anti_alias_order": int(rec.get("anti_alias_order", 4)),
             "digital": list(rec.get("digital", ())),
         }
-    cond = declared_conditioning(sensors)
+    cond = declared_conditioning(sensors, present)
     if cond:
         meta["channel_conditioning"] = cond
     return meta
