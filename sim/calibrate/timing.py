@@ -47,6 +47,13 @@ ORDERS = (1, 2, 4)
 #: the lowest conditioner cut-off searched (assumed: 2 Hz, below any table's test band)
 MIN_CUTOFF_HZ = 2.0
 Z95 = 1.96
+#: the share of what a timing candidate takes out of the residual that must be coherent
+#: with the motion (assumed: 0.5, the line :func:`sim.calibrate.search.unexplained` draws
+#: between a DOF's effect and a sensor's). A sensor that is late or filtered differently
+#: changes the balance by a filtered copy of the motion's own force; a low-pass that
+#: "explains" a mains line picked up on the load cell (by filtering the force it is
+#: applied to) takes out something the motion did not make.
+COHERENT_SHARE = 0.5
 #: the effect types of these candidates (``--effects`` names them)
 TIMING_EFFECTS = ("sensor_delay", "sensor_lowpass")
 
@@ -102,12 +109,15 @@ def prefilter_of(state: dict, run, given=None) -> tuple | None:
 
 def retime(mr, state: dict):
     """A mechanical run (:class:`sim.calibrate.residuals.MechRun`) with the force and
-    acceleration timing of ``state`` in place of its own (same rows)."""
+    acceleration timing of ``state`` in place of its own (same rows, same weights: every
+    timing is scored by one measure; the terms' columns kept while the filter is)."""
     from sim.identify.least_squares import analog_lowpass
 
     old = mr.extra["timing"]
     same_filter = all(old[k] == state[k] for k in ("accel_delay_s", "accel_lowpass_hz", "accel_lowpass_order"))
-    keep = ("force_at_instant", "inertial", "other") + (("raw_columns",) if same_filter else ())
+    keep = ("force_at_instant", "inertial", "other", "w") + (
+        ("raw_columns", "columns", "second") if same_filter else ()
+    )
     new = dataclasses.replace(mr, extra={k: mr.extra[k] for k in keep if k in mr.extra})
     fc = state["accel_lowpass_hz"]
     new.prefilter = analog_lowpass(fc, 1.0 / mr.dt, state["accel_lowpass_order"]) if fc else None
@@ -116,6 +126,8 @@ def retime(mr, state: dict):
     new.force = new.filt(f @ mr.J)
     new.model = mr.extra["inertial"] + new.filt(mr.extra["other"])
     new.extra.update(actuator_force=f, timing=dict(state))
+    if "w" in new.extra:
+        new.extra["y"] = (new.residual[new.rows] * new.extra["w"]).reshape(-1)
     return new
 
 
@@ -199,17 +211,17 @@ def _rss(mruns, terms, cand, x) -> float:
 
 
 def search(mruns, terms, cand: Candidate) -> float:
-    """The parameter that minimises the balance's residual: a grid (whole samples for a
-    delay, 24 points in 1/cut-off), then a bounded scalar search between the best
+    """The parameter that minimises the balance's residual: a grid (every second sample
+    for a delay, 16 points in 1/cut-off), then a bounded scalar search between the best
     point's neighbours."""
     from scipy.optimize import minimize_scalar
 
     dt = mruns[0].dt
     if cand.field == "accel_lowpass_hz":
-        grid = np.geomspace(cand.lo, cand.hi, 24)
-    else:
-        n = int(MAX_DELAY_S / dt)
-        grid = cand.neutral + dt * np.arange(-n, n + 1)
+        grid = np.geomspace(cand.lo, cand.hi, 16)
+    else:  # every second sample: the residual varies on the motion's time scale (> 10 samples)
+        n = int(MAX_DELAY_S / (2 * dt))
+        grid = cand.neutral + 2 * dt * np.arange(-n, n + 1)
         grid = grid[(grid >= cand.lo) & (grid <= cand.hi)]
     vals = [_rss(mruns, terms, cand, g) for g in grid]
     k = int(np.argmin(vals))
@@ -259,6 +271,9 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
     f_new = flatness(nf, new.residuals)
     bic_new = new.n * math.log(max(new.rss, 1e-300) / new.n) + (new.p + 1) * math.log(new.n)
     ok, why = _param_check(cand, x, s)
+    share = coherent_share(mfit, cur.residuals, new.residuals)
+    if ok and share < COHERENT_SHARE:
+        ok, why = False, f"what it takes out of the residual is {100 * share:.0f} % coherent with the motion"
     if ok:
         ok, why = accept_numbers(e_ho, e_new, cur.bic, bic_new, flat, f_new, margin)
     value, unc = cand.value(x), _uncertainty(cand, x, s)
@@ -272,10 +287,30 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
         "holdout_error": e_new,
         "bic_change": bic_new - cur.bic,
         "flatness": f_new,
+        "coherent_share": share,
         "accepted": ok,
         "reason": why,
     }
     return {"row": row, "accepted": ok, "fit": new, "mfit": nf, "mho": nh, "e_ho": e_new, "flat": f_new}
+
+
+def coherent_share(mruns, before, after) -> float:
+    """The share of the change ``before - after`` of the residuals (per run and DOF)
+    that is coherent with the motion: its Welch spectrum weighted by its largest
+    coherence with the DOF's acceleration, velocity or displacement, pooled by power."""
+    from sim.calibrate.residuals import spectra
+
+    num = den = 0.0
+    for mr, r0, r1 in zip(mruns, before, after):
+        for j in range(r0.shape[1]):
+            d = r0[:, j] - r1[:, j]
+            if not np.any(d):
+                continue
+            sp = spectra(d, 1.0 / mr.dt, {"u": mr.u[:, j], "v": mr.v[:, j], "a": mr.a[:, j]})
+            C = np.max(list(sp["coherence"].values()), axis=0)
+            num += float(np.sum(C * sp["psd"]))
+            den += float(np.sum(sp["psd"]))
+    return num / den if den > 0 else 0.0
 
 
 def _uncertainty(cand, x, s) -> dict:
@@ -345,6 +380,7 @@ __all__ = [
     "Candidate",
     "added_entry",
     "candidates",
+    "coherent_share",
     "declared_state",
     "evaluate",
     "prefilter_of",
