@@ -81,22 +81,28 @@ def shift(x: np.ndarray, delay_s: float, dt: float) -> np.ndarray:
 def declared_state(run, accel_lowpass_hz) -> dict:
     """What is known of ``run``'s force and acceleration timing: its
     ``meta.channel_conditioning`` (:mod:`sim.calibrate.conditioning`), else
-    ``accel_lowpass_hz`` (the table's or ``--accel-lowpass``) as a 4-pole conditioner."""
+    ``accel_lowpass_hz`` (the table's or ``--accel-lowpass``) as a 4-pole conditioner. A
+    declared conditioner too close to the record's Nyquist frequency to be filtered at its
+    rate counts as its low-frequency delay, 1 / (2 pi f_c sin(pi / 2n)) for n poles."""
     from sim.calibrate.conditioning import channel_conditioning
 
     cond = channel_conditioning(run)
     acc = cond.get("table_acceleration", {})
     fc = acc.get("lowpass_hz") if "table_acceleration" in cond else accel_lowpass_hz
-    order = acc.get("lowpass_order", TABLE_ORDER) if "table_acceleration" in cond else TABLE_ORDER
+    order = int(acc.get("lowpass_order", TABLE_ORDER) if "table_acceleration" in cond else TABLE_ORDER)
+    delay = acc.get("delay_s", 0.0)
+    if fc and fc >= 0.45 / run.dt and "table_acceleration" in cond:
+        delay += 1.0 / (2 * math.pi * fc * math.sin(math.pi / (2 * order)))
+        fc = None
     return {
         "force_delay_s": cond.get("actuator_force", {}).get("delay_s", 0.0),
-        "accel_delay_s": acc.get("delay_s", 0.0),
+        "accel_delay_s": delay,
         "accel_lowpass_hz": fc or None,
-        "accel_lowpass_order": int(order),
+        "accel_lowpass_order": order,
     }
 
 
-def prefilter_of(state: dict, run, given=None) -> tuple | None:
+def prefilter_of(state: dict, run) -> tuple | None:
     """The analog filter (b, a) of the acceleration's conditioner in ``state`` at the
     run's rate (one-line error when above the Nyquist frequency)."""
     from sim.calibrate.residuals import CalibrationError

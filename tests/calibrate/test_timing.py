@@ -164,3 +164,55 @@ def test_coherent_share_tells_the_motions_force_from_a_line():
     zero = np.zeros((n, 1))
     assert coherent_share([mr], [(force - late)[:, None]], [zero]) > 0.95
     assert coherent_share([mr], [line[:, None]], [zero]) < COHERENT_SHARE
+
+
+def test_declared_conditioning_read_from_the_run_not_the_chain():
+    """The mechanical path's starting timing: the run's declared conditioning over the
+    table's; a declared conditioner above 0.45 of the rate counts as its delay."""
+    from types import SimpleNamespace
+
+    from sim.calibrate.timing import declared_state
+
+    def run(cond):
+        return SimpleNamespace(name="r", dt=1 / FS, meta={"channel_conditioning": cond} if cond else {})
+
+    assert declared_state(run(None), 100.0) == {
+        "force_delay_s": 0.0,
+        "accel_delay_s": 0.0,
+        "accel_lowpass_hz": 100.0,
+        "accel_lowpass_order": 4,
+    }
+    s = declared_state(
+        run(
+            {
+                "table_acceleration": {"delay_s": 0.002, "lowpass_hz": 30.0, "lowpass_order": 2},
+                "actuator_force": {"delay_s": -0.001, "lowpass_hz": None, "lowpass_order": 2},
+            }
+        ),
+        100.0,
+    )
+    assert s == {"force_delay_s": -0.001, "accel_delay_s": 0.002, "accel_lowpass_hz": 30.0, "accel_lowpass_order": 2}
+    hi = declared_state(run({"table_acceleration": {"delay_s": 0.0, "lowpass_hz": 1000.0, "lowpass_order": 4}}), None)
+    assert hi["accel_lowpass_hz"] is None and hi["accel_delay_s"] == pytest.approx(
+        2.6131 / (2 * np.pi * 1000.0), rel=1e-4
+    )
+
+
+@pytest.mark.parametrize(
+    "cond, match",
+    [
+        ({"table_acceleration": {"lowpass_hz": -3.0}}, "lowpass_hz must be a cut-off > 0 Hz"),
+        ({"table_acceleration": {"lowpass_order": 0}}, "lowpass_order must be a whole number 1..12"),
+        ({"actuator_force": {"delay_s": "4 ms"}}, "delay_s must be a number of seconds"),
+        ({"actuator_force": 0.004}, "must be a table of delay_s"),
+    ],
+)
+def test_bad_declared_conditioning_is_one_line(cond, match):
+    from types import SimpleNamespace
+
+    from sim.calibrate.conditioning import channel_conditioning
+    from sim.calibrate.residuals import CalibrationError
+
+    with pytest.raises(CalibrationError, match=match) as ei:
+        channel_conditioning(SimpleNamespace(name="rec.run.npz", meta={"channel_conditioning": cond}))
+    assert "\n" not in str(ei.value) and "rec.run.npz: meta.channel_conditioning" in str(ei.value)
