@@ -114,6 +114,20 @@ def test_accelerometer_conditioner_mismatch_found(clean, tmp_path):
     assert res.error_after <= 1.02 * clean.error_before
 
 
+def test_undeclared_accelerometer_lag_found(clean, tmp_path):
+    """The accelerometer two samples late (1.953 ms) with only its conditioner declared."""
+    sensors = copy.deepcopy(ARTIFACTS)
+    acc = sensors["channel"]["table_acceleration"]
+    del acc["declared"]
+    acc.update(declared_lowpass_hz=100.0, declared_lowpass_order=4)  # the lag is not declared
+    res = S.calibrate(measured_runs(tmp_path, sensors))
+    (e,) = res.effects_added
+    assert (e["name"], e["where"]) == ("sensor_delay", "channel:table_acceleration")
+    d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
+    assert abs(d - 2.0 / FS) <= u and abs(d - 2.0 / FS) < 2e-5 and 0 < u < 5e-5
+    assert res.error_after <= 1.02 * clean.error_before
+
+
 def test_shift_is_a_delay_of_either_sign():
     from sim.calibrate.timing import shift
 
