@@ -55,12 +55,29 @@ def recorder(run) -> dict:
     return rec if isinstance(rec, dict) else {}
 
 
-def of_run(run) -> dict | None:
-    """What the model's channels go through to compare with ``run``'s (None: nothing known)."""
-    rec, cond = recorder(run), channel_conditioning(run)
-    if not rec.get("anti_alias_hz") and not cond:
-        return None
-    return {"recorder": rec, "channels": cond}
+def of_run(run) -> dict:
+    """What the model's channels go through to compare with ``run``'s: the recorder's
+    settings, the declared conditioning, and how long the record's force lags its motion
+    (``meta.force_lag_s``: a simulator's own record; 0 for a recorder's)."""
+    lag = float((run.meta or {}).get("force_lag_s") or 0.0)
+    return {"recorder": recorder(run), "channels": channel_conditioning(run), "force_lag_s": lag}
+
+
+#: the channels the simulation loop records a step before the motion (docs/run-file.md)
+LAGGED = ("actuator_force", "pressure_a", "pressure_b")
+
+
+def force_at_record_instant(chans: dict, model_lag_s: float, known: dict | None, dt: float) -> dict:
+    """The model's force and pressures at the instants the record holds them: the loop
+    records them ``model_lag_s`` before the motion they drive; a recorder samples every
+    channel at one instant (``known["force_lag_s"]`` = 0), a simulator's record keeps its
+    own lag. Read ``model_lag_s - record lag`` later (cubic spline)."""
+    shift_s = model_lag_s - float((known or {}).get("force_lag_s", 0.0))
+    if not shift_s:
+        return chans
+    from sim.calibrate.timing import shift
+
+    return {c: (shift(x, -shift_s, dt) if c in LAGGED else x) for c, x in chans.items()}
 
 
 def apply(chans: dict, known: dict | None, fs: float) -> dict:
@@ -112,4 +129,13 @@ def noise_floor(x: np.ndarray, fs: float) -> np.ndarray:
     return np.sqrt(np.mean(P[top], axis=0) * 0.5 * fs)
 
 
-__all__ = ["apply", "channel_conditioning", "condition_channel", "noise_floor", "of_run", "recorder"]
+__all__ = [
+    "LAGGED",
+    "apply",
+    "force_at_record_instant",
+    "channel_conditioning",
+    "condition_channel",
+    "noise_floor",
+    "of_run",
+    "recorder",
+]

@@ -270,6 +270,8 @@ def _setup(job):
         if res.incomplete_reason:
             return None
         chans, n = chans_of(res)
+        lag = float(getattr(res, "force_lag_s", 0.0) or 0.0)
+        chans = conditioning.force_at_record_instant(chans, lag, cond, float(t[1] - t[0]))
         return _compared(chans, n, t, columns, cond, bands)
 
     return sim, ref, cmd, post
