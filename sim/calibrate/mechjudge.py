@@ -5,7 +5,7 @@ to add chosen among those that pass (:func:`sim.calibrate.acceptance.tie_break`)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -20,7 +20,7 @@ MAX_NESTED = 2
 class RoundState:
     """What a candidate is judged against: the fit and held-out runs, the current model's
     held-out error and residual flatness, the margin, the table's scale (None: no
-    plausibility test)."""
+    plausibility test), and the sensor-timing candidates' switch and findings."""
 
     mfit: list
     mho: list
@@ -28,6 +28,12 @@ class RoundState:
     flat: float
     margin: float
     scale: object = None
+    #: effect types allowed (None: all); the sensor-timing candidates follow it
+    effects: object = None
+    #: offer the sensor-timing candidates (:mod:`sim.calibrate.timing`) each round
+    timing_on: bool = False
+    #: the ``effects_added`` entries of the timing candidates accepted
+    timed_added: list = field(default_factory=list)
 
 
 def term_force_peak(mruns, fit, i: int) -> tuple[str, float]:
@@ -152,11 +158,36 @@ def forward_round(st: RoundState, cur, scored: list, rnd, say) -> tuple[list, tu
     return rows, win[:3]
 
 
+def timed_first(st: RoundState, cur, scored: list, rnd, say) -> tuple[list, dict | None, list]:
+    """The round's order split at the first sensor-timing candidate that passes
+    (:mod:`sim.calibrate.timing`, fitted and judged on its own re-timed records): the law
+    candidates that explain more (judged first by :func:`forward_round`), that timing
+    candidate (None: none passed, or timing is off) and the rows of the timing candidates
+    judged up to it."""
+    if not st.timing_on:
+        return scored, None, []
+    from sim.calibrate import timing
+
+    timed = timing.round_candidates(st.mfit, st.mho, cur, st.e_ho, st.flat, st.margin, st.effects, st.timed_added)
+    ahead, rows = [], []
+    for expl, law, w, new in timing.merged(scored, timed):
+        if law is not None:
+            ahead.append((expl, law, w, new))
+            continue
+        rows.append({"round": rnd, **new["row"]})
+        say(timing.log_line(new["row"]))
+        if new["accepted"]:
+            new["row"] = rows[-1]
+            return ahead, new, rows
+    return ahead, None, rows
+
+
 def forward_search(st: RoundState, cur, cands: list, max_rounds: int, say) -> tuple:
     """Rounds of the forward search from the fit ``cur`` over ``cands`` (``(law, where)``):
     each round fits every candidate with the current terms, judges them best explained
     first (:func:`forward_round`) and adds the chosen one; ``st`` follows the current
     model. Returns ``(fit, rows, least-squares fits)``."""
+    from sim.calibrate import timing
     from sim.calibrate.residuals import nrmse_runs
     from sim.calibrate.trace import Term, fit_terms, flatness, predict
 
@@ -178,13 +209,21 @@ def forward_search(st: RoundState, cur, cands: list, max_rounds: int, say) -> tu
             n_fits += 1
             scored.append((1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0, law, w, new))
         scored.sort(key=lambda s: (-round(s[0], 6), rank.get(s[2].split(":")[0], 3)))
-        rs, win = forward_round(st, cur, scored, rnd, say)
-        rows += rs
-        if win is None:
+        ahead, timed, trs = timed_first(st, cur, scored, rnd, say)
+        rs, win = forward_round(st, cur, ahead, rnd, say)
+        rows += rs + trs
+        if win is None and timed is None:
             break
+        if win is None:  # a sensor's timing: the records re-timed, the model refitted on them
+            st.mfit, st.mho = timed["mfit"], timed["mho"]
+            st.timed_added.append(timing.added_entry(timed["row"]))
+            win = (timed["fit"],)
+        elif timed is not None:
+            timed["row"]["accepted"] = False
+            timed["row"]["reason"] = "passed, not added: a candidate that explains more was added"
         cur = fit_terms(st.mfit, win[0].terms)  # every shape parameter again, with the new term in
         st.e_ho, st.flat = nrmse_runs(st.mho, predict(st.mho, cur)), flatness(st.mfit, cur.residuals)
     return cur, rows, n_fits
 
 
-__all__ = ["RoundState", "forward_round", "forward_search", "judge", "term_force_peak"]
+__all__ = ["RoundState", "forward_round", "forward_search", "judge", "term_force_peak", "timed_first"]

@@ -9,10 +9,10 @@
 * ``closed_loop``: runs with only a reference: the model runs it through the table's
   controller (:class:`sim.loop.simulation.Simulation`, the table's own gains).
 
-The model's channels pass through the recorder's deterministic conditioning when the
-run says what it was (``meta.measurement.model`` of ``run --measure``: gain, offset,
-anti-alias low-pass, skew; not its noise or quantisation), so record and model are
-compared like for like. The residual is recorded minus model on the channels present
+The model's channels pass through what the record says of its recorder chain
+(:mod:`sim.calibrate.conditioning`: ``meta.recorder``'s anti-alias low-pass and each
+channel's declared ``meta.channel_conditioning``), so record and model are compared
+like for like; nothing else about the sensors is read. The residual is recorded minus model on the channels present
 (:data:`FIT_CHANNELS`: actuator force, table acceleration and velocity; the band-passed
 displacement when a run has no velocity; the chamber pressures when it has no force),
 per column (actuator / DOF), each column scaled by its recorded RMS: the pooled NRMSE is
@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hydraulics.params import HydraulicsParamError
+from sim.calibrate import conditioning
 from sim.calibrate.residuals import CalibrationError, check_finite
 from sim.calibrate.windows import QUIET_COLUMN, dof_weights, excited
 from sim.errors import UserError
@@ -44,8 +45,9 @@ from sim.errors import UserError
 FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_velocity")
 #: a column is compared when the run excites it (:func:`sim.calibrate.windows.excited`:
 #: its RMS at least QUIET_COLUMN of its channel's largest, DOFs in actuator units) and its
-#: RMS is at least this many times its recorded noise, when the run says what its sensor
-#: model was (``meta.measurement``)
+#: RMS is at least this many times its noise floor (its level in the top of the band,
+#: :func:`sim.calibrate.conditioning.noise_floor`: read off the record, as a real one holds
+#: nothing about its sensors)
 NOISE_COLUMN = 3.0
 DOF_CHANNELS = ("table_displacement", "table_velocity", "table_acceleration")
 
@@ -184,7 +186,7 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
             for j, d in enumerate(r.dofs):
                 drive[:, DOFS6.index(d)] = r.reference[:, j]
         rec, cols, bands, quiet = {}, {}, {}, {}
-        meas = (r.meta.get("measurement") or {}).get("model")
+        known = conditioning.of_run(r)
         for c in chans:
             x = np.asarray(getattr(r, c), float)
             if c == "table_displacement":
@@ -192,9 +194,7 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
                 x = bandpass(x, r.sample_rate_hz, band)
                 bands[c] = band
             rms = np.sqrt(np.mean((x - x.mean(axis=0)) ** 2, axis=0))
-            noise = np.broadcast_to(
-                np.asarray(((meas or {}).get("channel", {}).get(c, {})).get("noise_rms", 0.0), float), rms.shape
-            )
+            noise = conditioning.noise_floor(x, r.sample_rate_hz)
             # a DOF channel in actuator units (a rotation as the strokes it takes): one rule for
             # both paths (sim.calibrate.windows.excited)
             w = dof_weights(J6, r.dofs, "motion") if c.startswith("table_") else None
@@ -224,7 +224,7 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
                 columns=cols,
                 scale=_scales(rec, cols, rows),
                 rows=rows,
-                conditioning=meas,
+                conditioning=known,
                 valve_null=vn,
                 bandpass=bands,
                 not_excited=quiet,
@@ -234,28 +234,9 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
 
 
 # ------------------------------------------------------------------ the simulation
-def condition(chans: dict, sensors: dict | None, fs: float) -> dict:
-    """The model's channels through the recorder's deterministic conditioning
-    (``run --measure``'s chain without noise and quantisation)."""
-    if not sensors:
-        return chans
-    from sim.signals import sensing
-
-    rec = sensors.get("recorder", {})
-    fc = rec.get("anti_alias_hz")
-    order = int(rec.get("anti_alias_order", 4))  # as sim.runs.measure: 4 poles unless the model says otherwise
-    digital = set(rec.get("digital", ()))
-    out = {}
-    for name, x in chans.items():
-        spec = sensors.get("channel", {}).get(name, {})
-        x = np.asarray(x, float) * np.asarray(spec.get("gain", 1.0), float) + np.asarray(spec.get("offset", 0.0), float)
-        if fc is not None and name not in digital and len(x) > 1 and fc < 0.5 * fs:
-            x = sensing.lowpass(x, fc, order, fs)
-        skew = np.broadcast_to(np.asarray(spec.get("skew_s", 0.0), float), (x.shape[1],))
-        for j in np.nonzero(skew)[0]:
-            x[:, j] = sensing.fractional_delay(x[:, j], -skew[j], 1.0 / fs)
-        out[name] = x
-    return out
+def condition(chans: dict, known: dict | None, fs: float) -> dict:
+    """The model's channels through the record's known chain (:func:`sim.calibrate.conditioning.apply`)."""
+    return conditioning.apply(chans, known, fs)
 
 
 def simulate_job(job) -> dict | None:
@@ -314,6 +295,8 @@ def _setup(job):
         if res.incomplete_reason:
             return None
         chans, n = chans_of(res)
+        lag = float(getattr(res, "force_lag_s", 0.0) or 0.0)
+        chans = conditioning.force_at_record_instant(chans, lag, cond, float(t[1] - t[0]))
         return _compared(chans, n, t, columns, cond, bands)
 
     return sim, ref, cmd, post

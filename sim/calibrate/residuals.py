@@ -62,6 +62,9 @@ class MechRun:
     classes: dict  # class name -> actuator indices
     rows: np.ndarray  # bool (n,): samples in the fit
     prefilter: tuple | None = None
+    #: a delay (s) after the prefilter: the acceleration's own sensor delay
+    #: (:mod:`sim.calibrate.timing`), applied to every other term as the prefilter is
+    filter_delay_s: float = 0.0
     t0: float = 0.0
     presliding_m: float | None = None  #: the table's pre-sliding travel, if its dry friction has one
     #: the declared payload's (mass kg, centre of gravity from the reference point m (3,),
@@ -81,11 +84,15 @@ class MechRun:
         return x - x[self.rows].mean(axis=0)
 
     def filt(self, x: np.ndarray) -> np.ndarray:
-        if self.prefilter is None:
-            return x
-        import scipy.signal as sig
+        if self.prefilter is not None:
+            import scipy.signal as sig
 
-        return sig.lfilter(*self.prefilter, x, axis=0)
+            x = sig.lfilter(*self.prefilter, x, axis=0)
+        if self.filter_delay_s:
+            from sim.calibrate.timing import shift
+
+            x = shift(x, self.filter_delay_s, self.dt)
+        return x
 
     def place_motion(self, where: str):
         """(u, v, a, map) of a place: its coordinate's motion (n,) and ``map`` (k,) or
@@ -252,6 +259,7 @@ def _still_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.n
 def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None = None) -> list[MechRun]:
     """The mechanical-path records of ``runs`` against the declared ``desc`` (+ ``payload``)."""
     from mjcf.description import DOFS6 as DOF6
+    from sim.calibrate import timing
     from sim.calibrate.laws import declared_forces
     from sim.control.tvc import dof_jacobian
     from sim.effects import build_model
@@ -277,16 +285,8 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         v = r.table_velocity[:, cols]
         a = r.table_acceleration[:, cols]
         f = _force_at_acceleration_instant(r)
-        pre = None
-        if accel_lowpass_hz:
-            from sim.identify.least_squares import analog_lowpass
-
-            if accel_lowpass_hz >= 0.5 / r.dt:
-                raise CalibrationError(
-                    f"{r.name}: the accelerometer low-pass {accel_lowpass_hz:g} Hz is above the "
-                    f"Nyquist frequency {0.5 / r.dt:g} Hz; give --accel-lowpass none"
-                )
-            pre = analog_lowpass(accel_lowpass_hz, 1.0 / r.dt, desc.accelerometer_filter_order)
+        known = timing.declared_state(r, accel_lowpass_hz, desc.accelerometer_filter_order)
+        pre = timing.prefilter_of(known, r)
         mr = MechRun(
             name=r.name,
             dt=r.dt,
@@ -304,6 +304,9 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             presliding_m=desc.friction_presliding_m if desc.friction_model == "presliding" else None,
             payload=pay,
         )
+        mr.filter_delay_s = known["accel_delay_s"]
+        mr.extra["force_at_instant"] = f  # before any declared or found force delay
+        f = timing.shift(f, -known["force_delay_s"], r.dt)
         mr.force = mr.filt(f @ J)
         mr.extra["actuator_force"] = f
         other = joints.force(u, v, r.dt)
@@ -312,6 +315,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             if law.second_order is not None:
                 other = other + mr.second(law, where, vals, vals)
         mr.model = a @ Me.T + mr.filt(other)
+        mr.extra.update(inertial=a @ Me.T, other=other, timing=known)
         mr.rows = _still_rows(v, pre, r.dt)
         mr.excited = excited_dofs(mr, J6)
         out.append(mr)

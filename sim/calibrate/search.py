@@ -141,10 +141,11 @@ def candidate_laws(effects=None) -> list:
     """The laws to try: every law whose effect type is usable (see
     :func:`sim.calibrate.laws.usable`), or those named in ``effects``."""
     from sim.calibrate.laws import LAWS, NOT_ON_MECHANICAL, usable
+    from sim.calibrate.timing import TIMING_EFFECTS
 
     if effects:
         check_effect_names(effects)
-        nolaw = [e for e in effects if e not in LAWS]
+        nolaw = [e for e in effects if e not in LAWS and e not in TIMING_EFFECTS]
         if nolaw and nolaw[0] in NOT_ON_MECHANICAL:
             raise CalibrationError(
                 f"--effects: '{nolaw[0]}' is not identifiable on the mechanical path: " + NOT_ON_MECHANICAL[nolaw[0]]
@@ -392,6 +393,7 @@ def calibrate(
     scale = table_scale(desc, pl)
     cur = fit_terms(mfit, [])
     e_ho0 = nrmse_runs(mho, predict(mho, cur))
+    mfit0, mho0 = mfit, mho  # the declared timing: the "before" of the report
     e_ho = e_ho0
     flat = flatness(mfit, cur.residuals)
     say(f"{path} path: {len(fit_runs)} fit runs, {len(ho_runs)} held out; held-out NRMSE {e_ho0:.4f}")
@@ -405,10 +407,11 @@ def calibrate(
         for law in laws
         for w in distinct_places(mfit[0], [p for p in places(desc, law.places, pl is not None) if law.acts_at(p)])
     ]
-    st = RoundState(mfit, mho, e_ho, flat, margin, scale)
+    st = RoundState(mfit, mho, e_ho, flat, margin, scale, effects=effects, timing_on=True)
     cur, tried, n_fits = forward_search(st, cur, cands, MAX_ROUNDS, say)
     e_ho, flat = st.e_ho, st.flat
-    added = []
+    mfit, mho = st.mfit, st.mho  # a sensor's timing found: the records re-timed
+    added, timed_added = [], st.timed_added
     # Backward: a term accepted early may be superseded by later ones (viscous damping
     # standing in for friction the flatness test kept out until a specimen's mode was in):
     # drop a term whose removal keeps the held-out error within the acceptance margin.
@@ -482,8 +485,9 @@ def calibrate(
                 "units": t.law.units,
             }
         )
+    added += timed_added
     ho_res = predict(mho, cur)
-    ho_res0 = [mr.residual for mr in mho]
+    ho_res0 = [mr.residual for mr in mho0]
     per, per_run, quiet = mechanical_errors(mho, ho_res0, ho_res)
     t3 = time.perf_counter()
     res = CalibrationResult(
@@ -513,7 +517,7 @@ def calibrate(
             "holdout": mho,
             "before": ho_res0,
             "after": ho_res,
-            "fit_before": [mr.residual for mr in mfit],
+            "fit_before": [mr.residual for mr in mfit0],
             "fit_after": cur.residuals,
         },
         unknowns_identified=unk,

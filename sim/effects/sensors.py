@@ -14,7 +14,7 @@ or ``"channel:<channel>"`` (every column); channels as in ``sim.runs.runfile.CHA
 |---|---|---|---|
 | ``sensor_gain`` | ``gain`` | 1 | gain x signal |
 | ``sensor_offset`` | ``offset`` | channel units | signal + offset |
-| ``sensor_delay`` | ``delay_s`` | s | signal(t - delay), linear interpolation (any fraction of a sample) |
+| ``sensor_delay`` | ``delay_s`` | s | signal(t - delay), linear interpolation (any fraction of a sample; negative: ahead) |
 | ``sensor_lowpass`` | ``cutoff_hz``, option ``order`` (default 2) | Hz | causal Butterworth low-pass, started in steady state |
 | ``sensor_noise`` | ``rms``, option ``seed`` (default 0) | channel units | + white Gaussian noise of that RMS |
 
@@ -48,6 +48,7 @@ CHANNEL_NAMES = (
     "table_velocity",
     "table_acceleration",
     "accelerometers",
+    "specimen_acceleration",
 )
 
 _PLACE = re.compile(r"^([a-z_]+)(?:\[(\d+)\])?$")
@@ -123,7 +124,7 @@ class SensorOffset(_Sensor):
 @register
 class SensorDelay(_Sensor):
     type = "sensor_delay"
-    SPEC = {"delay_s": ("s", 0.0, 10.0, None)}
+    SPEC = {"delay_s": ("s", -10.0, 10.0, None)}  # either sign: a channel may lead (calibrate finds both)
 
     def transform(self, t, x):
         return sensing.fractional_delay(x, self.values["delay_s"], _dt(t))

@@ -31,7 +31,18 @@ def foundation_slides(tm):
 
 
 def derive(tm, Q, V, ACC) -> dict:
-    """Recorder channels of table model ``tm`` from raw qpos/qvel/platen-qacc samples."""
+    """Recorder channels of table model ``tm`` from raw qpos/qvel/platen-qacc samples
+    (with ``specimen_acceleration`` for a payload with floors, :mod:`sim.loop.specimen`)."""
+    from sim.loop.specimen import specimen_acceleration, specimen_sensors
+
+    out = _derive_table(tm, Q, V, ACC)
+    sp = specimen_sensors(tm)
+    if sp is not None:
+        out["specimen_acceleration"] = specimen_acceleration(sp, Q, V)
+    return out
+
+
+def _derive_table(tm, Q, V, ACC) -> dict:
     pq, pd = tm.platen_qadr, tm.platen_dadr
     if not tm.platen_free:
         n = len(Q)

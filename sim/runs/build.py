@@ -32,6 +32,11 @@ def build_runfile(res, tm, *, source="simulated", description="", payload_name=N
     payload = getattr(tm, "payload", None)
     if payload is not None and getattr(payload, "raw", None):
         meta.update(description_meta("payload", payload.source, payload.raw))
+    from sim.loop.specimen import specimen_sensors
+
+    spec = specimen_sensors(tm) if "specimen_acceleration" in res.channels else None
+    if spec is not None:  # accelerometers on the specimen's floors (docs/run-file.md)
+        meta["specimen_sensors"] = spec.meta
     lag = float(getattr(res, "force_lag_s", 0.0) or 0.0)
     if lag:  # the loop's recorder: docs/run-file.md, meta force_lag_s
         meta["force_lag_s"] = lag
@@ -53,6 +58,7 @@ def build_runfile(res, tm, *, source="simulated", description="", payload_name=N
         table_velocity=ch["table_velocity"],
         table_acceleration=ch["table_acceleration"],
         accelerometers=ch["accelerometers"],
+        specimen_acceleration=ch.get("specimen_acceleration") if spec is not None else None,
         reference=None if reference is None else reference.d[:n].copy(),
         extras=dict(res.extras),
     )

@@ -203,6 +203,8 @@ class RunFile:
             return self.actuators
         if channel in DOF_CHANNELS:
             return self.dofs
+        if channel in SPECIMEN_CHANNELS:
+            return [str(s.get("name", f"spec{i}")) for i, s in enumerate(self.meta.get("specimen_sensors") or [])]
         if channel in ACCELEROMETER_CHANNELS:
             names = self.accelerometer_names
             if names is None:
@@ -703,6 +705,7 @@ def payload_of(run: RunFile, override: str | None = None):
 
 __all__ = [
     "ACCELEROMETER_CHANNELS",
+    "SPECIMEN_CHANNELS",
     "ACTUATOR_CHANNELS",
     "CHANNELS",
     "DOF_CHANNELS",

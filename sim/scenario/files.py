@@ -77,6 +77,7 @@ _MOTION_SPEC = {
         "rms_acceleration": "pos",
         "rms_displacement": "pos",
         "taper_s": "nonneg",
+        "delay_s": "nonneg",
     },
     "at2": {
         "type": "text",

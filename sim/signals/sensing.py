@@ -36,15 +36,30 @@ def butter_lowpass_sos(cutoff_hz: float, order: int, fs: float) -> np.ndarray:
     return S.butter(int(order), cutoff_hz, btype="lowpass", fs=fs, output="sos")
 
 
-def lowpass(x: np.ndarray, cutoff_hz: float, order: int, fs: float) -> np.ndarray:
+def analog_lowpass_sos(cutoff_hz: float, order: int, fs: float) -> np.ndarray:
+    """Second-order sections of an analog Butterworth low-pass (a sensor's signal
+    conditioner) discretised at ``fs`` by the bilinear transform *without* pre-warping,
+    so its low-frequency delay is the analog filter's at any rate (as
+    ``sim.identify.least_squares.analog_lowpass``, which calibration applies)."""
+    import scipy.signal as S
+
+    if not 0.0 < cutoff_hz < 0.5 * fs:
+        raise ValueError(f"cutoff {cutoff_hz:g} Hz must lie in (0, {0.5 * fs:g}) Hz (the Nyquist frequency)")
+    z, p, k = S.butter(int(order), 2.0 * np.pi * cutoff_hz, analog=True, output="zpk")
+    return S.zpk2sos(*S.bilinear_zpk(z, p, k, fs))
+
+
+def lowpass(x: np.ndarray, cutoff_hz: float, order: int, fs: float, analog: bool = False) -> np.ndarray:
     """Causal Butterworth low-pass along axis 0, started in steady state on the first
-    sample (no start-up transient for a signal that starts constant)."""
+    sample (no start-up transient for a signal that starts constant); ``analog``: the
+    analog conditioner of :func:`analog_lowpass_sos`, else the digital filter of
+    :func:`butter_lowpass_sos`."""
     import scipy.signal as S
 
     x = np.asarray(x, dtype=np.float64)
     if x.shape[0] == 0:
         return x.copy()
-    sos = butter_lowpass_sos(cutoff_hz, order, fs)
+    sos = (analog_lowpass_sos if analog else butter_lowpass_sos)(cutoff_hz, order, fs)
     zi = S.sosfilt_zi(sos)  # (n_sections, 2), unit step steady state
     zi = zi.reshape(zi.shape + (1,) * (x.ndim - 1)) * x[0][None, None]
     y, _ = S.sosfilt(sos, x, axis=0, zi=zi)
@@ -63,4 +78,4 @@ def quantisation_step(bits: int, full_scale: float) -> float:
     return 2.0 * full_scale / 2.0 ** int(bits)
 
 
-__all__ = ["butter_lowpass_sos", "fractional_delay", "lowpass", "quantisation_step", "quantise"]
+__all__ = ["analog_lowpass_sos", "butter_lowpass_sos", "fractional_delay", "lowpass", "quantisation_step", "quantise"]

@@ -141,7 +141,10 @@ def test_sensor_offset_of_one_accelerometer_found(floor, tmp_path):
     res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
     _check(res, floor, "sensor_offset", "channel:table_acceleration[2]", "offset", 0.15)
     assert len(res.effects_added) == 1
-    assert any(c["name"] == "sensor_offset" and "actuator_force" in c["where"] for c in res.candidates)
+    # the load cells' offsets are screened with the rest; ``candidates`` lists the first
+    # dozen by score, where one of them ranked 11th on main and below the dozen once the measured
+    # force is sampled at the motion's instant (held-out error the same to 1e-6): none is taken
+    assert not any(c["accepted"] and "actuator_force" in c["where"] for c in res.candidates)
 
 
 def test_load_cell_offset_of_one_actuator_found(floor, tmp_path):

@@ -218,7 +218,9 @@ def test_measured_run_gain_offset_skew_and_meta():
     # column B: sampled 1.5 samples late, on a ramp of slope -0.5 m/s: -0.5 (t + skew) + 0.01
     np.testing.assert_allclose(m.actuator_displacement[:-2, 1], -0.5 * (run.t[:-2] + 1.5 / FS) + 0.01, atol=1e-12)
     assert m.source == "measured" and run.source == "simulated"
-    assert m.meta["measurement"]["seed"] == 0 and m.meta["measurement"]["of"] == "simulated"
+    assert "measurement" not in m.meta  # a real record carries nothing about its sensor chain
+    rec = M.chain_record(run.meta, sensors, 0)
+    assert rec["seed"] == 0 and rec["of"] == "simulated" and rec["model"] == sensors
     np.testing.assert_array_equal(m.valve_command, run.valve_command)  # no model for it: unchanged
 
 
@@ -258,11 +260,14 @@ def test_same_seed_same_run_other_seed_other_run(tmp_path):
     p = write_run(tmp_path / "m.run.npz", a)
     back = read_run(p)
     np.testing.assert_array_equal(back.actuator_force, a.actuator_force)
-    assert back.source == "measured" and back.meta["measurement"]["model"] == json.loads(json.dumps(sensors))
+    assert back.source == "measured" and "measurement" not in back.meta
+    assert back.meta["recorder"]["anti_alias_hz"] == sensors["recorder"]["anti_alias_hz"]
 
 
-def test_builtin_model_has_a_source_beside_every_number():
-    for line in M.DEFAULT_SENSORS.read_text().splitlines():
+@pytest.mark.parametrize("model", [M.DEFAULT_SENSORS, M.DEFAULT_SENSORS.parent / "real_record_1024hz.toml"])
+def test_builtin_model_has_a_source_beside_every_number(model):
+    M.load_sensors(model, sample_rate_hz=FS)  # it loads
+    for line in model.read_text().splitlines():
         code = line.split("#")[0]
         if "=" in code and any(ch.isdigit() for ch in code.split("=", 1)[1]):
             assert "#" in line and any(w in line for w in ("assumed:", "seed 0", "calibrated:")), line
@@ -299,6 +304,8 @@ def test_cli_run_measure(tmp_path):
     meas = read_run(tmp_path / "ucsd_t8.measured.run.npz")
     assert meas.source == "measured" and meas.n_samples == sim_run.n_samples
     assert json.loads((tmp_path / "summary.json").read_text())["measured_run_file"].endswith(".measured.run.npz")
+    chain = json.loads((tmp_path / f"ucsd_t8.measured{M.CHAIN_SUFFIX}").read_text())  # the chain, beside the run
+    assert chain["model_file"] == str(M.DEFAULT_SENSORS) and "measurement" not in meas.meta
     noise = meas.pressure_a - sim_run.pressure_a
     assert 1e3 < np.std(noise) < 2e4  # 5 kPa RMS noise (through nothing else of size)
     bad = tmp_path / "bad.toml"

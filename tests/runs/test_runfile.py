@@ -210,6 +210,10 @@ BAD_CASES = {
     "wrong_act_columns": (dict(pressure_b=np.zeros((N, 11))), "'pressure_b' has 11 columns but there are 12 actuators"),
     "wrong_dof_columns": (dict(table_velocity=np.zeros((N, 3))), "'table_velocity' has 3 columns but there are 6 DOFs"),
     "wrong_acc_columns": (dict(accelerometers=np.zeros((N, 5))), "'accelerometers' has 5 columns"),
+    "wrong_specimen_columns": (
+        dict(specimen_acceleration=np.zeros((N, 3))),
+        "'specimen_acceleration' has 3 columns but there are 2 specimen sensors",
+    ),
     "one_d_channel": (dict(reference=np.zeros(N)), "'reference' has shape (256,)"),
     "no_input": (dict(reference=None, valve_command=None), "neither valve_command nor reference"),
     "unknown_key": (dict(pressureA=np.zeros((N, 12))), "unknown array(s) pressureA"),

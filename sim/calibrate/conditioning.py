@@ -1,0 +1,141 @@
+"""What a record says about its own recorder chain, and the model's channels put through it.
+
+A real record carries nothing about its sensors but what its recorder writes and what
+the lab declares (docs/run-file.md): ``meta.recorder`` (the recorder's own settings:
+rate, anti-alias cut-off and order, the digital channels that bypass it) and
+``meta.channel_conditioning`` (per channel, the KNOWN delay and analog conditioner:
+``{"delay_s", "lowpass_hz", "lowpass_order"}``). Calibration applies these to the
+model's channels before comparing and searches for what they do not say
+(:mod:`sim.calibrate.timing`); it never reads how a synthetic record was made.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sim.calibrate.residuals import CalibrationError
+
+#: a declared conditioner's order when the declaration gives none (assumed: 2 poles,
+#: as the sensor effects' default, ``sim.effects.sensors.SensorLowpass``)
+DEFAULT_ORDER = 2
+
+
+def channel_conditioning(run) -> dict:
+    """``{channel: {"delay_s", "lowpass_hz", "lowpass_order"}}`` declared by ``run``'s
+    meta, checked (one-line :class:`CalibrationError` naming the run, the field and the fix)."""
+    raw = (run.meta or {}).get("channel_conditioning") or {}
+    if not isinstance(raw, dict):
+        raise CalibrationError(
+            f"{run.name}: meta.channel_conditioning must map channel names to "
+            '{"delay_s", "lowpass_hz", "lowpass_order"}; fix or remove it'
+        )
+    out = {}
+    for ch, spec in raw.items():
+        where = f"{run.name}: meta.channel_conditioning.{ch}"
+        if not isinstance(spec, dict):
+            raise CalibrationError(f"{where} must be a table of delay_s, lowpass_hz, lowpass_order")
+        delay = spec.get("delay_s", 0.0) or 0.0
+        fc = spec.get("lowpass_hz")
+        order = spec.get("lowpass_order", DEFAULT_ORDER)
+        if not isinstance(delay, (int, float)) or isinstance(delay, bool) or not math.isfinite(delay):
+            raise CalibrationError(f"{where}.delay_s must be a number of seconds (got {delay!r})")
+        if fc is not None and (isinstance(fc, bool) or not isinstance(fc, (int, float)) or not fc > 0):
+            raise CalibrationError(f"{where}.lowpass_hz must be a cut-off > 0 Hz or null (got {fc!r})")
+        if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= 12:
+            raise CalibrationError(f"{where}.lowpass_order must be a whole number 1..12 (got {order!r})")
+        out[ch] = {"delay_s": float(delay), "lowpass_hz": None if fc is None else float(fc), "lowpass_order": order}
+    return out
+
+
+def recorder(run) -> dict:
+    """The recorder's own settings (``meta.recorder``), {} when the record has none."""
+    rec = (run.meta or {}).get("recorder") or {}
+    return rec if isinstance(rec, dict) else {}
+
+
+def of_run(run) -> dict:
+    """What the model's channels go through to compare with ``run``'s: the recorder's
+    settings, the declared conditioning, and how long the record's force lags its motion
+    (``meta.force_lag_s``: a simulator's own record; 0 for a recorder's)."""
+    lag = float((run.meta or {}).get("force_lag_s") or 0.0)
+    return {"recorder": recorder(run), "channels": channel_conditioning(run), "force_lag_s": lag}
+
+
+#: the channels the simulation loop records a step before the motion (docs/run-file.md)
+LAGGED = ("actuator_force", "pressure_a", "pressure_b")
+
+
+def force_at_record_instant(chans: dict, model_lag_s: float, known: dict | None, dt: float) -> dict:
+    """The model's force and pressures at the instants the record holds them: the loop
+    records them ``model_lag_s`` before the motion they drive; a recorder samples every
+    channel at one instant (``known["force_lag_s"]`` = 0), a simulator's record keeps its
+    own lag. Read ``model_lag_s - record lag`` later (cubic spline)."""
+    shift_s = model_lag_s - float((known or {}).get("force_lag_s", 0.0))
+    if not shift_s:
+        return chans
+    from sim.calibrate.timing import shift
+
+    return {c: (shift(x, -shift_s, dt) if c in LAGGED else x) for c, x in chans.items()}
+
+
+def apply(chans: dict, known: dict | None, fs: float) -> dict:
+    """The model's channels through a record's known chain (:func:`of_run`): the
+    recorder's anti-alias (a digital Butterworth, as ``run --measure`` makes it) on the
+    analog channels, then each channel's declared analog conditioner and delay."""
+    if not known:
+        return chans
+    from sim.signals import sensing
+
+    rec = known.get("recorder") or {}
+    fc = rec.get("anti_alias_hz")
+    digital = set(rec.get("digital") or ())
+    out = {}
+    for name, x in chans.items():
+        x = np.asarray(x, float)
+        if fc and name not in digital and len(x) > 1 and fc < 0.5 * fs:
+            x = sensing.lowpass(x, fc, int(rec.get("anti_alias_order", 4)), fs)
+        out[name] = condition_channel(x, (known.get("channels") or {}).get(name), fs)
+    return out
+
+
+def condition_channel(x: np.ndarray, spec: dict | None, fs: float) -> np.ndarray:
+    """``x`` through one declared conditioning: the analog low-pass, then the delay."""
+    if not spec or len(x) < 2:
+        return x
+    from sim.signals import sensing
+
+    fc = spec.get("lowpass_hz")
+    if fc and fc < 0.5 * fs:
+        x = sensing.lowpass(x, fc, int(spec.get("lowpass_order", DEFAULT_ORDER)), fs, analog=True)
+    if spec.get("delay_s"):
+        x = sensing.fractional_delay(x, float(spec["delay_s"]), 1.0 / fs)
+    return x
+
+
+def noise_floor(x: np.ndarray, fs: float) -> np.ndarray:
+    """Per column, the RMS of the white noise under a record: its level in the top of the
+    band (0.35-0.5 of the sample rate), where a table's motion and forces hold next to
+    nothing, spread over the whole band. What a lab reads off a spectrum; it replaces the
+    noise a synthetic record's sensor model stated."""
+    import scipy.signal as sig
+
+    x = np.asarray(x, float)
+    if len(x) < 256:
+        return np.zeros(x.shape[1])
+    f, P = sig.welch(x - x.mean(axis=0), fs=fs, nperseg=256, axis=0)
+    top = f >= 0.35 * fs
+    return np.sqrt(np.mean(P[top], axis=0) * 0.5 * fs)
+
+
+__all__ = [
+    "LAGGED",
+    "apply",
+    "force_at_record_instant",
+    "channel_conditioning",
+    "condition_channel",
+    "noise_floor",
+    "of_run",
+    "recorder",
+]

@@ -1,0 +1,404 @@
+"""Sensor timing and conditioning on the mechanical path of ``shaketable calibrate``.
+
+The force balance compares the recorded force with the force the model needs for the
+recorded motion, sample by sample, so it holds only if every channel was sampled at the
+instant its time stamp says. A load cell whose conditioner delays its signal by 4 ms,
+or an accelerometer conditioner left at 30 Hz where the lab believes 100 Hz, leaves a
+residual in phase quadrature with the motion that no force law explains (a delay tau
+reads as a force tau x dF/dt). The candidates here change the records' timing, not the
+model's forces:
+
+* ``sensor_delay`` at ``channel:actuator_force``: the recorded force is the true one
+  ``delay_s`` late (either sign); it is read at t + delay_s;
+* ``sensor_delay`` at ``channel:table_acceleration``: the recorded acceleration is
+  ``delay_s`` late; every other term of the balance is delayed alike (as the declared
+  conditioner's filter is applied to them);
+* ``sensor_lowpass`` at ``channel:table_acceleration``: the accelerometer's analog
+  conditioner is a Butterworth of ``cutoff_hz`` and ``order`` instead of the declared
+  one; the other terms go through it instead.
+
+What a record declares (``meta.channel_conditioning``, else the table's
+``accelerometer_bandwidth_hz``) is the starting point (:func:`declared_state`). Each
+candidate's parameter is fitted by a grid and a bounded scalar search of the force
+balance's residual sum of squares (the accepted terms refitted linearly at each point);
+its 95 % interval comes from the Jacobian of the residual in the parameter and the
+coefficients together with the residual's autocorrelation (:func:`sim.calibrate.hac.hac_sigma`).
+It is judged by the rules every candidate meets (:func:`sim.calibrate.search.accept_numbers`
+plus: off its bounds, and the declared value outside its interval).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: the analog conditioner's order when only a cut-off is declared (the table's
+#: ``accelerometer_bandwidth_hz`` or ``--accel-lowpass``): 4 poles, as
+#: :func:`sim.identify.least_squares.analog_lowpass` assumes
+TABLE_ORDER = 4
+#: a delay is searched within this many seconds either way (assumed: 50 ms, ten times
+#: the largest conditioner delay of the tables here, 4.2 ms for 4 poles at 100 Hz)
+MAX_DELAY_S = 0.05
+#: conditioner orders tried besides the declared one: none. Within a test's band a
+#: Butterworth of another order and a cut-off of the same low-frequency delay balances the
+#: force as well (2 poles at 55 Hz against 4 at 100 Hz: 4.1 ms both); what tells them
+#: apart is above the band, where a record holds noise and mains pickup: on the NEES-UCSD
+#: runs with a 60 Hz line on the load cell a 2-pole 51.6 Hz "conditioner" took 34 % of the
+#: residual (held-out 0.038 -> 0.030) by filtering the line out of the force. The order
+#: is the declared one (the table's 4 poles unless the run declares another).
+ORDERS: tuple = ()
+#: the lowest conditioner cut-off searched (assumed: 2 Hz, below any table's test band)
+MIN_CUTOFF_HZ = 2.0
+Z95 = 1.96
+#: the share of what a timing candidate takes out of the residual that must be coherent
+#: with the motion (assumed: 0.5, the line :func:`sim.calibrate.search.unexplained` draws
+#: between a DOF's effect and a sensor's). A sensor that is late or filtered differently
+#: changes the balance by a filtered copy of the motion's own force; a low-pass that
+#: "explains" a mains line picked up on the load cell (by filtering the force it is
+#: applied to) takes out something the motion did not make.
+COHERENT_SHARE = 0.5
+#: the effect types of these candidates (``--effects`` names them)
+TIMING_EFFECTS = ("sensor_delay", "sensor_lowpass")
+
+
+def shift(x: np.ndarray, delay_s: float, dt: float) -> np.ndarray:
+    """``x`` delayed by ``delay_s`` (either sign, any fraction of a sample): y(t) =
+    x(t - delay), by a cubic spline through the samples (linear interpolation loses
+    amplitude between samples), the end values held beyond the record."""
+    x = np.asarray(x, float)
+    if not delay_s or len(x) < 4:
+        return x
+    from scipy.interpolate import CubicSpline
+
+    n = len(x)
+    k = np.clip(np.arange(n) - delay_s / dt, 0.0, n - 1)
+    return CubicSpline(np.arange(n, dtype=float), x, axis=0)(k)
+
+
+def declared_state(run, accel_lowpass_hz, table_order: int = TABLE_ORDER) -> dict:
+    """What is known of ``run``'s force and acceleration timing: its
+    ``meta.channel_conditioning`` (:mod:`sim.calibrate.conditioning`), else
+    ``accel_lowpass_hz`` (the table's or ``--accel-lowpass``) as a conditioner of
+    ``table_order`` poles (the table's ``[sensors] accelerometer_filter_order``). A
+    declared conditioner too close to the record's Nyquist frequency to be filtered at its
+    rate counts as its low-frequency delay, 1 / (2 pi f_c sin(pi / 2n)) for n poles."""
+    from sim.calibrate.conditioning import channel_conditioning
+
+    cond = channel_conditioning(run)
+    acc = cond.get("table_acceleration", {})
+    fc = acc.get("lowpass_hz") if "table_acceleration" in cond else accel_lowpass_hz
+    order = int(acc.get("lowpass_order", table_order) if "table_acceleration" in cond else table_order)
+    delay = acc.get("delay_s", 0.0)
+    if fc and fc >= 0.45 / run.dt and "table_acceleration" in cond:
+        delay += 1.0 / (2 * math.pi * fc * math.sin(math.pi / (2 * order)))
+        fc = None
+    return {
+        "force_delay_s": cond.get("actuator_force", {}).get("delay_s", 0.0),
+        "accel_delay_s": delay,
+        "accel_lowpass_hz": fc or None,
+        "accel_lowpass_order": order,
+    }
+
+
+def prefilter_of(state: dict, run) -> tuple | None:
+    """The analog filter (b, a) of the acceleration's conditioner in ``state`` at the
+    run's rate (one-line error when above the Nyquist frequency)."""
+    from sim.calibrate.residuals import CalibrationError
+    from sim.identify.least_squares import analog_lowpass
+
+    fc = state["accel_lowpass_hz"]
+    if not fc:
+        return None
+    if fc >= 0.5 / run.dt:
+        raise CalibrationError(
+            f"{run.name}: the accelerometer low-pass {fc:g} Hz is above the Nyquist frequency "
+            f"{0.5 / run.dt:g} Hz; give --accel-lowpass none or declare a lower cut-off"
+        )
+    return analog_lowpass(fc, 1.0 / run.dt, state["accel_lowpass_order"])
+
+
+def retime(mr, state: dict):
+    """A mechanical run (:class:`sim.calibrate.residuals.MechRun`) with the force and
+    acceleration timing of ``state`` in place of its own (same rows, same weights: every
+    timing is scored by one measure; the terms' columns kept while the filter is)."""
+    from sim.identify.least_squares import analog_lowpass
+
+    old = mr.extra["timing"]
+    same_filter = all(old[k] == state[k] for k in ("accel_delay_s", "accel_lowpass_hz", "accel_lowpass_order"))
+    keep = ("force_at_instant", "inertial", "other", "w") + (
+        ("raw_columns", "columns", "second") if same_filter else ()
+    )
+    new = dataclasses.replace(mr, extra={k: mr.extra[k] for k in keep if k in mr.extra})
+    fc = state["accel_lowpass_hz"]
+    new.prefilter = analog_lowpass(fc, 1.0 / mr.dt, state["accel_lowpass_order"]) if fc else None
+    new.filter_delay_s = state["accel_delay_s"]
+    f = shift(mr.extra["force_at_instant"], -state["force_delay_s"], mr.dt)
+    new.force = new.filt(f @ mr.J)
+    new.model = mr.extra["inertial"] + new.filt(mr.extra["other"])
+    new.extra.update(actuator_force=f, timing=dict(state))
+    if "w" in new.extra:
+        new.extra["y"] = (new.residual[new.rows] * new.extra["w"]).reshape(-1)
+    return new
+
+
+@dataclass
+class Candidate:
+    """One timing candidate: ``name`` (effect type) at ``where``, its parameter, the state
+    field it sets, the search bounds and the declared (neutral) value."""
+
+    name: str
+    where: str
+    param: str
+    field: str
+    lo: float
+    hi: float
+    neutral: float
+    order: int | None = None
+    unit: str = "s"
+
+    def state(self, base: dict, x: float) -> dict:
+        s = dict(base)
+        if self.field == "accel_lowpass_hz":  # searched in 1/cut-off (a delay-like scale)
+            s["accel_lowpass_hz"] = 1.0 / x if x > 0 else None
+            s["accel_lowpass_order"] = self.order
+        else:
+            s[self.field] = x
+        return s
+
+    def value(self, x: float) -> dict:
+        if self.field == "accel_lowpass_hz":
+            return {"cutoff_hz": 1.0 / x}
+        return {self.param: x}
+
+
+def candidates(mruns) -> list[Candidate]:
+    """The timing candidates of these runs (declared timing of the first run as neutral)."""
+    base = mruns[0].extra["timing"]
+    dt = mruns[0].dt
+    out = [
+        Candidate(
+            "sensor_delay",
+            "channel:actuator_force",
+            "delay_s",
+            "force_delay_s",
+            -MAX_DELAY_S,
+            MAX_DELAY_S,
+            base["force_delay_s"],
+        ),
+        Candidate(
+            "sensor_delay",
+            "channel:table_acceleration",
+            "delay_s",
+            "accel_delay_s",
+            -MAX_DELAY_S,
+            MAX_DELAY_S,
+            base["accel_delay_s"],
+        ),
+    ]
+    g0 = 1.0 / base["accel_lowpass_hz"] if base["accel_lowpass_hz"] else 0.0
+    for order in sorted(set(ORDERS) | {base["accel_lowpass_order"]}):  # the declared order
+        out.append(
+            Candidate(
+                "sensor_lowpass",
+                "channel:table_acceleration",
+                "cutoff_hz",
+                "accel_lowpass_hz",
+                1.0 / (0.45 / dt),
+                1.0 / MIN_CUTOFF_HZ,
+                g0,
+                order,
+                "Hz",
+            )
+        )
+    return out
+
+
+def _rss(mruns, terms, cand, x) -> float:
+    from sim.calibrate.trace import _fit_linear
+
+    runs = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mruns]
+    return _fit_linear(runs, terms)[1]
+
+
+def search(mruns, terms, cand: Candidate) -> float:
+    """The parameter that minimises the balance's residual: a grid (every second sample
+    for a delay, 16 points in 1/cut-off), then a bounded scalar search between the best
+    point's neighbours."""
+    from scipy.optimize import minimize_scalar
+
+    dt = mruns[0].dt
+    if cand.field == "accel_lowpass_hz":
+        grid = np.geomspace(cand.lo, cand.hi, 16)
+    else:  # every second sample: the residual varies on the motion's time scale (> 10 samples)
+        n = int(MAX_DELAY_S / (2 * dt))
+        grid = cand.neutral + 2 * dt * np.arange(-n, n + 1)
+        grid = grid[(grid >= cand.lo) & (grid <= cand.hi)]
+    vals = [_rss(mruns, terms, cand, g) for g in grid]
+    k = int(np.argmin(vals))
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    r = minimize_scalar(
+        lambda x: _rss(mruns, terms, cand, x), bounds=(lo, hi), method="bounded", options={"xatol": 1e-4 * (hi - lo)}
+    )
+    return float(r.x) if r.fun <= vals[k] else float(grid[k])
+
+
+def sigma(mruns, terms, cand: Candidate, x: float) -> float:
+    """Standard deviation of the parameter at ``x``: the Jacobian of the stacked, weighted
+    residual in the terms' coefficients and the parameter (central difference), through
+    the autocorrelation-robust sandwich of :func:`sim.calibrate.hac.hac_sigma`."""
+    from sim.calibrate.hac import hac_sigma
+    from sim.calibrate.trace import _fit_linear, _segments
+
+    h = 0.05 * mruns[0].dt if cand.field != "accel_lowpass_hz" else 1e-3 * max(x, 1e-4)
+    runs = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mruns]
+    theta, _, y, X = _fit_linear(runs, terms)
+
+    def stacked(xx):
+        rr = [retime(mr, cand.state(mr.extra["timing"], xx)) for mr in mruns]
+        from sim.calibrate.trace import _stack
+
+        yy, XX = _stack(rr, terms)
+        return yy - XX @ theta
+
+    d = (stacked(x + h) - stacked(x - h)) / (2 * h)
+    J = np.column_stack([X, d]) if X.shape[1] else d[:, None]
+    return float(hac_sigma(J, y - X @ theta, _segments(runs))[-1])
+
+
+def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: float) -> dict:
+    """The candidate fitted and judged: ``{"row": candidates row, "accepted": bool,
+    "fit", "mfit", "mho"}`` (the retimed runs and the refit when accepted)."""
+    from sim.calibrate.residuals import nrmse_runs
+    from sim.calibrate.search import accept_numbers
+    from sim.calibrate.trace import fit_terms, flatness, predict
+
+    x = search(mfit, cur.terms, cand)
+    s = sigma(mfit, cur.terms, cand, x)
+    nf = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mfit]
+    nh = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mho]
+    new = fit_terms(nf, cur.terms, refine="none")
+    e_new = nrmse_runs(nh, predict(nh, new))
+    f_new = flatness(nf, new.residuals)
+    bic_new = new.n * math.log(max(new.rss, 1e-300) / new.n) + (new.p + 1) * math.log(new.n)
+    ok, why = _param_check(cand, x, s)
+    share = coherent_share(mfit, cur.residuals, new.residuals)
+    if ok and share < COHERENT_SHARE:
+        ok, why = False, f"what it takes out of the residual is {100 * share:.0f} % coherent with the motion"
+    if ok:
+        ok, why = accept_numbers(e_ho, e_new, cur.bic, bic_new, flat, f_new, margin)
+    value, unc = cand.value(x), _uncertainty(cand, x, s)
+    row = {
+        "name": cand.name,
+        "where": cand.where,
+        **({"options": {"order": cand.order}} if cand.order else {}),
+        "explained_fraction": 1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0,
+        "parameters": value,
+        "uncertainty": unc,
+        "holdout_error": e_new,
+        "bic_change": bic_new - cur.bic,
+        "flatness": f_new,
+        "coherent_share": share,
+        "accepted": ok,
+        "reason": why,
+    }
+    return {"row": row, "accepted": ok, "fit": new, "mfit": nf, "mho": nh, "e_ho": e_new, "flat": f_new}
+
+
+def coherent_share(mruns, before, after) -> float:
+    """The share of the change ``before - after`` of the residuals (per run and DOF)
+    that is coherent with the motion: its Welch spectrum weighted by its largest
+    coherence with the DOF's acceleration, velocity or displacement, pooled by power."""
+    from sim.calibrate.residuals import spectra
+
+    num = den = 0.0
+    for mr, r0, r1 in zip(mruns, before, after):
+        for j in range(r0.shape[1]):
+            d = r0[:, j] - r1[:, j]
+            if not np.any(d):
+                continue
+            sp = spectra(d, 1.0 / mr.dt, {"u": mr.u[:, j], "v": mr.v[:, j], "a": mr.a[:, j]})
+            C = np.max(list(sp["coherence"].values()), axis=0)
+            num += float(np.sum(C * sp["psd"]))
+            den += float(np.sum(sp["psd"]))
+    return num / den if den > 0 else 0.0
+
+
+def _uncertainty(cand, x, s) -> dict:
+    if cand.field == "accel_lowpass_hz":  # delta method from 1/cut-off to the cut-off
+        return {"cutoff_hz": Z95 * s / x**2 if x > 0 else math.inf}
+    return {cand.param: Z95 * s}
+
+
+def _param_check(cand, x, s) -> tuple[bool, str]:
+    """Off its bounds, a finite interval, the declared value outside it."""
+    if not math.isfinite(s):
+        return False, f"{cand.param}: no finite confidence interval"
+    span = cand.hi - cand.lo
+    if x - cand.lo <= 1e-3 * span or cand.hi - x <= 1e-3 * span:
+        return False, f"{cand.param} at the edge of its searched range"
+    if abs(x - cand.neutral) <= Z95 * s:
+        what = "the declared conditioner" if cand.field == "accel_lowpass_hz" else f"{cand.neutral:g} s"
+        return False, f"{cand.param}: its 95 % interval holds {what}"
+    return True, ""
+
+
+def round_candidates(mfit, mho, cur, e_ho, flat, margin, effects, done) -> list:
+    """Every timing candidate not yet accepted (``done``: effects_added entries) and
+    allowed by ``effects`` (None: all), fitted and judged against the current fit."""
+    have = {(d["name"], d["where"]) for d in done}
+    out = []
+    for cand in candidates(mfit):
+        if (cand.name, cand.where) in have or (effects and cand.name not in effects):
+            continue
+        out.append(evaluate(mfit, mho, cur, cand, e_ho, flat, margin))
+    return out
+
+
+def merged(scored, timed) -> list:
+    """The round's law candidates ``(explained, law, where, fit)`` and the timing ones
+    (as ``(explained, None, where, evaluation)``) in one order, most explained first
+    (stable: the laws' own order kept among themselves)."""
+    rows = [(e["row"]["explained_fraction"], None, e["row"]["where"], e) for e in timed]
+    both = list(scored) + rows
+    return sorted(both, key=lambda s: -round(s[0], 6))
+
+
+def log_line(row: dict) -> str:
+    p = ", ".join(f"{k} = {v:.5g}" for k, v in row["parameters"].items())
+    tail = "  ACCEPTED" if row["accepted"] else f"  ({row['reason']})"
+    return (
+        f"  {row['name']:18s} {row['where']:14s} explains {100 * row['explained_fraction']:6.2f} %  "
+        f"held-out {row['holdout_error']:.4f}  [{p}]" + tail
+    )
+
+
+def added_entry(row: dict) -> dict:
+    """The ``effects_added`` entry of an accepted timing candidate."""
+    units = {"delay_s": "s", "cutoff_hz": "Hz"}
+    return {
+        "name": row["name"],
+        "where": row["where"],
+        **({"options": row["options"]} if "options" in row else {}),
+        "parameters": row["parameters"],
+        "uncertainty": row["uncertainty"],
+        "units": {k: units[k] for k in row["parameters"]},
+    }
+
+
+__all__ = [
+    "TIMING_EFFECTS",
+    "Candidate",
+    "added_entry",
+    "candidates",
+    "coherent_share",
+    "declared_state",
+    "evaluate",
+    "prefilter_of",
+    "retime",
+    "search",
+    "shift",
+    "sigma",
+]

@@ -1,0 +1,232 @@
+"""Sensor timing and conditioning on the mechanical path (sim/calibrate/timing.py):
+plant a sensor fault in "measured" runs with real-record artifacts, calibrate with
+defaults (the stock ucsd description, which declares 100 Hz accelerometer
+conditioners), recover it with the truth inside its 95 % interval; clean runs with the
+same artifacts add nothing. The runs' meta holds only what a recorder writes (its
+settings and the declared conditioning): the calibrator never sees the chain.
+
+The runs: NEES-UCSD table (scenarios/tables/ucsd.toml), band-limited white noise
+0.5-20 Hz, 1 m/s^2 RMS, 6 s after a 3 s quiet lead-in, three seeds (two fitted, one
+held out), measured through a 1024 Hz recorder with a 256 Hz anti-alias filter, a
+4-pole 100 Hz accelerometer conditioner, the accelerometer two samples late (declared),
+displacement and velocity 0.3 sample early (not declared), per-record offsets, drift
+and noise on every motion and force channel.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from sim.calibrate import search as S
+
+FS = 1024.0
+#: the artifacts of every run here (docs/sensors.md keys; sizes as the built-in recorder's noise)
+ARTIFACTS = {
+    "recorder": {"anti_alias_hz": 256.0, "anti_alias_order": 4, "digital": ["reference"], "lead_in_s": 3.0},
+    "channel": {
+        "table_acceleration": {
+            "lowpass_hz": 100.0,
+            "lowpass_order": 4,
+            "skew_s": -2.0 / FS,  # two samples late
+            "declared": True,  # the lab states its conditioner and the lag
+            "noise_rms": 0.0294,
+            "offset_rms": 0.05,
+            "drift_per_sqrt_s": 0.002,
+        },
+        "actuator_force": {"noise_rms": 1.0e3, "offset_rms": 2.0e3, "drift_per_sqrt_s": 100.0},
+        "table_displacement": {"noise_rms": 20e-6, "skew_s": 0.3 / FS, "offset_rms": 1e-3},
+        "table_velocity": {"noise_rms": 2.5e-4, "skew_s": 0.3 / FS},
+    },
+}
+
+
+def measured_runs(out, sensors, seeds=(1, 2, 3), seconds=6.0):
+    """ucsd runs under white noise, through ``sensors`` (a SENSORS.toml as a dict)."""
+    from mjcf import load_table
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+    from sim.runs.build import build_runfile
+    from sim.runs.measure import measure_run
+    from sim.runs.runfile import write_run
+    from sim.scenario import motions as M
+    from sim.scenario.reference import reference_from_motions
+
+    tm = build_model(load_table("ucsd"))
+    paths = []
+    for s in seeds:
+        mo = M.white_noise(
+            duration_s=seconds, sample_rate_hz=FS, band_hz=(0.5, 20.0), seed=(s, 0), rms_acceleration=1.0
+        )
+        ref = reference_from_motions({"x": mo}, FS, seconds)
+        res = Simulation(tm).run(reference=ref)
+        assert res.incomplete_reason is None
+        run = measure_run(build_runfile(res, tm, reference=ref), sensors, seed=s)
+        assert "measurement" not in run.meta and "force_lag_s" not in run.meta  # a recorder's meta only
+        paths.append(str(write_run(out / f"ucsd_{s}.run.npz", run)))
+    return paths
+
+
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory):
+    paths = measured_runs(tmp_path_factory.mktemp("clean"), ARTIFACTS)
+    return S.calibrate(paths)
+
+
+def test_clean_runs_with_every_artifact_add_nothing(clean):
+    assert clean.residual_path == "mechanical"
+    assert clean.effects_added == []
+    assert clean.error_before < 0.03  # the noise floor of these runs (2.17 % measured)
+    timing_rows = [c for c in clean.candidates if c["name"] in ("sensor_delay", "sensor_lowpass")]
+    assert len(timing_rows) == 3 and not any(c["accepted"] for c in timing_rows)  # 2 delays, 1 conditioner
+
+
+def test_force_sensor_delay_found(clean, tmp_path):
+    """A load cell 4 ms late (the channel's sample taken 4 ms before its time stamp)."""
+    sensors = copy.deepcopy(ARTIFACTS)
+    sensors["channel"]["actuator_force"]["skew_s"] = -0.004
+    res = S.calibrate(measured_runs(tmp_path, sensors))
+    (e,) = res.effects_added
+    assert (e["name"], e["where"]) == ("sensor_delay", "channel:actuator_force")
+    d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
+    assert abs(d - 0.004) <= u  # the truth inside the 95 % interval (3.9989 +/- 0.0064 ms measured)
+    assert abs(d - 0.004) < 2e-5 and 0 < u < 5e-5
+    row = next(c for c in res.candidates if c["accepted"])
+    assert row["coherent_share"] > 0.95  # a late load cell's change is the motion's own force
+    assert res.error_before > 10 * clean.error_before  # 0.308 against 0.0217
+    assert res.error_after <= 1.02 * clean.error_before
+
+
+def test_accelerometer_conditioner_mismatch_found(clean, tmp_path):
+    """The accelerometer's conditioner left at 30 Hz where the lab declares 100 Hz."""
+    sensors = copy.deepcopy(ARTIFACTS)
+    acc = sensors["channel"]["table_acceleration"]
+    acc.update(lowpass_hz=30.0, declared_lowpass_hz=100.0, declared_lowpass_order=4)
+    res = S.calibrate(measured_runs(tmp_path, sensors))
+    (e,) = res.effects_added
+    assert (e["name"], e["where"], e["options"]) == ("sensor_lowpass", "channel:table_acceleration", {"order": 4})
+    fc, u = e["parameters"]["cutoff_hz"], e["uncertainty"]["cutoff_hz"]
+    assert abs(fc - 30.0) <= u  # 29.989 +/- 0.012 Hz measured
+    assert abs(fc - 30.0) < 0.05 and 0 < u < 0.1
+    assert res.error_before > 10 * clean.error_before  # 0.764 against 0.0217
+    assert res.error_after <= 1.02 * clean.error_before
+
+
+def test_undeclared_accelerometer_lag_found(clean, tmp_path):
+    """The accelerometer two samples late (1.953 ms) with only its conditioner declared."""
+    sensors = copy.deepcopy(ARTIFACTS)
+    acc = sensors["channel"]["table_acceleration"]
+    del acc["declared"]
+    acc.update(declared_lowpass_hz=100.0, declared_lowpass_order=4)  # the lag is not declared
+    res = S.calibrate(measured_runs(tmp_path, sensors))
+    (e,) = res.effects_added
+    assert (e["name"], e["where"]) == ("sensor_delay", "channel:table_acceleration")
+    d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
+    assert abs(d - 2.0 / FS) <= u and abs(d - 2.0 / FS) < 2e-5 and 0 < u < 5e-5
+    assert res.error_after <= 1.02 * clean.error_before
+
+
+def test_shift_is_a_delay_of_either_sign():
+    from sim.calibrate.timing import shift
+
+    dt = 1.0 / FS
+    t = np.arange(4096) * dt
+    x = np.sin(2 * np.pi * 7.0 * t)
+    for d in (0.0042, -0.0017):
+        y = shift(x, d, dt)
+        k = slice(64, -64)
+        np.testing.assert_allclose(y[k], np.sin(2 * np.pi * 7.0 * (t[k] - d)), atol=1e-6)
+
+
+def test_mains_pickup_on_the_load_cell_is_not_a_sensor_fault(tmp_path):
+    """A 60 Hz, 3 kN line on the force channel adds no timing candidate (the conditioner is
+    searched at its declared order: one of another order with the same in-band delay
+    would filter the line out of the force it is applied to)."""
+    from sim.runs.runfile import read_run, write_run
+
+    paths = []
+    for p in measured_runs(tmp_path, ARTIFACTS):
+        r = read_run(p)
+        r.actuator_force[:, 0] += 3e3 * np.sin(2 * np.pi * 60.0 * r.t + 0.3)
+        paths.append(str(write_run(p, r)))
+    res = S.calibrate(paths)
+    assert res.effects_added == []
+    lows = [c for c in res.candidates if c["name"] == "sensor_lowpass"]
+    assert [c["options"] for c in lows] == [{"order": 4}] and abs(lows[0]["parameters"]["cutoff_hz"] - 100.0) < 0.5
+
+
+def test_coherent_share_tells_the_motions_force_from_a_line():
+    """What a timing candidate takes out of the residual: a filtered copy of the motion's
+    force is coherent with the motion, a 60 Hz line on the load cell is not."""
+    from types import SimpleNamespace
+
+    import scipy.signal as sig
+
+    from sim.calibrate.timing import COHERENT_SHARE, coherent_share
+
+    n = 8192
+    rng = np.random.default_rng(4)
+    a = sig.lfilter(*sig.butter(4, 20.0, fs=FS), rng.standard_normal(n))
+    mr = SimpleNamespace(dt=1 / FS, u=np.zeros((n, 1)), v=np.zeros((n, 1)), a=a[:, None])
+    mr.u[:, 0] = rng.standard_normal(n)  # unrelated states: coherence is the largest of the three
+    mr.v[:, 0] = rng.standard_normal(n)
+    force = 3e4 * a
+    late = 3e4 * np.interp(np.arange(n) - 4.1, np.arange(n), a)  # the same force 4 ms late
+    line = 3e3 * np.sin(2 * np.pi * 60.0 * np.arange(n) / FS + 0.3) + 300.0 * rng.standard_normal(n)
+    zero = np.zeros((n, 1))
+    assert coherent_share([mr], [(force - late)[:, None]], [zero]) > 0.95
+    assert coherent_share([mr], [line[:, None]], [zero]) < COHERENT_SHARE
+
+
+def test_declared_conditioning_read_from_the_run_not_the_chain():
+    """The mechanical path's starting timing: the run's declared conditioning over the
+    table's; a declared conditioner above 0.45 of the rate counts as its delay."""
+    from types import SimpleNamespace
+
+    from sim.calibrate.timing import declared_state
+
+    def run(cond):
+        return SimpleNamespace(name="r", dt=1 / FS, meta={"channel_conditioning": cond} if cond else {})
+
+    assert declared_state(run(None), 100.0) == {
+        "force_delay_s": 0.0,
+        "accel_delay_s": 0.0,
+        "accel_lowpass_hz": 100.0,
+        "accel_lowpass_order": 4,
+    }
+    s = declared_state(
+        run(
+            {
+                "table_acceleration": {"delay_s": 0.002, "lowpass_hz": 30.0, "lowpass_order": 2},
+                "actuator_force": {"delay_s": -0.001, "lowpass_hz": None, "lowpass_order": 2},
+            }
+        ),
+        100.0,
+    )
+    assert s == {"force_delay_s": -0.001, "accel_delay_s": 0.002, "accel_lowpass_hz": 30.0, "accel_lowpass_order": 2}
+    hi = declared_state(run({"table_acceleration": {"delay_s": 0.0, "lowpass_hz": 1000.0, "lowpass_order": 4}}), None)
+    assert hi["accel_lowpass_hz"] is None and hi["accel_delay_s"] == pytest.approx(
+        2.6131 / (2 * np.pi * 1000.0), rel=1e-4
+    )
+
+
+@pytest.mark.parametrize(
+    "cond, match",
+    [
+        ({"table_acceleration": {"lowpass_hz": -3.0}}, "lowpass_hz must be a cut-off > 0 Hz"),
+        ({"table_acceleration": {"lowpass_order": 0}}, "lowpass_order must be a whole number 1..12"),
+        ({"actuator_force": {"delay_s": "4 ms"}}, "delay_s must be a number of seconds"),
+        ({"actuator_force": 0.004}, "must be a table of delay_s"),
+    ],
+)
+def test_bad_declared_conditioning_is_one_line(cond, match):
+    from types import SimpleNamespace
+
+    from sim.calibrate.conditioning import channel_conditioning
+    from sim.calibrate.residuals import CalibrationError
+
+    with pytest.raises(CalibrationError, match=match) as ei:
+        channel_conditioning(SimpleNamespace(name="rec.run.npz", meta={"channel_conditioning": cond}))
+    assert "\n" not in str(ei.value) and "rec.run.npz: meta.channel_conditioning" in str(ei.value)
