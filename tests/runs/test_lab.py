@@ -335,7 +335,7 @@ def test_identify_warns_on_unphysical_parameters():
 def test_bare_table_calibrates_to_the_same_friction_at_200_and_1024_hz(example, tmp_path):
     """The bare-table test recorded at 200 Hz (not a divisor of the model's rate) and at
     1024 Hz: calibrate finds the undeclared bearing friction, the same within 5 % from
-    either record and within 10 % of the planted 400 N (docs/lab-example.md: 397.5 N and
+    either record and within 10 % of the planted 400 N (docs/lab-example-noise.md: 397.5 N and
     399.7 N on 20 s; the model's force channel is read at the motion's instant,
     make_export.FORCE_SKEW_S)."""
     mod, folder = example["mod"], example["folder"]
