@@ -480,7 +480,7 @@ def test_table_new_reproduces_the_committed_light_lab_table(tmp_path, monkeypatc
 
 
 def test_worked_example_end_to_end_through_the_cli(tmp_path, capsys):
-    """docs/lab-example.md, shortened (10 s and 8 s records instead of 18 s and 12 s):
+    """docs/lab-example.md steps 2-7, shortened (10 s and 8 s records instead of 18 s and 12 s):
     the lab's export imported with the map; every command rebuilds the table from the run
     (no --table); calibration with the corralitos test held out finds the first mode and
     the friction planted, the held-out error falls, and the report holds the ARX baseline,
@@ -498,6 +498,8 @@ def test_worked_example_end_to_end_through_the_cli(tmp_path, capsys):
         out = tmp_path / ("closed" if extra else "replay")
         assert main(["replay", str(runs / "elcentro.run.npz"), *extra, "--out", str(out)]) == 0
     assert (tmp_path / "closed" / "elcentro.closedloop.run.npz").exists()
+    rrd = tmp_path / "elcentro.rrd"
+    assert main(["view", str(runs / "elcentro.run.npz"), "--rrd", str(rrd)]) == 0 and rrd.stat().st_size > 0
     cal = tmp_path / "cal"
     args = ["calibrate", str(runs / "elcentro.run.npz"), "--holdout", str(runs / "corralitos.run.npz")]
     assert main([*args, "--payload", "none", "--out", str(cal)]) == 0
