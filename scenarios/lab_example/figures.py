@@ -28,6 +28,9 @@ def main(argv=None) -> int:
     p.add_argument("replays", nargs="+")
     p.add_argument("--labels", nargs="+")
     p.add_argument("--out", required=True)
+    p.add_argument(
+        "--window", nargs=2, type=float, metavar=("T0", "T1"), help="time window shown (s; default the last 2 s)"
+    )
     a = p.parse_args(argv)
     rec = read_run(a.record)
     reps = [read_run(r) for r in a.replays]
@@ -45,9 +48,10 @@ def main(argv=None) -> int:
     ax[1].set_ylabel("table acceleration (m/s$^2$)")
     ax[2].set_ylabel("actuator force (kN)")
     ax[2].set_xlabel("t (s)")
-    ax[1].set_xlim(rec.t[-1] - 2.0, rec.t[-1])  # the last 2 s: the detail after the drift has had time
+    # the last 2 s by default: the detail after the drift has had time
+    ax[1].set_xlim(*(a.window or (rec.t[-1] - 2.0, rec.t[-1])))
     ax[0].legend(loc="upper left", fontsize=8)
-    fig.suptitle("worked example: record (204.8 Hz) and open-loop replays", fontsize=10)
+    fig.suptitle(f"worked example: {Path(a.record).name} (204.8 Hz) and open-loop replays", fontsize=10)
     fig.tight_layout()
     fig.savefig(a.out, dpi=90)
     print(a.out)

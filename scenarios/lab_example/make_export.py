@@ -1,4 +1,4 @@
-"""A synthetic lab export for the worked example (docs/lab-example.md).
+"""A synthetic lab export for the worked example (docs/lab-example-noise.md).
 
 The project plays the lab: the example table (``scenarios/tables/lab.toml``, written by
 ``shaketable table new`` from ``lab_table.toml``) with the 2-storey frame runs the white
@@ -40,7 +40,7 @@ SEED = 14  #: seed of the accelerometer noise
 #: step leaving t_k, which the force at t_k + h produced; the run file says by how much in
 #: ``meta.force_lag_s`` (docs/run-file.md). A lab's recorder samples force and motion at one
 #: instant, so the export reads the force that much later. Measured on the bare-table test
-#: (docs/lab-example.md, "The 9 % friction gap"): the model's own 1024 Hz force regressed on
+#: (docs/lab-example-noise.md, "The 9 % friction gap"): the model's own 1024 Hz force regressed on
 #: [sign v, v, a] gives 388 N, 557 N s/m, 1198 kg as recorded and 393 N, 51 N s/m, 1200 kg
 #: shifted by the lag: 0.49 ms reads as a drag M w^2 dt on this white noise, which sign(v)
 #: partly absorbs (+36 N).

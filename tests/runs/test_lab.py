@@ -335,7 +335,7 @@ def test_identify_warns_on_unphysical_parameters():
 def test_bare_table_calibrates_to_the_same_friction_at_200_and_1024_hz(example, tmp_path):
     """The bare-table test recorded at 200 Hz (not a divisor of the model's rate) and at
     1024 Hz: calibrate finds the undeclared bearing friction, the same within 5 % from
-    either record and within 10 % of the planted 400 N (docs/lab-example.md: 397.5 N and
+    either record and within 10 % of the planted 400 N (docs/lab-example-noise.md: 397.5 N and
     399.7 N on 20 s; the model's force channel is read at the motion's instant,
     make_export.FORCE_SKEW_S)."""
     mod, folder = example["mod"], example["folder"]
@@ -452,3 +452,65 @@ def test_replay_of_a_204_8_hz_record_lasts_its_own_duration(example):
     assert ch["table_acceleration"].shape == (run.n_samples, 1)
     # the model follows the record in time: acceleration residual as replay's (same hold, no null estimate)
     assert nrmse(ch["table_acceleration"][:, 0], run.table_acceleration[:, 0]) < 0.3
+
+
+# ------------------------------------------------------------------ the worked example (docs/lab-example.md)
+LIGHT_MAP = EX / "light_map.toml"
+
+
+def _quake_example():
+    spec = importlib.util.spec_from_file_location("lab_quake_export", EX / "make_quake_export.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_table_new_reproduces_the_committed_light_lab_table(tmp_path, monkeypatch):
+    """docs/lab-example.md step 1: the light table's file is what `table new` writes from
+    the lab's numbers, its controller and conditioner on their keys."""
+    monkeypatch.chdir(ROOT)  # the sources name the input file as given
+    out = tmp_path / "lab_light.toml"
+    src = "scenarios/lab_example/light_table.toml"
+    assert main(["table", "new", "lab_light", "--from", src, "--out", str(out)]) == 0
+    assert out.read_text() == (ROOT / "scenarios" / "tables" / "lab_light.toml").read_text()
+    desc = mjcf.load_table(out)
+    assert desc.accelerometer_bandwidth_hz == 50.0 and desc.recorder_rate_hz == 204.8
+    platen = tomllib.loads(out.read_text())["platen"]["mass_kg"]
+    assert platen < sum(mjcf.load_payload("lab_2storey_heavy").mass_kg)  # the specimen is heavier than the platen
+
+
+def test_worked_example_end_to_end_through_the_cli(tmp_path, capsys):
+    """docs/lab-example.md steps 2-7, shortened (10 s and 8 s records instead of 18 s and 12 s):
+    the lab's export imported with the map; every command rebuilds the table from the run
+    (no --table); calibration with the corralitos test held out finds the first mode and
+    the friction planted, the held-out error falls, and the report holds the ARX baseline,
+    which the calibrated model beats."""
+    mod = _quake_example()
+    csvs = mod.make_export(tmp_path / "ex", durations={"elcentro": 10.0, "corralitos": 8.0})
+    runs = tmp_path / "runs"
+    assert main(["import", *map(str, csvs.values()), "--map", str(LIGHT_MAP), "--out", str(runs)]) == 0
+    rec = read_run(runs / "elcentro.run.npz")
+    assert rec.meta["table"] == "lab_light" and "[table]" in rec.meta["table_description"]
+    assert rec.specimen_acceleration.shape == (rec.n_samples, 2)
+    quiet = rec.t < mod.LEAD_IN_S - 0.5  # the lead-in: the table at rest
+    assert np.abs(rec.table_displacement[quiet]).max() < 1e-4
+    for extra in ([], ["--closed-loop"]):
+        out = tmp_path / ("closed" if extra else "replay")
+        assert main(["replay", str(runs / "elcentro.run.npz"), *extra, "--out", str(out)]) == 0
+    assert (tmp_path / "closed" / "elcentro.closedloop.run.npz").exists()
+    rrd = tmp_path / "elcentro.rrd"
+    assert main(["view", str(runs / "elcentro.run.npz"), "--rrd", str(rrd)]) == 0 and rrd.stat().st_size > 0
+    cal = tmp_path / "cal"
+    args = ["calibrate", str(runs / "elcentro.run.npz"), "--holdout", str(runs / "corralitos.run.npz")]
+    assert main([*args, "--payload", "none", "--out", str(cal)]) == 0
+    js = json.loads((cal / "calibration.json").read_text())
+    added = js["effects_added"]
+    friction = [e["parameters"]["force_n"] for e in added if e["name"] == "coulomb_friction"]
+    assert len(friction) == 1 and friction[0] == pytest.approx(mod.FRICTION_N, rel=0.10), added
+    modes = [e["parameters"] for e in added if e["name"] == "payload_mode"]
+    (f1, m1, _), _ = _frame_modes("lab_2storey_heavy")
+    first = min(modes, key=lambda p: abs(p["frequency_hz"] - f1))
+    assert first["frequency_hz"] == pytest.approx(f1, rel=0.03) and first["mass_kg"] == pytest.approx(m1, rel=0.15)
+    assert js["error_after"] < 0.5 * js["error_before"]
+    assert js["beats_baseline"] and js["error_after"] < js["baseline"]["holdout_error"]
+    assert "linear ARX baseline" in (cal / "report.md").read_text()
