@@ -1,5 +1,5 @@
 """The virtual identification programme (``shaketable characterize --quick``) against the
-CGS paper (seed 000). One quick programme (~2 min on 2 cores) serves every assertion.
+CGS paper [Airouche 2014]. One quick programme (~2 min on 2 cores) serves every assertion.
 
 Only the figures the model meets are asserted, at the brief's tolerances; what is not
 met is reported in docs/characterization.md with the measured numbers.

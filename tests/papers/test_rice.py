@@ -1,4 +1,4 @@
-"""Rice table (seed 001): description, analytical T(s) (Eqs. 1-8), the model's FRF."""
+"""Rice table [Trombetti 2002]: description, analytical T(s) (Eqs. 1-8), the model's FRF."""
 
 import math
 
@@ -17,7 +17,7 @@ def mag(gains, ps="d0", **kw):
 
 def test_known_parameters_from_the_description():
     tb = R.load()
-    # seed 001 Sec. 5.1: A = 82.13 cm^2, V = 1668.86 cm^3, m_t = 643 kg, m_b = 29 500 kg
+    # Sec. 5.1 of [Trombetti 2002]: A = 82.13 cm^2, V = 1668.86 cm^3, m_t = 643 kg, m_b = 29 500 kg
     assert tb.area_m2 == pytest.approx(82.13e-4, rel=1e-9)
     assert tb.volume_m3 == pytest.approx(1668.86e-6, rel=1e-4)
     assert tb.m_t == pytest.approx(643.0)
