@@ -66,7 +66,7 @@ MASS_LEVELS = {
     "R2": {"x": 0.30 * G, "y": 0.30 * G, "z": 0.30 * G, "rx": 20 * DEG, "ry": 20 * DEG, "rz": 20 * DEG},
 }
 RANDOM_BAND_HZ = (0.5, 50.0)  # Tables 1 and 2
-#: Servovalve test (section A): random displacement control, RMS 0.01 m, 0.5-125 Hz.
+#: Servovalve test (Sec. 4 of [Airouche 2014]): random displacement control, RMS 0.01 m, 0.5-125 Hz.
 VALVE_RMS_M = 0.01
 VALVE_BAND_HZ = (0.5, 125.0)
 FIRST_ORDER_BAND_HZ = (0.5, 20.0)  # paper: first-order phase good to ~20 Hz
