@@ -1,6 +1,6 @@
 """Calibrate the unpublished masses of a table description against measured effective masses.
 
-The paper (seed 000, Table 2) gives the effective mass per DOF of the bare table; the
+The paper (Table 2 of [Airouche 2014]) gives the effective mass per DOF of the bare table; the
 layout and the actuators' moving masses are not published. The effective mass from the
 model, ``diag(T^T M T)``, is linear in every body's mass and inertia (the projection T
 depends on geometry only), so the unknowns follow from one linear solve:

@@ -20,7 +20,8 @@ Ctrl-C: a plain pool handles it badly (every worker is in the terminal's process
 gets the SIGINT too and prints its own traceback, and ``ProcessPoolExecutor.__exit__``
 waits for the jobs already running). The workers here ignore SIGINT, so only the parent
 sees it; the parent then terminates the workers at once and re-raises, and the command
-stops within a second.
+stops within a second. A terminated worker ends its job through Python (SIGTERM raises
+SystemExit there), so a file it was writing leaves no temporary behind.
 """
 
 from __future__ import annotations
@@ -32,6 +33,14 @@ from collections.abc import Callable, Iterable
 
 def _ignore_sigint() -> None:  # pragma: no cover - runs in the worker processes
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _exit_through_python)
+
+
+def _exit_through_python(signum, frame):  # pragma: no cover - runs in the worker processes
+    """``Pool.terminate`` sends SIGTERM. Its default action kills the worker on the spot,
+    in the middle of an atomic write, leaving the temporary file beside the target; ending
+    the job through Python runs its ``finally`` blocks (the writer removes the temporary)."""
+    raise SystemExit(128 + signum)
 
 
 def _call(task):  # pragma: no cover - runs in the worker processes

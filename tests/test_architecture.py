@@ -1,8 +1,11 @@
 """The house rules of ``sim/`` (see docs/architecture.md): layers import downwards only,
 ``mjcf`` and ``hydraulics`` import nothing from ``sim``, only ``sim/papers`` names a
-table, and no module grows past 800 lines."""
+table, no module grows past 800 lines, and sources are cited by the keys of
+docs/references.md."""
 
 import ast
+import re
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -121,3 +124,40 @@ def test_no_module_over_800_lines():
         if (n := len(p.read_text().splitlines())) > 800
     ]
     assert not long, long
+
+
+#: the internal codes the papers once had ("seed" and three digits); docs/references.md
+#: gives their keys ([Airouche 2014], [Trombetti 2002], [Ozcelik 2008]).
+OLD_SOURCE_CODE = re.compile(r"seeds?[ -]0{2}", re.IGNORECASE)
+
+
+def _tracked_text_files():
+    """The project's tracked files that read as UTF-8 text (git's list; without git, every
+    file under the root outside hidden and build folders)."""
+    try:
+        out = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
+        paths = [ROOT / n for n in out.decode().split("\0") if n]
+    except (OSError, subprocess.CalledProcessError):
+        skip = {"build", "dist", "__pycache__", "node_modules"}
+        paths = [
+            p
+            for p in ROOT.rglob("*")
+            if not any(part.startswith(".") or part in skip for part in p.relative_to(ROOT).parts)
+        ]
+    for p in paths:
+        if p.is_file() and not p.is_symlink():
+            try:
+                yield p, p.read_text(encoding="utf-8")
+            except UnicodeDecodeError:
+                continue  # a figure or other binary file
+
+
+def test_sources_are_cited_by_key_not_by_internal_code():
+    """A reader outside the project cannot look up an internal code: cite the paper's key."""
+    bad = [
+        f"{p.relative_to(ROOT)}:{i}: {line.strip()[:100]}"
+        for p, text in _tracked_text_files()
+        for i, line in enumerate(text.splitlines(), 1)
+        if OLD_SOURCE_CODE.search(line)
+    ]
+    assert not bad, "cite docs/references.md's keys instead:\n" + "\n".join(bad)

@@ -16,7 +16,7 @@ A check is ``{"name", "demand", "capacity", "unit", "utilisation", "pass"}`` wit
   supply and the precharge pressure) and the supply-pressure drop against the drop to
   the precharge (an accumulator bank is sized to sag: below the precharge only the pumps
   deliver. An earlier rule, "supply above 90 % of its set pressure", had no source and
-  failed UCSD test T8, which seed 002 ran on the real table: 84 % of 20.7 MPa with
+  failed UCSD test T8, which Ozcelik et al. [Ozcelik 2008] ran on the real table: 84 % of 20.7 MPa with
   0.62 of 1.51 m^3 usable oil drawn. What a sagging supply costs is counted where it
   matters: the force capacity uses the supply pressure of the moment); overturning moment of the specimen at the platen surface against the
   rated moment; loop closure; the run completing; tracking (PGA error, the fraction of

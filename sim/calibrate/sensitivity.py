@@ -296,7 +296,7 @@ def foundation_candidate(desc, dt: float, fit_damping: bool | None = None) -> Ca
     is a second parameter (``fit_damping``, default :data:`FOUNDATION_FIT_DAMPING`), from
     the description's value (not screened: at ``s = 0`` it changes nothing); the mass is
     held at the description's ``[foundation] mass_kg``: a reaction mass's weight is known
-    from its drawings (CGS 6400 t, Table A), its soil spring is not (and the mode's
+    from its drawings (CGS 6400 t, Sec. 2 of [Airouche 2014]), its soil spring is not (and the mode's
     frequency and mass are not told apart by the motion alone). Searched from
     :data:`FOUNDATION_MIN_HZ` up to ``1 / (2 pi dt)``: a spring of frequency f is integrated
     explicitly (MuJoCo's implicitfast treats damping, not stiffness, implicitly) and is

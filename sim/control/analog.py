@@ -1,5 +1,5 @@
 """An analog displacement controller (PIDF with differential-pressure feedback), acting at
-every physics step: the controller of Trombetti & Conte's uni-axial table (seed 001,
+every physics step: the controller of Trombetti and Conte's uni-axial table ([Trombetti 2002],
 Eq. 2), usable by any table whose description says ``[controller] type = "analog"``."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import numpy as np
 
 from sim.errors import ScenarioError
 
-PHYSICS_RATE_HZ = 8000.0  #: seed 001: the analog controller evaluated at every 1/8000 s physics step
-RECORDER_RATE_HZ = 4000.0  #: seed 001: the DAQ rate
+PHYSICS_RATE_HZ = 8000.0  #: [Trombetti 2002]: the analog controller evaluated at every 1/8000 s physics step
+RECORDER_RATE_HZ = 4000.0  #: [Trombetti 2002]: the DAQ rate
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Table controller model in the style of the MTS 469D (seed 000, Table A).
+"""Table controller model in the style of the MTS 469D (Sec. 2 of [Airouche 2014]).
 
 Runs at the controller rate (1024 Hz by default, one tick every two physics steps of
 1/2048 s) and holds its valve commands between ticks (zero-order hold, like a DAC).

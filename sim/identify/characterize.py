@@ -1,6 +1,6 @@
 """Virtual characterisation of a table: the identification programme of the CGS paper.
 
-Seed 000 (Airouche et al., CGS 6-DOF table) identifies the table with these tests, and
+Airouche et al. [Airouche 2014] (CGS 6-DOF table) identify the table with these tests, and
 this module runs the same tests on the model (closed loop, the table's own controller,
 1024 Hz records) and evaluates them with :mod:`sim.signals.estimation`:
 
@@ -57,7 +57,7 @@ DOFS = DOFS6
 G = 9.81  # m/s^2, as the table description's gravity
 DEG = math.pi / 180.0
 
-# ---------------------------------------------------------------- the programme (seed 000's tests)
+# ---------------------------------------------------------------- the programme (the tests of [Airouche 2014])
 #: Table 1: test levels of the oil-column tests (RMS acceleration, m/s^2 or rad/s^2).
 OIL_COLUMN_LEVEL = {"x": 0.10 * G, "y": 0.10 * G, "z": 0.10 * G, "rx": 20 * DEG, "ry": 20 * DEG, "rz": 20 * DEG}
 #: Table 2: test levels R1 and R2.
@@ -66,7 +66,7 @@ MASS_LEVELS = {
     "R2": {"x": 0.30 * G, "y": 0.30 * G, "z": 0.30 * G, "rx": 20 * DEG, "ry": 20 * DEG, "rz": 20 * DEG},
 }
 RANDOM_BAND_HZ = (0.5, 50.0)  # Tables 1 and 2
-#: Servovalve test (section A): random displacement control, RMS 0.01 m, 0.5-125 Hz.
+#: Servovalve test (Sec. 4 of [Airouche 2014]): random displacement control, RMS 0.01 m, 0.5-125 Hz.
 VALVE_RMS_M = 0.01
 VALVE_BAND_HZ = (0.5, 125.0)
 FIRST_ORDER_BAND_HZ = (0.5, 20.0)  # paper: first-order phase good to ~20 Hz

@@ -1,4 +1,4 @@
-"""Least-squares identification of a uni-axial table's mechanical subsystem (seed 002).
+"""Least-squares identification of a uni-axial table's mechanical subsystem [Ozcelik 2008].
 
 Ozcelik, Luco & Conte (2008) model the NEES-UCSD platen as (their Eq. 1)
 
@@ -178,7 +178,7 @@ def prepare(
 
     ``accel_lowpass_hz``: the acceleration channel went through an analog low-pass (the
     LHPOST's conditioners: 100 Hz; ``order``-pole Butterworth, :func:`analog_lowpass`)
-    that the force, displacement and velocity did not (seed 002: pressures only
+    that the force, displacement and velocity did not ([Ozcelik 2008]: pressures only
     high-pass filtered). The filter delays the inertia term by ~4 ms against the others,
     which in a 1 Hz test is a velocity-proportional error M w^2 4 ms u' of several kN
     that the least squares puts into C_e and F_mu. Eq. 1 is linear in (M_e, K_e, C_e,

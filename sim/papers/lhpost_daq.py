@@ -1,4 +1,4 @@
-"""The LHPOST's data acquisition (seed 002) applied to a simulated run of the ucsd model:
+"""The LHPOST's data acquisition [Ozcelik 2008] applied to a simulated run of the ucsd model:
 the sensors, their conditioning and the recorder (:class:`SensorModel`,
 :func:`ucsd_measure`), and the run file the NEES-UCSD records would make
 (:func:`write_measured_run`). Used by :mod:`sim.papers.uniaxial`'s programme."""
@@ -12,18 +12,18 @@ import numpy as np
 
 from mjcf.description import DOFS6
 
-G0 = 9.81  #: m/s^2: the g in which seed 002 gives its accelerations (the white-noise tests' % g)
+G0 = 9.81  #: m/s^2: the g in which Ozcelik et al. [Ozcelik 2008] give their accelerations (the white-noise tests' % g)
 
 
 @dataclass
 class SensorModel:
-    """The LHPOST's DAQ as seed 002 describes it (all numbers there or assumed here).
+    """The LHPOST's DAQ as Ozcelik et al. [Ozcelik 2008] describe it (all numbers there or assumed here).
 
     Displacement: Temposonics on the actuators (noise ``disp_noise_m``, assumed).
     Acceleration: Setra 141A through a 100 Hz analog low-pass (4-pole Butterworth
     assumed), noise ``acc_noise_m_s2`` (assumed). Force: chamber pressures x areas, the
     pressure transducers' 689.5 Pa resolution and noise ``pressure_noise_pa`` (assumed),
-    no low-pass (seed 002: pressures were only high-pass filtered to remove the static
+    no low-pass ([Ozcelik 2008]: pressures were only high-pass filtered to remove the static
     part; the model's force has no static part). Velocity: differentiated displacement
     and integrated acceleration blended by a complementary crossover at
     ``crossover_hz`` (assumed 2 Hz). Recorder: anti-alias filter and 1024 -> 512 Hz.
@@ -168,7 +168,7 @@ def write_measured_run(meas: dict, desc, name: str, out_dir):
         "actuators": list(desc.actuator_names),
         "dofs": list(DOFS6),
         "source": "simulated",
-        "description": f"{name}: seed 002 test on the ucsd model (sim.papers.uniaxial), measured with the LHPOST DAQ "
+        "description": f"{name}: [Ozcelik 2008] test on the ucsd model (sim.papers.uniaxial), measured with the LHPOST DAQ "
         "model; actuator_force holds the total measured "
         "force in column E (W zero)",
     }

@@ -4,11 +4,11 @@ A table file declares which identification programme characterises it in
 ``[published] programme = "..."`` (default :data:`DEFAULT_PROGRAMME`, the 6-DOF
 programme of :mod:`sim.identify.characterize`). The two papers' programmes live here:
 
-* ``"frf_random"`` (seed 001): the random-test FRFs of every operating condition the
+* ``"frf_random"`` [Trombetti 2002]: the random-test FRFs of every operating condition the
   paper plots (:func:`sim.papers.uniaxial.rice_cases`), model vs the analytical
   transfer function; the oil column is the peak of the model's FRF with the optimal
   gains, Hz;
-* ``"ls_identification"`` (seed 002): the test programme measured with the LHPOST DAQ
+* ``"ls_identification"`` [Ozcelik 2008]: the test programme measured with the LHPOST DAQ
   model and identified by least squares (M_e, K_e, C_e, F_mu).
 
 Each returns a JSON-ready summary (``characterization.json``), the report's markdown
@@ -30,7 +30,7 @@ def _peak(p) -> dict:
 
 
 def frf_random(desc, *, quick: bool = False, workers: int | None = None, progress=None, runs_dir=None) -> dict:
-    """Seed 001's random-test programme on the model (``desc`` must be that table)."""
+    """The random-test programme of [Trombetti 2002] on the model (``desc`` must be that table)."""
     from sim.papers import uniaxial as U
 
     t0 = time.perf_counter()
@@ -73,7 +73,7 @@ def frf_random(desc, *, quick: bool = False, workers: int | None = None, progres
 
 
 def ls_identification(desc, *, quick: bool = False, workers: int | None = None, progress=None, runs_dir=None) -> dict:
-    """Seed 002's programme on the model: measured run files and the least squares."""
+    """The programme of [Ozcelik 2008] on the model: measured run files and the least squares."""
     from sim.papers import uniaxial as U
 
     t0 = time.perf_counter()

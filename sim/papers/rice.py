@@ -1,4 +1,4 @@
-"""The Rice University shaking table's analytical transfer function (seed 001, Eqs. 1-8).
+"""The Rice University shaking table's analytical transfer function (Eqs. 1-8 of [Trombetti 2002]).
 
 Trombetti & Conte model the uni-axial, displacement-controlled table as a linear
 input-output transfer function from the commanded displacement x_d to the achieved
@@ -47,8 +47,8 @@ from sim.control.analog import Conditioning, Gains, RiceController  # noqa: F401
 
 TABLE_FILE = ROOT / "scenarios" / "tables" / "rice.toml"
 
-# ------------------------------------------------------------------ seed 001 figures
-#: Paper's statements used as targets (seed 001; section B of the published values).
+# ------------------------------------------------------------------ figures of [Trombetti 2002]
+#: Paper's statements used as targets ([Trombetti 2002]).
 PAPER = {
     "oil_column_bare_hz": (67.0, 70.0),  # Sec. 6.1 "approximately 70 Hz"; Sec. 7 "67 Hz" (optimal gains)
     "foundation_hz": 27.1,  # Sec. 5.1

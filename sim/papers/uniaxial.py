@@ -1,6 +1,6 @@
 """The two uni-axial papers' test programmes run on the model (MuJoCo + hydraulics).
 
-Rice (seed 001): :func:`rice_frf` builds the Rice table (``scenarios/tables/rice.toml``)
+Rice [Trombetti 2002]: :func:`rice_frf` builds the Rice table (``scenarios/tables/rice.toml``)
 with one of the paper's effective servo-hydraulic parameter sets applied, optionally a
 payload, and runs the paper's random test: a white-noise acceleration command,
 11 segments of 2^14 samples at 4000 Hz (plus a lead-in that is discarded, the paper's
@@ -17,7 +17,7 @@ is synthesised at the controller rate (8000 Hz) and handed to the loop as its re
 the records are the loop's channels (absolute table displacement and acceleration,
 including the foundation's motion; the stroke; the chamber pressures; the valve opening).
 
-UCSD (seed 002): see :func:`ucsd_programme` further down.
+UCSD [Ozcelik 2008]: see :func:`ucsd_programme` further down.
 """
 
 from __future__ import annotations
@@ -279,8 +279,8 @@ def run_rice_programme(cases=None, workers: int = 2, progress=None, **kw) -> lis
     return map_jobs(partial(run_rice_case, **kw), cases or rice_cases(), workers=workers, progress=progress)
 
 
-# ------------------------------------------------------------------ UCSD (seed 002)
-#: seed 002 Table 8 (v cm/s, xi %, f_m Hz, A_m, u_max cm, F_0 kN).
+# ------------------------------------------------------------------ UCSD [Ozcelik 2008]
+#: Table 8 of [Ozcelik 2008] (v cm/s, xi %, f_m Hz, A_m, u_max cm, F_0 kN).
 PAPER_TABLE8 = [
     (20.00, 33.20, 0.416, 1.60, 7.65, 60.5),
     (25.12, 27.72, 0.433, 1.88, 9.23, 62.2),
@@ -291,11 +291,11 @@ PAPER_TABLE8 = [
     (150.72, 7.50, 0.468, 6.69, 51.26, 97.0),
     (180.00, 6.67, 0.469, 7.52, 61.08, 102.8),
 ]
-#: seed 002 identified parameters (13.8 MPa, periodic tests, constrained C_e).
+#: the parameters identified in [Ozcelik 2008] (13.8 MPa, periodic tests, constrained C_e).
 PAPER_PARAMS = {"M_e_kg": 144.0e3, "K_e_N_per_m": 1.263e6, "C_e": 45.9e3, "F_mu_N": 26.5e3, "alpha": 0.5}
 UCSD_FILE = R.ROOT / "scenarios" / "tables" / "ucsd.toml"
-#: Hold-down nitrogen pressure (MPa) -> K_e (seed 002 Table 4 averages) and the vertical
-#: bearing force F_z (seed 002, Fig. 5); F_mu = 4.1 kN + 0.39 % F_z (seed 002).
+#: Hold-down nitrogen pressure (MPa) -> K_e (the averages in Table 4 of [Ozcelik 2008]) and the vertical
+#: bearing force F_z (Fig. 5 of [Ozcelik 2008]); F_mu = 4.1 kN + 0.39 % F_z [Ozcelik 2008].
 UCSD_HOLD_DOWN = {
     13.8: {"K_e": 1.263e6, "F_z": 5.783e6},
     6.9: {"K_e": 0.635e6, "F_z": 3.698e6},
@@ -331,7 +331,7 @@ UCSD_EL_CENTRO = {"EC20": 0.2, "EC100": 1.0, "EC300": 3.0}
 UCSD_WHITE_NOISE = {"WN3": 0.03, "WN5": 0.05, "WN7": 0.07, "WN10": 0.10, "WN13": 0.13}
 #: Pre-sliding travel of the platen friction (Dahl, ``platen_coulomb`` ``presliding_m``).
 #: calibrated: the WN 3-7 % g least squares (C_e constrained, the report's processing)
-#: returns seed 002's low-amplitude white-noise K_e (2.02 MN/m). Not in ucsd.toml (off by
+#: returns the low-amplitude white-noise K_e of [Ozcelik 2008] (2.02 MN/m). Not in ucsd.toml (off by
 #: default): it also moves the periodic identification outside its tolerances and makes
 #: El Centro read a stiffer, less frictional table than the paper found (docs/uniaxial.md).
 UCSD_PRESLIDING_M = 0.4e-3
@@ -359,7 +359,7 @@ def ucsd_description(
 
 
 def ucsd_motion(name: str, fs: float = 1024.0, *, cycles: float = 2.0, wn_duration_s: float = 30.0, seed: int = 0):
-    """The reference Motion of one test of seed 002's programme."""
+    """The reference Motion of one test of the programme of [Ozcelik 2008]."""
     from sim.scenario import motions as Mo
 
     if name in UCSD_TRIANGLES:
@@ -494,7 +494,7 @@ def rice_report(results: list[dict]) -> list[str]:
     """Markdown: every Rice case, analytical Eq. 1-8 vs model FRF, with the paper's statements."""
     tb = R.load()
     lines = [
-        "# Rice table (seed 001): paper vs analytical T(s) vs model FRF",
+        "# Rice table [Trombetti 2002]: paper vs analytical T(s) vs model FRF",
         "",
         "Model FRF: white-noise acceleration command, Bartlett average of 11 x 2^14 samples at 4000 Hz, "
         "3-term Blackman-Harris (sim/papers/uniaxial.py). Peaks as (Hz, |T|); model peaks on a 5-bin running mean.",
@@ -586,7 +586,7 @@ def ucsd_report(results, ident: dict | None = None) -> list[str]:
     }
     paper_fmu = {"periodic": 26.5, "El Centro": 28.3, "WN 3-7 % g": 26.1, "WN 10-13 % g": 24.4}
     lines = [
-        "# NEES-UCSD LHPOST (seed 002): least-squares identification of simulated tests",
+        "# NEES-UCSD LHPOST [Ozcelik 2008]: least-squares identification of simulated tests",
         "",
         "Model truth (scenarios/tables/ucsd.toml, 13.8 MPa): M_e 144 t, K_e 1.263 MN/m, C_e 45.9 kN (s/m)^0.5, "
         "F_mu 26.65 kN (4.1 kN + 0.39 % x 5.783 MN), alpha 0.5. Records: 512 Hz, accelerometers low-passed at "

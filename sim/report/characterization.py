@@ -162,7 +162,7 @@ def write_report(out: Path, summary: dict, rows: list[dict], figures: list[str])
         "",
     ]
     L.append(
-        f"Programme of seed 000 run on the model ({summary.get('mode', 'full')} records), "
+        f"Programme of [Airouche 2014] run on the model ({summary.get('mode', 'full')} records), "
         f"{summary.get('wall_s', float('nan')):.0f} s wall time, {summary.get('sim_s', float('nan')):.0f} s "
         "simulated."
     )

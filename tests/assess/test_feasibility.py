@@ -238,8 +238,14 @@ def test_ucsd_t8_is_feasible(tmp_path, capsys):
 
 
 def test_shear_frame_response_balances_the_floor_inertia():
-    """Base shear from the storey springs (K q) equals the floors' inertia forces
-    sum m_i (a_platen + q_i'') up to the 2 % damping force."""
+    """Newton on the whole frame: the floors' inertia forces sum m_i (a_x + h_i a_ry + q_i'')
+    (platen translation, its rocking at floor height h_i, drift) balance the storey springs
+    and the 2 % modal dampers, sum (K q + C q'), with C = M phi diag(2 zeta w) phi^T M built
+    here from K and M: within 1 % of the peak (measured 0.26 %, the finite differences of
+    q at 1024 Hz; the damper force alone is 4.5 %, the rocking term 5 %). The reported
+    base shear is the springs' part, |sum K q|."""
+    import scipy.linalg
+
     frame = specimen_from_numbers(mass_kg=20000, cg_height_m=3.0, modes_hz=[2.0, 5.0, 9.0])
     v = study.assess(study.Case(table="cgs", motion="elcentro1940", payload=frame, window_s=2.0))
     out = v["_outcome"]
@@ -249,12 +255,19 @@ def test_shear_frame_response_balances_the_floor_inertia():
     resp = specimen_response(res, out.tm)
     q = res.extras["payload_qpos"]
     dt = float(res.t[1] - res.t[0])
-    qdd = np.gradient(np.gradient(q, dt, axis=0), dt, axis=0)
-    inertia = (frame.mass_kg * (res.channels["table_acceleration"][:, :1] + qdd)).sum(axis=1)
-    k = slice(50, -50)
-    peak = np.max(np.abs(inertia[k]))
-    assert np.max(np.abs(np.abs(inertia[k]) - resp["base_shear_n"][k])) < 0.1 * peak
+    qd = np.gradient(q, dt, axis=0)
+    qdd = np.gradient(qd, dt, axis=0)
+    a = res.channels["table_acceleration"]
     h = frame.storey_height_m * np.arange(1, 4)
+    inertia = (frame.mass_kg * (a[:, :1] + a[:, 4:5] * h + qdd)).sum(axis=1)
+    M, K = np.diag(frame.mass_kg), np.asarray(frame.stiffness_n_m)
+    w2, phi = scipy.linalg.eigh(K, M)  # mass-normalised modes
+    C = M @ phi @ np.diag(2 * frame.damping_ratio * np.sqrt(w2)) @ phi.T @ M
+    springs, dampers = (q @ K).sum(axis=1), (qd @ C).sum(axis=1)
+    k = slice(50, -50)  # away from the finite differences' ends
+    peak = np.max(np.abs(inertia[k]))
+    assert np.max(np.abs(inertia[k] + springs[k] + dampers[k])) < 0.01 * peak
+    np.testing.assert_allclose(resp["base_shear_n"], np.abs(springs), rtol=1e-9, atol=1e-6)
     assert v["figures"]["specimen"]["peak_overturning_n_m"] <= np.max(resp["base_shear_n"]) * h[-1]
     assert v["figures"]["specimen"]["peak_storey_drift_m"] > 0
 

@@ -4,7 +4,7 @@ The issue's acceptance figures for El Centro at 80 %: displacement NRMSE <= 5 %,
 within 10 %, 5 %-damped response spectrum of the achieved acceleration within
 0.8-1.25 x the reference's from 0.5 to 20 Hz. The plain controller falls short of it
 (PGA 1.13-1.17 in x, spectrum up to 1.25-1.43 in 13-20 Hz): the dry friction (1.25 %
-of capability, seed 000) reverses at every velocity reversal and rings the oil
+of capability, [Airouche 2014]) reverses at every velocity reversal and rings the oil
 columns. The scenarios therefore iterate the drive on the model (two corrections, FRF
 from a white-noise identification run), as table controllers do before a test; the
 criterion is asserted on the iterated run.

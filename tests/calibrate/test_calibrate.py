@@ -21,7 +21,7 @@ from sim.runs.runfile import read_run, write_run
 UCSD_TOML = Path(__file__).resolve().parents[2] / "scenarios" / "tables" / "ucsd.toml"
 #: the NEES-UCSD periodic tests simulated (sim.papers.uniaxial): 3 triangular, 4 sinusoidal
 UCSD_SET = ["T5", "T7", "T9", "S4", "S6", "S8", "S10"]
-#: the truth in ucsd.toml: F_mu = 4.1 kN + 0.39 % x 5.783 MN (seed 002), C_e, alpha, K_e (seed 002)
+#: the truth in ucsd.toml: F_mu = 4.1 kN + 0.39 % x 5.783 MN [Ozcelik 2008], C_e, alpha, K_e [Ozcelik 2008]
 F_MU, C_E, ALPHA, K_E = 4.1e3 + 0.0039 * 5.783e6, 45.9e3, 0.5, 1.263e6
 
 

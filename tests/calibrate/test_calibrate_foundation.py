@@ -1,5 +1,5 @@
 """The foundation mode on the replay path (issue #13): runs made on the CGS table with its
-reaction mass (6400 t, Table A) on a spring, calibrated against the stock description (a
+reaction mass (6400 t, Sec. 2 of [Airouche 2014]) on a spring, calibrated against the stock description (a
 fixed foundation), name ``foundation_mode`` at the table, recover its frequency within
 10 % and bring the held-out error down; clean runs with the candidate add nothing.
 
@@ -28,7 +28,7 @@ from sim.calibrate import search as S
 EFFECTS = ["foundation_mode", "added_mass"]
 #: of the clean runs: the foundation mode and every confuser tried
 CLEAN_EFFECTS = ["foundation_mode", "added_mass", "bulk_modulus", "valve_flow_gain", "spring"]
-CGS_MASS_KG = 6.4e6  # Table A: the 6400 t reaction mass (scenarios/tables/cgs.toml)
+CGS_MASS_KG = 6.4e6  # Sec. 2 of [Airouche 2014]: the 6400 t reaction mass (scenarios/tables/cgs.toml)
 
 
 def _foundation(f_hz, zeta=0.05):

@@ -171,7 +171,7 @@ def test_sensor_lowpass_of_one_accelerometer_found(floor, tmp_path):
 @pytest.mark.slow
 def test_valve_bandwidth_of_a_class_found(floor, tmp_path):
     """The vertical valves' main stage at 25 Hz where the description says 41.5 Hz
-    (Table A's second-order fit; a worn pilot stage, or a valve of a lower rating)."""
+    (the second-order fit of Sec. 4 of [Airouche 2014]; a worn pilot stage, or a valve of a lower rating)."""
     paths = _cgs_measured(tmp_path, [{"type": "valve_bandwidth", "where": "class:vertical", "bandwidth_hz": 25.0}])
     res = S.calibrate(
         paths, path="replay", effects=["valve_bandwidth", "valve_delay", "valve_flow_gain", "bulk_modulus"], workers=2

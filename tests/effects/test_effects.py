@@ -19,7 +19,7 @@ from sim.effects import EFFECTS, build_model, create, table_parameters, with_par
 from sim.effects.mechanical import CoulombFriction, dof_jacobian
 from sim.errors import ScenarioError
 
-M_UCSD = 144e3  # tests/papers/test_ucsd.py: the LHPOST's effective mass (seed 002)
+M_UCSD = 144e3  # tests/papers/test_ucsd.py: the LHPOST's effective mass [Ozcelik 2008]
 
 
 @pytest.fixture(scope="module")

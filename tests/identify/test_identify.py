@@ -1,4 +1,4 @@
-"""Least-squares identification (seed 002, Eqs. 2-16), Table 8 (Eqs. 18-26), CLI."""
+"""Least-squares identification (Eqs. 2-16 of [Ozcelik 2008]), Table 8 (Eqs. 18-26), CLI."""
 
 import json
 import math

@@ -328,10 +328,29 @@ def _rice_ref(rate, n, slope=0.01):
     return Reference(t=t, d=D, v=V, a=np.zeros((n, 6)))
 
 
+def _paper_ramp_response(t, slope=0.01):
+    """The actuator stroke the paper's linear model gives for ``_rice_ref``'s ramp: H(s) of
+    Eqs. 1-8 of [Trombetti 2002] (sim.papers.rice.transfer, valve delay and foundation
+    included) applied by FFT to the ramp, held, ramped back and held at 0 over a 4 s
+    period (causal: the first ``len(t)`` samples see only the ramp, the previous period's
+    tail has settled)."""
+    from sim.papers import rice
+
+    fs, n, period = 1.0 / (t[1] - t[0]), len(t), 16000
+    k = np.arange(period)
+    top = slope * t[-1]
+    r = np.where(k < n, slope * k / fs, top)
+    r[period // 2 :] = np.clip(top - slope * (k[period // 2 :] - period // 2) / fs, 0.0, None)
+    f = np.fft.rfftfreq(period, 1.0 / fs)
+    H = np.concatenate([[1.0], rice.transfer(f[1:]).H])  # H(0) = 1: the integral gain
+    return np.fft.irfft(np.fft.rfft(r) * H, period)[:n]
+
+
 def test_analog_controller_ticks_every_step_from_either_reference_rate(rice_sim):
     """The loop takes a reference at the recorder rate (interpolated to the controller's
     ticks) or at the controller rate (the paper's per-step command): the same run for a
-    linear command; the valve command changes at every physics step, recorded every 2."""
+    linear command; the valve command changes at every physics step, recorded every 2;
+    the stroke follows the ramp as the paper's linear model of the loop says it should."""
     rice_sim.reset()
     a = rice_sim.run(reference=_rice_ref(4000.0, 201))
     rice_sim.reset()
@@ -340,9 +359,12 @@ def test_analog_controller_ticks_every_step_from_either_reference_rate(rice_sim)
     assert a.t[1] == 1 / 4000.0
     for ch in a.channels:
         assert np.allclose(a.channels[ch], b.channels[ch], rtol=1e-9, atol=1e-12), ch
-    # the commanded ramp is followed (the stroke moves with it, not held between records)
+    # the commanded ramp is followed as the analytical H(s) predicts: the valve's 13.5 ms
+    # delay, then the stroke 22 % behind the ramp at 50 ms (measured: 0.17 % NRMSE)
     x = a.channels["actuator_displacement"][:, 0]
-    assert x[-1] > 0.2 * 0.01 * a.t[-1] and np.all(np.isfinite(a.channels["valve_command"]))
+    y = _paper_ramp_response(a.t)
+    assert np.sqrt(np.mean((x - y) ** 2)) < 0.01 * np.sqrt(np.mean(y**2))
+    assert np.all(np.isfinite(a.channels["valve_command"]))
 
 
 def test_analog_run_stops_when_the_actuator_leaves_its_stroke(rice_sim):

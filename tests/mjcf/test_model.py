@@ -11,7 +11,7 @@ from mjcf.analysis import linear_modes, projection
 from mjcf.description import actuator_strokes, envelope_corners
 from sim.effects import build_model
 
-# Seed 000, Table 2 (bare-table effective masses).
+# Table 2 of [Airouche 2014] (bare-table effective masses).
 TABLE2 = {"x": 48.85e3, "y": 49.36e3, "z": 52.50e3, "rx": 208e3, "ry": 217e3, "rz": 354e3}
 
 

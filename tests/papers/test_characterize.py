@@ -1,8 +1,20 @@
 """The virtual identification programme (``shaketable characterize --quick``) against the
-CGS paper (seed 000). One quick programme (~2 min on 2 cores) serves every assertion.
+CGS paper [Airouche 2014]. One quick programme (~2 min on 2 cores) serves every assertion.
 
-Only the figures the model meets are asserted, at the brief's tolerances; what is not
-met is reported in docs/characterization.md with the measured numbers.
+Two kinds of test, named for what they are:
+
+* ``test_regression_*``: the figures ``cgs.toml`` was calibrated to (its ``calibrated:``
+  lines: dead volumes to Table 1's oil columns, masses and inertias to Table 2, the
+  translational seal friction to the 1.25 %). Measured again by the same programme, they
+  show the calibration still holds and the programme still reads it; they cannot show
+  that the model is right.
+* ``test_validation_*``: published figures the calibration did not use: the servovalve's
+  first-order time constant (Sec. 4: the table's valve is the paper's second-order fit,
+  the 5.6 ms first-order fit of the same measurement is not an input) and the rotational
+  friction (Sec. 6: 1.25 % on all six DOFs; only x, y, z were calibrated).
+
+What the model does not meet is asserted as measured and reported in
+docs/characterization.md.
 """
 
 import dataclasses
@@ -46,7 +58,8 @@ def test_outputs_written(quick):
 
 
 @pytest.mark.parametrize("dof", ["x", "y", "z", "rx", "ry", "rz"])
-def test_oil_column_within_3_percent(quick, dof):
+def test_regression_oil_column_still_meets_table_1_it_was_calibrated_to(quick, dof):
+    """Table 1 within 3 % (the dead volumes were chosen for it)."""
     s, _ = quick
     assert s["oil_column_hz"][dof] == pytest.approx(PUB.oil_column_hz[dof], rel=0.03)
 
@@ -61,14 +74,16 @@ def test_oil_column_peaks_are_damped(quick):
 
 @pytest.mark.parametrize("dof", list(C.DOFS))
 @pytest.mark.parametrize("level", ["R1", "R2"])
-def test_effective_mass_within_2_percent(quick, dof, level):
-    """Table 2 from the virtual tests at both levels (the masses are calibrated against the
-    tests' mean; the R1/R2 difference is the model's own)."""
+def test_regression_effective_mass_still_meets_table_2_it_was_calibrated_to(quick, dof, level):
+    """Table 2 from the virtual tests at both levels, within 2 % (the masses are calibrated
+    against the tests' mean; the R1/R2 difference is the model's own)."""
     s, _ = quick
     assert s["effective_mass_levels"][level][dof] == pytest.approx(PUB.effective_mass[dof], rel=0.02)
 
 
-def test_servovalve_second_order_fit(quick):
+def test_regression_servovalve_fit_recovers_the_tables_own_valve(quick):
+    """The table's valve is the paper's second-order fit (41.5 Hz, 0.75, gain 1): the
+    virtual test and its fit read back the model's input, within 3 %."""
     s, _ = quick
     sv = s["servovalve"]
     assert sv["wn_hz"] == pytest.approx(41.5, rel=0.03)
@@ -76,10 +91,32 @@ def test_servovalve_second_order_fit(quick):
     assert sv["K_low"] == pytest.approx(1.0, rel=0.03)
 
 
+def test_validation_servovalve_first_order_tau_is_the_papers_5_6_ms(quick):
+    """Sec. 4 fits the same measured valve FRF twice: second order (the table's valve) and
+    first order, tau = 5.6 ms, which the model never received. The programme's magnitude
+    fit of the virtual FRF (0.5-125 Hz) gives it back within 0.05 ms (measured 5.59 ms);
+    the complex fit over 0.5-20 Hz, where the phase holds, reads 4 % more (5.84 ms)."""
+    s, _ = quick
+    sv = s["servovalve"]
+    assert sv["tau_s_magnitude_fit"] == pytest.approx(PUB.servovalve["tau_s"], abs=5e-5)
+    assert sv["tau_s"] == pytest.approx(PUB.servovalve["tau_s"], rel=0.06)
+
+
 @pytest.mark.parametrize("dof", ["x", "y", "z"])
-def test_translational_friction_about_1_25_percent(quick, dof):
+def test_regression_translational_friction_still_meets_the_1_25_percent_it_was_calibrated_to(quick, dof):
     s, _ = quick
     assert s["friction_fraction"][dof] == pytest.approx(0.0125, abs=0.0015)
+
+
+@pytest.mark.parametrize("dof", ["rx", "ry", "rz"])
+def test_validation_rotational_friction_falls_short_of_the_papers_1_25_percent(quick, dof):
+    """Sec. 6: 1.25 % of capability on all six DOFs. The seal friction was calibrated on
+    x, y, z only; on the rotations the least-squares Coulomb term of the model's loops
+    reads less (measured 0.83-0.91 % in the quick records; docs/characterization.md
+    gives the reasons found and the loops' half-height reading). Not met; held at what it
+    is: 60-80 % of the paper's figure."""
+    s, _ = quick
+    assert 0.60 * 0.0125 < s["friction_fraction"][dof] < 0.80 * 0.0125
 
 
 @pytest.mark.parametrize("d", ["y", "z", "rx", "ry", "rz"])

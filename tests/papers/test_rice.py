@@ -1,4 +1,4 @@
-"""Rice table (seed 001): description, analytical T(s) (Eqs. 1-8), the model's FRF."""
+"""Rice table [Trombetti 2002]: description, analytical T(s) (Eqs. 1-8), the model's FRF."""
 
 import math
 
@@ -17,7 +17,7 @@ def mag(gains, ps="d0", **kw):
 
 def test_known_parameters_from_the_description():
     tb = R.load()
-    # seed 001 Sec. 5.1: A = 82.13 cm^2, V = 1668.86 cm^3, m_t = 643 kg, m_b = 29 500 kg
+    # Sec. 5.1 of [Trombetti 2002]: A = 82.13 cm^2, V = 1668.86 cm^3, m_t = 643 kg, m_b = 29 500 kg
     assert tb.area_m2 == pytest.approx(82.13e-4, rel=1e-9)
     assert tb.volume_m3 == pytest.approx(1668.86e-6, rel=1e-4)
     assert tb.m_t == pytest.approx(643.0)
@@ -135,7 +135,11 @@ def test_model_reproduces_payload_and_gain_effects():
     assert 15.0 <= mm["P3"]["low_peak"][0] <= 20.0  # the ~15 Hz peak of Fig. 3
     assert 35.5 <= mm["rigid 408"]["central_peak"][0] <= 42.0  # central peak 36-42 Hz
     assert mm["rigid 408"]["foundation_peak"][1] > 2.0  # 27 Hz peak grows with payload
-    assert 50.0 <= mm["rigid 68 clamp"]["small_peak"][0] <= 65.0  # the split oil-column peak
+    # the split oil-column peak: where Eqs. 1-8 put it (measured 55.63 vs 55.72 Hz), and
+    # within 1.5 Hz of the paper's "about 57 Hz" (Sec. 8.2 of [Trombetti 2002])
+    small = mm["rigid 68 clamp"]["small_peak"][0]
+    assert abs(small - res["rigid 68 clamp"]["analytical_metrics"]["small_peak"][0]) < 0.5
+    assert abs(small - 57.0) <= 1.5
     assert 60.0 <= mm["frame 297"]["oil_peak"][0] <= 64.0  # oil column drops to ~62 Hz
     spikes = [s[0] for s in mm["frame 297"]["spikes"]]
     assert spikes[0] == pytest.approx(7.22, abs=1.0)  # spike at the first mode
@@ -242,6 +246,17 @@ def _payload_text(name):
     return (PAYLOADS_DIR / f"{name}.toml").read_text()
 
 
+def _two_mass_upper_hz(mass_kg, clamp_hz=52.0):
+    """Upper natural frequency of the table m_t on its oil column k = 4 beta A^2 / V (Eq. 11
+    of [Trombetti 2002], set pfr) carrying ``mass_kg`` on a spring of ``clamp_hz``: the larger
+    root of w^4 - w^2 (w_o^2 + w_c^2 (1 + m/m_t)) + w_o^2 w_c^2 = 0 (no loop, no damping)."""
+    tb = R.load()
+    wo2 = 4 * tb.area_m2**2 * tb.sets["pfr"].beta_pa / (tb.volume_m3 * tb.m_t)
+    wc2 = (2 * math.pi * clamp_hz) ** 2
+    b = wo2 + wc2 * (1 + mass_kg / tb.m_t)
+    return math.sqrt((b + math.sqrt(b * b - 4 * wo2 * wc2)) / 2) / (2 * math.pi)
+
+
 def test_clamp_split_puts_the_small_peak_near_57_hz_analytical():
     """Sec. 8.1/8.2: a small peak at about 57 Hz for all three blocks, central peak 36-42 Hz,
     foundation peak 1.7 / 2.0 / 3.0. One clamped fraction, the same for every block (the
@@ -253,8 +268,17 @@ def test_clamp_split_puts_the_small_peak_near_57_hz_analytical():
     got = {mp: _clamp_peaks(mp, a) for mp in CLAMPED}
     whole = {mp: _clamp_peaks(mp, 1.0) for mp in CLAMPED}
     small = [got[mp][0][0] for mp in CLAMPED]
-    # the whole block on the clamp: 62 / 75 / 85 Hz; the split: within 1.5 Hz of 57 for all three
-    assert [w[0][0] for w in whole.values()] == pytest.approx([62.1, 75.4, 84.8], abs=0.1)
+    # the whole block on the clamp (the paper's SDOF taken literally) misses the paper's
+    # ~57 Hz by 5 Hz or more on every block (Eqs. 1-8 give 62.1 / 75.4 / 84.8 Hz), rising
+    # with the mass as the two-mass closed form does: the upper root of the table on its
+    # oil column (Eq. 11, set pfr: 57.0 Hz) carrying the block on its 52 Hz clamp, 64.0 /
+    # 71.3 / 79.2 Hz (no loop: the controller stiffens the heavier blocks' peak further)
+    up = [w[0][0] for w in whole.values()]
+    two_mass = [_two_mass_upper_hz(mp) for mp in CLAMPED]
+    assert two_mass[0] < two_mass[1] < two_mass[2] and up[0] < up[1] < up[2]
+    assert all(f - 57.0 >= 5.0 for f in up), up
+    assert all(abs(f - f2) < 6.0 for f, f2 in zip(up, two_mass)), (up, two_mass)
+    # the split: within 1.5 Hz of 57 for all three
     assert all(abs(s - 57.0) <= 1.5 for s in small), small
     # ... but still rising with the mass (the paper's peak stays at about 57 Hz): no one
     # fraction puts all three within 1 Hz (68 kg needs more on the clamp than 408 kg allows)

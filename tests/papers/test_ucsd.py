@@ -1,4 +1,4 @@
-"""NEES-UCSD LHPOST (seed 002): description and the identification of simulated tests."""
+"""NEES-UCSD LHPOST [Ozcelik 2008]: description and the identification of simulated tests."""
 
 import math
 
@@ -49,7 +49,7 @@ def _identify(names, **kw):
 
 
 def test_periodic_identification_recovers_friction_and_table8():
-    """Seed 002 periodic tests on the model, through the DAQ model (512 Hz, 100 Hz
+    """The periodic tests of [Ozcelik 2008] on the model, through the DAQ model (512 Hz, 100 Hz
     accelerometer filter, noise): with the accelerometer filter applied to every term
     and the stuck samples left out, the least squares returns the model's parameters,
     F_mu within 2 % of the paper's 26.5 kN and Table 8 within 1 % on every row."""
@@ -132,7 +132,7 @@ def test_presliding_platen_friction_law():
 
 
 def test_presliding_reproduces_the_low_amplitude_white_noise_stiffness():
-    """Seed 002: low-level white noise (3-7 % g rms) gives the right M_e (143.6 t) but
+    """[Ozcelik 2008]: low-level white noise (3-7 % g rms) gives the right M_e (143.6 t) but
     K_e 2.02 MN/m, +60 % on the periodic 1.263; 10-13 % g gives 1.405 (+11 %). With the
     platen friction's pre-sliding travel (UCSD_PRESLIDING_M, calibrated on the 3-7 % g set
     alone) the model reproduces the first and predicts the second: at 3-7 % g most

@@ -6,7 +6,6 @@ Run files are made here with the project's own simulator (2 s of harmonic_bare).
 from __future__ import annotations
 
 import math
-import os
 import shutil
 import subprocess
 import sys
@@ -272,17 +271,29 @@ def test_recording_folder_is_created(made, tmp_path, capsys):
     assert rc == 0 and (tmp_path / "new" / "sub" / "x.rrd").stat().st_size > 0
 
 
-@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="root can write anywhere")
-def test_unwritable_folder(made, tmp_path, capsys):
+def test_unwritable_folder(made, tmp_path, capsys, monkeypatch):
+    """A folder the user may not write to: one line, exit 2, nothing left in it. The
+    refusal is raised where the recording probes the folder (root, as in CI, would not
+    feel a folder's permissions)."""
+    import tempfile
+
+    from sim.report import rerun
+
     _, run_path, _ = made
     ro = tmp_path / "ro"
     ro.mkdir()
-    ro.chmod(0o500)
-    try:
-        rc = cli.main(["view", str(run_path), "--rrd", str(ro / "x.rrd")])
-        assert rc == 2 and "cannot be written" in capsys.readouterr().err
-    finally:
-        ro.chmod(0o700)
+    real_mkstemp = tempfile.mkstemp
+
+    def refused(*a, dir=None, **k):
+        if dir is not None and Path(dir) == ro:
+            raise PermissionError(13, "Permission denied")
+        return real_mkstemp(*a, dir=dir, **k)
+
+    monkeypatch.setattr(rerun.tempfile, "mkstemp", refused)
+    rc = cli.main(["view", str(run_path), "--rrd", str(ro / "x.rrd")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "cannot be written (Permission denied)" in err
+    assert list(ro.iterdir()) == []
 
 
 def test_not_a_run_file(tmp_path, capsys):

@@ -438,9 +438,9 @@ def test_a_renamed_six_dof_description_builds_and_runs_with_no_code_of_its_own(t
 
 
 def test_replay_of_a_204_8_hz_record_lasts_its_own_duration(example):
-    """The replay behind calibration (:func:`sim.calibrate.replay.run_at_record`, once
-    behind the removed `fit`) once replayed a 204.8 Hz record at 1024 Hz (30 s became 6 s)."""
-    from sim.calibrate.replay import run_at_record
+    """The replay behind calibration (:func:`sim.calibrate.replay.run_at_record`) once
+    replayed a 204.8 Hz record at 1024 Hz (30 s became 6 s)."""
+    from sim.calibrate.replay import replay, run_at_record
     from sim.effects import build_model
 
     run = example["runs"][204.8]
@@ -450,8 +450,26 @@ def test_replay_of_a_204_8_hz_record_lasts_its_own_duration(example):
     assert n == run.n_samples
     assert t_rec[n - 1] == pytest.approx(run.duration_s, abs=1e-9)
     assert ch["table_acceleration"].shape == (run.n_samples, 1)
-    # the model follows the record in time: acceleration residual as replay's (same hold, no null estimate)
-    assert nrmse(ch["table_acceleration"][:, 0], run.table_acceleration[:, 0]) < 0.3
+    # the model follows the record in time: its acceleration best matches the record at lag 0
+    # (correlation 0.99 measured; at the old wrong rate the best lag was 45 samples and the
+    # correlation 0.09). The amplitudes differ by what the uncalibrated description lacks
+    # (the lab's undeclared friction and valve null), which is replay's own residual:
+    # the same path, bit for bit (same hold, no null estimate).
+    model, record = ch["table_acceleration"][:, 0], run.table_acceleration[:, 0]
+    lag, corr = _best_lag(model, record, max_lag=50)
+    assert lag == 0 and corr > 0.95, (lag, corr)
+    same = replay(run, hold=run.meta.get("command_hold", "zoh"), bias="none").run.table_acceleration[:, 0]
+    np.testing.assert_allclose(model, same, rtol=1e-9, atol=1e-12)
+
+
+def _best_lag(x, y, max_lag):
+    """The shift of ``x`` against ``y`` (samples) with the largest normalised correlation,
+    and that correlation."""
+    x, y = x - x.mean(), y - y.mean()
+    n = len(x)
+    c = [np.dot(x[max(0, k) : n + min(0, k)], y[max(0, -k) : n - max(0, k)]) for k in range(-max_lag, max_lag + 1)]
+    best = int(np.argmax(c))
+    return best - max_lag, c[best] / np.sqrt(np.dot(x, x) * np.dot(y, y))
 
 
 # ------------------------------------------------------------------ the worked example (docs/lab-example.md)
