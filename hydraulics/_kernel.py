@@ -159,6 +159,11 @@ def p_of_store(s, guess, cline, v0, ppre, nacc):
     return p
 
 
+# One long body on purpose (the architecture test lists it as a compiled kernel): numba
+# compiles it (hydraulics.system._numba_kernel) into one loop over simulations and
+# actuators that keeps the ~40 per-actuator scalars of the servovalve, land-flow, supply
+# and chamber steps in registers. The same steps, named and readable, are the functions of
+# the numpy backend (hydraulics/_numpy_step.py), which test_backends_agree holds it to.
 def step_loops(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
     ns = cmd.shape[0]
     na = cmd.shape[1]

@@ -139,44 +139,16 @@ def p_of_store_np(s, guess, cline, v0, ppre, nacc):
 
 
 def step_numpy(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
+    """One hydraulic step of every actuator of every simulation: servovalve, valve land
+    flows, the chambers' pressures solved implicitly with the supply node, then the
+    chambers' flows, relief, cavitation, volume balances and the actuator forces."""
     dt = G[G_DT]
     pv, prel, pt = G[G_PV], G[G_PREL], G[G_PT]
-    pset, qmax = G[G_PSET], G[G_QMAX]
-    v0, ppre, nacc, cline, sset = G[G_V0], G[G_PPRE], G[G_NACC], G[G_CLINE], G[G_SSET]
     oleak, dl, sqdl, ov = G[G_OLEAK], G[G_DL], G[G_SQDL], G[G_OV]
     K = P[P_K]
-    slew = G[G_SLEW]
-    nd = int(G[G_ND])
 
     # ---- servovalve: delay line, spool dynamics, slew, saturation
-    if nd > 0:
-        ndi = P[P_ND].astype(np.int64)
-        slot = (head + nd - ndi) % nd  # actuator i reads the command of ndi steps ago
-        u = np.where(ndi > 0, buf[:, np.arange(buf.shape[1]), slot], cmd)
-        buf[:, :, head] = cmd
-    else:
-        u = cmd
-    u = u + P[P_U0]
-    y = X[SPOOL]
-    r = X[RATE]
-    if G[G_MODEL] > 0.5:
-        yn = P[P_F00] * y + P[P_F01] * r + P[P_G0] * u
-        rn = P[P_F10] * y + P[P_F11] * r + P[P_G1] * u
-    else:
-        a1 = P[P_A1]
-        yn = a1 * y + (1.0 - a1) * u
-        rn = np.zeros_like(y)
-    if slew > 0.0:
-        lim = slew * dt
-        yn = np.clip(yn, y - lim, y + lim)
-        rn = np.clip(rn, -slew, slew)
-    rn = np.where((yn > 1.0) & (rn > 0.0), 0.0, rn)
-    rn = np.where((yn < -1.0) & (rn < 0.0), 0.0, rn)
-    yn = np.clip(yn, -1.0, 1.0)
-    if G[G_MODEL] < 0.5:
-        rn = (yn - y) / dt
-    X[SPOOL] = yn
-    X[RATE] = rn
+    yn = _servovalve_np(cmd, X, buf, head, P, G)
 
     op = np.maximum(yn - ov, 0.0) / (1.0 - ov)
     on = np.maximum(-yn - ov, 0.0) / (1.0 - ov)
@@ -215,42 +187,7 @@ def step_numpy(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
     sig = np.sum(gpa * (1.0 - wa) + gpb * (1.0 - wb), axis=1)
 
     # ---- supply node
-    ps1 = Y[PS].copy()
-    sto = Y[STORE].copy()
-    ds = pset - ps1
-    dem = d0 + sig * ds
-    qp = (sset - sto) / dt + dem
-    reg = (qp >= 0.0) & (qp <= qmax)
-    qp_c = np.clip(qp, 0.0, qmax)
-    cs = dstore_dp_np(ps1, cline, v0, ppre, nacc)
-    ds_c = (qp_c - d0) / (cs / dt + sig)
-    dem_c = d0 + sig * ds_c
-    sn_c = sto + (qp_c - dem_c) * dt
-    smin = cline * pv
-    low = (~reg) & (sn_c < smin)
-    Y[V_SUPPLY_CAV] += np.where(low, smin - sn_c, 0.0)
-    sn_c = np.where(low, smin, sn_c)
-    psn_c = np.where(low, pv, p_of_store_np(sn_c, ps1 + ds_c, cline, v0, ppre, nacc))
-    ICS[CS_PUMPSAT] += ~reg
-    ICS[CS_LOW] += low
-    ds = np.where(reg, ds, ds_c)
-    dem = np.where(reg, dem, dem_c)
-    qp = np.where(reg, qp, qp_c)
-    snew = np.where(reg, sset, sn_c)
-    psn = np.where(reg, pset, psn_c)
-    if v0 > 0.0:
-        pp = np.maximum(psn, ppre)
-        gas = np.where(psn > ppre, v0 * (ppre / pp) ** (1.0 / nacc), v0)
-    else:
-        gas = np.zeros_like(psn)
-    Y[V_ACC_OUT] += gas - Y[GASV]
-    Y[V_STORE_OUT] += sto - snew
-    Y[V_PUMP] += qp * dt
-    Y[QPUMP] = qp
-    Y[QDEMAND] = dem
-    Y[STORE] = snew
-    Y[PS] = psn
-    Y[GASV] = gas
+    ds = _supply_node_np(Y, ICS, d0, sig, G)
 
     # ---- chambers
     dsc = ds[:, None]
@@ -294,3 +231,88 @@ def step_numpy(cmd, xin, vin, X, Y, IC, ICS, buf, head, P, G):
     fc = np.where(e > 0.0, -np.copysign(P[P_KCUSH] * np.maximum(e, 0.0), xin), 0.0)
     X[FCUSH] = fc
     X[FORCE] = pan * aa - pbn * ab + fc
+
+
+def _servovalve_np(cmd, X, buf, head, P, G):
+    """Servovalve: the command through each actuator's delay line, the spool's first- or
+    second-order dynamics, slew limit and saturation; writes X[SPOOL], X[RATE] and
+    returns the new spool position."""
+    dt = G[G_DT]
+    slew = G[G_SLEW]
+    nd = int(G[G_ND])
+    if nd > 0:
+        ndi = P[P_ND].astype(np.int64)
+        slot = (head + nd - ndi) % nd  # actuator i reads the command of ndi steps ago
+        u = np.where(ndi > 0, buf[:, np.arange(buf.shape[1]), slot], cmd)
+        buf[:, :, head] = cmd
+    else:
+        u = cmd
+    u = u + P[P_U0]
+    y = X[SPOOL]
+    r = X[RATE]
+    if G[G_MODEL] > 0.5:
+        yn = P[P_F00] * y + P[P_F01] * r + P[P_G0] * u
+        rn = P[P_F10] * y + P[P_F11] * r + P[P_G1] * u
+    else:
+        a1 = P[P_A1]
+        yn = a1 * y + (1.0 - a1) * u
+        rn = np.zeros_like(y)
+    if slew > 0.0:
+        lim = slew * dt
+        yn = np.clip(yn, y - lim, y + lim)
+        rn = np.clip(rn, -slew, slew)
+    rn = np.where((yn > 1.0) & (rn > 0.0), 0.0, rn)
+    rn = np.where((yn < -1.0) & (rn < 0.0), 0.0, rn)
+    yn = np.clip(yn, -1.0, 1.0)
+    if G[G_MODEL] < 0.5:
+        rn = (yn - y) / dt
+    X[SPOOL] = yn
+    X[RATE] = rn
+    return yn
+
+
+def _supply_node_np(Y, ICS, d0, sig, G):
+    """Supply node: the pump regulates the supply pressure to its set point where its flow
+    is within [0, max]; otherwise the accumulator and line store take the difference
+    (clamped at the vapour pressure). Updates Y and ICS; returns the supply pressure step."""
+    dt = G[G_DT]
+    pv = G[G_PV]
+    pset, qmax = G[G_PSET], G[G_QMAX]
+    v0, ppre, nacc, cline, sset = G[G_V0], G[G_PPRE], G[G_NACC], G[G_CLINE], G[G_SSET]
+    ps1 = Y[PS].copy()
+    sto = Y[STORE].copy()
+    ds = pset - ps1
+    dem = d0 + sig * ds
+    qp = (sset - sto) / dt + dem
+    reg = (qp >= 0.0) & (qp <= qmax)
+    qp_c = np.clip(qp, 0.0, qmax)
+    cs = dstore_dp_np(ps1, cline, v0, ppre, nacc)
+    ds_c = (qp_c - d0) / (cs / dt + sig)
+    dem_c = d0 + sig * ds_c
+    sn_c = sto + (qp_c - dem_c) * dt
+    smin = cline * pv
+    low = (~reg) & (sn_c < smin)
+    Y[V_SUPPLY_CAV] += np.where(low, smin - sn_c, 0.0)
+    sn_c = np.where(low, smin, sn_c)
+    psn_c = np.where(low, pv, p_of_store_np(sn_c, ps1 + ds_c, cline, v0, ppre, nacc))
+    ICS[CS_PUMPSAT] += ~reg
+    ICS[CS_LOW] += low
+    ds = np.where(reg, ds, ds_c)
+    dem = np.where(reg, dem, dem_c)
+    qp = np.where(reg, qp, qp_c)
+    snew = np.where(reg, sset, sn_c)
+    psn = np.where(reg, pset, psn_c)
+    if v0 > 0.0:
+        pp = np.maximum(psn, ppre)
+        gas = np.where(psn > ppre, v0 * (ppre / pp) ** (1.0 / nacc), v0)
+    else:
+        gas = np.zeros_like(psn)
+    Y[V_ACC_OUT] += gas - Y[GASV]
+    Y[V_STORE_OUT] += sto - snew
+    Y[V_PUMP] += qp * dt
+    Y[QPUMP] = qp
+    Y[QDEMAND] = dem
+    Y[STORE] = snew
+    Y[PS] = psn
+    Y[GASV] = gas
+    return ds

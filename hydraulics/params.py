@@ -245,54 +245,22 @@ class HydraulicParams:
 
     def validate(self) -> None:
         """Raise :class:`HydraulicsParamError` (one line, naming the parameter) if anything is off."""
-
-        def num(name, val, cond, expect):
-            try:
-                v = float(val)
-            except (TypeError, ValueError):
-                raise HydraulicsParamError(f"{name} must be a number (got {val!r})") from None
-            if not math.isfinite(v) or not cond(v):
-                shown = repr(v) if isinstance(val, (int, float, np.floating, np.integer)) else repr(val)
-                raise HydraulicsParamError(f"{name} must be {expect} (got {shown})")
-
-        pos = (lambda v: v > 0, "> 0")
-        nonneg = (lambda v: v >= 0, ">= 0")
-
         n = len(self.names)
         if n == 0:
             raise HydraulicsParamError("actuator list must not be empty")
         if len(self.classes) not in (0, n):
             raise HydraulicsParamError(f"classes must have {n} entries (got {len(self.classes)})")
-
-        for name, (cond, expect) in {
-            "fluid.bulk_modulus_pa": pos,
-            "fluid.vapour_pressure_pa": nonneg,
-            "fluid.relief_pressure_pa": pos,
-            "fluid.entrained_air_fraction": nonneg,
-            "fluid.air_polytropic_exponent": (lambda v: v >= 1.0, ">= 1"),
-            "fluid.atmospheric_pressure_pa": pos,
-            "supply.pressure_pa": pos,
-            "supply.return_pressure_pa": nonneg,
-            "supply.pump_flow_m3_s": nonneg,
-            "supply.accumulator_volume_m3": nonneg,
-            "supply.accumulator_precharge_pa": pos,
-            "supply.polytropic_exponent": (lambda v: v >= 1.0, ">= 1"),
-            "supply.line_volume_m3": pos,
-            "servovalve.rated_flow_m3_s": pos,
-            "servovalve.rated_drop_pa": pos,
-            "servovalve.tau_s": pos,
-            "servovalve.natural_frequency_hz": pos,
-            "servovalve.damping_ratio": pos,
-            "servovalve.delay_s": nonneg,
-            "servovalve.slew_limit_per_s": nonneg,
-            "servovalve.laminar_drop_pa": pos,
-            "servovalve.null_leakage_m3_s": nonneg,
-            "servovalve.overlap": (lambda v: 0.0 <= v < 1.0, "in [0, 1)"),
-        }.items():
+        for name, (cond, expect) in _SCALAR_RULES.items():
             sec, key = name.split(".")
             attr = {"pressure_pa": "supply_pressure_pa"}.get(key, key) if sec == "supply" else key
-            num(name, getattr(self, attr), cond, expect)
+            _check_number(name, getattr(self, attr), cond, expect)
+        self._validate_relations()
+        self._validate_arrays(n)
 
+    def _validate_relations(self) -> None:
+        """The scalars' mutual order: vapour < return < supply < relief pressure, a precharge
+        below the supply, a laminar drop below half the rated drop, null leakage below the
+        rated flow; only the modelled valve models and no supply-line loss."""
         if self.line_resistance_pa_s_m3 != 0.0:
             raise HydraulicsParamError(
                 f"supply.line_resistance_pa_s_m3 must be 0 (supply line loss is not modelled; got {self.line_resistance_pa_s_m3!r})"
@@ -324,29 +292,16 @@ class HydraulicParams:
                 f"servovalve.null_leakage_m3_s must be < rated_flow_m3_s (got {self.null_leakage_m3_s!r})"
             )
 
-        arr_rules = {
-            "half_stroke_m": pos,
-            "area_a_m2": pos,
-            "area_b_m2": pos,
-            "dead_volume_a_m3": pos,
-            "dead_volume_b_m3": pos,
-            "leakage_cross_m3_s_pa": nonneg,
-            "leakage_external_m3_s_pa": nonneg,
-            "seal_friction_n": nonneg,
-            "seal_viscous_n_s_m": nonneg,
-            "cushion_length_m": nonneg,
-            "cushion_stiffness_n_m": nonneg,
-            "seal_static_friction_n": nonneg,
-            "stribeck_velocity_m_s": pos,
-            "friction_smoothing_m_s": pos,
-        }
-        for key, (cond, expect) in arr_rules.items():
+    def _validate_arrays(self, n: int) -> None:
+        """The per-actuator arrays (class values and overrides): shape (n,), each value
+        checked; stored as float64 arrays. A cushion shorter than the half-stroke."""
+        for key, (cond, expect) in _ARRAY_RULES.items():
             arr = np.asarray(getattr(self, key), dtype=np.float64)
             if arr.shape != (n,):
                 raise HydraulicsParamError(f"{key} must have shape ({n},) (got {arr.shape})")
             setattr(self, key, arr)
             for i in range(n):
-                num(f"{self._where(i)}.{key}", arr[i], cond, expect)
+                _check_number(f"{self._where(i)}.{key}", arr[i], cond, expect)
         for key, (_base, (cond, expect)) in PER_ACTUATOR.items():
             arr = getattr(self, key)
             if arr is None:
@@ -356,7 +311,7 @@ class HydraulicParams:
                 raise HydraulicsParamError(f"{key} must have shape ({n},) (got {arr.shape})")
             setattr(self, key, arr)
             for i in range(n):
-                num(f"actuator {self.names[i]} {key}", arr[i], cond, expect)
+                _check_number(f"actuator {self.names[i]} {key}", arr[i], cond, expect)
         for i in range(n):
             if self.cushion_length_m[i] >= self.half_stroke_m[i]:
                 raise HydraulicsParamError(
@@ -380,4 +335,63 @@ PER_ACTUATOR = {
     "valve_flow_gain": (1.0, (lambda v: v > 0, "> 0")),
     "valve_null_offset": (0.0, (lambda v: -1.0 < v < 1.0, "in (-1, 1)")),
     "chamber_bulk_modulus_pa": ("bulk_modulus_pa", (lambda v: v > 0, "> 0")),
+}
+
+
+def _check_number(name, val, cond, expect) -> None:
+    """A finite number meeting ``cond``, else a one-line error naming ``name``."""
+    try:
+        v = float(val)
+    except (TypeError, ValueError):
+        raise HydraulicsParamError(f"{name} must be a number (got {val!r})") from None
+    if not math.isfinite(v) or not cond(v):
+        shown = repr(v) if isinstance(val, (int, float, np.floating, np.integer)) else repr(val)
+        raise HydraulicsParamError(f"{name} must be {expect} (got {shown})")
+
+
+_POS = (lambda v: v > 0, "> 0")
+_NONNEG = (lambda v: v >= 0, ">= 0")
+_AT_LEAST_1 = (lambda v: v >= 1.0, ">= 1")
+#: the scalar parameters' conditions, by their table key
+_SCALAR_RULES = {
+    "fluid.bulk_modulus_pa": _POS,
+    "fluid.vapour_pressure_pa": _NONNEG,
+    "fluid.relief_pressure_pa": _POS,
+    "fluid.entrained_air_fraction": _NONNEG,
+    "fluid.air_polytropic_exponent": _AT_LEAST_1,
+    "fluid.atmospheric_pressure_pa": _POS,
+    "supply.pressure_pa": _POS,
+    "supply.return_pressure_pa": _NONNEG,
+    "supply.pump_flow_m3_s": _NONNEG,
+    "supply.accumulator_volume_m3": _NONNEG,
+    "supply.accumulator_precharge_pa": _POS,
+    "supply.polytropic_exponent": _AT_LEAST_1,
+    "supply.line_volume_m3": _POS,
+    "servovalve.rated_flow_m3_s": _POS,
+    "servovalve.rated_drop_pa": _POS,
+    "servovalve.tau_s": _POS,
+    "servovalve.natural_frequency_hz": _POS,
+    "servovalve.damping_ratio": _POS,
+    "servovalve.delay_s": _NONNEG,
+    "servovalve.slew_limit_per_s": _NONNEG,
+    "servovalve.laminar_drop_pa": _POS,
+    "servovalve.null_leakage_m3_s": _NONNEG,
+    "servovalve.overlap": (lambda v: 0.0 <= v < 1.0, "in [0, 1)"),
+}
+#: the per-actuator class arrays' conditions
+_ARRAY_RULES = {
+    "half_stroke_m": _POS,
+    "area_a_m2": _POS,
+    "area_b_m2": _POS,
+    "dead_volume_a_m3": _POS,
+    "dead_volume_b_m3": _POS,
+    "leakage_cross_m3_s_pa": _NONNEG,
+    "leakage_external_m3_s_pa": _NONNEG,
+    "seal_friction_n": _NONNEG,
+    "seal_viscous_n_s_m": _NONNEG,
+    "cushion_length_m": _NONNEG,
+    "cushion_stiffness_n_m": _NONNEG,
+    "seal_static_friction_n": _NONNEG,
+    "stribeck_velocity_m_s": _POS,
+    "friction_smoothing_m_s": _POS,
 }

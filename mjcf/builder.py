@@ -137,6 +137,30 @@ def build_spec(
     """
     opt = options or BuildOptions()
     info = BuildInfo()
+    spec = _new_spec(desc, opt)
+    link_cls, sup_cls = _add_defaults(spec, desc, opt)
+    world = spec.worldbody
+    _add_scenery(world)
+    base_parent = _add_foundation(world, desc.foundation)
+    platen = _add_platen(world, base_parent, desc)
+    for a in desc.actuators:
+        _add_linkage(spec, base_parent, a, link_cls[a.cls.name], opt)
+    if desc.supports is not None:
+        for i, p in enumerate(desc.supports.positions_m, start=1):
+            _add_support(spec, base_parent, f"S{i}", p, desc.supports, sup_cls, opt)
+    _add_payload(spec, platen, payload, info)
+    if desc.effects:
+        if effects is None:
+            raise DescriptionError(
+                f"{desc.source}: the description declares [[effect]] entries, which mjcf alone cannot build; "
+                "build it with sim.effects.build_model"
+            )
+        info.step_effects, info.effects = effects(spec, list(desc.effects), desc)
+    return spec, info
+
+
+def _new_spec(desc: TableDescription, opt: BuildOptions) -> mujoco.MjSpec:
+    """An empty spec with the compiler and solver options (no contacts: the model has none)."""
     spec = mujoco.MjSpec()
     spec.modelname = f"shaketable_{desc.name}"
     spec.compiler.degree = False
@@ -152,8 +176,12 @@ def build_spec(
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     spec.stat.extent = 12.0
     spec.stat.center = [0.0, 0.0, -1.0]
+    return spec
 
-    # Default classes for the repeated parts (menagerie habit).
+
+def _add_defaults(spec: mujoco.MjSpec, desc: TableDescription, opt: BuildOptions):
+    """Default classes for the repeated parts (menagerie habit): one per actuator class
+    and one for the static supports; returns them."""
     main = spec.default
     main.geom.contype = 0
     main.geom.conaffinity = 0
@@ -167,40 +195,47 @@ def build_spec(
         link_cls[cname] = d
     sup_cls = spec.add_default("static_support", main)
     sup_cls.geom.rgba = _SUPPORT
+    return link_cls, sup_cls
 
-    world = spec.worldbody
+
+def _add_scenery(world) -> None:
+    """A light and the pit floor (visual only)."""
     world.add_light(name="sun", pos=[0, 0, 12], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     _visual(
         world, name="pit_floor", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, -3.3], size=[7.5, 7.5, 0.2], rgba=_CONCRETE
     )
 
-    # Foundation.
-    fd = desc.foundation
-    if fd.mode == "fixed":
-        base_parent = world
-    else:
-        base_parent = world.add_body(name="foundation", pos=[0, 0, 0])
-        base_parent.explicitinertial = True
-        base_parent.mass = fd.mass_kg
-        base_parent.ipos = [0, 0, -3.0]
-        base_parent.inertia = _box_inertia(fd.mass_kg, [15, 15, 6])
-        for k, ax in enumerate(("x", "y", "z")):
-            w = 2 * math.pi * fd.frequency_hz[k]
-            axis = [0.0, 0.0, 0.0]
-            axis[k] = 1.0
-            j = base_parent.add_joint(name=f"foundation_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
-            j.stiffness = [fd.mass_kg * w * w, 0, 0]
-            j.damping = [2 * fd.damping_ratio[k] * fd.mass_kg * w, 0, 0]
-        _visual(
-            base_parent,
-            name="foundation_block",
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            pos=[0, 0, -3.2],
-            size=[7.0, 7.0, 0.05],
-            rgba=_CONCRETE,
-        )
 
-    # Platen.
+def _add_foundation(world, fd):
+    """The body the linkages stand on: the world itself, or a reaction mass on three
+    spring-dampers tuned to the foundation's frequencies and damping ratios."""
+    if fd.mode == "fixed":
+        return world
+    base_parent = world.add_body(name="foundation", pos=[0, 0, 0])
+    base_parent.explicitinertial = True
+    base_parent.mass = fd.mass_kg
+    base_parent.ipos = [0, 0, -3.0]
+    base_parent.inertia = _box_inertia(fd.mass_kg, [15, 15, 6])
+    for k, ax in enumerate(("x", "y", "z")):
+        w = 2 * math.pi * fd.frequency_hz[k]
+        axis = [0.0, 0.0, 0.0]
+        axis[k] = 1.0
+        j = base_parent.add_joint(name=f"foundation_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
+        j.stiffness = [fd.mass_kg * w * w, 0, 0]
+        j.damping = [2 * fd.damping_ratio[k] * fd.mass_kg * w, 0, 0]
+    _visual(
+        base_parent,
+        name="foundation_block",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        pos=[0, 0, -3.2],
+        size=[7.0, 7.0, 0.05],
+        rgba=_CONCRETE,
+    )
+    return base_parent
+
+
+def _add_platen(world, base_parent, desc: TableDescription):
+    """The platen (free, or on linear bearings), its reference site and accelerometer sites."""
     pl = desc.platen
     if pl.guided:
         # Linear bearings on the foundation: one slide per translational DOF of the table.
@@ -232,259 +267,266 @@ def build_spec(
             quat=_frame_from_z(acc.direction).tolist(),
             rgba=[1, 0.2, 0.2, 1],
         )
+    return platen
 
-    # Linkages.
-    for a in desc.actuators:
-        c = a.cls
-        L0 = a.length0_m
-        cyl = base_parent.add_body(
-            name=f"{a.name}_cylinder",
-            pos=a.base_m.tolist(),
-            quat=_frame_from_z(a.axis).tolist(),
-            childclass=link_cls[c.name].name,
-        )
-        cyl.explicitinertial = True
-        cyl.mass = c.cylinder_mass_kg
-        cyl.ipos = [0, 0, c.cylinder_length_m / 2]
-        cyl.inertia = _cyl_inertia(c.cylinder_mass_kg, c.cylinder_radius_m, c.cylinder_length_m)
-        cyl.add_joint(name=f"{a.name}_swivel_u", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[1, 0, 0])
-        cyl.add_joint(name=f"{a.name}_swivel_v", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
-        _visual(
-            cyl,
-            name=f"{a.name}_cylinder",
-            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-            fromto=[0, 0, 0, 0, 0, c.cylinder_length_m],
-            size=[c.cylinder_radius_m, 0, 0],
-        )
-        cyl.add_site(name=f"{a.name}_base", pos=[0, 0, 0], size=[0.05, 0, 0])
 
-        rod = cyl.add_body(name=f"{a.name}_rod", pos=[0, 0, 0])
-        rod.explicitinertial = True
-        rod.mass = c.rod_mass_kg
-        rod.ipos = [0, 0, L0 - c.rod_length_m / 2]
-        rod.inertia = _cyl_inertia(c.rod_mass_kg, c.rod_radius_m, c.rod_length_m)
-        js = rod.add_joint(name=f"{a.name}_stroke", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
-        js.frictionloss = c.seal_friction_n
-        js.damping = [c.seal_viscous_n_s_m, 0, 0]
-        _visual(
-            rod,
-            name=f"{a.name}_rod",
-            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-            fromto=[0, 0, L0 - c.rod_length_m, 0, 0, L0],
-            size=[c.rod_radius_m, 0, 0],
-            rgba=_ROD,
-        )
-        rod.add_site(name=f"{a.name}_rod_end", pos=[0, 0, L0], size=[0.05, 0, 0])
+def _add_linkage(spec: mujoco.MjSpec, base_parent, a, default_cls, opt: BuildOptions) -> None:
+    """One actuator: a cylinder on a two-axis swivel at the base, a rod sliding in it
+    (the stroke joint, with the seal friction), a ball joint (connect) to the platen,
+    and the motor on the stroke joint."""
+    c = a.cls
+    L0 = a.length0_m
+    cyl = base_parent.add_body(
+        name=f"{a.name}_cylinder",
+        pos=a.base_m.tolist(),
+        quat=_frame_from_z(a.axis).tolist(),
+        childclass=default_cls.name,
+    )
+    cyl.explicitinertial = True
+    cyl.mass = c.cylinder_mass_kg
+    cyl.ipos = [0, 0, c.cylinder_length_m / 2]
+    cyl.inertia = _cyl_inertia(c.cylinder_mass_kg, c.cylinder_radius_m, c.cylinder_length_m)
+    cyl.add_joint(name=f"{a.name}_swivel_u", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[1, 0, 0])
+    cyl.add_joint(name=f"{a.name}_swivel_v", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0])
+    _visual(
+        cyl,
+        name=f"{a.name}_cylinder",
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+        fromto=[0, 0, 0, 0, 0, c.cylinder_length_m],
+        size=[c.cylinder_radius_m, 0, 0],
+    )
+    cyl.add_site(name=f"{a.name}_base", pos=[0, 0, 0], size=[0.05, 0, 0])
 
-        eq = spec.add_equality(name=f"{a.name}_swivel")
-        eq.type = mujoco.mjtEq.mjEQ_CONNECT
-        eq.objtype = mujoco.mjtObj.mjOBJ_BODY
-        eq.name1 = f"{a.name}_rod"
-        eq.name2 = "platen"
-        eq.data[0:3] = [0, 0, L0]
-        eq.solref = list(opt.eq_solref)
-        eq.solimp = list(opt.eq_solimp)
+    rod = cyl.add_body(name=f"{a.name}_rod", pos=[0, 0, 0])
+    rod.explicitinertial = True
+    rod.mass = c.rod_mass_kg
+    rod.ipos = [0, 0, L0 - c.rod_length_m / 2]
+    rod.inertia = _cyl_inertia(c.rod_mass_kg, c.rod_radius_m, c.rod_length_m)
+    js = rod.add_joint(name=f"{a.name}_stroke", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
+    js.frictionloss = c.seal_friction_n
+    js.damping = [c.seal_viscous_n_s_m, 0, 0]
+    _visual(
+        rod,
+        name=f"{a.name}_rod",
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+        fromto=[0, 0, L0 - c.rod_length_m, 0, 0, L0],
+        size=[c.rod_radius_m, 0, 0],
+        rgba=_ROD,
+    )
+    rod.add_site(name=f"{a.name}_rod_end", pos=[0, 0, L0], size=[0.05, 0, 0])
+    _connect(spec, f"{a.name}_swivel", f"{a.name}_rod", [0, 0, L0], opt)
 
-        act = spec.add_actuator(name=a.name, target=f"{a.name}_stroke", trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        act.gear[0] = 1.0
-        act.ctrllimited = False
+    act = spec.add_actuator(name=a.name, target=f"{a.name}_stroke", trntype=mujoco.mjtTrn.mjTRN_JOINT)
+    act.gear[0] = 1.0
+    act.ctrllimited = False
 
-    # Static supports.
-    sp = desc.supports
-    if sp is not None:
-        for i, p in enumerate(sp.positions_m, start=1):
-            nm = f"S{i}"
-            pis = base_parent.add_body(
-                name=f"{nm}_piston", pos=[p[0], p[1], p[2] - sp.piston_length_m], childclass=sup_cls.name
-            )
-            pis.explicitinertial = True
-            pis.mass = sp.piston_mass_kg
-            pis.ipos = [0, 0, sp.piston_length_m / 2]
-            pis.inertia = _cyl_inertia(sp.piston_mass_kg, sp.piston_radius_m, sp.piston_length_m)
-            ja = pis.add_joint(name=f"{nm}_air", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
-            ja.frictionloss = sp.piston_friction_n
-            _visual(
-                pis,
-                name=f"{nm}_piston",
-                type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                fromto=[0, 0, 0, 0, 0, sp.piston_length_m],
-                size=[sp.piston_radius_m, 0, 0],
-            )
-            shoe = pis.add_body(name=f"{nm}_shoe", pos=[0, 0, sp.piston_length_m])
-            shoe.explicitinertial = True
-            shoe.mass = sp.shoe_mass_kg
-            shoe.ipos = [0, 0, 0]
-            shoe.inertia = _box_inertia(sp.shoe_mass_kg, [0.4, 0.4, 0.1])
-            for ax, vec in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
-                jsh = shoe.add_joint(name=f"{nm}_shoe_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=vec)
-                jsh.frictionloss = sp.shoe_friction_n / math.sqrt(2)
-            _visual(
-                shoe,
-                name=f"{nm}_shoe",
-                type=mujoco.mjtGeom.mjGEOM_BOX,
-                pos=[0, 0, -0.05],
-                size=[0.2, 0.2, 0.05],
-                rgba=_ROD,
-            )
-            eq = spec.add_equality(name=f"{nm}_pin")
-            eq.type = mujoco.mjtEq.mjEQ_CONNECT
-            eq.objtype = mujoco.mjtObj.mjOBJ_BODY
-            eq.name1 = f"{nm}_shoe"
-            eq.name2 = "platen"
-            eq.data[0:3] = [0, 0, 0]
-            eq.solref = list(opt.eq_solref)
-            eq.solimp = list(opt.eq_solimp)
 
-    _add_payload(spec, platen, payload, info)
-    if desc.effects:
-        if effects is None:
-            raise DescriptionError(
-                f"{desc.source}: the description declares [[effect]] entries, which mjcf alone cannot build; "
-                "build it with sim.effects.build_model"
-            )
-        info.step_effects, info.effects = effects(spec, list(desc.effects), desc)
-    return spec, info
+def _connect(spec: mujoco.MjSpec, name: str, body: str, anchor, opt: BuildOptions) -> None:
+    """A ball joint (connect equality) from ``body`` at ``anchor`` to the platen."""
+    eq = spec.add_equality(name=name)
+    eq.type = mujoco.mjtEq.mjEQ_CONNECT
+    eq.objtype = mujoco.mjtObj.mjOBJ_BODY
+    eq.name1 = body
+    eq.name2 = "platen"
+    eq.data[0:3] = anchor
+    eq.solref = list(opt.eq_solref)
+    eq.solimp = list(opt.eq_solimp)
+
+
+def _add_support(spec: mujoco.MjSpec, base_parent, nm: str, p, sp, sup_cls, opt: BuildOptions) -> None:
+    """One static support at ``p``: an air piston (vertical slide with friction) carrying a
+    shoe that slides in x and y, pinned to the platen."""
+    pis = base_parent.add_body(
+        name=f"{nm}_piston", pos=[p[0], p[1], p[2] - sp.piston_length_m], childclass=sup_cls.name
+    )
+    pis.explicitinertial = True
+    pis.mass = sp.piston_mass_kg
+    pis.ipos = [0, 0, sp.piston_length_m / 2]
+    pis.inertia = _cyl_inertia(sp.piston_mass_kg, sp.piston_radius_m, sp.piston_length_m)
+    ja = pis.add_joint(name=f"{nm}_air", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1])
+    ja.frictionloss = sp.piston_friction_n
+    _visual(
+        pis,
+        name=f"{nm}_piston",
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+        fromto=[0, 0, 0, 0, 0, sp.piston_length_m],
+        size=[sp.piston_radius_m, 0, 0],
+    )
+    shoe = pis.add_body(name=f"{nm}_shoe", pos=[0, 0, sp.piston_length_m])
+    shoe.explicitinertial = True
+    shoe.mass = sp.shoe_mass_kg
+    shoe.ipos = [0, 0, 0]
+    shoe.inertia = _box_inertia(sp.shoe_mass_kg, [0.4, 0.4, 0.1])
+    for ax, vec in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
+        jsh = shoe.add_joint(name=f"{nm}_shoe_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=vec)
+        jsh.frictionloss = sp.shoe_friction_n / math.sqrt(2)
+    _visual(
+        shoe,
+        name=f"{nm}_shoe",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        pos=[0, 0, -0.05],
+        size=[0.2, 0.2, 0.05],
+        rgba=_ROD,
+    )
+    _connect(spec, f"{nm}_pin", f"{nm}_shoe", [0, 0, 0], opt)
 
 
 def _add_payload(spec, platen, payload, info):
+    """The specimen on the platen, by kind (none, rigid block, shear frame, cantilever)."""
     if payload is None:
         return
     if isinstance(payload, RigidPayload):
-        info.payload_kind = "rigid"
-        p = payload
-        if p.clamp_frequency_hz is None:
-            body = platen.add_body(name="payload", pos=p.com_m.tolist())
-        else:
-            # Clamping flexibility: the block (or the fraction clamp_mass_fraction of its mass,
-            # body "payload") on a 3-axis spring-damper of clamp_frequency_hz to the platen; the
-            # rest of the mass (body "payload_fixed") rigidly on the platen, same centre.
-            a = p.clamp_mass_fraction
-            if a < 1.0:
-                fixed = platen.add_body(name="payload_fixed", pos=p.com_m.tolist())
-                fixed.explicitinertial = True
-                fixed.mass = (1.0 - a) * p.mass_kg
-                fixed.ipos = [0, 0, 0]
-                fixed.inertia = ((1.0 - a) * p.inertia_kg_m2).tolist()
-                info.payload_bodies.append("payload_fixed")
-            body = platen.add_body(name="payload", pos=p.com_m.tolist())
-            w = 2 * math.pi * p.clamp_frequency_hz
-            for ax, vec in (("x", [1, 0, 0]), ("y", [0, 1, 0]), ("z", [0, 0, 1])):
-                j = body.add_joint(name=f"payload_clamp_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=vec)
-                j.stiffness = [a * p.mass_kg * w * w, 0, 0]
-                j.damping = [2 * p.clamp_damping_ratio * a * p.mass_kg * w, 0, 0]
-                info.payload_joints.append(j.name)
-        a = 1.0 if p.clamp_frequency_hz is None else p.clamp_mass_fraction
-        body.explicitinertial = True
-        body.mass = a * p.mass_kg
-        body.ipos = [0, 0, 0]
-        body.inertia = (a * p.inertia_kg_m2).tolist()
-        info.payload_bodies.append("payload")
-        # The block drawn from its footprint and height, resting on the platen.
-        _visual(
-            body,
-            name="payload_block",
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            pos=[0, 0, p.height_m / 2 - p.com_m[2]],
-            size=[p.footprint_m[0] / 2, p.footprint_m[1] / 2, p.height_m / 2],
-            rgba=_PAYLOAD,
-        )
+        _add_rigid_payload(platen, payload, info)
     elif isinstance(payload, ShearFramePayload):
-        info.payload_kind = "shear_frame"
-        p = payload
-        n = len(p.mass_kg)
-        axis = [1.0, 0.0, 0.0] if p.direction == "x" else [0.0, 1.0, 0.0]
-        names = []
-        for i in range(n):
-            z = p.base_m[2] + (i + 1) * p.storey_height_m
-            b = platen.add_body(name=f"floor{i + 1}", pos=[p.base_m[0], p.base_m[1], z])
-            b.explicitinertial = True
-            b.mass = float(p.mass_kg[i])
-            b.ipos = [0, 0, 0]
-            b.inertia = _box_inertia(float(p.mass_kg[i]), [p.footprint_m[0], p.footprint_m[1], 0.05])
-            j = b.add_joint(name=f"floor{i + 1}_drift", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
-            names.append(j.name)
-            _visual(
-                b,
-                name=f"floor{i + 1}_slab",
-                type=mujoco.mjtGeom.mjGEOM_BOX,
-                size=[p.footprint_m[0] / 2, p.footprint_m[1] / 2, 0.02],
-                rgba=_PAYLOAD,
-            )
-            info.payload_bodies.append(b.name)
-        info.payload_joints.extend(names)
-        # K and C as sums of rank-one springs/dampers on fixed tendons: K = sum k_i v_i v_i^T
-        # with v_i the eigenvectors of K (all k_i > 0 since K is positive definite).
-        M = np.diag(p.mass_kg)
-        w2, phi = _generalized_eig(p.stiffness_n_m, M)
-        Mphi = M @ phi
-        C = Mphi @ np.diag(2 * p.damping_ratio * np.sqrt(w2)) @ Mphi.T
-        for label, mat, kind in (("k", p.stiffness_n_m, "stiffness"), ("c", C, "damping")):
-            vals, vecs = np.linalg.eigh(mat)
-            for i in range(n):
-                if vals[i] <= 1e-12 * max(abs(vals).max(), 1.0):
-                    continue
-                t = spec.add_tendon(name=f"frame_{label}{i + 1}")
-                for jn, coef in zip(names, vecs[:, i]):
-                    t.wrap_joint(jn, float(coef))
-                if kind == "stiffness":
-                    t.stiffness = [float(vals[i]), 0, 0]
-                    t.springlength = [0.0, 0.0]
-                else:
-                    t.damping = [float(vals[i]), 0, 0]
+        _add_shear_frame(spec, platen, payload, info)
     elif isinstance(payload, CantileverPayload):
-        # Rigid finite elements (spring-at-centre discretisation): the beam is cut into
-        # n segments of length l; a bending spring EI/l sits at the centre of each
-        # segment, and the rigid bodies span from one spring to the next (half
-        # segments at the two ends). This converges much faster than springs at the
-        # segment ends (first mode within 0.1 % at n = 24, see tests).
-        info.payload_kind = "cantilever"
-        p = payload
-        n = p.n_segments
-        seg = p.height_m / n
-        mu = p.mass_per_length_kg_m
-        k_rot = p.bending_stiffness_n_m2 / seg
-        w1 = (1.875104**2) * math.sqrt(p.bending_stiffness_n_m2 / (mu * p.height_m**4))
-        foot = platen.add_body(name="segment0", pos=p.base_m.tolist())
-        foot.explicitinertial = True
-        foot.mass = mu * seg / 2
-        foot.ipos = [0, 0, seg / 4]
-        foot.inertia = _box_inertia(mu * seg / 2, [p.width_m, p.width_m, seg / 2])
+        _add_cantilever(platen, payload, info)
+
+
+def _add_rigid_payload(platen, p: RigidPayload, info: BuildInfo) -> None:
+    """A rigid block, fixed to the platen or (with a clamp frequency) partly on springs."""
+    info.payload_kind = "rigid"
+    if p.clamp_frequency_hz is None:
+        body = platen.add_body(name="payload", pos=p.com_m.tolist())
+    else:
+        # Clamping flexibility: the block (or the fraction clamp_mass_fraction of its mass,
+        # body "payload") on a 3-axis spring-damper of clamp_frequency_hz to the platen; the
+        # rest of the mass (body "payload_fixed") rigidly on the platen, same centre.
+        a = p.clamp_mass_fraction
+        if a < 1.0:
+            fixed = platen.add_body(name="payload_fixed", pos=p.com_m.tolist())
+            fixed.explicitinertial = True
+            fixed.mass = (1.0 - a) * p.mass_kg
+            fixed.ipos = [0, 0, 0]
+            fixed.inertia = ((1.0 - a) * p.inertia_kg_m2).tolist()
+            info.payload_bodies.append("payload_fixed")
+        body = platen.add_body(name="payload", pos=p.com_m.tolist())
+        w = 2 * math.pi * p.clamp_frequency_hz
+        for ax, vec in (("x", [1, 0, 0]), ("y", [0, 1, 0]), ("z", [0, 0, 1])):
+            j = body.add_joint(name=f"payload_clamp_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=vec)
+            j.stiffness = [a * p.mass_kg * w * w, 0, 0]
+            j.damping = [2 * p.clamp_damping_ratio * a * p.mass_kg * w, 0, 0]
+            info.payload_joints.append(j.name)
+    a = 1.0 if p.clamp_frequency_hz is None else p.clamp_mass_fraction
+    body.explicitinertial = True
+    body.mass = a * p.mass_kg
+    body.ipos = [0, 0, 0]
+    body.inertia = (a * p.inertia_kg_m2).tolist()
+    info.payload_bodies.append("payload")
+    # The block drawn from its footprint and height, resting on the platen.
+    _visual(
+        body,
+        name="payload_block",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        pos=[0, 0, p.height_m / 2 - p.com_m[2]],
+        size=[p.footprint_m[0] / 2, p.footprint_m[1] / 2, p.height_m / 2],
+        rgba=_PAYLOAD,
+    )
+
+
+def _add_shear_frame(spec, platen, p: ShearFramePayload, info: BuildInfo) -> None:
+    """Floor masses on drift slides, coupled by the frame's stiffness and damping."""
+    info.payload_kind = "shear_frame"
+    n = len(p.mass_kg)
+    axis = [1.0, 0.0, 0.0] if p.direction == "x" else [0.0, 1.0, 0.0]
+    names = []
+    for i in range(n):
+        z = p.base_m[2] + (i + 1) * p.storey_height_m
+        b = platen.add_body(name=f"floor{i + 1}", pos=[p.base_m[0], p.base_m[1], z])
+        b.explicitinertial = True
+        b.mass = float(p.mass_kg[i])
+        b.ipos = [0, 0, 0]
+        b.inertia = _box_inertia(float(p.mass_kg[i]), [p.footprint_m[0], p.footprint_m[1], 0.05])
+        j = b.add_joint(name=f"floor{i + 1}_drift", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
+        names.append(j.name)
         _visual(
-            foot,
-            name="segment0",
+            b,
+            name=f"floor{i + 1}_slab",
             type=mujoco.mjtGeom.mjGEOM_BOX,
-            pos=[0, 0, seg / 4],
-            size=[p.width_m / 2, p.width_m / 2, seg / 4 * 0.98],
+            size=[p.footprint_m[0] / 2, p.footprint_m[1] / 2, 0.02],
             rgba=_PAYLOAD,
         )
-        info.payload_bodies.append("segment0")
-        parent = foot
-        pos = [0, 0, seg / 2]
+        info.payload_bodies.append(b.name)
+    info.payload_joints.extend(names)
+    _add_frame_tendons(spec, p, names)
+
+
+def _add_frame_tendons(spec, p: ShearFramePayload, names: list[str]) -> None:
+    """K and C as sums of rank-one springs/dampers on fixed tendons: K = sum k_i v_i v_i^T
+    with v_i the eigenvectors of K (all k_i > 0 since K is positive definite)."""
+    n = len(names)
+    M = np.diag(p.mass_kg)
+    w2, phi = _generalized_eig(p.stiffness_n_m, M)
+    Mphi = M @ phi
+    C = Mphi @ np.diag(2 * p.damping_ratio * np.sqrt(w2)) @ Mphi.T
+    for label, mat, kind in (("k", p.stiffness_n_m, "stiffness"), ("c", C, "damping")):
+        vals, vecs = np.linalg.eigh(mat)
         for i in range(n):
-            length = seg if i < n - 1 else seg / 2
-            m_seg = mu * length
-            b = parent.add_body(name=f"segment{i + 1}", pos=pos)
-            b.explicitinertial = True
-            b.mass = m_seg
-            b.ipos = [0, 0, length / 2]
-            b.inertia = _box_inertia(m_seg, [p.width_m, p.width_m, length])
-            for ax, vec in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
-                j = b.add_joint(name=f"segment{i + 1}_bend_{ax}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=vec)
-                j.stiffness = [k_rot, 0, 0]
-                # stiffness-proportional damping giving damping_ratio at the first mode
-                j.damping = [2 * p.damping_ratio * k_rot / w1, 0, 0]
-                info.payload_joints.append(j.name)
-            _visual(
-                b,
-                name=f"segment{i + 1}",
-                type=mujoco.mjtGeom.mjGEOM_BOX,
-                pos=[0, 0, length / 2],
-                size=[p.width_m / 2, p.width_m / 2, length / 2 * 0.98],
-                rgba=_PAYLOAD,
-            )
-            info.payload_bodies.append(b.name)
-            parent = b
-            pos = [0, 0, length]
+            if vals[i] <= 1e-12 * max(abs(vals).max(), 1.0):
+                continue
+            t = spec.add_tendon(name=f"frame_{label}{i + 1}")
+            for jn, coef in zip(names, vecs[:, i]):
+                t.wrap_joint(jn, float(coef))
+            if kind == "stiffness":
+                t.stiffness = [float(vals[i]), 0, 0]
+                t.springlength = [0.0, 0.0]
+            else:
+                t.damping = [float(vals[i]), 0, 0]
+
+
+def _add_cantilever(platen, p: CantileverPayload, info: BuildInfo) -> None:
+    """Rigid finite elements (spring-at-centre discretisation): the beam is cut into
+    n segments of length l; a bending spring EI/l sits at the centre of each
+    segment, and the rigid bodies span from one spring to the next (half
+    segments at the two ends). This converges much faster than springs at the
+    segment ends (first mode within 0.1 % at n = 24, see tests)."""
+    info.payload_kind = "cantilever"
+    n = p.n_segments
+    seg = p.height_m / n
+    mu = p.mass_per_length_kg_m
+    k_rot = p.bending_stiffness_n_m2 / seg
+    w1 = (1.875104**2) * math.sqrt(p.bending_stiffness_n_m2 / (mu * p.height_m**4))
+    foot = platen.add_body(name="segment0", pos=p.base_m.tolist())
+    foot.explicitinertial = True
+    foot.mass = mu * seg / 2
+    foot.ipos = [0, 0, seg / 4]
+    foot.inertia = _box_inertia(mu * seg / 2, [p.width_m, p.width_m, seg / 2])
+    _visual(
+        foot,
+        name="segment0",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        pos=[0, 0, seg / 4],
+        size=[p.width_m / 2, p.width_m / 2, seg / 4 * 0.98],
+        rgba=_PAYLOAD,
+    )
+    info.payload_bodies.append("segment0")
+    parent = foot
+    pos = [0, 0, seg / 2]
+    for i in range(n):
+        length = seg if i < n - 1 else seg / 2
+        m_seg = mu * length
+        b = parent.add_body(name=f"segment{i + 1}", pos=pos)
+        b.explicitinertial = True
+        b.mass = m_seg
+        b.ipos = [0, 0, length / 2]
+        b.inertia = _box_inertia(m_seg, [p.width_m, p.width_m, length])
+        for ax, vec in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
+            j = b.add_joint(name=f"segment{i + 1}_bend_{ax}", type=mujoco.mjtJoint.mjJNT_HINGE, axis=vec)
+            j.stiffness = [k_rot, 0, 0]
+            # stiffness-proportional damping giving damping_ratio at the first mode
+            j.damping = [2 * p.damping_ratio * k_rot / w1, 0, 0]
+            info.payload_joints.append(j.name)
+        _visual(
+            b,
+            name=f"segment{i + 1}",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            pos=[0, 0, length / 2],
+            size=[p.width_m / 2, p.width_m / 2, length / 2 * 0.98],
+            rgba=_PAYLOAD,
+        )
+        info.payload_bodies.append(b.name)
+        parent = b
+        pos = [0, 0, length]
 
 
 def _generalized_eig(K, M):

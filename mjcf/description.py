@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import itertools
 import math
 import re
 import tomllib
@@ -24,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcf.errors import DescriptionError
+from mjcf.kinematics import actuator_strokes, envelope_corners, rotation_matrices, rotation_matrix  # noqa: F401
 from mjcf.unknowns import parse_unknowns
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -308,188 +308,19 @@ def check_hydraulics(data: dict, src: str) -> None:
 
 
 def parse_table(data: dict, src: str = "<table>") -> TableDescription:
+    """Validate a table file's data section by section (each part below reads one) and
+    build its description; the first mistake raises a DescriptionError naming ``src``."""
     top = _Section(data, "", src)
-    t = top.sub("table")
-    name = t.text("name")
-    title = t.text("title", name)
-    dofs = t.raw("dofs")
-    if not isinstance(dofs, list) or not all(isinstance(d, str) for d in dofs) or not dofs:
-        raise DescriptionError(f"{src}: 'table.dofs' must be a list of DOF names")
-    if any(d not in DOFS6 for d in dofs) or len(set(dofs)) != len(dofs):
-        raise DescriptionError(f"{src}: 'table.dofs' must be distinct names from {', '.join(DOFS6)} (got {dofs})")
-    g = t.num("gravity_m_s2", positive=True)
-    t.done()
-
-    li = top.sub("limits")
-    limits = Limits(
-        stroke_m=li.vec("stroke_m", 3, nonneg=True),
-        rotation_rad=li.vec("rotation_rad", 3, nonneg=True),
-        velocity_m_s=li.vec("velocity_m_s", 3, nonneg=True),
-        acceleration_m_s2=li.vec("acceleration_m_s2", 3, nonneg=True),
-        max_specimen_kg=None if li.raw("max_specimen_kg") == "unknown" else li.num("max_specimen_kg", nonneg=True),
-        overturning_moment_n_m=None
-        if li.raw("overturning_moment_n_m") == "unknown"
-        else li.num("overturning_moment_n_m", nonneg=True),
-        frequency_range_hz=li.vec("frequency_range_hz", 2, nonneg=True),
-    )
-    li.done()
-
-    pl = top.sub("platen")
-    guide = pl.text("guide", "free", choices=("free", "bearings"))
-    if guide == "bearings" and any(d in ("rx", "ry", "rz") for d in dofs):
-        raise DescriptionError(
-            f"{src}: 'platen.guide = \"bearings\"' allows translations only; table.dofs has rotations"
-        )
-    platen = Platen(
-        guided=(guide == "bearings"),
-        size_m=pl.vec("size_m", 3, positive=True),
-        com_m=pl.vec("com_m", 3),
-        mass_kg=pl.num("mass_kg", positive=True),
-        inertia_kg_m2=pl.vec("inertia_kg_m2", 3, positive=True),
-    )
-    pl.done()
-    _check_inertia(platen.inertia_kg_m2, f"{src}: 'platen.inertia_kg_m2'")
-
-    fo = top.sub("foundation")
-    foundation = Foundation(
-        mode=fo.text("mode", choices=("fixed", "spring")),
-        mass_kg=fo.num("mass_kg", positive=True),
-        frequency_hz=fo.vec("frequency_hz", 3, positive=True),
-        damping_ratio=fo.vec("damping_ratio", 3, nonneg=True),
-    )
-    fo.done()
-
-    classes = {}
-    ac_all = top.sub("actuator_class")
-    for cname in list(ac_all.data):
-        c = ac_all.sub(cname)
-        classes[cname] = ActuatorClass(
-            name=cname,
-            half_stroke_m=c.num("half_stroke_m", positive=True),
-            area_a_m2=c.num("area_a_m2", positive=True),
-            area_b_m2=c.num("area_b_m2", positive=True),
-            dead_volume_a_m3=c.num("dead_volume_a_m3", positive=True),
-            dead_volume_b_m3=c.num("dead_volume_b_m3", positive=True),
-            seal_friction_n=c.num("seal_friction_n", nonneg=True),
-            seal_viscous_n_s_m=c.num("seal_viscous_n_s_m", nonneg=True),
-            cylinder_mass_kg=c.num("cylinder_mass_kg", positive=True),
-            cylinder_length_m=c.num("cylinder_length_m", positive=True),
-            cylinder_radius_m=c.num("cylinder_radius_m", positive=True),
-            rod_mass_kg=c.num("rod_mass_kg", positive=True),
-            rod_length_m=c.num("rod_length_m", positive=True),
-            rod_radius_m=c.num("rod_radius_m", positive=True),
-        )
-        # Hydraulic-only keys are validated by the hydraulics package; mark them used.
-        for k in (
-            "leakage_cross_m3_s_pa",
-            "leakage_external_m3_s_pa",
-            "cushion_length_m",
-            "cushion_stiffness_n_m",
-            "seal_static_friction_n",
-            "stribeck_velocity_m_s",
-            "friction_smoothing_m_s",
-        ):
-            if c.has(k):
-                c.num(k, nonneg=True)
-        c.done()
-        ac_all.used.add(cname)
-
-    acts_raw = top.raw("actuator")
-    if not isinstance(acts_raw, list) or not acts_raw:
-        raise DescriptionError(f"{src}: '[[actuator]]' must list at least one actuator")
-    actuators = []
-    seen = set()
-    for i, a_raw in enumerate(acts_raw):
-        a = _Section(a_raw, f"actuator[{i}]", src)
-        nm = a.text("name")
-        if nm in seen:
-            raise DescriptionError(f"{src}: two actuators are named '{nm}'; actuator names must be unique")
-        seen.add(nm)
-        cname = a.text("class")
-        if cname not in classes:
-            raise DescriptionError(f"{src}: actuator '{nm}' has class '{cname}'; known classes: {', '.join(classes)}")
-        base = a.vec("base_m", 3)
-        plat = a.vec("platen_m", 3)
-        a.done()
-        if np.linalg.norm(plat - base) < 1e-3:
-            raise DescriptionError(f"{src}: actuator '{nm}' has base_m == platen_m; a linkage needs a length")
-        cls = classes[cname]
-        actuators.append(Actuator(name=nm, cls=cls, base_m=base, platen_m=plat))
-
-    supports = None
-    if top.has("supports"):
-        s = top.sub("supports")
-        pos = s.raw("positions_m")
-        try:
-            pos = np.array(pos, dtype=float)
-        except (TypeError, ValueError):
-            raise DescriptionError(f"{src}: 'supports.positions_m' must be a list of [x, y, z] points") from None
-        if pos.ndim != 2 or pos.shape[1] != 3 or len(pos) < 1:
-            raise DescriptionError(f"{src}: 'supports.positions_m' must be a list of [x, y, z] points")
-        supports = Supports(
-            capacity_kg=s.num("capacity_kg", positive=True),
-            positions_m=pos,
-            piston_area_m2=s.num("piston_area_m2", positive=True),
-            chamber_volume_m3=s.num("chamber_volume_m3", positive=True),
-            polytropic_exponent=s.num("polytropic_exponent", positive=True),
-            piston_mass_kg=s.num("piston_mass_kg", positive=True),
-            shoe_mass_kg=s.num("shoe_mass_kg", positive=True),
-            piston_friction_n=s.num("piston_friction_n", nonneg=True),
-            shoe_friction_n=s.num("shoe_friction_n", nonneg=True),
-            piston_radius_m=s.num("piston_radius_m", positive=True),
-            piston_length_m=s.num("piston_length_m", positive=True),
-            air_law=s.text("air_law", "polytropic", choices=("polytropic", "linear")),
-        )
-        s.done()
-
-    se = top.sub("sensors")
-    se.num("accelerometer_range_m_s2", positive=True)
-    bw = se.num("accelerometer_bandwidth_hz", positive=True)
-    rate = se.num("recorder_rate_hz", positive=True)
-    order = se.raw("accelerometer_filter_order", 4)
-    if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= 8:
-        raise DescriptionError(
-            f"{src}: 'sensors.accelerometer_filter_order' must be a whole number 1..8 (got {order!r})"
-        )
-    se.done()
-    accs = []
-    acc_names = set()
-    for i, a_raw in enumerate(top.raw("accelerometer", [])):
-        a = _Section(a_raw, f"accelerometer[{i}]", src)
-        nm = a.text("name")
-        if nm in acc_names:
-            raise DescriptionError(f"{src}: two accelerometers are named '{nm}'")
-        acc_names.add(nm)
-        d = a.vec("direction", 3)
-        if np.linalg.norm(d) < 1e-9:
-            raise DescriptionError(f"{src}: accelerometer '{nm}' direction must be non-zero")
-        accs.append(Accelerometer(name=nm, position_m=a.vec("position_m", 3), direction=d / np.linalg.norm(d)))
-        a.done()
-
-    # The hydraulic sections are validated by hydraulics.HydraulicParams; accept them here.
-    for k in ("fluid", "supply", "servovalve"):
-        top.raw(k)
-    if top.has("controller"):
-        top.raw("controller")
-    if top.has("interlock"):
-        top.raw("interlock")  # the controller's limit detectors (read by sim/effects/faults.py, checked there)
-    if top.has("calibration"):
-        top.raw("calibration")  # read by mjcf/calibrate.py (validated there)
-    if top.has("published"):
-        pub = top.raw("published")  # what the table's own tests measured (read by characterize / calibrate)
-        if not isinstance(pub, dict):
-            raise DescriptionError(f"{src}: '[published]' must be a table of measured values")
-    fmodel, fpre = "coulomb", 1e-4
-    if top.has("friction"):
-        fr = top.sub("friction")
-        fmodel = fr.text("model", "coulomb", choices=("coulomb", "presliding"))
-        fpre = fr.num("presliding_m", 1e-4, positive=True)
-        fr.done()
-    effects = top.raw("effect", [])
-    if not isinstance(effects, list) or not all(isinstance(e, dict) for e in effects):
-        raise DescriptionError(f"{src}: '[[effect]]' entries must be tables")
-    if top.has("unknown"):
-        top.raw("unknown")  # checked by mjcf.unknowns.parse_unknowns below
+    name, title, dofs, g = _parse_header(top, src)
+    limits = _parse_limits(top)
+    platen = _parse_platen(top, dofs, src)
+    foundation = _parse_foundation(top)
+    classes = _parse_actuator_classes(top)
+    actuators = _parse_actuators(top, classes, src)
+    supports = _parse_supports(top, src) if top.has("supports") else None
+    bw, rate, order = _parse_sensors(top, src)
+    accs = _parse_accelerometers(top, src)
+    fmodel, fpre, effects = _parse_other_sections(top, src)
     top.done()
 
     desc = TableDescription(
@@ -518,6 +349,231 @@ def parse_table(data: dict, src: str = "<table>") -> TableDescription:
     return desc
 
 
+def _parse_header(top: _Section, src: str):
+    """[table]: name, title, the platen's degrees of freedom and gravity."""
+    t = top.sub("table")
+    name = t.text("name")
+    title = t.text("title", name)
+    dofs = t.raw("dofs")
+    if not isinstance(dofs, list) or not all(isinstance(d, str) for d in dofs) or not dofs:
+        raise DescriptionError(f"{src}: 'table.dofs' must be a list of DOF names")
+    if any(d not in DOFS6 for d in dofs) or len(set(dofs)) != len(dofs):
+        raise DescriptionError(f"{src}: 'table.dofs' must be distinct names from {', '.join(DOFS6)} (got {dofs})")
+    g = t.num("gravity_m_s2", positive=True)
+    t.done()
+    return name, title, dofs, g
+
+
+def _parse_limits(top: _Section) -> Limits:
+    """[limits]: the table's rated envelope ("unknown" where the lab does not state it)."""
+    li = top.sub("limits")
+    limits = Limits(
+        stroke_m=li.vec("stroke_m", 3, nonneg=True),
+        rotation_rad=li.vec("rotation_rad", 3, nonneg=True),
+        velocity_m_s=li.vec("velocity_m_s", 3, nonneg=True),
+        acceleration_m_s2=li.vec("acceleration_m_s2", 3, nonneg=True),
+        max_specimen_kg=None if li.raw("max_specimen_kg") == "unknown" else li.num("max_specimen_kg", nonneg=True),
+        overturning_moment_n_m=None
+        if li.raw("overturning_moment_n_m") == "unknown"
+        else li.num("overturning_moment_n_m", nonneg=True),
+        frequency_range_hz=li.vec("frequency_range_hz", 2, nonneg=True),
+    )
+    li.done()
+    return limits
+
+
+def _parse_platen(top: _Section, dofs: list, src: str) -> Platen:
+    """[platen]: rigid-body properties and whether bearings guide it (translations only)."""
+    pl = top.sub("platen")
+    guide = pl.text("guide", "free", choices=("free", "bearings"))
+    if guide == "bearings" and any(d in ("rx", "ry", "rz") for d in dofs):
+        raise DescriptionError(
+            f"{src}: 'platen.guide = \"bearings\"' allows translations only; table.dofs has rotations"
+        )
+    platen = Platen(
+        guided=(guide == "bearings"),
+        size_m=pl.vec("size_m", 3, positive=True),
+        com_m=pl.vec("com_m", 3),
+        mass_kg=pl.num("mass_kg", positive=True),
+        inertia_kg_m2=pl.vec("inertia_kg_m2", 3, positive=True),
+    )
+    pl.done()
+    _check_inertia(platen.inertia_kg_m2, f"{src}: 'platen.inertia_kg_m2'")
+    return platen
+
+
+def _parse_foundation(top: _Section) -> Foundation:
+    """[foundation]: fixed, or a reaction mass on springs."""
+    fo = top.sub("foundation")
+    foundation = Foundation(
+        mode=fo.text("mode", choices=("fixed", "spring")),
+        mass_kg=fo.num("mass_kg", positive=True),
+        frequency_hz=fo.vec("frequency_hz", 3, positive=True),
+        damping_ratio=fo.vec("damping_ratio", 3, nonneg=True),
+    )
+    fo.done()
+    return foundation
+
+
+#: actuator-class keys read by the hydraulics package only; checked for sign here.
+_HYDRAULIC_CLASS_KEYS = (
+    "leakage_cross_m3_s_pa",
+    "leakage_external_m3_s_pa",
+    "cushion_length_m",
+    "cushion_stiffness_n_m",
+    "seal_static_friction_n",
+    "stribeck_velocity_m_s",
+    "friction_smoothing_m_s",
+)
+
+
+def _parse_actuator_classes(top: _Section) -> dict:
+    """[actuator_class.NAME]: the geometry and seals of each kind of actuator."""
+    classes = {}
+    ac_all = top.sub("actuator_class")
+    for cname in list(ac_all.data):
+        c = ac_all.sub(cname)
+        classes[cname] = ActuatorClass(
+            name=cname,
+            half_stroke_m=c.num("half_stroke_m", positive=True),
+            area_a_m2=c.num("area_a_m2", positive=True),
+            area_b_m2=c.num("area_b_m2", positive=True),
+            dead_volume_a_m3=c.num("dead_volume_a_m3", positive=True),
+            dead_volume_b_m3=c.num("dead_volume_b_m3", positive=True),
+            seal_friction_n=c.num("seal_friction_n", nonneg=True),
+            seal_viscous_n_s_m=c.num("seal_viscous_n_s_m", nonneg=True),
+            cylinder_mass_kg=c.num("cylinder_mass_kg", positive=True),
+            cylinder_length_m=c.num("cylinder_length_m", positive=True),
+            cylinder_radius_m=c.num("cylinder_radius_m", positive=True),
+            rod_mass_kg=c.num("rod_mass_kg", positive=True),
+            rod_length_m=c.num("rod_length_m", positive=True),
+            rod_radius_m=c.num("rod_radius_m", positive=True),
+        )
+        # Hydraulic-only keys are validated by the hydraulics package; mark them used.
+        for k in _HYDRAULIC_CLASS_KEYS:
+            if c.has(k):
+                c.num(k, nonneg=True)
+        c.done()
+        ac_all.used.add(cname)
+    return classes
+
+
+def _parse_actuators(top: _Section, classes: dict, src: str) -> list:
+    """[[actuator]]: each linkage's class and its two attachment points."""
+    acts_raw = top.raw("actuator")
+    if not isinstance(acts_raw, list) or not acts_raw:
+        raise DescriptionError(f"{src}: '[[actuator]]' must list at least one actuator")
+    actuators = []
+    seen = set()
+    for i, a_raw in enumerate(acts_raw):
+        a = _Section(a_raw, f"actuator[{i}]", src)
+        nm = a.text("name")
+        if nm in seen:
+            raise DescriptionError(f"{src}: two actuators are named '{nm}'; actuator names must be unique")
+        seen.add(nm)
+        cname = a.text("class")
+        if cname not in classes:
+            raise DescriptionError(f"{src}: actuator '{nm}' has class '{cname}'; known classes: {', '.join(classes)}")
+        base = a.vec("base_m", 3)
+        plat = a.vec("platen_m", 3)
+        a.done()
+        if np.linalg.norm(plat - base) < 1e-3:
+            raise DescriptionError(f"{src}: actuator '{nm}' has base_m == platen_m; a linkage needs a length")
+        cls = classes[cname]
+        actuators.append(Actuator(name=nm, cls=cls, base_m=base, platen_m=plat))
+    return actuators
+
+
+def _parse_supports(top: _Section, src: str) -> Supports:
+    """[supports]: the static (air-spring) supports under the platen."""
+    s = top.sub("supports")
+    pos = s.raw("positions_m")
+    try:
+        pos = np.array(pos, dtype=float)
+    except (TypeError, ValueError):
+        raise DescriptionError(f"{src}: 'supports.positions_m' must be a list of [x, y, z] points") from None
+    if pos.ndim != 2 or pos.shape[1] != 3 or len(pos) < 1:
+        raise DescriptionError(f"{src}: 'supports.positions_m' must be a list of [x, y, z] points")
+    supports = Supports(
+        capacity_kg=s.num("capacity_kg", positive=True),
+        positions_m=pos,
+        piston_area_m2=s.num("piston_area_m2", positive=True),
+        chamber_volume_m3=s.num("chamber_volume_m3", positive=True),
+        polytropic_exponent=s.num("polytropic_exponent", positive=True),
+        piston_mass_kg=s.num("piston_mass_kg", positive=True),
+        shoe_mass_kg=s.num("shoe_mass_kg", positive=True),
+        piston_friction_n=s.num("piston_friction_n", nonneg=True),
+        shoe_friction_n=s.num("shoe_friction_n", nonneg=True),
+        piston_radius_m=s.num("piston_radius_m", positive=True),
+        piston_length_m=s.num("piston_length_m", positive=True),
+        air_law=s.text("air_law", "polytropic", choices=("polytropic", "linear")),
+    )
+    s.done()
+    return supports
+
+
+def _parse_sensors(top: _Section, src: str):
+    """[sensors]: accelerometer bandwidth, recorder rate and anti-alias filter order."""
+    se = top.sub("sensors")
+    se.num("accelerometer_range_m_s2", positive=True)
+    bw = se.num("accelerometer_bandwidth_hz", positive=True)
+    rate = se.num("recorder_rate_hz", positive=True)
+    order = se.raw("accelerometer_filter_order", 4)
+    if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= 8:
+        raise DescriptionError(
+            f"{src}: 'sensors.accelerometer_filter_order' must be a whole number 1..8 (got {order!r})"
+        )
+    se.done()
+    return bw, rate, order
+
+
+def _parse_accelerometers(top: _Section, src: str) -> list:
+    """[[accelerometer]]: named platen sensors, each with a position and a unit direction."""
+    accs = []
+    acc_names = set()
+    for i, a_raw in enumerate(top.raw("accelerometer", [])):
+        a = _Section(a_raw, f"accelerometer[{i}]", src)
+        nm = a.text("name")
+        if nm in acc_names:
+            raise DescriptionError(f"{src}: two accelerometers are named '{nm}'")
+        acc_names.add(nm)
+        d = a.vec("direction", 3)
+        if np.linalg.norm(d) < 1e-9:
+            raise DescriptionError(f"{src}: accelerometer '{nm}' direction must be non-zero")
+        accs.append(Accelerometer(name=nm, position_m=a.vec("position_m", 3), direction=d / np.linalg.norm(d)))
+        a.done()
+    return accs
+
+
+def _parse_other_sections(top: _Section, src: str):
+    """Sections other modules validate (marked used here), [friction] and [[effect]]."""
+    # The hydraulic sections are validated by hydraulics.HydraulicParams; accept them here.
+    for k in ("fluid", "supply", "servovalve"):
+        top.raw(k)
+    if top.has("controller"):
+        top.raw("controller")
+    if top.has("interlock"):
+        top.raw("interlock")  # the controller's limit detectors (read by sim/effects/faults.py, checked there)
+    if top.has("calibration"):
+        top.raw("calibration")  # read by mjcf/calibrate.py (validated there)
+    if top.has("published"):
+        pub = top.raw("published")  # what the table's own tests measured (read by characterize / calibrate)
+        if not isinstance(pub, dict):
+            raise DescriptionError(f"{src}: '[published]' must be a table of measured values")
+    fmodel, fpre = "coulomb", 1e-4
+    if top.has("friction"):
+        fr = top.sub("friction")
+        fmodel = fr.text("model", "coulomb", choices=("coulomb", "presliding"))
+        fpre = fr.num("presliding_m", 1e-4, positive=True)
+        fr.done()
+    effects = top.raw("effect", [])
+    if not isinstance(effects, list) or not all(isinstance(e, dict) for e in effects):
+        raise DescriptionError(f"{src}: '[[effect]]' entries must be tables")
+    if top.has("unknown"):
+        top.raw("unknown")  # checked by mjcf.unknowns.parse_unknowns below
+    return fmodel, fpre, effects
+
+
 def _check_inertia(I, what):
     a, b, c = sorted(I)
     if a + b < c * (1 - 1e-9):
@@ -541,56 +597,6 @@ def toml_key_index(lines: list[str], section: str, key: str) -> int | None:
         if current == section and re.match(rf"^{re.escape(key)}\s*=", line):
             return i
     return None
-
-
-# --------------------------------------------------------------------------- kinematics
-def rotation_matrices(angles) -> np.ndarray:
-    """(n, 3, 3) platen rotations for (n, 3) intrinsic x-y-z angles, R = Rx @ Ry @ Rz."""
-    a = np.atleast_2d(np.asarray(angles, dtype=float))
-    c, s = np.cos(a), np.sin(a)
-    n = len(a)
-    one, zero = np.ones(n), np.zeros(n)
-    Rx = np.stack([one, zero, zero, zero, c[:, 0], -s[:, 0], zero, s[:, 0], c[:, 0]], axis=1).reshape(n, 3, 3)
-    Ry = np.stack([c[:, 1], zero, s[:, 1], zero, one, zero, -s[:, 1], zero, c[:, 1]], axis=1).reshape(n, 3, 3)
-    Rz = np.stack([c[:, 2], -s[:, 2], zero, s[:, 2], c[:, 2], zero, zero, zero, one], axis=1).reshape(n, 3, 3)
-    return Rx @ Ry @ Rz
-
-
-def rotation_matrix(rx: float, ry: float, rz: float) -> np.ndarray:
-    """Platen rotation: intrinsic x-y-z angles, R = Rx(rx) @ Ry(ry) @ Rz(rz)."""
-    return rotation_matrices([[rx, ry, rz]])[0]
-
-
-def actuator_strokes(desc: TableDescription, pose) -> np.ndarray:
-    """Inverse kinematics: 6-DOF pose of the reference point -> actuator strokes.
-
-    Args:
-        desc: the table.
-        pose: (6,) [x, y, z, rx, ry, rz] in m and rad (intrinsic x-y-z angles), or
-            (n, 6) for many poses.
-    Returns:
-        (n_act,) or (n, n_act) piston strokes from mid-stroke in m, + = extension.
-    """
-    pose = np.asarray(pose, dtype=float)
-    single = pose.ndim == 1
-    P = np.atleast_2d(pose)
-    base = np.array([a.base_m for a in desc.actuators])
-    plat = np.array([a.platen_m for a in desc.actuators])
-    L0 = np.linalg.norm(plat - base, axis=1)
-    out = np.empty((len(P), len(base)))
-    for i0 in range(0, len(P), 8192):  # in blocks: (block, n_act, 3) temporaries stay small
-        blk = P[i0 : i0 + 8192]
-        pts = blk[:, None, :3] + plat @ rotation_matrices(blk[:, 3:6]).transpose(0, 2, 1)
-        out[i0 : i0 + len(blk)] = np.linalg.norm(pts - base, axis=2) - L0
-    return out[0] if single else out
-
-
-def envelope_corners(desc: TableDescription) -> np.ndarray:
-    """All corners of the rated motion box over the table's DOFs (m, rad), as 6-vectors."""
-    half = np.concatenate([desc.limits.stroke_m, desc.limits.rotation_rad])
-    mask = np.array([d in desc.dofs for d in DOFS6], dtype=float)
-    corners = np.array([np.array(s) * half * mask for s in itertools.product((-1.0, 1.0), repeat=6)])
-    return np.unique(corners, axis=0)
 
 
 def check_stroke_reach(desc: TableDescription) -> None:

@@ -1,7 +1,7 @@
 """The house rules of ``sim/`` (see docs/architecture.md): layers import downwards only,
 ``mjcf`` and ``hydraulics`` import nothing from ``sim``, only ``sim/papers`` names a
-table, no module grows past 800 lines, and sources are cited by the keys of
-docs/references.md."""
+table, no module grows past 800 lines and no function past 100 (outside a short list,
+each entry with its reason), and sources are cited by the keys of docs/references.md."""
 
 import ast
 import re
@@ -161,3 +161,64 @@ def test_sources_are_cited_by_key_not_by_internal_code():
         if OLD_SOURCE_CODE.search(line)
     ]
     assert not bad, "cite docs/references.md's keys instead:\n" + "\n".join(bad)
+
+
+#: the longest a function may be, in lines (def to last line, docstring included)
+FUNCTION_LINES = 100
+#: functions still over the limit, each with its reason; an entry is removed when its
+#: function is split (the test below fails on a stale entry, so the list only shrinks).
+LONG_FUNCTIONS = {
+    "hydraulics/_kernel.py::step_loops": "compiled kernel: numba keeps the ~40 per-actuator scalars of the "
+    "valve, supply and chamber steps in one loop body; the same steps are named functions in the numpy "
+    "backend (hydraulics/_numpy_step.py), which test_backends_agree holds it to",
+    "sim/loop/callback.py::coupled_step": "compiled kernel: the numba control callback, one body per physics step",
+    "sim/loop/simulation.py::Simulation.run": "to split: issue 26, owned by the speed helper (sim/loop/*)",
+    "sim/assess/study.py::max_scale": "to split: issue 26, owned by the speed helper (sim/assess/study.py)",
+    "sim/calibrate/pathsearch.py::calibrate_path": "to split: issue 26, owned by the calibration helpers",
+    "sim/calibrate/search.py::calibrate": "to split: issue 26, owned by the calibration helpers",
+    "sim/calibrate/sensitivity.py::candidates": "to split: issue 26, owned by the calibration helpers",
+    "sim/calibrate/replay.py::replay": "to split: issue 26, owned by the calibration helpers",
+    "sim/calibrate/revisit.py::revisit_accepted": "to split: issue 26, owned by the calibration helpers",
+}
+
+
+def _functions(path: Path):
+    """(qualified name, lines) of every function and method in the file, nested ones too."""
+
+    def walk(node, prefix):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                yield prefix + child.name, child.end_lineno - child.lineno + 1
+                yield from walk(child, prefix + child.name + ".")
+            elif isinstance(child, ast.ClassDef):
+                yield from walk(child, prefix + child.name + ".")
+            else:
+                yield from walk(child, prefix)
+
+    yield from walk(ast.parse(path.read_text()), "")
+
+
+def _function_lengths():
+    for pkg in ("sim", "mjcf", "hydraulics", "bench"):
+        for _, path in _modules(pkg):
+            for name, n in _functions(path):
+                yield f"{path.relative_to(ROOT).as_posix()}::{name}", n
+
+
+def test_no_function_over_100_lines():
+    """One idea per function: a new function over the limit fails here; the ones that
+    remain are listed in LONG_FUNCTIONS with their reason."""
+    long = {name: n for name, n in _function_lengths() if n > FUNCTION_LINES}
+    new = [f"{name}: {n} lines" for name, n in sorted(long.items()) if name not in LONG_FUNCTIONS]
+    assert not new, f"functions over {FUNCTION_LINES} lines (split them along their steps):\n" + "\n".join(new)
+    stale = [name for name in LONG_FUNCTIONS if name not in long]
+    assert not stale, f"split or gone, remove from LONG_FUNCTIONS: {stale}"
+
+
+def test_the_function_length_check_sees_methods_and_nested_functions(tmp_path):
+    """The walk names methods by their class and measures every function."""
+    src = tmp_path / "m.py"
+    src.write_text(
+        "class A:\n    def f(self):\n        def g():\n            pass\n        return 1\n\n\ndef h():\n    pass\n"
+    )
+    assert dict(_functions(src)) == {"A.f": 4, "A.f.g": 2, "h": 2}

@@ -269,14 +269,45 @@ def _curve(fr: E.FRF, f_max: float = 130.0) -> dict:
 
 def run_test(job: dict) -> dict:
     """Run one virtual test (in a worker process) and evaluate it."""
-    from sim.scenario.motions import tapered_sine, white_noise
-
     desc, sim = _simulation(job["raw"], job["src"], job["payload"])
     fs = sim.gains.rate_hz
     kind, dof = job["kind"], job.get("dof")
-    J = sim.controller.J
-    Jp = sim.controller.Jp
     t0 = time.perf_counter()
+    motions = _test_motions(job, fs)
+    n = max(len(m.t) for m in motions.values())
+    ref = _reference(motions, n, fs)
+    sim.reset()
+    res = sim.run(reference=ref)
+    out = {
+        "kind": kind,
+        "dof": dof,
+        "level": job.get("level"),
+        "sim_s": res.sim_s,
+        "wall_s": time.perf_counter() - t0,
+        "incomplete": res.incomplete_reason,
+    }
+    if res.incomplete_reason:
+        return out
+    ch = res.channels
+    nps = job["durations"].nperseg
+    if kind == "valve":
+        out.update(_evaluate_valve(ch, sim.controller.Jp, dof, fs, nps))
+    elif kind == "random":
+        out.update(_evaluate_random(ch, ref, sim.controller.J, sim.controller.Jp, dof, fs, nps))
+    elif kind == "friction":
+        out.update(_evaluate_friction(ch, sim.controller.J, dof))
+    elif kind == "harmonic":
+        out.update(_evaluate_harmonic(sim, res, ref))
+    return out
+
+
+def _test_motions(job: dict, fs: float) -> dict:
+    """The reference motion of each driven DOF for the test ``job["kind"]``: band-limited
+    noise (random: in acceleration; valve: small displacement), a tapered sine (friction)
+    or the three-axis harmonic."""
+    from sim.scenario.motions import tapered_sine, white_noise
+
+    kind, dof = job["kind"], job.get("dof")
     if kind in ("random", "valve"):
         i = DOFS.index(dof)
         if kind == "random":
@@ -295,8 +326,8 @@ def run_test(job: dict) -> dict:
                 seed=(job["seed"], i),
                 rms_displacement=VALVE_RMS_M,
             )
-        motions = {dof: m}
-    elif kind == "friction":
+        return {dof: m}
+    if kind == "friction":
         d = job["durations"]
         m = tapered_sine(
             amplitude=FRICTION_AMPLITUDE[dof],
@@ -305,10 +336,10 @@ def run_test(job: dict) -> dict:
             sample_rate_hz=fs,
             taper_cycles=d.friction_taper_cycles,
         )
-        motions = {dof: m}
-    elif kind == "harmonic":
+        return {dof: m}
+    if kind == "harmonic":
         dur = 24.0
-        motions = {
+        return {
             k: tapered_sine(
                 amplitude=a,
                 frequency_hz=HARMONIC["frequency_hz"],
@@ -319,109 +350,114 @@ def run_test(job: dict) -> dict:
             )
             for k, a in HARMONIC["amplitude"].items()
         }
-    else:  # pragma: no cover
-        raise ValueError(kind)
-    n = max(len(m.t) for m in motions.values())
-    ref = _reference(motions, n, fs)
-    sim.reset()
-    res = sim.run(reference=ref)
-    out = {
-        "kind": kind,
-        "dof": dof,
-        "level": job.get("level"),
-        "sim_s": res.sim_s,
-        "wall_s": time.perf_counter() - t0,
-        "incomplete": res.incomplete_reason,
-    }
-    if res.incomplete_reason:
-        return out
-    ch = res.channels
-    nps = job["durations"].nperseg
-    if kind == "valve":
-        i = DOFS.index(dof)
-        cmd = (ch["valve_command"] @ Jp.T)[:, i]
-        sp = (ch["spool_position"] @ Jp.T)[:, i]
-        fr = E.frf(cmd, sp, fs, nperseg=nps)
-        # The recorded command is the sample at the start of each 1/fs hold (the
-        # controller's zero-order hold, a DAC): the valve sees the held staircase, whose
-        # FRF to the samples is sinc(f/fs) exp(-j pi f/fs). Dividing it out gives the FRF
-        # of the valve to its actual (continuous) drive, as an analogue spool/command
-        # recording on the real table does.
-        fr.H = fr.H / E.zero_order_hold(fr.f, fs)
-        out["frf"] = _curve(fr)
-        out["first"] = E.fit_first_order(fr.f, fr.H, FIRST_ORDER_BAND_HZ, fix_gain=True)
-        out["first_magnitude"] = E.fit_first_order_magnitude(fr.f, fr.H, VALVE_BAND_HZ)
-        out["gain_below_15hz"] = E.band_average(fr.f, fr.H, (0.5, 15.0))
-        out["second"] = E.fit_second_order(fr.f, fr.H, SECOND_ORDER_BAND_HZ)
-        out["command_rms"] = float(np.std(ch["valve_command"]))
-    elif kind == "random":
-        i = DOFS.index(dof)
-        F = ch["actuator_force"] - ch["actuator_force"].mean(axis=0)
-        W = (F @ J)[:, i]
-        sp = (ch["spool_position"] @ Jp.T)[:, i]
-        acc = ch["table_acceleration"][:, i]
-        r = ref.a[:, i]
-        fo = E.frf(sp, W, fs, nperseg=nps, reference=r)
-        fm = E.frf(acc, W, fs, nperseg=nps, reference=r)
-        out["oil"] = _curve(fo, 60.0)
-        out["mass"] = _curve(fm, 60.0)
-        pk = E.peak_pick(fo.f, fo.H, OIL_PEAK_BAND_HZ)
-        out["peak"] = {
-            "f_hz": pk.f_hz,
-            "zeta": pk.zeta,
-            "magnitude": pk.magnitude,
-            "f1_hz": pk.f1_hz,
-            "f2_hz": pk.f2_hz,
-        }
-        # Recorder alignment: the acceleration of tick k is produced by the force half-way
-        # between the force samples k and k+1 (the hydraulic force is updated before each
-        # physics step), i.e. the force record lags by half a tick; exp(+j pi f/fs) undoes
-        # it. The effective mass is then the in-phase (inertial) part of F/a: the
-        # quadrature part is friction and damping (the equivalent viscous damping of
-        # Coulomb friction under random motion, which grows as the test level falls).
-        Hm = fm.H * np.exp(1j * np.pi * fm.f / fs)
-        out["effective_mass"] = E.band_average(fm.f, Hm, MASS_BAND_HZ, part="real")
-        out["effective_mass_abs"] = E.band_average(fm.f, fm.H, MASS_BAND_HZ)
-        out["achieved_rms"] = float(np.std(acc))
-        out["reference_rms"] = float(np.std(r))
-    elif kind == "friction":
-        i = DOFS.index(dof)
-        W = (ch["actuator_force"] @ J)[:, i]
-        d, v, a = (ch[k][:, i] for k in ("table_displacement", "table_velocity", "table_acceleration"))
-        fit = E.friction_fit(d, v, a, W)
-        W0 = W - fit.offset
-        loop = E.hysteresis_loop(d, v, W0 - fit.stiffness * d, n_bins=16)
-        step = max(1, len(d) // 3000)
-        out["fit"] = fit.__dict__
-        out["loop"] = loop
-        out["trace"] = {"d": d[::step], "F": W0[::step]}
-        out["amplitude"] = float(np.max(np.abs(d)))
-    elif kind == "harmonic":
-        from sim.assess.metrics import nrmse
+    raise ValueError(kind)  # pragma: no cover
 
-        achieved = ch["table_displacement"]
-        out["nrmse_closed_loop"] = {
-            k: nrmse(achieved[:, DOFS.index(k)], ref.d[:, DOFS.index(k)]) for k in HARMONIC["amplitude"]
+
+def _evaluate_valve(ch: dict, Jp, dof: str, fs: float, nps: int) -> dict:
+    """Valve test: the spool's FRF to its command in the DOF, and its fitted orders."""
+    out = {}
+    i = DOFS.index(dof)
+    cmd = (ch["valve_command"] @ Jp.T)[:, i]
+    sp = (ch["spool_position"] @ Jp.T)[:, i]
+    fr = E.frf(cmd, sp, fs, nperseg=nps)
+    # The recorded command is the sample at the start of each 1/fs hold (the
+    # controller's zero-order hold, a DAC): the valve sees the held staircase, whose
+    # FRF to the samples is sinc(f/fs) exp(-j pi f/fs). Dividing it out gives the FRF
+    # of the valve to its actual (continuous) drive, as an analogue spool/command
+    # recording on the real table does.
+    fr.H = fr.H / E.zero_order_hold(fr.f, fs)
+    out["frf"] = _curve(fr)
+    out["first"] = E.fit_first_order(fr.f, fr.H, FIRST_ORDER_BAND_HZ, fix_gain=True)
+    out["first_magnitude"] = E.fit_first_order_magnitude(fr.f, fr.H, VALVE_BAND_HZ)
+    out["gain_below_15hz"] = E.band_average(fr.f, fr.H, (0.5, 15.0))
+    out["second"] = E.fit_second_order(fr.f, fr.H, SECOND_ORDER_BAND_HZ)
+    out["command_rms"] = float(np.std(ch["valve_command"]))
+    return out
+
+
+def _evaluate_random(ch: dict, ref, J, Jp, dof: str, fs: float, nps: int) -> dict:
+    """Random test: the oil column (force to spool) with its peak, and the effective
+    mass (force to acceleration) in the DOF."""
+    out = {}
+    i = DOFS.index(dof)
+    F = ch["actuator_force"] - ch["actuator_force"].mean(axis=0)
+    W = (F @ J)[:, i]
+    sp = (ch["spool_position"] @ Jp.T)[:, i]
+    acc = ch["table_acceleration"][:, i]
+    r = ref.a[:, i]
+    fo = E.frf(sp, W, fs, nperseg=nps, reference=r)
+    fm = E.frf(acc, W, fs, nperseg=nps, reference=r)
+    out["oil"] = _curve(fo, 60.0)
+    out["mass"] = _curve(fm, 60.0)
+    pk = E.peak_pick(fo.f, fo.H, OIL_PEAK_BAND_HZ)
+    out["peak"] = {
+        "f_hz": pk.f_hz,
+        "zeta": pk.zeta,
+        "magnitude": pk.magnitude,
+        "f1_hz": pk.f1_hz,
+        "f2_hz": pk.f2_hz,
+    }
+    # Recorder alignment: the acceleration of tick k is produced by the force half-way
+    # between the force samples k and k+1 (the hydraulic force is updated before each
+    # physics step), i.e. the force record lags by half a tick; exp(+j pi f/fs) undoes
+    # it. The effective mass is then the in-phase (inertial) part of F/a: the
+    # quadrature part is friction and damping (the equivalent viscous damping of
+    # Coulomb friction under random motion, which grows as the test level falls).
+    Hm = fm.H * np.exp(1j * np.pi * fm.f / fs)
+    out["effective_mass"] = E.band_average(fm.f, Hm, MASS_BAND_HZ, part="real")
+    out["effective_mass_abs"] = E.band_average(fm.f, fm.H, MASS_BAND_HZ)
+    out["achieved_rms"] = float(np.std(acc))
+    out["reference_rms"] = float(np.std(r))
+    return out
+
+
+def _evaluate_friction(ch: dict, J, dof: str) -> dict:
+    """Friction test: the force-displacement loop in the DOF and its fitted friction."""
+    i = DOFS.index(dof)
+    W = (ch["actuator_force"] @ J)[:, i]
+    d, v, a = (ch[k][:, i] for k in ("table_displacement", "table_velocity", "table_acceleration"))
+    fit = E.friction_fit(d, v, a, W)
+    W0 = W - fit.offset
+    loop = E.hysteresis_loop(d, v, W0 - fit.stiffness * d, n_bins=16)
+    step = max(1, len(d) // 3000)
+    return {
+        "fit": fit.__dict__,
+        "loop": loop,
+        "trace": {"d": d[::step], "F": W0[::step]},
+        "amplitude": float(np.max(np.abs(d))),
+    }
+
+
+def _evaluate_harmonic(sim, res, ref) -> dict:
+    """Harmonic test: closed-loop tracking, then the recorded valve command replayed open
+    loop against the closed-loop motion."""
+    from sim.assess.metrics import nrmse
+
+    out = {}
+    ch = res.channels
+    achieved = ch["table_displacement"]
+    out["nrmse_closed_loop"] = {
+        k: nrmse(achieved[:, DOFS.index(k)], ref.d[:, DOFS.index(k)]) for k in HARMONIC["amplitude"]
+    }
+    out["peak_mm"] = {k: float(np.max(np.abs(achieved[:, DOFS.index(k)]))) * 1e3 for k in HARMONIC["amplitude"]}
+    sim.reset()
+    rep = sim.run(valve_command=ch["valve_command"])
+    ok = rep.incomplete_reason is None
+    out["nrmse_replay_vs_closed_loop"] = (
+        {
+            k: nrmse(rep.channels["table_displacement"][:, DOFS.index(k)], achieved[:, DOFS.index(k)])
+            for k in HARMONIC["amplitude"]
         }
-        out["peak_mm"] = {k: float(np.max(np.abs(achieved[:, DOFS.index(k)]))) * 1e3 for k in HARMONIC["amplitude"]}
-        sim.reset()
-        rep = sim.run(valve_command=ch["valve_command"])
-        ok = rep.incomplete_reason is None
-        out["nrmse_replay_vs_closed_loop"] = (
-            {
-                k: nrmse(rep.channels["table_displacement"][:, DOFS.index(k)], achieved[:, DOFS.index(k)])
-                for k in HARMONIC["amplitude"]
-            }
-            if ok
-            else None
-        )
-        step = 8
-        out["trace"] = {
-            "t": res.t[::step],
-            "ref": ref.d[::step, :3],
-            "closed": achieved[::step, :3],
-            "replay": rep.channels["table_displacement"][::step, :3] if ok else None,
-        }
+        if ok
+        else None
+    )
+    step = 8
+    out["trace"] = {
+        "t": res.t[::step],
+        "ref": ref.d[::step, :3],
+        "closed": achieved[::step, :3],
+        "replay": rep.channels["table_displacement"][::step, :3] if ok else None,
+    }
     return out
 
 

@@ -70,6 +70,8 @@ from sim.report.rerun_scene import (  # noqa: F401
     _Scene,
     _scene,
     body_entity,
+    log_compare_platen,
+    log_static_scene,
     specimen_sensor_marks,
 )
 from sim.report.rerun_series import (  # noqa: F401
@@ -286,6 +288,66 @@ def blueprint(run, compare=None, *, tm=None):
 
 
 # ---------------------------------------------------------------------- target
+def _log_force_colors(rec, rr, tm, sc, force: np.ndarray, times) -> None:
+    """Colour each actuator's cylinder and rod by its force over its capacity (supply
+    pressure times piston area) at the display frames."""
+    import mujoco
+
+    m = tm.model
+    cap = np.array([a.cls.area_a_m2 for a in tm.desc.actuators]) * float(tm.desc.raw["supply"]["pressure_pa"])
+    frac = np.abs(force) / cap
+    for i, gents in sc.force_geoms.items():
+        cols = force_colors(frac[:, i])
+        for gent in gents:
+            arch = rr.Cylinders3D if gent.endswith(("cylinder", "rod")) else None
+            g = next(gg for gg, e, _ in sc.geoms if e == gent)
+            arch = {
+                int(mujoco.mjtGeom.mjGEOM_BOX): rr.Boxes3D,
+                int(mujoco.mjtGeom.mjGEOM_CYLINDER): rr.Cylinders3D,
+                int(mujoco.mjtGeom.mjGEOM_CAPSULE): rr.Capsules3D,
+            }.get(int(m.geom_type[g]), arch)
+            if arch is not None:
+                rec.send_columns(gent, indexes=[times], columns=arch.columns(colors=cols))
+
+
+def _checked_inputs(run, tm, payload_qpos, compare):
+    """Refuse a run of another table, payload positions of the wrong shape or a comparison
+    run of other DOFs; returns ``payload_qpos`` as a float array (or None)."""
+    if list(run.actuators) != list(tm.actuator_names):
+        raise RunFileError(
+            f"run file {run.name} has actuators {', '.join(run.actuators)} but table "
+            f"'{tm.desc.name}' has {', '.join(tm.actuator_names)}; give the matching --table"
+        )
+    if payload_qpos is not None:
+        payload_qpos = np.asarray(payload_qpos, dtype=float)
+        nj = len(getattr(tm.info, "payload_joints", []))
+        if payload_qpos.shape != (run.n_samples, nj):
+            raise ValueError(f"payload_qpos has shape {payload_qpos.shape}, need ({run.n_samples}, {nj})")
+    if compare is not None and list(compare.dofs) != list(run.dofs):
+        raise RunFileError(
+            f"run file {compare.name} has DOFs {', '.join(compare.dofs)} but "
+            f"{run.name} has {', '.join(run.dofs)}; compare runs of the same table"
+        )
+    return payload_qpos
+
+
+def _temp_beside(path: Path) -> str:
+    """An empty hidden temporary file in ``path``'s folder (made as run --out makes its own)."""
+    if str(path.parent):
+        path.parent.mkdir(parents=True, exist_ok=True)  # as run --out creates its folder
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
+    os.close(fd)
+    return tmp
+
+
+def _publish(tmp: str, path: Path) -> None:
+    """Give the finished temporary file the usual permissions (umask) and move it in place."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    os.replace(tmp, path)
+
+
 class RrdTarget:
     """Where a recording goes: an ``.rrd`` file and/or a live viewer.
 
@@ -403,21 +465,7 @@ class RrdTarget:
         Returns:
             The recording file written, or None for a viewer-only target.
         """
-        if list(run.actuators) != list(tm.actuator_names):
-            raise RunFileError(
-                f"run file {run.name} has actuators {', '.join(run.actuators)} but table "
-                f"'{tm.desc.name}' has {', '.join(tm.actuator_names)}; give the matching --table"
-            )
-        if payload_qpos is not None:
-            payload_qpos = np.asarray(payload_qpos, dtype=float)
-            nj = len(getattr(tm.info, "payload_joints", []))
-            if payload_qpos.shape != (run.n_samples, nj):
-                raise ValueError(f"payload_qpos has shape {payload_qpos.shape}, need ({run.n_samples}, {nj})")
-        if compare is not None and list(compare.dofs) != list(run.dofs):
-            raise RunFileError(
-                f"run file {compare.name} has DOFs {', '.join(compare.dofs)} but "
-                f"{run.name} has {', '.join(run.dofs)}; compare runs of the same table"
-            )
+        payload_qpos = _checked_inputs(run, tm, payload_qpos, compare)
         rate = float(rate_hz) if rate_hz is not None else self.rate_hz
         series_rate = self.series_rate_hz if series_rate_hz is _TARGET else series_rate_hz
 
@@ -429,27 +477,9 @@ class RrdTarget:
             # rerun itself runs in the writer process started by open() (or here)
             ops = _Ops()
             self._log(ops, _Lazy(), run, tm, payload_qpos, compare, rate, series_rate, name)
-            job = {
-                "application_id": self.application_id,
-                "recording_id": self.recording_id,
-                "spawn": self.spawn,
-                "connect": (self.connect or DEFAULT_URL) if self.connect is not None else None,
-                "blueprint": (
-                    [str(a) for a in run.actuators],
-                    [str(d) for d in run.dofs],
-                    run.accelerometers is not None,
-                    compare is not None,
-                    run.specimen_acceleration is not None,
-                ),
-                "ops": ops.calls,
-            }
+            job = self._job(ops, run, compare)
             if self.path is not None:
-                if str(self.path.parent):
-                    self.path.parent.mkdir(parents=True, exist_ok=True)  # as run --out creates its folder
-                fd, tmp = tempfile.mkstemp(
-                    prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent if str(self.path.parent) else "."
-                )
-                os.close(fd)
+                tmp = _temp_beside(self.path)
             job["file"] = tmp
             live = self.spawn or self.connect is not None
             if live and (worker is None or worker.poll() is not None):
@@ -459,23 +489,12 @@ class RrdTarget:
                     _run_in_worker(worker, job, timeout_s=self.timeout_s if live else None)
                 except ViewerTimeout:
                     worker = None
-                    where = "the spawned viewer" if self.spawn else f"the viewer at {job['connect']}"
-                    how = (
-                        "--spawn needs a screen; write a file with --rrd and open it where there is one"
-                        if self.spawn
-                        else "start one (`rerun`) or write a file with --rrd"
-                    )
-                    raise RecordingError(
-                        f"{where} did not take the recording within {self.timeout_s:g} s (nothing kept); {how}"
-                    ) from None
+                    raise self._timeout_error(job) from None
                 worker = None
             else:
                 _execute(job)
             if tmp is not None:
-                umask = os.umask(0)
-                os.umask(umask)
-                os.chmod(tmp, 0o666 & ~umask)
-                os.replace(tmp, self.path)
+                _publish(tmp, self.path)
                 tmp = None
         except OSError as exc:
             raise RecordingError(
@@ -491,6 +510,34 @@ class RrdTarget:
                 except OSError:
                     pass
         return self.path
+
+    def _job(self, ops, run, compare) -> dict:
+        """What the writer process needs: where to send the recording, the blueprint's
+        parts and the noted rerun calls (``file`` is added by the caller)."""
+        return {
+            "application_id": self.application_id,
+            "recording_id": self.recording_id,
+            "spawn": self.spawn,
+            "connect": (self.connect or DEFAULT_URL) if self.connect is not None else None,
+            "blueprint": (
+                [str(a) for a in run.actuators],
+                [str(d) for d in run.dofs],
+                run.accelerometers is not None,
+                compare is not None,
+                run.specimen_acceleration is not None,
+            ),
+            "ops": ops.calls,
+        }
+
+    def _timeout_error(self, job: dict) -> "RecordingError":
+        """The one-line error of a live viewer that did not take the recording in time."""
+        where = "the spawned viewer" if self.spawn else f"the viewer at {job['connect']}"
+        how = (
+            "--spawn needs a screen; write a file with --rrd and open it where there is one"
+            if self.spawn
+            else "start one (`rerun`) or write a file with --rrd"
+        )
+        return RecordingError(f"{where} did not take the recording within {self.timeout_s:g} s (nothing kept); {how}")
 
     def close(self) -> None:
         """Stop the background writer process, if any (a target never written)."""
@@ -527,48 +574,11 @@ class RrdTarget:
         self._log_series(rec, rr, run, compare, series_rate_hz)
 
     def _log_scene(self, rec, rr, run, tm, payload_qpos, compare, rate_hz) -> None:
-        import mujoco
-
-        m = tm.model
+        """The model's geometry and sensors (static), then the bodies' poses at the display
+        rate, the actuators coloured by force and the compared run's platen."""
         sc = _scene(tm)
         colored = {g for gs in sc.force_geoms.values() for g in gs} if run.actuator_force is not None else set()
-        for g, gent, _ in sc.geoms:
-            arch = _geom_archetype(rr, m, g, color=gent not in colored)
-            if arch is None:
-                continue
-            rec.log(
-                gent,
-                rr.Transform3D(translation=m.geom_pos[g], quaternion=_quat_xyzw(m.geom_quat[g])),
-                arch,
-                static=True,
-            )
-        # accelerometers, in the frame of the body that carries them
-        acc_by_body: dict[int, list] = {}
-        for a, s in zip(tm.desc.accelerometers, tm.acc_sites):
-            if s >= 0:
-                acc_by_body.setdefault(int(m.site_bodyid[s]), []).append((a, s))
-        ents = dict(sc.bodies)
-        for b, items in acc_by_body.items():
-            ent = ents.get(b, "table/foundation") + "/accelerometers"
-            p = np.array([m.site_pos[s] for _, s in items])
-            rec.log(
-                ent,
-                rr.Points3D(p, radii=0.05, colors=(255, 215, 0), labels=[a.name for a, _ in items], show_labels=False),
-                rr.Arrows3D(
-                    origins=p, vectors=np.array([0.5 * a.direction for a, _ in items]), colors=(255, 215, 0), radii=0.02
-                ),
-                static=True,
-            )
-
-        # the specimen's sensors, on the floor (or the platen) that carries each
-        for ent, (p, d, labels) in specimen_sensor_marks(tm, run.meta.get("specimen_sensors"), ents).items():
-            rec.log(
-                ent,
-                rr.Points3D(p, radii=0.05, colors=(0, 200, 200), labels=labels, show_labels=False),
-                rr.Arrows3D(origins=p, vectors=0.5 * d, colors=(0, 200, 200), radii=0.02),
-                static=True,
-            )
-
+        log_static_scene(rec, rr, tm, sc, colored, run.meta.get("specimen_sensors"))
         # display frames
         pose_src = run.table_displacement if run.table_displacement is not None else run.reference
         if pose_src is None or pose_src.shape[1] != 6:
@@ -588,55 +598,9 @@ class RrdTarget:
                 columns=rr.Transform3D.columns(translation=pos[:, k], quaternion=_quat_xyzw(quat[:, k])),
             )
         if colored:
-            cap = np.array([a.cls.area_a_m2 for a in tm.desc.actuators]) * float(tm.desc.raw["supply"]["pressure_pa"])
-            frac = np.abs(run.actuator_force[idx]) / cap
-            for i, gents in sc.force_geoms.items():
-                cols = force_colors(frac[:, i])
-                for gent in gents:
-                    arch = rr.Cylinders3D if gent.endswith(("cylinder", "rod")) else None
-                    g = next(gg for gg, e, _ in sc.geoms if e == gent)
-                    arch = {
-                        int(mujoco.mjtGeom.mjGEOM_BOX): rr.Boxes3D,
-                        int(mujoco.mjtGeom.mjGEOM_CYLINDER): rr.Cylinders3D,
-                        int(mujoco.mjtGeom.mjGEOM_CAPSULE): rr.Capsules3D,
-                    }.get(int(m.geom_type[g]), arch)
-                    if arch is not None:
-                        rec.send_columns(gent, indexes=[times], columns=arch.columns(colors=cols))
-        # the compare run's platen, translucent
+            _log_force_colors(rec, rr, tm, sc, run.actuator_force[idx], times)
         if compare is not None and compare.table_displacement is not None and compare.table_displacement.shape[1] == 6:
-            from mjcf.model import xyz_to_quat
-
-            other = _aligned(run, compare.t, compare.table_displacement)[idx]
-            ok = np.all(np.isfinite(other), axis=1)
-            if np.any(ok):
-                pb = tm.platen_body
-                for g in range(int(m.body_geomadr[pb]), int(m.body_geomadr[pb]) + int(m.body_geomnum[pb])):
-                    arch = _geom_archetype(rr, m, g, alpha=0.35)
-                    if arch is not None:
-                        rec.log(
-                            f"compare/platen/g{g}",
-                            rr.Transform3D(translation=m.geom_pos[g], quaternion=_quat_xyzw(m.geom_quat[g])),
-                            arch,
-                            static=True,
-                        )
-                # platen body frame relative to the reference point pose (home offset)
-                d = tm.new_data()
-                tm.set_platen_pose(d, np.zeros(6))
-                off_p, off_q = d.xpos[pb].copy(), d.xquat[pb].copy()
-                qs = np.array([xyz_to_quat(*o[3:6]) for o in other[ok]])
-                tr = np.empty((int(ok.sum()), 3))
-                qq = np.empty((int(ok.sum()), 4))
-                for k, (o, q) in enumerate(zip(other[ok], qs)):
-                    # world pose = pose(o) * home body offset (home reference pose is the identity)
-                    R = np.zeros(9)
-                    mujoco.mju_quat2Mat(R, q)
-                    tr[k] = o[:3] + R.reshape(3, 3) @ off_p
-                    mujoco.mju_mulQuat(qq[k], q, off_q)
-                rec.send_columns(
-                    "compare/platen",
-                    indexes=[rr.TimeColumn(TIMELINE, duration=run.t[idx][ok])],
-                    columns=rr.Transform3D.columns(translation=tr, quaternion=_quat_xyzw(qq)),
-                )
+            log_compare_platen(rec, rr, run, tm, compare, idx, TIMELINE)
 
     def _log_series(self, rec, rr, run, compare, series_rate_hz) -> None:
         stride = series_stride(run.sample_rate_hz, series_rate_hz)

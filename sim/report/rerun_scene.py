@@ -337,3 +337,88 @@ def specimen_sensor_marks(tm, sensors, ents: dict) -> dict:
         d.append([float(x) for x in s["direction"]])
         lab.append(str(s["name"]))
     return {k: (np.array(p), np.array(d), lab) for k, (p, d, lab) in out.items()}
+
+
+def log_static_scene(rec, rr, tm, sc, colored: set, specimen_sensors) -> None:
+    """Log the model's geoms (those in ``colored`` left uncoloured: their colour follows
+    the force), the platen accelerometers in the frame of the body that carries each,
+    and the specimen's sensors, all static."""
+    m = tm.model
+    for g, gent, _ in sc.geoms:
+        arch = _geom_archetype(rr, m, g, color=gent not in colored)
+        if arch is None:
+            continue
+        rec.log(
+            gent,
+            rr.Transform3D(translation=m.geom_pos[g], quaternion=_quat_xyzw(m.geom_quat[g])),
+            arch,
+            static=True,
+        )
+    # accelerometers, in the frame of the body that carries them
+    acc_by_body: dict[int, list] = {}
+    for a, s in zip(tm.desc.accelerometers, tm.acc_sites):
+        if s >= 0:
+            acc_by_body.setdefault(int(m.site_bodyid[s]), []).append((a, s))
+    ents = dict(sc.bodies)
+    for b, items in acc_by_body.items():
+        ent = ents.get(b, "table/foundation") + "/accelerometers"
+        p = np.array([m.site_pos[s] for _, s in items])
+        rec.log(
+            ent,
+            rr.Points3D(p, radii=0.05, colors=(255, 215, 0), labels=[a.name for a, _ in items], show_labels=False),
+            rr.Arrows3D(
+                origins=p, vectors=np.array([0.5 * a.direction for a, _ in items]), colors=(255, 215, 0), radii=0.02
+            ),
+            static=True,
+        )
+
+    # the specimen's sensors, on the floor (or the platen) that carries each
+    for ent, (p, d, labels) in specimen_sensor_marks(tm, specimen_sensors, ents).items():
+        rec.log(
+            ent,
+            rr.Points3D(p, radii=0.05, colors=(0, 200, 200), labels=labels, show_labels=False),
+            rr.Arrows3D(origins=p, vectors=0.5 * d, colors=(0, 200, 200), radii=0.02),
+            static=True,
+        )
+
+
+def log_compare_platen(rec, rr, run, tm, compare, idx: np.ndarray, timeline: str) -> None:
+    """The compared run's platen, translucent, at the display frames ``idx`` of ``run``."""
+    import mujoco
+
+    from mjcf.model import xyz_to_quat
+    from sim.report.rerun_series import _aligned
+
+    m = tm.model
+    other = _aligned(run, compare.t, compare.table_displacement)[idx]
+    ok = np.all(np.isfinite(other), axis=1)
+    if not np.any(ok):
+        return
+    pb = tm.platen_body
+    for g in range(int(m.body_geomadr[pb]), int(m.body_geomadr[pb]) + int(m.body_geomnum[pb])):
+        arch = _geom_archetype(rr, m, g, alpha=0.35)
+        if arch is not None:
+            rec.log(
+                f"compare/platen/g{g}",
+                rr.Transform3D(translation=m.geom_pos[g], quaternion=_quat_xyzw(m.geom_quat[g])),
+                arch,
+                static=True,
+            )
+    # platen body frame relative to the reference point pose (home offset)
+    d = tm.new_data()
+    tm.set_platen_pose(d, np.zeros(6))
+    off_p, off_q = d.xpos[pb].copy(), d.xquat[pb].copy()
+    qs = np.array([xyz_to_quat(*o[3:6]) for o in other[ok]])
+    tr = np.empty((int(ok.sum()), 3))
+    qq = np.empty((int(ok.sum()), 4))
+    for k, (o, q) in enumerate(zip(other[ok], qs)):
+        # world pose = pose(o) * home body offset (home reference pose is the identity)
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, q)
+        tr[k] = o[:3] + R.reshape(3, 3) @ off_p
+        mujoco.mju_mulQuat(qq[k], q, off_q)
+    rec.send_columns(
+        "compare/platen",
+        indexes=[rr.TimeColumn(timeline, duration=run.t[idx][ok])],
+        columns=rr.Transform3D.columns(translation=tr, quaternion=_quat_xyzw(qq)),
+    )

@@ -216,6 +216,35 @@ def _column(c, where: str, desc, seen: dict) -> "ColumnMap":
         raise _err(where, "has no name", "set name = the column's header in the export")
     if ch not in DIMENSION:
         raise _err(where, f"channel {ch!r} is not a run-file channel", f"use one of {', '.join(DIMENSION)}")
+    target = _column_target(c, ch, where, desc)
+    if (ch, target) in seen:
+        raise _err(
+            where,
+            f"maps {ch} {target} again (also column '{seen[(ch, target)]}')",
+            "keep one column per channel and target",
+        )
+    seen[(ch, target)] = name
+    factor = _column_factor(c, ch, target, unit, where, desc)
+    nums = _column_numbers(c, where)
+    cm = ColumnMap(
+        name=name,
+        channel=ch,
+        target=target,
+        factor=nums["sign"] * nums["scale"] * factor,
+        offset=nums["offset"],
+        unit=unit,
+    )
+    if ch == "accelerometers":
+        _accelerometer_fields(c, cm, where)
+    if ch == "specimen_acceleration":
+        _specimen_fields(c, cm, where)
+    cm.conditioning = _conditioning(c, where)
+    return cm
+
+
+def _column_target(c: dict, ch: str, where: str, desc) -> str:
+    """The actuator, DOF, accelerometer or specimen sensor the column's channel is of,
+    checked against the table's description where it names them."""
     if ch in ACTUATOR:
         target, kind, known = c.get("actuator"), "actuator", list(desc.actuator_names)
     elif ch in DOF:
@@ -240,13 +269,12 @@ def _column(c, where: str, desc, seen: dict) -> "ColumnMap":
             f"{', '.join(known) if known else 'any name'}",
             f"set {kind} = one of them, or describe the table's {kind}s in its description",
         )
-    if (ch, target) in seen:
-        raise _err(
-            where,
-            f"maps {ch} {target} again (also column '{seen[(ch, target)]}')",
-            "keep one column per channel and target",
-        )
-    seen[(ch, target)] = name
+    return target
+
+
+def _column_factor(c: dict, ch: str, target: str, unit, where: str, desc) -> float:
+    """The factor from the column's unit to the channel's SI unit: a known unit's, over
+    ``full_scale`` for volts or mA, times the piston area for a differential pressure."""
     dims = DIMENSION[ch]
     dim = next((d for d in dims if unit in UNITS[d]), None)
     if dim is None:
@@ -263,25 +291,36 @@ def _column(c, where: str, desc, seen: dict) -> "ColumnMap":
             )
         factor = 1.0 / float(fsv)
     if ch == "actuator_force" and dim == "pressure":
-        area = c.get("area_m2")
-        if area == "table":
-            a = desc.actuators[list(desc.actuator_names).index(target)]
-            if a.cls.area_a_m2 != a.cls.area_b_m2:
-                raise _err(
-                    where,
-                    f"table '{desc.name}' actuator {target} has unequal areas "
-                    f"({a.cls.area_a_m2:g}, {a.cls.area_b_m2:g} m^2): one differential pressure "
-                    "is not its force",
-                    "export both chamber pressures (pressure_a, pressure_b)",
-                )
-            area = a.cls.area_a_m2
-        if isinstance(area, bool) or not isinstance(area, (int, float)) or not area > 0:
+        factor *= _piston_area(c, target, unit, where, desc)
+    return factor
+
+
+def _piston_area(c: dict, target: str, unit, where: str, desc) -> float:
+    """``area_m2`` of a differential-pressure force column (``"table"``: the description's,
+    for an actuator of equal areas)."""
+    area = c.get("area_m2")
+    if area == "table":
+        a = desc.actuators[list(desc.actuator_names).index(target)]
+        if a.cls.area_a_m2 != a.cls.area_b_m2:
             raise _err(
                 where,
-                f"a differential pressure ({unit}) as actuator_force needs the piston area",
-                'add area_m2 = the piston area in m^2, or area_m2 = "table" (from the description)',
+                f"table '{desc.name}' actuator {target} has unequal areas "
+                f"({a.cls.area_a_m2:g}, {a.cls.area_b_m2:g} m^2): one differential pressure "
+                "is not its force",
+                "export both chamber pressures (pressure_a, pressure_b)",
             )
-        factor *= float(area)
+        area = a.cls.area_a_m2
+    if isinstance(area, bool) or not isinstance(area, (int, float)) or not area > 0:
+        raise _err(
+            where,
+            f"a differential pressure ({unit}) as actuator_force needs the piston area",
+            'add area_m2 = the piston area in m^2, or area_m2 = "table" (from the description)',
+        )
+    return float(area)
+
+
+def _column_numbers(c: dict, where: str) -> dict:
+    """``scale``, ``offset`` and ``sign`` (1 or -1) of a column, as floats."""
     nums = {}
     for key, default in (("scale", 1.0), ("offset", 0.0), ("sign", 1.0)):
         v = c.get(key, default)
@@ -290,24 +329,16 @@ def _column(c, where: str, desc, seen: dict) -> "ColumnMap":
         nums[key] = float(v)
     if nums["sign"] not in (1.0, -1.0):
         raise _err(where, f"sign must be 1 or -1 (got {nums['sign']:g})", "set sign = 1 or -1")
-    cm = ColumnMap(
-        name=name,
-        channel=ch,
-        target=target,
-        factor=nums["sign"] * nums["scale"] * factor,
-        offset=nums["offset"],
-        unit=unit,
-    )
-    if ch == "accelerometers":
-        for key in ("position_m", "direction"):
-            v = c.get(key, getattr(cm, key.split("_")[0] if key == "position_m" else key))
-            if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) for x in v)):
-                raise _err(where, f"{key} must be 3 numbers (got {v!r})", f"set {key} = [x, y, z] in the table frame")
-            setattr(cm, "position" if key == "position_m" else "direction", [float(x) for x in v])
-    if ch == "specimen_acceleration":
-        _specimen_fields(c, cm, where)
-    cm.conditioning = _conditioning(c, where)
-    return cm
+    return nums
+
+
+def _accelerometer_fields(c: dict, cm: "ColumnMap", where: str) -> None:
+    """``position_m`` and ``direction`` of a platen accelerometer (defaults: the map's)."""
+    for key in ("position_m", "direction"):
+        v = c.get(key, getattr(cm, key.split("_")[0] if key == "position_m" else key))
+        if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) for x in v)):
+            raise _err(where, f"{key} must be 3 numbers (got {v!r})", f"set {key} = [x, y, z] in the table frame")
+        setattr(cm, "position" if key == "position_m" else "direction", [float(x) for x in v])
 
 
 def _specimen_fields(c: dict, cm: "ColumnMap", where: str) -> None:

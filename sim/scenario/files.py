@@ -202,24 +202,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     rate = V.sample_rate(out.get("sample_rate_hz", 1024.0), "output.sample_rate_hz", src, ScenarioError)
     if dur is not None:
         V.check_samples(float(dur) * rate + 1, f"'scenario.duration_s' = {dur:g} s at {rate:g} Hz", src, ScenarioError)
-    it = data.get("iteration", {"count": 0})
-    if not isinstance(it, dict):
-        raise ScenarioError(f"{src}: [iteration] must be a table (count, gain, band_hz)")
-    _unknown(it, _ITERATION_KEYS, "iteration", src)
-    cnt = it.get("count", 0)
-    if isinstance(cnt, bool) or not isinstance(cnt, int) or not 0 <= cnt <= 10:
-        raise ScenarioError(f"{src}: 'iteration.count' must be an integer 0..10 (got {cnt!r})")
-    if it.get("frf", "noise") not in ("noise", "record"):
-        raise ScenarioError(f'{src}: \'iteration.frf\' must be "noise" or "record" (got {it["frf"]!r})')
-    if "band_hz" in it:
-        V.numbers(it["band_hz"], "iteration.band_hz", src, ScenarioError, n=2, positive=True, increasing=True)
-    for key in ("gain", "noise_level", "h_min"):
-        v = it.get(key)
-        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 1e3):
-            raise ScenarioError(f"{src}: 'iteration.{key}' must be a positive number (got {v!r})")
-    seed = it.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ScenarioError(f"{src}: 'iteration.seed' must be a non-negative integer (got {seed!r})")
+    it = _check_iteration(data, src)
     ctrl = data.get("controller", {})
     if not isinstance(ctrl, dict):
         raise ScenarioError(f"{src}: [controller] must be a table of gains")
@@ -232,12 +215,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         table = str(base / table)
     if payload and payload.endswith(".toml") and not Path(payload).is_absolute():
         payload = str(base / payload)
-    faults = []  # [[fault]] / [[effect]]: effects the scenario adds to the table (docs/faults.md)
-    for key in ("fault", "effect"):
-        got = data.get(key, [])
-        if not isinstance(got, list) or not all(isinstance(e, dict) and "type" in e for e in got):
-            raise ScenarioError(f"{src}: [[{key}]] entries must be tables with a 'type' (see docs/faults.md)")
-        faults += got
+    faults = _scenario_effects(data, src)
     interlock = data.get("interlock", {})
     if not isinstance(interlock, dict):
         raise ScenarioError(f"{src}: [interlock] must be a table of limits (see docs/faults.md)")
@@ -263,6 +241,40 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     )
     _check_motion(s)
     return s
+
+
+def _check_iteration(data: dict, src: str) -> dict:
+    """[iteration] (drive-file iteration before the run), checked; default no iteration."""
+    it = data.get("iteration", {"count": 0})
+    if not isinstance(it, dict):
+        raise ScenarioError(f"{src}: [iteration] must be a table (count, gain, band_hz)")
+    _unknown(it, _ITERATION_KEYS, "iteration", src)
+    cnt = it.get("count", 0)
+    if isinstance(cnt, bool) or not isinstance(cnt, int) or not 0 <= cnt <= 10:
+        raise ScenarioError(f"{src}: 'iteration.count' must be an integer 0..10 (got {cnt!r})")
+    if it.get("frf", "noise") not in ("noise", "record"):
+        raise ScenarioError(f'{src}: \'iteration.frf\' must be "noise" or "record" (got {it["frf"]!r})')
+    if "band_hz" in it:
+        V.numbers(it["band_hz"], "iteration.band_hz", src, ScenarioError, n=2, positive=True, increasing=True)
+    for key in ("gain", "noise_level", "h_min"):
+        v = it.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 1e3):
+            raise ScenarioError(f"{src}: 'iteration.{key}' must be a positive number (got {v!r})")
+    seed = it.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ScenarioError(f"{src}: 'iteration.seed' must be a non-negative integer (got {seed!r})")
+    return it
+
+
+def _scenario_effects(data: dict, src: str) -> list:
+    """[[fault]] and [[effect]] entries, each a table with a 'type' (checked by sim.effects)."""
+    faults = []  # [[fault]] / [[effect]]: effects the scenario adds to the table (docs/faults.md)
+    for key in ("fault", "effect"):
+        got = data.get(key, [])
+        if not isinstance(got, list) or not all(isinstance(e, dict) and "type" in e for e in got):
+            raise ScenarioError(f"{src}: [[{key}]] entries must be tables with a 'type' (see docs/faults.md)")
+        faults += got
+    return faults
 
 
 def _check_factor(m: dict, where: str, src: str):

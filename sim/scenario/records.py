@@ -416,19 +416,10 @@ def process_record(
         if n_total < x.size:
             raise MotionError(f"record {name} is longer than record_length_s = {record_length_s:g} s; raise it")
         x = np.concatenate([x, np.zeros(n_total - x.size)])
-    trim_used = None
     check_samples(len(x) * dt_t * fs, f"record {name} at time_factor {time_factor:g} and {fs:g} Hz", None, MotionError)
     x = resample(x, dt_t, fs)
     h = 1.0 / fs
-    if baseline == "butterworth":
-        x = highpass(x, h, highpass_hz, filter_order, keep_padding=True)
-        i0, i1 = trim_quiet(x, h, trim_tol) if trim is None else trim
-        x = x[i0:i1]
-        trim_used = (int(i0), int(i1))
-    elif baseline == "polynomial":
-        x = polynomial_baseline(x, h, polynomial_degree)
-    elif baseline in ("linear", "mean"):
-        x = remove_trend(x, 1 if baseline == "linear" else 0)
+    x, trim_used = _correct_baseline(x, h, baseline, highpass_hz, filter_order, polynomial_degree, trim_tol, trim)
     x = cosine_taper(x, h, taper_s)
     v, d = integrate(x, h)
     t = np.arange(x.size) * h
@@ -460,6 +451,21 @@ def process_record(
         peak_acceleration=pk_unit.acceleration * factor,
     )
     return Motion(m.t, m.d * factor, m.v * factor, m.a * factor, name, info)
+
+
+def _correct_baseline(x, h, baseline, highpass_hz, filter_order, polynomial_degree, trim_tol, trim):
+    """(baseline-corrected acceleration, the (i0, i1) kept of the Butterworth's padded
+    output or None): a zero-phase high-pass whose precursor and tail are trimmed where
+    quiet, a polynomial fitted to the displacement, or a linear trend or mean removed."""
+    if baseline == "butterworth":
+        x = highpass(x, h, highpass_hz, filter_order, keep_padding=True)
+        i0, i1 = trim_quiet(x, h, trim_tol) if trim is None else trim
+        return x[i0:i1], (int(i0), int(i1))
+    if baseline == "polynomial":
+        return polynomial_baseline(x, h, polynomial_degree), None
+    if baseline in ("linear", "mean"):
+        return remove_trend(x, 1 if baseline == "linear" else 0), None
+    return x, None
 
 
 def process_components(

@@ -25,6 +25,7 @@ Layouts:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -210,10 +211,101 @@ def _fit_limits(base, plat, usable, a, b):
     return lo * umin, lo * umin / R
 
 
+@dataclass
+class _Lab6:
+    """The lab's numbers for a 6-DOF table, read and checked (SI), and the source of each."""
+
+    kind: str  #: layout name
+    m: float  #: moving mass
+    a: float  #: platen length
+    b: float  #: platen width
+    h: float  #: platen depth
+    A_h: float  #: piston area (horizontal or all)
+    s_h: float  #: half-stroke (horizontal or all)
+    A_v: float  #: piston area of the vertical actuators
+    s_v: float  #: half-stroke of the vertical actuators
+    ps: float  #: supply pressure
+    q: float  #: valve rated flow
+    fv: float  #: valve bandwidth
+    drop: float  #: valve rated drop
+    beta: float  #: bulk modulus
+    kfb: float  #: force-balance gain
+    m_spec: float | None  #: rated specimen mass
+    lab: str  #: "lab: <src>", the comment of a lab's number
+    given: dict  #: key -> its source comment (lab's number or unknown range)
+
+
+@dataclass
+class _Layout6:
+    """The actuators' attachment points, their classes and the layout's Jacobian."""
+
+    names: list
+    cls: list
+    base: np.ndarray
+    plat: np.ndarray
+    note: str
+    supports: bool
+    J: np.ndarray
+
+
 def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
     """TOML text of a 6-DOF table description named ``name`` from the lab's ``inputs``
     (keys of :data:`LAB_KEYS6`; the moving mass, supply pressure, valve rated flow and
     bandwidth and bulk modulus possibly unknown, :mod:`sim.scenario.labvalues`)."""
+    from sim.scenario import labvalues
+
+    inputs, unknowns, L = _read_lab6(name, inputs, src)
+    lay = _read_layout(L, inputs, src)
+    classes = {}
+    for c in dict.fromkeys(lay.cls):
+        vert = c == "vertical"
+        classes[c] = {"A": L.A_v if vert else L.A_h, "s": L.s_v if vert else L.s_h, "vert": vert}
+    n_act = len(lay.names)
+    # masses: 5 % of the moving mass in the rods (as the uni-axial generator)
+    rod = 0.05 * L.m / n_act
+    platen = L.m - n_act * rod
+    com = [0.0, 0.0, -L.h / 2]
+    inertia, in_src = _platen_inertia(inputs, L, platen, src)
+    f_oil, f_dof = _oil_columns(lay, classes, L, inertia, com)
+    kp, kp_src = _position_gains(inputs, f_dof, L, src)
+    title = inputs.get("title", f"{name}: 6-DOF table ({n_act} actuators, {L.kind} layout)")
+    if not isinstance(title, str):
+        raise ScenarioError(f"{src}: 'title' must be text")
+    out = [
+        *_head_lines(name, title, L.lab),
+        *_limits_lines(L, lay, classes, f_oil, inputs, src),
+        "[platen]",
+        f"size_m = {_fl([L.a, L.b, L.h])}   # {L.given['platen_size_m']}",
+        f"com_m = {_fl(com)}   # assumed: symmetric platen, centre of mass at mid-depth",
+        f"mass_kg = {_f(platen)}   # derived: moving mass ({L.given['moving_mass_kg']}) - {n_act} rods (assumed below)",
+        f"inertia_kg_m2 = {_fl(inertia)}   # {in_src}",
+        "",
+        *common_sections(
+            _f,
+            L.given,
+            ps=L.ps,
+            q=L.q,
+            drop=L.drop,
+            fv=L.fv,
+            pump_flow=0.5 * L.q * n_act,
+            swept_total=sum(classes[c]["A"] * classes[c]["s"] for c in lay.cls),
+            beta=L.beta,
+            ps_hi=unknowns["supply_pressure_pa"].hi if "supply_pressure_pa" in unknowns else None,
+        ),
+    ]
+    for c, cd in classes.items():
+        out += _class_lines(c, cd, lay, L, rod)
+    out += _actuator_lines(lay)
+    if lay.supports:
+        out += _support_lines(L)
+    out += _control_and_sensor_lines(inputs, L, kp, kp_src, src)
+    ranges, lab_of = labvalues.description_ranges(unknowns, list(classes), n_act * rod)
+    return labvalues.mark("\n".join(out), ranges, unknowns, lab_of)
+
+
+def _read_lab6(name: str, inputs: dict, src: str):
+    """Check the keys and the name, resolve the unknown values and read every number:
+    (inputs with unknowns at their nominal, the unknowns, :class:`_Lab6`)."""
     from sim.scenario import labvalues
 
     unknown = sorted(set(inputs) - set(LAB_KEYS6))
@@ -244,8 +336,15 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
     lab = f"lab: {src}"
     given = {k: lab for k in inputs}
     given.update({k: u.comment() for k, u in unknowns.items()})
-    names, cls, base, plat, layout_note = _layout(kind, inputs, (a, b, h), s_h, s_v, src)
-    supports = inputs.get("static_supports", kind == "4h4v")
+    L = _Lab6(kind, m, a, b, h, A_h, s_h, A_v, s_v, ps, q, fv, drop, beta, kfb, m_spec, lab, given)
+    return inputs, unknowns, L
+
+
+def _read_layout(L: _Lab6, inputs: dict, src: str) -> _Layout6:
+    """The layout's attachment points, whether static supports carry the weight, and a
+    check that the actuators control all six DOF (Jacobian of full rank)."""
+    names, cls, base, plat, layout_note = _layout(L.kind, inputs, (L.a, L.b, L.h), L.s_h, L.s_v, src)
+    supports = inputs.get("static_supports", L.kind == "4h4v")
     if not isinstance(supports, bool):
         raise ScenarioError(f"{src}: 'static_supports' must be true or false")
     J = _jacobian(base, plat)
@@ -253,60 +352,59 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
         raise ScenarioError(
             f"{src}: the actuator layout does not control all 6 DOF (its Jacobian has rank < 6); move the attachment points"
         )
-    classes = {}
-    for c in dict.fromkeys(cls):
-        vert = c == "vertical"
-        classes[c] = {"A": A_v if vert else A_h, "s": s_v if vert else s_h, "vert": vert}
-    n_act = len(names)
-    # masses: 5 % of the moving mass in the rods (as the uni-axial generator)
-    rod = 0.05 * m / n_act
-    platen = m - n_act * rod
-    com = [0.0, 0.0, -h / 2]
+    return _Layout6(names, cls, base, plat, layout_note, supports, J)
+
+
+def _platen_inertia(inputs: dict, L: _Lab6, platen: float, src: str):
+    """(principal moments, source comment): the lab's, else a uniform solid box."""
     if "inertia_kg_m2" in inputs:
-        inertia = _vec(inputs, "inertia_kg_m2", 3, src)
-        in_src = lab
-    else:
-        inertia = [platen * (b * b + h * h) / 12, platen * (a * a + h * h) / 12, platen * (a * a + b * b) / 12]
-        in_src = "derived: uniform solid box of the platen mass and size, m (b^2 + h^2) / 12 etc. (a welded box is stiffer in inertia: give inertia_kg_m2 if known)"
+        return _vec(inputs, "inertia_kg_m2", 3, src), L.lab
+    a, b, h = L.a, L.b, L.h
+    inertia = [platen * (b * b + h * h) / 12, platen * (a * a + h * h) / 12, platen * (a * a + b * b) / 12]
+    in_src = "derived: uniform solid box of the platen mass and size, m (b^2 + h^2) / 12 etc. (a welded box is stiffer in inertia: give inertia_kg_m2 if known)"
+    return inertia, in_src
+
+
+def _oil_columns(lay: _Layout6, classes: dict, L: _Lab6, inertia, com):
+    """(coupled oil-column frequencies, per-DOF oil-column frequencies) in Hz."""
     # oil columns: k_i = 2 beta A^2 / V per actuator, V = A s (1 + dead fraction); DOF stiffness J^T diag(k) J
     k_act = np.array(
-        [2 * beta * classes[c]["A"] ** 2 / (classes[c]["A"] * classes[c]["s"] * (1 + DEAD_FRACTION)) for c in cls]
+        [2 * L.beta * classes[c]["A"] ** 2 / (classes[c]["A"] * classes[c]["s"] * (1 + DEAD_FRACTION)) for c in lay.cls]
     )
+    J, m = lay.J, L.m
     K = J.T @ (k_act[:, None] * J)
     Mref = np.diag([m, m, m, inertia[0] + m * com[2] ** 2, inertia[1] + m * com[2] ** 2, inertia[2]])
     f_oil = np.sqrt(np.clip(np.linalg.eigvals(np.linalg.solve(Mref, K)).real, 0, None)) / (2 * math.pi)
     f_dof = np.sqrt(np.diag(K) / np.diag(Mref)) / (2 * math.pi)
+    return f_oil, f_dof
+
+
+def _position_gains(inputs: dict, f_dof, L: _Lab6, src: str):
+    """(displacement loop gain per DOF in 1/s, source comment)."""
     kp_in = inputs.get("kp_per_s")
     if kp_in is None:
-        kp = [2 * math.pi * min(f, fv) / 5 for f in f_dof]
+        kp = [2 * math.pi * min(f, L.fv) / 5 for f in f_dof]
         kp_src = (
             "derived: per DOF, min(oil column of the DOF, valve bandwidth) / 5 (2 pi f); oil columns "
             + ", ".join(f"{d} {f:.1f}" for d, f in zip(("x", "y", "z", "rx", "ry", "rz"), f_dof))
             + " Hz"
         )
-    else:
-        kp = [_num(inputs, "kp_per_s", src)] * 6 if not isinstance(kp_in, list) else _vec(inputs, "kp_per_s", 6, src)
-        kp_src = lab
-    usable = np.array([classes[c]["s"] - min(0.005, 0.1 * classes[c]["s"]) for c in cls])
-    trans, rot = _fit_limits(base, plat, usable, a, b)
-    v_act = np.array([q * math.sqrt(max(ps - 0.3e6, 0.0) / drop) / classes[c]["A"] for c in cls])
-    v_lim = [float(np.min(v_act / np.maximum(np.abs(J[:, k]), 1e-9))) for k in range(3)]
-    F_act = np.array([classes[c]["A"] * ps * 2.0 / 3.0 for c in cls])
-    a_lim = [float(np.abs(J[:, k]) @ F_act / m) for k in range(3)]
-    a_lim[2] = max(a_lim[2] - 9.81, 0.1)
-    title = inputs.get("title", f"{name}: 6-DOF table ({n_act} actuators, {kind} layout)")
-    if not isinstance(title, str):
-        raise ScenarioError(f"{src}: 'title' must be text")
+        return kp, kp_src
+    kp = [_num(inputs, "kp_per_s", src)] * 6 if not isinstance(kp_in, list) else _vec(inputs, "kp_per_s", 6, src)
+    return kp, L.lab
 
-    def f(x):
-        return repr(float(f"{x:.6g}"))
 
-    def fl(v):
-        return "[" + ", ".join(f(x) for x in v) + "]"
+def _f(x):
+    return repr(float(f"{x:.6g}"))
 
-    q_pump = 0.5 * q * n_act
-    swept_all = sum(classes[c]["A"] * classes[c]["s"] for c in cls)
-    out = [
+
+def _fl(v):
+    return "[" + ", ".join(_f(x) for x in v) + "]"
+
+
+def _head_lines(name: str, title: str, lab: str) -> list[str]:
+    """The file's header comment and its [table] section."""
+    return [
         f"# {title}",
         "#",
         "# Written by `shaketable table new --kind 6dof` from the lab's numbers (sim/scenario/tablegen6.py).",
@@ -323,69 +421,73 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
         'dofs = ["x", "y", "z", "rx", "ry", "rz"]',
         "gravity_m_s2 = 9.81                 # standard gravity",
         "",
-        "[limits]",
-        f"stroke_m = {fl([trans] * 3)}   # derived: largest box (translations u, rotations u / half-diagonal) whose "
-        "every corner the actuators reach within their stroke less the cushions",
-        f"rotation_rad = {fl([rot] * 3)}   # derived: as stroke_m",
-        f"velocity_m_s = {fl(v_lim)}   # derived: min over actuators of (rated flow at supply - 0.3 MPa over the "
-        "rated drop / A) / |d stroke / d DOF|",
-        f"acceleration_m_s2 = {fl(a_lim)}   # derived: sum |d stroke / d DOF| A (2/3 supply) / moving mass (bare; z less g)",
-        *specimen_rating(f, inputs, given, src),
-        f"frequency_range_hz = [0.0, {f(min(min(f_oil), fv))}]   # derived: up to the lowest oil column or the valve bandwidth",
-        "",
-        "[platen]",
-        f"size_m = {fl([a, b, h])}   # {given['platen_size_m']}",
-        f"com_m = {fl(com)}   # assumed: symmetric platen, centre of mass at mid-depth",
-        f"mass_kg = {f(platen)}   # derived: moving mass ({given['moving_mass_kg']}) - {n_act} rods (assumed below)",
-        f"inertia_kg_m2 = {fl(inertia)}   # {in_src}",
-        "",
-        *common_sections(
-            f,
-            given,
-            ps=ps,
-            q=q,
-            drop=drop,
-            fv=fv,
-            pump_flow=q_pump,
-            swept_total=swept_all,
-            beta=beta,
-            ps_hi=unknowns["supply_pressure_pa"].hi if "supply_pressure_pa" in unknowns else None,
-        ),
     ]
-    for c, cd in classes.items():
-        A, s = cd["A"], cd["s"]
-        L = float(np.median([np.linalg.norm(p - bb) for p, bb, k in zip(plat, base, cls) if k == c]))
-        a_src = given[
-            "vertical_piston_area_m2" if cd["vert"] and "vertical_piston_area_m2" in given else "piston_area_m2"
-        ]
-        s_src = given["vertical_half_stroke_m" if cd["vert"] and "vertical_half_stroke_m" in given else "half_stroke_m"]
-        k1 = 2 * beta * A * A / (A * s * (1 + DEAD_FRACTION))
-        out += [
-            f"[actuator_class.{c}]",
-            f"half_stroke_m = {f(s)}   # {s_src}",
-            f"area_a_m2 = {f(A)}   # {a_src}",
-            f"area_b_m2 = {f(A)}   # assumed: double-ended (equal areas)",
-            f"dead_volume_a_m3 = {f(DEAD_FRACTION * A * s)}   # assumed: {DEAD_FRACTION:g} x the swept half volume A s "
-            "(hoses, manifold)",
-            f"dead_volume_b_m3 = {f(DEAD_FRACTION * A * s)}   # as chamber a",
-            "leakage_cross_m3_s_pa = 0.0         # assumed: none (calibrate from a record)",
-            "leakage_external_m3_s_pa = 0.0      # assumed: none",
-            "seal_friction_n = 0.0               # assumed: none (calibrate from a record)",
-            "seal_viscous_n_s_m = 0.0            # assumed: none",
-            f"cushion_length_m = {f(min(0.005, 0.1 * s))}   # assumed: end cushion travel, min(5 mm, 10 % of the half-stroke)",
-            f"cushion_stiffness_n_m = {f(100 * k1)}   # assumed: end stop 100 x the actuator's oil-column stiffness",
-            f"cylinder_mass_kg = {f(2 * rod)}   # assumed: twice the rod",
-            f"cylinder_length_m = {f(0.6 * L)}   # assumed: 0.6 x the swivel-to-swivel length (drawing and inertia size)",
-            f"cylinder_radius_m = {f(max(0.03, 1.5 * math.sqrt(A / math.pi)))}   # assumed: 1.5 x the piston radius",
-            f"rod_mass_kg = {f(rod)}   # assumed: 5 % of the moving mass shared by the rods",
-            f"rod_length_m = {f(0.6 * L)}   # assumed: as the cylinder",
-            f"rod_radius_m = {f(max(0.01, 0.5 * math.sqrt(A / math.pi)))}   # assumed: half the piston radius",
-            "",
-        ]
-    out.append(
-        f"# The {n_act} linkages (foundation swivel base_m, platen swivel platen_m, at mid-stroke): {layout_note}."
-    )
-    for nm, c, bb, p in zip(names, cls, base, plat):
+
+
+def _limits_lines(L: _Lab6, lay: _Layout6, classes: dict, f_oil, inputs: dict, src: str) -> list[str]:
+    """[limits]: the reachable box within the strokes, the flow-limited velocity, the
+    force-limited acceleration and the frequency range."""
+    cls, J = lay.cls, lay.J
+    usable = np.array([classes[c]["s"] - min(0.005, 0.1 * classes[c]["s"]) for c in cls])
+    trans, rot = _fit_limits(lay.base, lay.plat, usable, L.a, L.b)
+    v_act = np.array([L.q * math.sqrt(max(L.ps - 0.3e6, 0.0) / L.drop) / classes[c]["A"] for c in cls])
+    v_lim = [float(np.min(v_act / np.maximum(np.abs(J[:, k]), 1e-9))) for k in range(3)]
+    F_act = np.array([classes[c]["A"] * L.ps * 2.0 / 3.0 for c in cls])
+    a_lim = [float(np.abs(J[:, k]) @ F_act / L.m) for k in range(3)]
+    a_lim[2] = max(a_lim[2] - 9.81, 0.1)
+    return [
+        "[limits]",
+        f"stroke_m = {_fl([trans] * 3)}   # derived: largest box (translations u, rotations u / half-diagonal) whose "
+        "every corner the actuators reach within their stroke less the cushions",
+        f"rotation_rad = {_fl([rot] * 3)}   # derived: as stroke_m",
+        f"velocity_m_s = {_fl(v_lim)}   # derived: min over actuators of (rated flow at supply - 0.3 MPa over the "
+        "rated drop / A) / |d stroke / d DOF|",
+        f"acceleration_m_s2 = {_fl(a_lim)}   # derived: sum |d stroke / d DOF| A (2/3 supply) / moving mass (bare; z less g)",
+        *specimen_rating(_f, inputs, L.given, src),
+        f"frequency_range_hz = [0.0, {_f(min(min(f_oil), L.fv))}]   # derived: up to the lowest oil column or the valve bandwidth",
+        "",
+    ]
+
+
+def _class_lines(c: str, cd: dict, lay: _Layout6, L: _Lab6, rod: float) -> list[str]:
+    """[actuator_class.C]: the lab's area and stroke, the rest assumed with reasons."""
+    f, given = _f, L.given
+    A, s = cd["A"], cd["s"]
+    L_sw = float(np.median([np.linalg.norm(p - bb) for p, bb, k in zip(lay.plat, lay.base, lay.cls) if k == c]))
+    a_src = given["vertical_piston_area_m2" if cd["vert"] and "vertical_piston_area_m2" in given else "piston_area_m2"]
+    s_src = given["vertical_half_stroke_m" if cd["vert"] and "vertical_half_stroke_m" in given else "half_stroke_m"]
+    k1 = 2 * L.beta * A * A / (A * s * (1 + DEAD_FRACTION))
+    return [
+        f"[actuator_class.{c}]",
+        f"half_stroke_m = {f(s)}   # {s_src}",
+        f"area_a_m2 = {f(A)}   # {a_src}",
+        f"area_b_m2 = {f(A)}   # assumed: double-ended (equal areas)",
+        f"dead_volume_a_m3 = {f(DEAD_FRACTION * A * s)}   # assumed: {DEAD_FRACTION:g} x the swept half volume A s "
+        "(hoses, manifold)",
+        f"dead_volume_b_m3 = {f(DEAD_FRACTION * A * s)}   # as chamber a",
+        "leakage_cross_m3_s_pa = 0.0         # assumed: none (calibrate from a record)",
+        "leakage_external_m3_s_pa = 0.0      # assumed: none",
+        "seal_friction_n = 0.0               # assumed: none (calibrate from a record)",
+        "seal_viscous_n_s_m = 0.0            # assumed: none",
+        f"cushion_length_m = {f(min(0.005, 0.1 * s))}   # assumed: end cushion travel, min(5 mm, 10 % of the half-stroke)",
+        f"cushion_stiffness_n_m = {f(100 * k1)}   # assumed: end stop 100 x the actuator's oil-column stiffness",
+        f"cylinder_mass_kg = {f(2 * rod)}   # assumed: twice the rod",
+        f"cylinder_length_m = {f(0.6 * L_sw)}   # assumed: 0.6 x the swivel-to-swivel length (drawing and inertia size)",
+        f"cylinder_radius_m = {f(max(0.03, 1.5 * math.sqrt(A / math.pi)))}   # assumed: 1.5 x the piston radius",
+        f"rod_mass_kg = {f(rod)}   # assumed: 5 % of the moving mass shared by the rods",
+        f"rod_length_m = {f(0.6 * L_sw)}   # assumed: as the cylinder",
+        f"rod_radius_m = {f(max(0.01, 0.5 * math.sqrt(A / math.pi)))}   # assumed: half the piston radius",
+        "",
+    ]
+
+
+def _actuator_lines(lay: _Layout6) -> list[str]:
+    """The [[actuator]] entries, after a comment naming the layout."""
+    out = [
+        f"# The {len(lay.names)} linkages (foundation swivel base_m, platen swivel platen_m, at mid-stroke): "
+        f"{lay.note}."
+    ]
+    for nm, c, bb, p in zip(lay.names, lay.cls, lay.base, lay.plat):
         out += [
             "[[actuator]]",
             f'name = "{nm}"',
@@ -394,47 +496,56 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
             f"platen_m = {_pt(p)}   # see the layout above",
             "",
         ]
-    if supports:
-        cap = 1.2 * (m + (m_spec or m))
-        area = cap * 9.81 / (4 * SUPPORT_PRESSURE_PA)
-        p_bare = m * 9.81 / (4 * area)
-        vol = 1.4 * p_bare * area * area * 4 / (m * (2 * math.pi * SUPPORT_HZ) ** 2)
-        sx, sy = 0.25 * a, 0.25 * b
-        out += [
-            "# Four pneumatic static supports carry the dead weight (as on the CGS table), so that the",
-            "# vertical actuators start unloaded; set static_supports = false under [lab] if yours carry it.",
-            "[supports]",
-            f"capacity_kg = {f(cap)}   # assumed: 1.2 x (moving mass + "
-            + ("max specimen)" if m_spec else "a specimen of the moving mass; the rating is unknown)"),
-            f"positions_m = [[{f(-sx)}, {f(-sy)}, {f(-h)}], [{f(sx)}, {f(-sy)}, {f(-h)}], [{f(-sx)}, {f(sy)}, {f(-h)}], "
-            f"[{f(sx)}, {f(sy)}, {f(-h)}]]   # assumed: under the platen, a quarter of its size from the centre",
-            f"piston_area_m2 = {f(area)}   # derived: capacity weight / (4 x {SUPPORT_PRESSURE_PA:g} Pa, assumed design pressure)",
-            f"chamber_volume_m3 = {f(vol)}   # derived: bare table bounces {SUPPORT_HZ:g} Hz on the air springs "
-            "(assumed: below the test band), V = 4 n p A^2 / (m w^2)",
-            "polytropic_exponent = 1.4           # assumed: adiabatic air at test frequencies",
-            'air_law = "polytropic"              # assumed: the air spring law, not its linearisation',
-            f"piston_mass_kg = {f(0.02 * m)}   # assumed: 2 % of the moving mass",
-            f"shoe_mass_kg = {f(0.005 * m)}   # assumed: 0.5 % of the moving mass",
-            "piston_friction_n = 0.0             # assumed: none (calibrate from a record)",
-            "shoe_friction_n = 0.0               # assumed: none (calibrate from a record)",
-            f"piston_radius_m = {f(math.sqrt(area / math.pi))}   # derived: from the area",
-            f"piston_length_m = {f(0.5 * h + 0.2)}   # assumed: drawing size",
-            "",
-        ]
+    return out
+
+
+def _support_lines(L: _Lab6) -> list[str]:
+    """[supports]: four pneumatic static supports sized for the capacity weight."""
+    f, m, h = _f, L.m, L.h
+    cap = 1.2 * (m + (L.m_spec or m))
+    area = cap * 9.81 / (4 * SUPPORT_PRESSURE_PA)
+    p_bare = m * 9.81 / (4 * area)
+    vol = 1.4 * p_bare * area * area * 4 / (m * (2 * math.pi * SUPPORT_HZ) ** 2)
+    sx, sy = 0.25 * L.a, 0.25 * L.b
+    return [
+        "# Four pneumatic static supports carry the dead weight (as on the CGS table), so that the",
+        "# vertical actuators start unloaded; set static_supports = false under [lab] if yours carry it.",
+        "[supports]",
+        f"capacity_kg = {f(cap)}   # assumed: 1.2 x (moving mass + "
+        + ("max specimen)" if L.m_spec else "a specimen of the moving mass; the rating is unknown)"),
+        f"positions_m = [[{f(-sx)}, {f(-sy)}, {f(-h)}], [{f(sx)}, {f(-sy)}, {f(-h)}], [{f(-sx)}, {f(sy)}, {f(-h)}], "
+        f"[{f(sx)}, {f(sy)}, {f(-h)}]]   # assumed: under the platen, a quarter of its size from the centre",
+        f"piston_area_m2 = {f(area)}   # derived: capacity weight / (4 x {SUPPORT_PRESSURE_PA:g} Pa, assumed design pressure)",
+        f"chamber_volume_m3 = {f(vol)}   # derived: bare table bounces {SUPPORT_HZ:g} Hz on the air springs "
+        "(assumed: below the test band), V = 4 n p A^2 / (m w^2)",
+        "polytropic_exponent = 1.4           # assumed: adiabatic air at test frequencies",
+        'air_law = "polytropic"              # assumed: the air spring law, not its linearisation',
+        f"piston_mass_kg = {f(0.02 * m)}   # assumed: 2 % of the moving mass",
+        f"shoe_mass_kg = {f(0.005 * m)}   # assumed: 0.5 % of the moving mass",
+        "piston_friction_n = 0.0             # assumed: none (calibrate from a record)",
+        "shoe_friction_n = 0.0               # assumed: none (calibrate from a record)",
+        f"piston_radius_m = {f(math.sqrt(area / math.pi))}   # derived: from the area",
+        f"piston_length_m = {f(0.5 * h + 0.2)}   # assumed: drawing size",
+        "",
+    ]
+
+
+def _control_and_sensor_lines(inputs: dict, L: _Lab6, kp, kp_src: str, src: str) -> list[str]:
+    """[sensors], three [[accelerometer]]s at the platen centre, the controller and [friction]."""
     sensors, controller = control_lines(
-        f,
-        fl,
+        _f,
+        _fl,
         inputs,
-        given,
+        L.given,
         src,
         kp=kp,
         kp_src=kp_src,
-        tau=1 / (2 * math.pi * fv),
+        tau=1 / (2 * math.pi * L.fv),
         kdp_why="assumed: dP stabilisation of the oil columns (the CGS description's)",
-        kfb=f"kfb = {f(kfb)}   # "
-        + given.get("kfb", "assumed: force balance of the redundant actuators (the CGS description's)"),
+        kfb=f"kfb = {_f(L.kfb)}   # "
+        + L.given.get("kfb", "assumed: force balance of the redundant actuators (the CGS description's)"),
     )
-    out += [*sensors, ""]
+    out = [*sensors, ""]
     for nm, d in (("AX", "1.0, 0.0, 0.0"), ("AY", "0.0, 1.0, 0.0"), ("AZ", "0.0, 0.0, 1.0")):
         out += [
             "[[accelerometer]]",
@@ -454,8 +565,7 @@ def sixdof(name: str, inputs: dict, *, src: str = "the command line") -> str:
         "presliding_m = 0.5e-3               # assumed: 0.5 mm, the CGS description's value",
         "",
     ]
-    ranges, lab_of = labvalues.description_ranges(unknowns, list(classes), n_act * rod)
-    return labvalues.mark("\n".join(out), ranges, unknowns, lab_of)
+    return out
 
 
 def _pt(p):
