@@ -50,14 +50,14 @@ def run_cases(
     is the task's wall time shared equally among its cases."""
     from sim.assess.many import run_plans
     from sim.assess.run import plan_scenario
-    from sim.scenario.files import build_motions, load_scenario
+    from sim.scenario.files import load_scenario
 
     t0 = time.perf_counter()
     plans, rows = [], {}
-    motions = None  # the scenario's motions, built once for the task when no case changes them
+    motions = None  # the scenario's motions, built once for the worker when no case changes them
     if not any(k.split(".")[0] == "motion" for c in cases for k in c.overrides):
         try:
-            motions = build_motions(load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario)
+            motions = scenario_motions(load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario)
         except UserError:
             motions = None  # each case's plan reports it
     for c in cases:
@@ -89,6 +89,27 @@ def run_cases(
         except UserError as e:
             result.append(error_row(c, str(e), wall))
     return result
+
+
+_MOTIONS: dict = {}  #: this process's motions of the last scenarios it ran (a worker runs many tasks of one)
+
+
+def scenario_motions(sc) -> dict:
+    """``build_motions(sc)``, kept for the next task of the same scenario in this process
+    (a record's processing is a tenth of a second of a short case); keyed by the file,
+    its modification time and the motion table."""
+    from sim.scenario.files import build_motions
+
+    try:
+        stamp = Path(sc.path).stat().st_mtime_ns if sc.path else None
+    except OSError:
+        stamp = None
+    key = (str(sc.path), stamp, repr(sc.motion), sc.sample_rate_hz)
+    if key not in _MOTIONS:
+        if len(_MOTIONS) >= 4:
+            _MOTIONS.clear()
+        _MOTIONS[key] = build_motions(sc)
+    return _MOTIONS[key]
 
 
 def run_case(scenario, case, *, duration_s=None, start_s=None, iterations=None, run_dir=None) -> dict:
