@@ -68,6 +68,30 @@ def timed_sweep(sw, out: Path, **split) -> tuple[float, dict]:
     return wall, res
 
 
+def _spin(n: int) -> int:
+    """``n`` steps of plain Python arithmetic: CPU work with no memory traffic."""
+    x = 0
+    for i in range(n):
+        x = (x + i * i) % 1000003
+    return x
+
+
+def machine_efficiency(p: int, n: int = 3_000_000) -> float:
+    """What this machine gives ``p`` processes now: ``p`` worker processes doing the
+    same CPU work as one process (forked from this one, as the sweep's pool), its wall
+    time over theirs (1.0: ``p`` cores to ourselves; about 1/p when the scheduler keeps
+    this session to one core's share, e.g. Linux's autogroups with other sessions busy)."""
+    from sim.parallel import iter_jobs
+
+    t0 = time.perf_counter()
+    _spin(n)
+    one = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for _ in iter_jobs(_spin, [n] * p, workers=p):
+        pass
+    return one / (time.perf_counter() - t0)
+
+
 def dask_rate(sw, out: Path, workers: int) -> tuple[float, float]:
     """Cases per second on a ``LocalCluster`` of ``workers`` processes (started, then
     warmed by one short case on every worker: its start timed apart), and the start's
@@ -107,20 +131,28 @@ def main(n_cases: int = 64, duration_s: float = 4.0, *, with_dask: bool = True, 
         timed_sweep(warm, Path(tmp) / "warm", processes=1)  # imports, kernels, the record: warm for every run
         print(
             f"  {'executor':9s} {'workers':>7s} {'split':>34s} {'wall s':>8s} {'cases/s':>8s} {'efficiency':>10s} "
-            f"{'CPU s/case':>10s} {'CPU eff.':>8s} {'busy':>5s}"
+            f"{'CPU s/case':>10s} {'CPU eff.':>8s} {'busy':>5s} {'machine':>7s}"
         )
         rows, one = {}, None
         for p in worker_counts(cores):
+            machine = machine_efficiency(p)
             wall, res = timed_sweep(sw, Path(tmp) / f"local_{p}", processes=p, threads=1)
             rate, cpu_case = n_cases / wall, res["cpu_s"] / n_cases
             one = one or (rate, cpu_case)
             eff, cpu_eff, busy = rate / (p * one[0]), one[1] / cpu_case, res["cpu_s"] / (wall * p)
-            rows[p] = {"wall_s": wall, "cases_per_s": rate, "efficiency": eff, "cpu_efficiency": cpu_eff, "busy": busy}
+            rows[p] = {
+                "wall_s": wall,
+                "cases_per_s": rate,
+                "efficiency": eff,
+                "cpu_efficiency": cpu_eff,
+                "busy": busy,
+                "machine": machine,
+            }
             sp = res["split"]
             split = f"{sp['processes']} proc x {sp['threads']} thr, task {sp['task']}, batch {sp['batch']}"
             print(
                 f"  {'local':9s} {p:7d} {split:>34s} {wall:8.1f} {rate:8.3f} {eff:10.2f} {cpu_case:10.3f} "
-                f"{cpu_eff:8.2f} {busy:5.2f}"
+                f"{cpu_eff:8.2f} {busy:5.2f} {machine:7.2f}"
             )
             sys.stdout.flush()
         out = {"cases": n_cases, "cores": cores, "local": rows, "load_before": load0}
@@ -136,7 +168,9 @@ def main(n_cases: int = 64, duration_s: float = 4.0, *, with_dask: bool = True, 
     print(
         "  efficiency = cases/s over workers x the 1-worker cases/s; CPU eff. = the 1-worker CPU time per case "
         "over this one's (the work that parallel running adds); busy = CPU time over wall x workers (the share "
-        "of the workers' cores they got): efficiency ~ CPU eff. x busy / the 1-worker busy"
+        "of the workers' cores they got): efficiency ~ CPU eff. x busy / the 1-worker busy; machine = the same "
+        "ratio for a plain CPU-bound job in as many processes, measured just before (what the machine gave "
+        "that many processes then: the ceiling of the efficiency)"
     )
     print(f"  load average (1 min) {load0:.1f} before, {out['load_after']:.1f} after, on {cores} cores")
     return out
