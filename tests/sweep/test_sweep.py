@@ -226,8 +226,10 @@ def test_feasibility_suite_runs_its_cases_together_with_each_cases_own_verdict()
     from sim.assess import study
 
     pay = mjcf.load_payload("rigid_20t")
-    rows = study.suite("cgs", ["elcentro1940"], [0.3, 0.6], [pay], window_s=1.0, nthread=2)
+    rows = study.suite("cgs", ["elcentro1940"], [0.3, 0.6], [pay], window_s=1.0, nthread=2, processes=1)
     assert [r["scale"] for r in rows] == [0.3, 0.6] and all(r["simulated"] for r in rows)
+    # a worker process per case (each its own task, one thread): the same rows
+    assert study.suite("cgs", ["elcentro1940"], [0.3, 0.6], [pay], window_s=1.0, nthread=1, processes=2) == rows
     for r in rows:
         alone = study.assess(
             study.Case(table="cgs", motion="elcentro1940", payload=pay, scale=r["scale"], window_s=1.0)
