@@ -654,7 +654,7 @@ def run_callback(
     d2.userdata[1] = 0.0
     bar = _Bar(n, sim.gains.rate_hz) if progress else None
     with installed():
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             _step_chunks(m2, d2, ctx, n, sim.steps_per_tick, chunk_ticks, bar)
         except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C: keep the ticks done so far
@@ -666,9 +666,11 @@ def run_callback(
         finally:
             if bar is not None:
                 bar.close()
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     d2.userdata[0] = 0.0
-    return ctx.result(wall, (d2.qpos, d2.qvel, d2.warning.number))
+    res = ctx.result(wall, (d2.qpos, d2.qvel, d2.warning.number))
+    res.timing["callback_cpu_s"] = cpu  # the stepping's CPU time (this process's threads)
+    return res
 
 
 def _step_chunks(m2, d2, ctx, n: int, spt: int, chunk_ticks: int, bar) -> None:
