@@ -1,7 +1,9 @@
 """One process-pool helper for every programme that runs independent simulations.
 
 :func:`map_jobs` is used by the CGS identification programme (``sim.identify``), its
-calibration (``sim.calibrate``) and the papers' programmes (``sim.papers``). It sits at
+calibration (``sim.calibrate``) and the papers' programmes (``sim.papers``);
+:func:`iter_jobs` (each result as it finishes) by sweeps (``sim.sweep``) and feasibility
+suites (``sim.assess.study``), which keep each case as soon as it exists. It sits at
 the bottom layer (rank 0, beside ``sim.errors``) because its users sit at ranks 5 to 8
 and a layer may only import its own or lower ones: in ``sim.sweep`` (rank 7) the
 identification programme could not import it. It knows nothing of tables or models:
