@@ -292,8 +292,8 @@ def sweep_split(sweep, n_cases: int, *, workers=None, executor="local", address=
     machine's; with an external Dask scheduler, its workers)."""
     from sim.sweep.split import choose_split
 
-    task = given.get("task") or sweep.task
-    batch = given.get("batch") or sweep.batch
+    task = given["task"] if given.get("task") is not None else sweep.task
+    batch = given["batch"] if given.get("batch") is not None else sweep.batch
     procs, cores = given.get("processes"), workers
     if executor == "dask" and address is not None and procs is None:
         procs = _dask_workers(address)
@@ -328,9 +328,7 @@ def run_sweep(
         raise UserError(f"--executor must be one of {', '.join(EXECUTORS)} (got '{executor}')")
     cases = sweep.cases()
     _check_cases(sweep, cases)
-    out = out_dir(out)
-    (out / "cases").mkdir(exist_ok=True)
-    todo = [c for c in cases if not _case_path(out, c).exists()]
+    todo = [c for c in cases if not _case_path(Path(out), c).exists()]
     split = sweep_split(
         sweep,
         len(todo),
@@ -341,7 +339,9 @@ def run_sweep(
         threads=threads,
         task=task,
         batch=batch,
-    )
+    )  # a bad split fails here, before anything is written
+    out = out_dir(out)
+    (out / "cases").mkdir(exist_ok=True)
     skipped = len(cases) - len(todo)
     n_done = [skipped]
     if progress:

@@ -100,3 +100,6 @@ def test_the_old_group_key_reads_as_task_with_a_warning(tmp_path, sweep_file, ca
     assert len(err) == 1 and "'sweep.batch' (4) is more than 'sweep.task' (2)" in err[0]
     assert main(["sweep", str(sweep_file), "--out", str(tmp_path / "o"), "--processes", "0"]) == 2
     assert "--processes must be a positive integer" in capsys.readouterr().err
+    assert main(["sweep", str(sweep_file), "--out", str(tmp_path / "o"), "--task", "0"]) == 2
+    assert "task (cases per task) must be a positive integer" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()  # nothing written
