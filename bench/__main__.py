@@ -9,10 +9,16 @@ For each scene (bare CGS table, 20 t rigid specimen, 3-storey frame, 6 m tower):
   real-time factor and the ratio whole loop / bare ``mj_step`` (target <= 1.3) of the
   default loop, and the same run unfused (``fuse=False``) for the cost per physics step
   split into physics / hydraulics / controller / output;
+* the default single-run route of ``shaketable run`` (the callback route where the
+  table allows it, :mod:`sim.loop.callback`) per physics step over the bare ``mj_step``
+  of the same model on the same actuator forces (target <= 1.10), the median of three
+  alternated repetitions, and the worst scene's figure in one line;
 * the hydraulic step alone (12 actuators and a 64 x 12 batch, numba and numpy);
-* the coupled step inside MuJoCo and the batch (``bench/batch_bench.py``), ending with two
+* the coupled step inside MuJoCo and the batch (``bench/batch_bench.py``), with two
   lines a script can read: ``single loop / bare mj_step: X`` (the callback route, 20 t
-  scene) and ``batch efficiency (N sims, T threads): Y``.
+  scene) and ``batch efficiency (N sims, T threads): Y``;
+* the sweep's scaling over worker processes (``bench/sweep_bench.py``), ending with the
+  line ``sweep efficiency (N cases, P workers): Z``.
 
 All figures come from this one run on this machine; they are ratios of timings taken
 side by side, not absolute promises.
@@ -23,6 +29,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from math import nan
 
 import mujoco
 import numpy as np
@@ -84,6 +91,7 @@ def loop_figures(tm, ref) -> dict:
     res = sim.run(reference=ref)
     sim.reset()
     split = sim.run(reference=ref, fuse=False)
+    default = default_route(tm, ref, res)
     steps = res.timing["steps"]
     ts, ss = split.timing, split.timing["steps"]
     return {
@@ -95,13 +103,42 @@ def loop_figures(tm, ref) -> dict:
         "hydraulics_us": ts["hydraulics_s"] / ss * 1e6,
         "controller_us": ts["controller_s"] / ss * 1e6,
         "output_us": ts["output_s"] / ss * 1e6,
+        **default,
     }
+
+
+#: seconds of each scene's run timed for the default route (three alternated repetitions)
+DEFAULT_ROUTE_S = 5.0
+
+
+def default_route(tm, ref, loop) -> dict:
+    """``shaketable run``'s default route on this model (the callback where it accepts
+    the simulation, else the loop) per physics step over the bare ``mj_step`` on the
+    loop's actuator forces (:func:`bench.batch_bench.callback_vs_bare`)."""
+    from bench.batch_bench import bare_replay_rate, callback_vs_bare
+    from sim.loop.callback import accepts
+
+    sim = Simulation(tm)
+    n = min(len(ref.t), int(DEFAULT_ROUTE_S * sim.gains.rate_hz) + 1)  # the first seconds: 3 repetitions fit
+    ref = Reference(t=ref.t[:n], d=ref.d[:n], v=ref.v[:n], a=ref.a[:n])
+    if accepts(sim) is None:
+        cvb = callback_vs_bare(tm, ref, loop.channels["actuator_force"][:n])
+        return {
+            "route": "callback",
+            "default_ratio": cvb["callback_ratio"],
+            "default_us": cvb["callback_us"],
+            "default_cpu_ratio": cvb["callback_cpu_ratio"],
+        }
+    bare_us = 1e6 / bare_replay_rate(tm, loop.channels["actuator_force"][:n], sim.steps_per_tick)
+    per_step = loop.wall_s / loop.timing["steps"] * 1e6
+    return {"route": "loop", "default_ratio": per_step / bare_us, "default_us": per_step, "default_cpu_ratio": nan}
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m bench")
     ap.add_argument("--quick", action="store_true", help="shorter runs")
     ap.add_argument("--with-recording", action="store_true", help="also time the rerun recording overhead")
+    ap.add_argument("--no-dask", action="store_true", help="leave the Dask LocalCluster out of the sweep's scaling")
     args = ap.parse_args(argv)
     secs = 5.0 if args.quick else 15.0
     desc = mjcf.load_table("cgs")
@@ -112,25 +149,35 @@ def main(argv=None) -> int:
     )
     print(
         f"{'scene':16s} {'mj_step':>8s} {'loop/step':>9s} {'ratio':>6s} {'ratio*':>6s} {'RTF':>6s} | "
-        f"{'unfused':>8s} {'ratio*':>6s} {'physics':>8s} {'hydr.':>7s} {'ctrl':>7s} {'output':>7s}  "
-        "(us per physics step)"
+        f"{'unfused':>8s} {'ratio*':>6s} {'physics':>8s} {'hydr.':>7s} {'ctrl':>7s} {'output':>7s} | "
+        f"{'default':>8s} {'us/step':>7s} {'/bare':>6s} {'CPU':>5s}  (us per physics step)"
     )
+    worst = 0.0
     for label, payload in SCENES:
         tm = build_model(desc, mjcf.load_payload(payload) if payload else None)
         bare = bare_step_us(tm.model)
         f = loop_figures(tm, ref)
+        worst = max(worst, f["default_ratio"])
         print(
             f"{label:16s} {bare:8.1f} {f['wall_per_step_us']:9.1f} {f['wall_per_step_us'] / bare:6.2f} "
             f"{f['wall_per_step_us'] / f['physics_us']:6.2f} "
             f"{f['rtf']:6.2f} | {f['split_wall_per_step_us']:8.1f} "
             f"{f['split_wall_per_step_us'] / f['split_physics_us']:6.2f} {f['split_physics_us']:8.1f} "
-            f"{f['hydraulics_us']:7.1f} {f['controller_us']:7.1f} {f['output_us']:7.1f}"
+            f"{f['hydraulics_us']:7.1f} {f['controller_us']:7.1f} {f['output_us']:7.1f} | "
+            f"{f['route']:>8s} {f['default_us']:7.1f} {f['default_ratio']:6.2f} {f['default_cpu_ratio']:5.2f}"
         )
         sys.stdout.flush()
     print(
         "ratio = loop per step / isolated mj_step (random forces); ratio* = loop per step / the mj_step calls "
         "inside the same loop (same motion, same solver work); target <= 1.3"
     )
+    print(
+        "default = shaketable run's route (callback: the coupled step inside mj_step); /bare = its wall time per "
+        "physics step over the bare mj_step of the same model on the loop's actuator forces (the median of 3 "
+        f"alternated repetitions of the first {DEFAULT_ROUTE_S:g} s); target <= 1.10; CPU = the same in CPU "
+        "time per step (the median; steadier than wall time on a shared machine)"
+    )
+    print(f"default single-run route / bare mj_step (worst of {len(SCENES)} scenes): {worst:.3f}")
     print(
         "left: the default loop (recorder, controller and hydraulics fused into one compiled call per physics "
         "step); right: the same run unfused, one compiled call per stage, for the cost split"
@@ -153,6 +200,12 @@ def main(argv=None) -> int:
     n = b["summary_n"]
     print(f"single loop / bare mj_step: {b['callback_ratio']:.3f}")
     print(f"batch efficiency ({n} sims, {b['threads']} threads): {b['batches'][n]['efficiency']:.3f}")
+    print()
+    from bench import sweep_bench
+
+    sw = sweep_bench.main(64, 2.0 if args.quick else 4.0, with_dask=not args.no_dask)
+    p = sw["cores"]
+    print(f"sweep efficiency ({sw['cases']} cases, {p} workers): {sw['local'][p]['efficiency']:.3f}")
     return 0
 
 

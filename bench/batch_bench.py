@@ -102,45 +102,62 @@ _INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 REPEATS = 3
 
 
-def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads: int | None = None) -> dict:
-    threads = threads or os.cpu_count() or 1
-    control_callback()  # compile / load outside the timings
+def callback_vs_bare(tm, ref, forces, repeats: int = REPEATS) -> dict:
+    """The callback route's wall time per physics step over the bare ``mj_step`` of the
+    same model on the same forces (``forces``: the loop's actuator forces on ``ref``),
+    ``repeats`` alternations of bare replay / callback run / bare replay; each ratio
+    against the bare steps timed beside it, the median repetition reported (single
+    readings on a shared 2-core VM vary by +-15 %)."""
     sim = Simulation(tm)
     sim.reset()
-    run_callback(sim, ref, duration_s=0.2)
-    sim.reset()
-    loop = sim.run(reference=ref)
-    F = loop.channels["actuator_force"]
-    # REPEATS alternations of bare replay / callback run / bare replay; each ratio taken
-    # against the bare steps timed beside it, the median reported (single readings on a
-    # shared 2-core VM vary by +-15 %)
-    ratios, cb_us, bares, cpus = [], [], [], []
-    for _ in range(REPEATS):
-        rate0, cpu0 = bare_replay(tm, F, sim.steps_per_tick)
+    run_callback(sim, ref, duration_s=0.2)  # the model compiled with its userdata, the kernels warm
+    ratios, cb_us, bares, cpus, cpu_ratios = [], [], [], [], []
+    for _ in range(repeats):
+        rate0, cpu0 = bare_replay(tm, forces, sim.steps_per_tick)
         sim.reset()
-        cb = run_callback(sim, ref)
-        rate1, cpu1 = bare_replay(tm, F, sim.steps_per_tick)
+        cb = run_callback(sim, ref)  # CPU: the stepping's and the channels' (as its wall time counts)
+        cb_cpu = (cb.timing["callback_cpu_s"] + cb.timing["output_s"]) / cb.timing["steps"] * 1e6
+        rate1, cpu1 = bare_replay(tm, forces, sim.steps_per_tick)
         b_us = 2e6 / (rate0 + rate1)  # before and after the callback run
         cb_us.append(cb.wall_s / cb.timing["steps"] * 1e6)
         ratios.append(cb_us[-1] / b_us)
         bares.append(b_us)
         cpus.append(2e6 / (cpu0 + cpu1))
+        cpu_ratios.append(cb_cpu / cpus[-1])
     k = int(np.argsort(ratios)[len(ratios) // 2])  # the median repetition
-    bare_us, bare_cpu_us = bares[k], float(np.median(cpus))
+    return {
+        "bare_us": bares[k],
+        "bare_cpu_us": float(np.median(cpus)),
+        "callback_us": cb_us[k],
+        "callback_ratio": ratios[k],
+        "callback_ratios": ratios,
+        "callback_cpu_ratio": float(np.median(cpu_ratios)),  # CPU time per step over the bare's: robust to the load
+        "sim_s": cb.sim_s,
+    }
+
+
+def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads: int | None = None) -> dict:
+    threads = threads or os.cpu_count() or 1
+    control_callback()  # compile / load outside the timings
+    sim = Simulation(tm)
+    sim.reset()
+    loop = sim.run(reference=ref)
+    cvb = callback_vs_bare(tm, ref, loop.channels["actuator_force"])
+    bare_us, bare_cpu_us, ratios = cvb["bare_us"], cvb["bare_cpu_us"], cvb["callback_ratios"]
     out = {
         "bare_us": bare_us,
         "bare_cpu_us": bare_cpu_us,
         "loop_us": loop.wall_s / loop.timing["steps"] * 1e6,
-        "callback_us": cb_us[k],
+        "callback_us": cvb["callback_us"],
         "callback_ratios": ratios,
         "threads": threads,
         "batches": {},
         "load_before": os.getloadavg()[0],
     }
     out["loop_ratio"] = out["loop_us"] / bare_us
-    out["callback_ratio"] = ratios[k]
+    out["callback_ratio"] = cvb["callback_ratio"]
     print(
-        f"single simulation, {cb.sim_s:.1f} s of El Centro: bare mj_step (same model, same forces) {bare_us:.1f} us; "
+        f"single simulation, {cvb['sim_s']:.1f} s of El Centro: bare mj_step (same model, same forces) {bare_us:.1f} us; "
         f"Python loop {out['loop_us']:.1f} us/step ({out['loop_ratio']:.2f} x); "
         f"callback route {out['callback_us']:.1f} us/step ({out['callback_ratio']:.2f} x, the median of "
         f"{REPEATS} alternated repetitions: {', '.join(f'{r:.2f}' for r in ratios)})"
@@ -192,4 +209,4 @@ def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads:
     return out
 
 
-__all__ = ["bare_rate", "main", "plain_batch_rate", "plain_step_rate"]
+__all__ = ["bare_rate", "callback_vs_bare", "main", "plain_batch_rate", "plain_step_rate"]

@@ -1,7 +1,9 @@
 """One process-pool helper for every programme that runs independent simulations.
 
 :func:`map_jobs` is used by the CGS identification programme (``sim.identify``), its
-calibration (``sim.calibrate``) and the papers' programmes (``sim.papers``). It sits at
+calibration (``sim.calibrate``) and the papers' programmes (``sim.papers``);
+:func:`iter_jobs` (each result as it finishes) by sweeps (``sim.sweep``) and feasibility
+suites (``sim.assess.study``), which keep each case as soon as it exists. It sits at
 the bottom layer (rank 0, beside ``sim.errors``) because its users sit at ranks 5 to 8
 and a layer may only import its own or lower ones: in ``sim.sweep`` (rank 7) the
 identification programme could not import it. It knows nothing of tables or models:
@@ -72,33 +74,37 @@ def map_jobs(
             default the platform's.
     """
     jobs = list(jobs)
-    total = len(jobs)
-    if not total:
-        return []
-    workers = default_workers(total) if workers is None else max(1, min(int(workers), total))
-    if workers == 1:
-        out = []
-        for j in jobs:
-            out.append(fn(j))
-            if progress:
-                progress(len(out), total)
-        return out
-    import multiprocessing as mp
-
-    out: list = [None] * total
-    pool = mp.get_context(context).Pool(workers, initializer=_ignore_sigint)
-    try:
-        for done, (i, r) in enumerate(pool.imap_unordered(_call, [(fn, i, j) for i, j in enumerate(jobs)]), start=1):
-            out[i] = r
-            if progress:
-                progress(done, total)
-        pool.close()
-        pool.join()
-    except BaseException:  # Ctrl-C or a failed job: stop the workers now, then raise
-        pool.terminate()
-        pool.join()
-        raise
+    out: list = [None] * len(jobs)
+    for done, (i, r) in enumerate(iter_jobs(fn, jobs, workers=workers, context=context), start=1):
+        out[i] = r
+        if progress:
+            progress(done, len(jobs))
     return out
 
 
-__all__ = ["default_workers", "map_jobs"]
+def iter_jobs(fn: Callable, jobs: Iterable, *, workers: int | None = None, context: str | None = None):
+    """``(i, fn(jobs[i]))`` for every job, as each finishes (in parallel processes as
+    :func:`map_jobs`; serially here, in order, with ``workers=1``): for a caller that
+    keeps each result as soon as it exists."""
+    jobs = list(jobs)
+    if not jobs:
+        return
+    workers = default_workers(len(jobs)) if workers is None else max(1, min(int(workers), len(jobs)))
+    if workers == 1:
+        for i, j in enumerate(jobs):
+            yield i, fn(j)
+        return
+    import multiprocessing as mp
+
+    pool = mp.get_context(context).Pool(workers, initializer=_ignore_sigint)
+    try:
+        yield from pool.imap_unordered(_call, [(fn, i, j) for i, j in enumerate(jobs)])
+        pool.close()
+        pool.join()
+    except BaseException:  # Ctrl-C, a failed job, a caller that left early (GeneratorExit): stop the workers now
+        pool.terminate()
+        pool.join()
+        raise
+
+
+__all__ = ["default_workers", "iter_jobs", "map_jobs"]

@@ -134,6 +134,7 @@ class ScenarioPlan:
                 progress=lambda i: say(
                     "run with the plain controller" if i == 0 else f"drive iteration {i} of {settings.count}"
                 ),
+                run=self._runner(progress),
             )
             scores = []
             for i, r in enumerate(results):
@@ -144,17 +145,22 @@ class ScenarioPlan:
             best = int(np.argmin(scores))
             res, plain = results[best], results[0]
             wall_total = sum(r.wall_s for r in results)
-        elif self.engine == "callback":
-            from sim.loop.callback import run_callback
-
-            say("simulating (coupled step inside MuJoCo)")
-            res = run_callback(sim, ref)
-            plain, best, wall_total = res, 0, res.wall_s
         else:
-            say("simulating")
-            res = sim.run(reference=ref, progress=progress is not None and sys.stderr.isatty())
+            say("simulating (coupled step inside MuJoCo)" if self.engine == "callback" else "simulating")
+            res = self._runner(progress)(ref)
             plain, best, wall_total = res, 0, res.wall_s
         return res, plain, best, wall_total, settings
+
+    def _runner(self, progress):
+        """``run(reference) -> RunResult`` of this plan's simulation from its current
+        state on its engine (the callback route or ``Simulation.run``: the same run), with
+        the progress bar on a terminal when ``progress`` is given."""
+        sim, bar = self.sim, progress is not None and sys.stderr.isatty()
+        if self.engine == "callback":
+            from sim.loop.callback import run_callback
+
+            return lambda ref: run_callback(sim, ref, progress=bar)
+        return lambda ref: sim.run(reference=ref, progress=bar)
 
     def outcome(self, res, *, plain=None, best=0, wall_total=None, history=(), settings=None) -> RunOutcome:
         """The :class:`RunOutcome` of a finished loop result ``res`` of this plan (also
@@ -200,6 +206,7 @@ class ScenarioPlan:
                 ],
             },
             "wall_s_all_runs": float(wall_total),
+            "engine": self.engine,
             "warnings": self.warnings,
         }
         summary.update(
@@ -310,8 +317,9 @@ def plan_scenario(
     ``overrides``: ``{dotted key: value}`` (or ``{key: {"scale": f}}``) changes of the
     table, payload and scenario data (:mod:`sim.scenario.overrides`), e.g. a sweep case.
     ``engine``: ``"loop"`` (:meth:`Simulation.run`, the reference) or ``"callback"`` (the
-    same run with the coupled step inside MuJoCo, :mod:`sim.loop.callback`; used where the
-    table allows it: closed loop, no drive iterations). ``start_s``: where the run starts
+    same run with the coupled step inside MuJoCo, :mod:`sim.loop.callback`, drive
+    iterations included; used where the table allows it, the loop elsewhere:
+    :func:`sim.loop.callback.accepts`). ``start_s``: where the run starts
     in the motion instead of the strong motion (``scenario.start_s``; see
     :func:`sim.scenario.files.build_window`)."""
     import mjcf
@@ -365,8 +373,8 @@ def plan_scenario(
     if engine == "callback":
         from sim.loop.callback import accepts
 
-        if it.get("count", 0) or accepts(sim):
-            engine = "loop"  # the callback runs the fused closed loop only
+        if accepts(sim):
+            engine = "loop"  # the callback runs the fused loop only (sim.loop.callback.accepts says why)
     return ScenarioPlan(
         scenario=sc,
         desc=desc,

@@ -609,49 +609,67 @@ def suite(
     iterations=0,
     progress=None,
     nthread: int = 0,
+    processes: int | None = None,
 ) -> list[dict]:
     """Every record x scale x payload: one row per case (see :data:`SUITE_COLUMNS`).
 
-    Every case is prepared and checked first; the simulations then run together on the
+    The cases are dealt out in tasks (about four per process) to ``processes`` worker
+    processes (default: one per core, at most one per case; 1: this process), each task
+    prepared, staged and settled in its worker with its simulations run together on the
     shared route of many runs (:func:`sim.assess.many.run_plans`: MuJoCo's batch on
-    ``nthread`` threads, 0 = all cores, where the table allows), each the same run as
-    the case's own :func:`assess`."""
-    from sim.assess.many import run_plans
+    ``nthread`` threads, default the cores left to each process, where the table
+    allows): each case the same run and verdict as its own :func:`assess`, whatever the
+    split. Processes first, as for sweeps (:mod:`sim.sweep.split`): preparing and
+    settling a case is Python, one case at a time per process."""
+    import math
+    import os
+    from functools import partial
+
+    from sim.parallel import iter_jobs
 
     say = progress or (lambda text: None)
-    cases, preps, staged = [], [], []
-    for rec in records:
-        for pay in payloads:
-            for s in scales:
-                case = Case(table=table, motion=rec, payload=pay, scale=s, window_s=window_s, iterations=iterations)
-                prep = prepare(case)  # one per case: each case's plan has its own simulation
-                cases.append((rec, pay, s))
-                preps.append(prep)
-                staged.append(stage(prep, s, simulate=True))
+    keys = [(rec, pay, s) for rec in records for pay in payloads for s in scales]
+    cases = [
+        Case(table=table, motion=rec, payload=pay, scale=s, window_s=window_s, iterations=iterations)
+        for rec, pay, s in keys
+    ]
+    cores = os.cpu_count() or 1
+    procs = max(1, min(processes or cores, len(cases)))
+    per = max(1, math.ceil(len(cases) / (4 * procs)))
+    tasks = [list(range(i, min(i + per, len(cases)))) for i in range(0, len(cases), per)]
+    say(f"simulating {len(cases)} cases: {len(tasks)} tasks on {procs} process{'es' if procs > 1 else ''}")
+    rows: list = [None] * len(cases)
+    fn = partial(_suite_task, nthread=nthread or max(1, cores // procs))
+    for i, part in iter_jobs(fn, [[cases[j] for j in t] for t in tasks], workers=procs):
+        for j, v in zip(tasks[i], part):
+            rec, pay, s = keys[j]
+            rows[j] = {
+                "record": Path(rec).name,
+                "scale": s,
+                "payload": getattr(pay, "name", None) or "bare",
+                **{k: v[k] for k in ("feasible", "limiting", "limiting_utilisation", "simulated")},
+                "failed": ";".join(v["failed"]),
+            }
+    return [{k: r[k] for k in SUITE_COLUMNS} for r in rows]
+
+
+def _suite_task(cases: list, *, nthread: int) -> list[dict]:
+    """The verdicts of ``cases`` (one suite task): each prepared and staged, the
+    simulations run together (:func:`sim.assess.many.run_plans`), each settled; without
+    the outcomes (a worker sends the verdicts back)."""
+    from sim.assess.many import run_plans
+
+    preps = [prepare(c) for c in cases]  # one per case: each case's plan has its own simulation
+    staged = [stage(p, c.scale, simulate=True) for p, c in zip(preps, cases)]
     todo = [i for i, (pre, plan) in enumerate(staged) if plan is not None]
-    say(f"simulating {len(todo)} of {len(cases)} cases together")
     outs = run_plans([staged[i][1] for i in todo], nthread=nthread)
     verdicts = {i: pre for i, (pre, plan) in enumerate(staged) if plan is None}
     for i, o in zip(todo, outs):
         if isinstance(o, UserError):
             raise o
-        verdicts[i] = settle(preps[i], cases[i][2], o)
-    rows = []
-    for i, (rec, pay, s) in enumerate(cases):
-        v = _finish(preps[i], verdicts[i])
-        rows.append(
-            {
-                "record": Path(rec).name,
-                "scale": s,
-                "payload": getattr(pay, "name", None) or "bare",
-                "feasible": v["feasible"],
-                "limiting": v["limiting"],
-                "limiting_utilisation": v["limiting_utilisation"],
-                "failed": ";".join(v["failed"]),
-                "simulated": v["simulated"],
-            }
-        )
-    return rows
+        verdicts[i] = settle(preps[i], cases[i].scale, o)
+    keep = ("feasible", "limiting", "limiting_utilisation", "failed", "simulated")
+    return [{k: _finish(p, verdicts[i])[k] for k in keep} for i, p in enumerate(preps)]
 
 
 __all__ = [

@@ -18,11 +18,30 @@ def _progress(args):
     return Progress(enabled=not getattr(args, "json", False))
 
 
+#: the environment variable that sets ``run``'s default engine (``loop``: the Python loop, the reference)
+ENGINE_ENV = "SHAKETABLE_ENGINE"
+
+
+def _engine(args) -> str:
+    """``--engine``, else $SHAKETABLE_ENGINE, else ``callback`` (the coupled step inside
+    MuJoCo where the table allows it: the same run file as the loop, faster)."""
+    import os
+
+    from sim.errors import UserError
+
+    if args.engine:
+        return args.engine
+    env = os.environ.get(ENGINE_ENV, "").strip()
+    if env and env not in ("callback", "loop"):
+        raise UserError(f"environment variable {ENGINE_ENV}={env!r}: must be 'callback' or 'loop'; unset it or fix it")
+    return env or "callback"
+
+
 def cmd_run(args) -> int:
     from sim.assess.run import plan_scenario
 
     prog = _progress(args)
-    plan = plan_scenario(args.scenario, duration_s=args.duration, iterations=args.iterations)
+    plan = plan_scenario(args.scenario, duration_s=args.duration, iterations=args.iterations, engine=_engine(args))
     sensors = None
     if getattr(args, "measure", None) is not None:  # a bad sensor model fails before anything is written
         from sim.runs.measure import load_sensors
@@ -236,6 +255,14 @@ def add_parsers(sub) -> None:
         "default: the built-in 1024 Hz recorder, scenarios/sensors/recorder_1024hz.toml)",
     )
     r.add_argument("--measure-seed", type=int, default=0, help="seed of the measurement noise (default 0)")
+    r.add_argument(
+        "--engine",
+        choices=("callback", "loop"),
+        default=None,
+        help="callback: the coupled step compiled inside MuJoCo's step where the table allows it (the Python "
+        "loop elsewhere); loop: the Python loop, the reference; both write the same run file "
+        f"(default: ${ENGINE_ENV}, else callback)",
+    )
     r.set_defaults(func=cmd_run)
 
     p = sub.add_parser(

@@ -81,9 +81,10 @@ def _welch_frf(x: np.ndarray, y: np.ndarray, rate: float, nperseg: int):
     return r.f, np.where(np.isfinite(r.H), r.H, 0.0)
 
 
-def identify_frf(sim, target: Reference, dofs: list[int], s: IterationSettings) -> dict:
+def identify_frf(sim, target: Reference, dofs: list[int], s: IterationSettings, *, run=None) -> dict:
     """Per DOF, H(f) of achieved over commanded displacement from one white-noise run
     (all ``dofs`` excited together with independent seeds). Returns {dof: (f, H)}.
+    ``run(reference) -> RunResult``: how the simulation runs (default ``sim.run``).
 
     Why not the record's own runs: above ~12 Hz an earthquake drive has little content
     while the achieved motion there is dominated by what friction adds at every
@@ -113,7 +114,7 @@ def identify_frf(sim, target: Reference, dofs: list[int], s: IterationSettings) 
     from sim.errors import RunInterrupted
 
     try:
-        res = sim.run(reference=noise)
+        res = run(noise) if run is not None else sim.run(reference=noise)
     except RunInterrupted:  # Ctrl-C in the identification run: nothing of the scenario to keep yet
         raise KeyboardInterrupt from None
     if res.incomplete_reason:
@@ -172,21 +173,23 @@ def update_drive(
     return Reference(t=target.t, d=drive.d + delta, v=drive.v + dv, a=drive.a + da)
 
 
-def iterate(sim, target: Reference, settings: IterationSettings, *, progress=None):
-    """Run the plain controller, then ``settings.count`` corrected drives.
+def iterate(sim, target: Reference, settings: IterationSettings, *, progress=None, run=None):
+    """Run the plain controller, then ``settings.count`` corrected drives;
+    ``run(reference) -> RunResult`` runs ``sim`` from its reset state (default
+    ``sim.run``; the callback route gives the same runs).
 
     Returns (results, drives): the RunResult of every run (first = plain controller) and
     the drive of each run.
     """
     dofs = [i for i in range(6) if np.sqrt(np.mean(target.d[:, i] ** 2)) > 1e-9]
     drive = target
-    frf = identify_frf(sim, target, dofs, settings) if settings.frf == "noise" and settings.count else None
+    frf = identify_frf(sim, target, dofs, settings, run=run) if settings.frf == "noise" and settings.count else None
     results, drives = [], []
     for it in range(settings.count + 1):
         if progress:
             progress(it)
         sim.reset()
-        res = sim.run(reference=drive)
+        res = run(drive) if run is not None else sim.run(reference=drive)
         results.append(res)
         drives.append(drive)
         if res.incomplete_reason or it == settings.count:

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import sys
 import threading
 import time
 
@@ -48,7 +49,7 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-from sim.errors import ScenarioError
+from sim.errors import RunInterrupted, ScenarioError, is_interrupt
 from sim.loop import _kernels as FL
 from sim.loop.divergence import CODE_RESET, CODE_WARN, NWARN_ALL, WARN_IDX, check_state, divergence_reason
 from sim.loop.mjlayout import field_offsets
@@ -136,40 +137,12 @@ def _i3(C, i):
     return numba.carray(_ptr(a), (n0, n1, n2), np.int64)
 
 
+# the argument lists of the tick kernels, a few per line
+# fmt: off
 @numba.njit(**_J)
 def _tick(
-    k,
-    C,
-    qpos,
-    qvel,
-    XMP,
-    ctrl,
-    qfa,
-    qa,
-    da,
-    ids,
-    pd,
-    pb,
-    cmd2,
-    x2,
-    v2,
-    X,
-    Y,
-    IC,
-    ICS,
-    buf,
-    P,
-    G,
-    frd,
-    frfc,
-    zfr,
-    zss,
-    dt,
-    aq,
-    ad,
-    af0,
-    ac,
-    an,
+    k, C, qpos, qvel, XMP, ctrl, qfa, qa, da, ids, pd, pb, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr,
+    zss, dt, aq, ad, af0, ac, an,
 ):
     Q, V, HSP, HF = _f2(C, A_Q), _f2(C, A_V), _f2(C, A_HSP), _f2(C, A_HF)
     HPA, HPB, HCMD, EPS, EGAS = _f2(C, A_HPA), _f2(C, A_HPB), _f2(C, A_HCMD), _f1(C, A_EPS), _f1(C, A_EGAS)
@@ -177,102 +150,20 @@ def _tick(
     consts, J, Jp, N, gains = _f2(C, A_CONSTS), _f2(C, A_J), _f2(C, A_JP), _f2(C, A_NN), _f1(C, A_GAINS)
     cst, plhp, plprev = _f1(C, A_CSTATE), _f1(C, A_PLHP), _f1(C, A_PLPREV)
     FL.tick_first_step(
-        k,
-        qpos,
-        qvel,
-        XMP,
-        ctrl,
-        qfa,
-        Q,
-        V,
-        HSP,
-        HF,
-        HPA,
-        HPB,
-        HCMD,
-        EPS,
-        EGAS,
-        SREF,
-        VREF,
-        VFF,
-        qa,
-        da,
-        ids,
-        pd,
-        pb,
-        consts,
-        J,
-        Jp,
-        N,
-        gains,
-        cst,
-        plhp,
-        plprev,
-        cmd2,
-        x2,
-        v2,
-        X,
-        Y,
-        IC,
-        ICS,
-        buf,
-        P,
-        G,
-        frd,
-        frfc,
-        zfr,
-        zss,
-        dt,
-        aq,
-        ad,
-        af0,
-        ac,
-        an,
+        k, qpos, qvel, XMP, ctrl, qfa, Q, V, HSP, HF, HPA, HPB, HCMD, EPS, EGAS, SREF, VREF, VFF, qa, da, ids, pd, pb,
+        consts, J, Jp, N, gains, cst, plhp, plprev, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr, zss, dt,
+        aq, ad, af0, ac, an,
     )
 
 
 @numba.njit(**_J)
 def _tick_open(k, C, qpos, qvel, ctrl, qfa, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr):
     FL.tick_first_step_open(
-        k,
-        qpos,
-        qvel,
-        ctrl,
-        qfa,
-        _f2(C, A_Q),
-        _f2(C, A_V),
-        _f2(C, A_HSP),
-        _f2(C, A_HF),
-        _f2(C, A_HPA),
-        _f2(C, A_HPB),
-        _f2(C, A_HCMD),
-        _f1(C, A_EPS),
-        _f1(C, A_EGAS),
-        _f2(C, A_VC),
-        qa,
-        da,
-        ids,
-        cmd2,
-        x2,
-        v2,
-        X,
-        Y,
-        IC,
-        ICS,
-        buf,
-        P,
-        G,
-        frd,
-        frfc,
-        zfr,
-        C[S_ZSS],
-        C[S_DT],
-        _i1(C, A_AQ),
-        _i1(C, A_AD),
-        _f1(C, A_AF0),
-        C[S_AC],
-        C[S_AN],
+        k, qpos, qvel, ctrl, qfa, _f2(C, A_Q), _f2(C, A_V), _f2(C, A_HSP), _f2(C, A_HF), _f2(C, A_HPA), _f2(C, A_HPB),
+        _f2(C, A_HCMD), _f1(C, A_EPS), _f1(C, A_EGAS), _f2(C, A_VC), qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P,
+        G, frd, frfc, zfr, C[S_ZSS], C[S_DT], _i1(C, A_AQ), _i1(C, A_AD), _f1(C, A_AF0), C[S_AC], C[S_AN],
     )
+# fmt: on
 
 
 @numba.njit(**_J)
@@ -644,14 +535,17 @@ class Context:
         rose = np.flatnonzero(np.asarray(final_state[2])[WARN_IDX] > self.arrays["W0"])
         return CODE_WARN + int(rose[0]) if len(rose) else 0
 
-    def result(self, wall_s: float, final_state) -> RunResult:
+    def result(self, wall_s: float, final_state, *, interrupted: bool = False) -> RunResult:
         """The :class:`RunResult` of the finished run (``final_state``: qpos, qvel after
         the last step, for the last tick's pending check, and MuJoCo's warning counters
         (``mjData.warning.number``) where the route has them: a single run does, a batch
-        keeps its MjData to itself)."""
+        keeps its MjData to itself). ``interrupted``: Ctrl-C stopped the stepping; the
+        result keeps the ticks whose physics steps all ran, marked as the loop marks it."""
         C, arr, sim = self.C, self.arrays, self.sim
         rate = sim.gains.rate_hz
         spt = int(C[S_SPT])
+        if interrupted and C[S_DONE] < 0:
+            return self._interrupted(wall_s, min(int(C[S_CALLS]) // spt, self.n))
         if C[S_DONE] < 0 and C[S_CALLS] < self.n * spt:  # MuJoCo reset the simulation (userdata zeroed)
             k = max(int(C[S_CALLS]) - 1, 0) // spt
             # the warning that made MuJoCo reset it, where the route has the counters
@@ -668,6 +562,21 @@ class Context:
             tk = int(C[S_TICK]) / rate
             code, val = int(C[S_CODE]), float(C[S_VALUE])
             reason = divergence_reason(code, val, tk, sim)
+        return self._result(wall_s, n_done, reason)
+
+    def _interrupted(self, wall_s: float, n_done: int) -> RunResult:
+        """The result of a run stopped by Ctrl-C after ``n_done`` whole ticks (the loop's
+        reason text and flag)."""
+        rate = self.sim.gains.rate_hz
+        reason = f"interrupted (Ctrl-C) at t = {n_done / rate:.4f} s of {self.n / rate:.4f} s"
+        res = self._result(wall_s, n_done, reason)
+        res.interrupted = True
+        return res
+
+    def _result(self, wall_s: float, n_done: int, reason) -> RunResult:
+        """The recorder's first ``n_done`` ticks as a :class:`RunResult`."""
+        arr, sim = self.arrays, self.sim
+        rate = sim.gains.rate_hz
         t0 = time.perf_counter()
         ch = sim._derive(arr["Q"][:n_done], arr["V"][:n_done], arr["ACC"][:n_done])
         for key, name in (
@@ -716,13 +625,16 @@ def run_callback(
     duration_s: float | None = None,
     gap_every: int = 8,
     chunk_ticks: int = 512,
+    progress: bool = False,
 ) -> RunResult:
     """Closed-loop run of ``sim`` on ``reference`` (or open loop on ``valve_command``,
     (n, n_act) at the controller rate) with the coupled step inside MuJoCo
     (``mj_step(m, d, nstep)`` in chunks of ``chunk_ticks`` controller ticks, stopping at
     a divergence). Starts from ``sim``'s current state (its :meth:`reset`), which it
     leaves unchanged; same result as ``sim.run(reference=...)`` (the fused loop) or
-    ``sim.run(valve_command=...)``."""
+    ``sim.run(valve_command=...)``. ``progress``: the loop's progress bar on stderr,
+    drawn between chunks. Ctrl-C (seen between chunks) keeps the ticks done, marked
+    incomplete, and raises :class:`~sim.errors.RunInterrupted` with them, as the loop does."""
     why = accepts(sim)
     if why:
         raise ScenarioError(f"the callback route cannot run this table: {why}; use Simulation.run")
@@ -740,17 +652,57 @@ def run_callback(
     ctx = Context(sim, reference, n, gap_every=gap_every, state=st, valve_command=valve_command)
     d2.userdata[0] = ctx.address
     d2.userdata[1] = 0.0
-    spt = sim.steps_per_tick
+    bar = _Bar(n, sim.gains.rate_hz) if progress else None
     with installed():
-        t0 = time.perf_counter()
-        done = 0
-        while done < n and ctx.C[S_DONE] < 0:
-            k = min(chunk_ticks, n - done)
-            mujoco.mj_step(m2, d2, nstep=k * spt)
-            done += k
-        wall = time.perf_counter() - t0
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            _step_chunks(m2, d2, ctx, n, sim.steps_per_tick, chunk_ticks, bar)
+        except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C: keep the ticks done so far
+            if not is_interrupt(e):
+                raise
+            d2.userdata[0] = 0.0
+            res = ctx.result(time.perf_counter() - t0, (d2.qpos, d2.qvel, d2.warning.number), interrupted=True)
+            raise RunInterrupted(res) from None
+        finally:
+            if bar is not None:
+                bar.close()
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     d2.userdata[0] = 0.0
-    return ctx.result(wall, (d2.qpos, d2.qvel, d2.warning.number))
+    res = ctx.result(wall, (d2.qpos, d2.qvel, d2.warning.number))
+    res.timing["callback_cpu_s"] = cpu  # the stepping's CPU time (this process's threads)
+    return res
+
+
+def _step_chunks(m2, d2, ctx, n: int, spt: int, chunk_ticks: int, bar) -> None:
+    """``mj_step`` ``d2`` through ``n`` ticks, ``chunk_ticks`` at a time, until done or
+    stopped by the callback's check."""
+    done = 0
+    while done < n and ctx.C[S_DONE] < 0:
+        k = min(chunk_ticks, n - done)
+        mujoco.mj_step(m2, d2, nstep=k * spt)
+        done += k
+        if bar is not None:
+            bar.show(done)
+
+
+class _Bar:
+    """The loop's progress bar (``Simulation.run(progress=True)``), at most every 0.25 s."""
+
+    def __init__(self, n: int, rate_hz: float):
+        self.n, self.rate, self.last = n, rate_hz, time.perf_counter()
+
+    def show(self, done: int) -> None:
+        if time.perf_counter() - self.last <= 0.25:
+            return
+        self.last = time.perf_counter()
+        frac = done / self.n
+        sys.stderr.write(f"\r  [{'#' * int(30 * frac):<30s}] {100 * frac:5.1f} %  t = {(done - 1) / self.rate:7.2f} s")
+        sys.stderr.flush()
+
+    @staticmethod
+    def close() -> None:
+        sys.stderr.write("\r" + " " * 70 + "\r")
+        sys.stderr.flush()
 
 
 STATE_SPEC = int(mujoco.mjtState.mjSTATE_INTEGRATION) & ~int(mujoco.mjtState.mjSTATE_USERDATA)

@@ -36,6 +36,14 @@ def summarize(rows: list, column: str = "limiting_utilisation", check: str = "li
     }
 
 
+def _split_text(info: dict) -> str:
+    """`` (P processes x T threads, tasks of N cases)`` when ``info`` has the split."""
+    sp = info.get("split")
+    if not sp:
+        return ""
+    return f" ({sp['processes']} processes x {sp['threads']} threads, tasks of {sp['task']}, batches of {sp['batch']})"
+
+
 def write_report(out, info: dict, rows: list, title: str = "") -> Path:
     """``OUT/report.md`` with ``OUT/limiting_utilisation.png``; returns the report path."""
     import matplotlib
@@ -79,8 +87,8 @@ def write_report(out, info: dict, rows: list, title: str = "") -> Path:
         f"# Sweep {info['sweep']}" + (f": {title}" if title else ""),
         "",
         f"Scenario `{info['scenario']}`, {s['cases']} cases ({info['ran']} run now, {info['skipped']} "
-        f"already done), executor `{info['executor']}` with {info['workers']} workers, wall time of this "
-        f"invocation {info['wall_s']:.1f} s.",
+        f"already done), executor `{info['executor']}` with {info['workers']} workers{_split_text(info)}, "
+        f"wall time of this invocation {info['wall_s']:.1f} s.",
         "",
         f"- feasible: {s['feasible']} of {s['cases']}; errors: {s['errors']}",
         f"- limiting utilisation: min {u['min']:.4g}, 5 % {u['p5']:.4g}, median {u['median']:.4g}, "

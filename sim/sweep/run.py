@@ -1,21 +1,24 @@
 """Run a sweep: every case of a :class:`sim.sweep.spec.Sweep`, one results table.
 
-The per-group function is a plain library call, :func:`run_cases`: each case planned by
+The per-task function is a plain library call, :func:`run_cases`: each case planned by
 :func:`sim.assess.run.plan_scenario` with its overrides, then all simulated together by
 :func:`sim.assess.many.run_plans` (the route feasibility suites and calibration
 candidates share: :class:`sim.loop.batch.BatchRunner`, MuJoCo's batch with the coupled
-step compiled as MuJoCo's control callback). Executors:
+step compiled as MuJoCo's control callback), then each assessed. The cases are dealt out
+in tasks (:mod:`sim.sweep.split`: worker processes x batch threads, cases per task and
+per batch, chosen from the cores and the case count unless given). Executors:
 
-* ``local``: this machine's cores: groups of ``group`` cases (default 32), each one
-  batch on ``workers`` threads;
-* ``dask``: groups of ``group`` cases (default 8) submitted to a Dask cluster
-  (``dask.distributed``), one :func:`run_cases` per task on one thread: a scheduler
-  address, or a ``LocalCluster`` of ``workers`` processes when none is given.
+* ``local``: a pool of worker processes on this machine (one process: this one), each
+  task one :func:`run_cases` in a worker;
+* ``dask``: each task one :func:`run_cases` on a Dask cluster (``dask.distributed``): a
+  scheduler address, or a ``LocalCluster`` of the split's processes when none is given.
 
-Each finished case is written at once, atomically, to ``OUT/cases/<id>.json`` (plus its
-run file with ``run_files``); a case whose file exists is not run again, so an
-interrupted sweep resumes where it stopped. At the end every case file goes into
-``OUT/results.csv`` (and ``results.parquet`` when pyarrow is installed).
+The parent only deals the tasks and writes the rows. Each finished case is written at
+once, atomically, to ``OUT/cases/<id>.json`` (plus its run file with ``run_files``); a
+case whose file exists is not run again, so an interrupted sweep resumes where it
+stopped. At the end every case file goes into ``OUT/results.csv`` (and
+``results.parquet`` when pyarrow is installed). The rows do not depend on the split:
+every case's simulation is its own single run, bit for bit (``tests/sweep/test_split.py``).
 """
 
 from __future__ import annotations
@@ -35,26 +38,26 @@ EXECUTORS = ("local", "dask")
 
 
 def run_cases(
-    scenario, cases, *, duration_s=None, start_s=None, iterations=None, run_dir=None, nthread: int = 1, group=32
+    scenario, cases, *, duration_s=None, start_s=None, iterations=None, run_dir=None, nthread: int = 1, batch=32
 ) -> list:
-    """Cases of one scenario: each planned with its ``overrides``, then all simulated
-    together (:func:`sim.assess.many.run_plans`: the batch on ``nthread`` threads where
-    the table allows, the plan's own loop otherwise; the same runs as
-    :func:`sim.assess.run.run_scenario`); returns one row per case, in order (varied
-    values, verdict, limiting utilisation, timing). A case the inputs make impossible (a
-    user error, e.g. divergence before the second sample) gives a row with ``error``
-    instead of raising, so one bad case does not stop a sweep. ``case_wall_s`` is the
-    group's wall time shared equally among its cases."""
+    """Cases of one scenario (one task): each planned with its ``overrides``, then
+    simulated in batches of ``batch`` cases (:func:`sim.assess.many.run_plans`: MuJoCo's
+    batch on ``nthread`` threads where the table allows, the plan's own run otherwise;
+    the same runs as :func:`sim.assess.run.run_scenario`); returns one row per case, in
+    order (varied values, verdict, limiting utilisation, timing). A case the inputs make
+    impossible (a user error, e.g. divergence before the second sample) gives a row with
+    ``error`` instead of raising, so one bad case does not stop a sweep. ``case_wall_s``
+    is the task's wall time shared equally among its cases."""
     from sim.assess.many import run_plans
     from sim.assess.run import plan_scenario
-    from sim.scenario.files import build_motions, load_scenario
+    from sim.scenario.files import load_scenario
 
     t0 = time.perf_counter()
     plans, rows = [], {}
-    motions = None  # the scenario's motions, built once for the group when no case changes them
+    motions = None  # the scenario's motions, built once for the worker when no case changes them
     if not any(k.split(".")[0] == "motion" for c in cases for k in c.overrides):
         try:
-            motions = build_motions(load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario)
+            motions = scenario_motions(load_scenario(scenario) if isinstance(scenario, (str, Path)) else scenario)
         except UserError:
             motions = None  # each case's plan reports it
     for c in cases:
@@ -71,7 +74,7 @@ def run_cases(
             plans.append((c, p))
         except UserError as e:
             rows[c.id] = e
-    outs = run_plans([p for _, p in plans], nthread=nthread, group=group)
+    outs = run_plans([p for _, p in plans], nthread=nthread, group=batch)
     for (c, _), o in zip(plans, outs):
         rows[c.id] = o
     wall = (time.perf_counter() - t0) / max(len(cases), 1)
@@ -86,6 +89,27 @@ def run_cases(
         except UserError as e:
             result.append(error_row(c, str(e), wall))
     return result
+
+
+_MOTIONS: dict = {}  #: this process's motions of the last scenarios it ran (a worker runs many tasks of one)
+
+
+def scenario_motions(sc) -> dict:
+    """``build_motions(sc)``, kept for the next task of the same scenario in this process
+    (a record's processing is a tenth of a second of a short case); keyed by the file,
+    its modification time and the motion table."""
+    from sim.scenario.files import build_motions
+
+    try:
+        stamp = Path(sc.path).stat().st_mtime_ns if sc.path else None
+    except OSError:
+        stamp = None
+    key = (str(sc.path), stamp, repr(sc.motion), sc.sample_rate_hz)
+    if key not in _MOTIONS:
+        if len(_MOTIONS) >= 4:
+            _MOTIONS.clear()
+        _MOTIONS[key] = build_motions(sc)
+    return _MOTIONS[key]
 
 
 def run_case(scenario, case, *, duration_s=None, start_s=None, iterations=None, run_dir=None) -> dict:
@@ -190,15 +214,28 @@ def _kw(sweep, out):
     )
 
 
-def _local(sweep, todo, out, workers, group, done_cb):
-    for i in range(0, len(todo), group):
-        chunk = todo[i : i + group]
-        rows = run_cases(sweep.scenario, chunk, nthread=workers, group=group, **_kw(sweep, out))
-        for c, row in zip(chunk, rows):
+def _tasks(todo: list, split) -> list:
+    return [todo[i : i + split.task] for i in range(0, len(todo), split.task)]
+
+
+def _local(sweep, todo, out, split, done_cb):
+    """The tasks on a pool of ``split.processes`` worker processes (this process alone
+    for one), each task's rows written as it finishes."""
+    from functools import partial
+
+    from sim.parallel import iter_jobs
+
+    tasks = _tasks(todo, split)
+    fn = partial(run_cases, sweep.scenario, nthread=split.threads, batch=split.batch, **_kw(sweep, out))
+    for i, rows in iter_jobs(fn, tasks, workers=split.processes):
+        for c, row in zip(tasks[i], rows):
             done_cb(c, row)
 
 
-def _dask(sweep, todo, out, workers, address, group, done_cb):
+def _dask(sweep, todo, out, split, address, done_cb):
+    """The tasks on a Dask cluster: the scheduler at ``address``, or a ``LocalCluster``
+    of ``split.processes`` single-threaded worker processes (each task's batch brings
+    its own ``split.threads``)."""
     import dask
     from dask.distributed import Client, LocalCluster, as_completed
 
@@ -207,23 +244,25 @@ def _dask(sweep, todo, out, workers, address, group, done_cb):
         # a case holds its worker's GIL for seconds; on a loaded machine heartbeats come
         # late: no time-to-live, so a slow worker is waited for, not restarted
         with dask.config.set({"distributed.scheduler.worker-ttl": None}):
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0")
+            cluster = LocalCluster(
+                n_workers=split.processes, threads_per_worker=1, processes=True, dashboard_address=":0"
+            )
         address = cluster
     client = Client(address)
     try:
-        chunks = [todo[i : i + group] for i in range(0, len(todo), group)]
+        tasks = _tasks(todo, split)
         futs = {
             client.submit(
                 run_cases,
                 sweep.scenario,
-                chunk,
-                nthread=1,
-                group=group,
+                task,
+                nthread=split.threads,
+                batch=split.batch,
                 pure=False,
-                key=f"cases-{sweep.name}-{chunk[0].id}-{chunk[-1].id}",
+                key=f"cases-{sweep.name}-{task[0].id}-{task[-1].id}",
                 **_kw(sweep, out),
-            ): chunk
-            for chunk in chunks
+            ): task
+            for task in tasks
         }
         for fut in as_completed(futs):
             for c, row in zip(futs[fut], fut.result()):
@@ -234,6 +273,34 @@ def _dask(sweep, todo, out, workers, address, group, done_cb):
             cluster.close()
 
 
+def _dask_workers(address) -> int | None:
+    """The worker processes of the Dask scheduler at ``address`` (None: not reachable
+    now; the split then assumes this machine's cores)."""
+    try:
+        from dask.distributed import Client
+
+        with Client(address, timeout="10s") as c:
+            return max(1, len(c.scheduler_info()["workers"]))
+    except Exception:  # noqa: BLE001 - any failure to ask is reported by the run itself
+        return None
+
+
+def sweep_split(sweep, n_cases: int, *, workers=None, executor="local", address=None, **given):
+    """The :class:`~sim.sweep.split.Split` of a run of ``n_cases`` cases: ``given``
+    (``processes``, ``threads``, ``task``, ``batch``: CLI flags) over the sweep file's
+    ``task`` and ``batch``, the rest chosen for ``workers`` cores (default this
+    machine's; with an external Dask scheduler, its workers)."""
+    from sim.sweep.split import choose_split
+
+    task = given["task"] if given.get("task") is not None else sweep.task
+    batch = given["batch"] if given.get("batch") is not None else sweep.batch
+    procs, cores = given.get("processes"), workers
+    if executor == "dask" and address is not None and procs is None:
+        procs = _dask_workers(address)
+        cores = cores or (procs * (given.get("threads") or 1) if procs else None)
+    return choose_split(n_cases, cores=cores, processes=procs, threads=given.get("threads"), task=task, batch=batch)
+
+
 def run_sweep(
     sweep,
     out,
@@ -241,36 +308,40 @@ def run_sweep(
     workers: int | None = None,
     executor: str = "local",
     address: str | None = None,
-    group: int | None = None,
+    processes: int | None = None,
+    threads: int | None = None,
+    task: int | None = None,
+    batch: int | None = None,
     progress=None,
 ) -> dict:
     """Run every case of ``sweep`` not yet in ``out``; write the results table.
 
-    ``workers``: threads (local) or worker processes (a Dask ``LocalCluster``); default
-    the machine's cores. ``group``: cases per batch (local, default 32) or per Dask task
-    (default 8); default the sweep file's ``group``. ``address``: a Dask scheduler to submit to instead of a local
-    cluster. ``progress(done, total)`` is called after each case. Returns
-    ``{"cases", "ran", "skipped", "wall_s", "table", "rows"}``.
+    ``workers``: the cores to use (default: all of this machine's); ``processes``,
+    ``threads``, ``task``, ``batch``: the split (:func:`sim.sweep.split.choose_split`;
+    ``task`` and ``batch`` default to the sweep file's). ``address``: a Dask scheduler
+    to submit to instead of a local cluster. ``progress(done, total)`` is called after
+    each case. Returns ``{"cases", "ran", "skipped", "wall_s", "table", "rows", "split", ...}``.
     """
     from sim.runs.files import out_dir, write_json_atomic
 
     if executor not in EXECUTORS:
         raise UserError(f"--executor must be one of {', '.join(EXECUTORS)} (got '{executor}')")
-    workers = workers or os.cpu_count() or 1
-    if workers < 1:
-        raise UserError(f"--workers must be at least 1 (got {workers})")
-    from sim.assess.run import check_overrides
-
     cases = sweep.cases()
-    where = str(sweep.path or sweep.name)
-    for c in cases[:1] + cases[-1:]:  # every case has the same keys: a bad key fails here, before any run
-        try:
-            check_overrides(sweep.scenario, c.overrides)
-        except UserError as e:
-            raise UserError(f"{where}: case {c.id}: {e}") from None
+    _check_cases(sweep, cases)
+    todo = [c for c in cases if not _case_path(Path(out), c).exists()]
+    split = sweep_split(
+        sweep,
+        len(todo),
+        workers=workers,
+        executor=executor,
+        address=address,
+        processes=processes,
+        threads=threads,
+        task=task,
+        batch=batch,
+    )  # a bad split fails here, before anything is written
     out = out_dir(out)
     (out / "cases").mkdir(exist_ok=True)
-    todo = [c for c in cases if not _case_path(out, c).exists()]
     skipped = len(cases) - len(todo)
     n_done = [skipped]
     if progress:
@@ -285,9 +356,9 @@ def run_sweep(
     t0 = time.perf_counter()
     if todo:
         if executor == "local":
-            _local(sweep, todo, out, workers, group or sweep.group or 32, done)
+            _local(sweep, todo, out, split, done)
         else:
-            _dask(sweep, todo, out, workers, address, group or sweep.group or 8, done)
+            _dask(sweep, todo, out, split, address, done)
     wall = time.perf_counter() - t0
     rows = [json.loads(_case_path(out, c).read_text()) for c in cases]
     table = write_table(out, rows)
@@ -298,13 +369,27 @@ def run_sweep(
         "ran": len(todo),
         "skipped": skipped,
         "executor": executor,
-        "workers": workers,
+        "workers": split.processes * split.threads,
+        "split": {"processes": split.processes, "threads": split.threads, "task": split.task, "batch": split.batch},
         "varied": [v.name for v in sweep.vary],
         "wall_s": wall,
         "table": str(table),
     }
     write_json_atomic(out / "sweep.json", info)
     return {**info, "rows": rows}
+
+
+def _check_cases(sweep, cases) -> None:
+    """Every case has the same keys: a bad key fails here, on the first and last case,
+    before any run."""
+    from sim.assess.run import check_overrides
+
+    where = str(sweep.path or sweep.name)
+    for c in cases[:1] + cases[-1:]:
+        try:
+            check_overrides(sweep.scenario, c.overrides)
+        except UserError as e:
+            raise UserError(f"{where}: case {c.id}: {e}") from None
 
 
 def write_table(out: Path, rows: list) -> Path:
@@ -362,5 +447,6 @@ __all__ = [
     "run_cases",
     "run_sweep",
     "simulated_limiting",
+    "sweep_split",
     "write_table",
 ]

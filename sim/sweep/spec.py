@@ -7,7 +7,8 @@ A sweep file (TOML)::
     scenario = "elcentro_20t"       # scenario name or path (relative to the sweep file)
     duration_s = 5.0                # optional: simulate S seconds (of a record: its strong motion)
     start_s = 20.0                  # optional: start there in the motion instead (scenario.start_s)
-    group = 8                       # optional: cases per batch (local) or per task (dask)
+    task = 8                        # optional: cases dealt to a worker process at once (local or Dask)
+    batch = 8                       # optional: cases simulated together on one batch (default: the task)
     iterations = 0                  # optional: drive iterations per case (default: the scenario's)
     mode = "random"                 # "grid" (every combination) or "random"
     n = 1000                        # random: number of cases
@@ -23,7 +24,10 @@ A sweep file (TOML)::
     high = 1.2
 
 Keys are those of :mod:`sim.scenario.overrides`. Every key is checked; an error names
-the file, the field and the fix in one line.
+the file, the field and the fix in one line. ``task`` and ``batch`` only change how the
+cases are dealt out (:mod:`sim.sweep.split`), never a result; left out, they are chosen
+from the machine and the case count. The old ``group`` (which meant both: cases per Dask
+task and per local batch) still loads, as ``task``, with a warning.
 """
 
 from __future__ import annotations
@@ -37,7 +41,15 @@ import numpy as np
 from mjcf.description import load_toml
 from sim.errors import UserError
 
-_SWEEP_KEYS = {"name", "scenario", "duration_s", "start_s", "group", "iterations", "mode", "n", "seed", "run_files"}
+_SWEEP_KEYS = {
+    "name", "scenario", "duration_s", "start_s", "task", "batch", "group", "iterations", "mode", "n", "seed", "run_files",
+}  # fmt: skip
+#: the warning of a file with the old key ``group``
+GROUP_DEPRECATED = (
+    "'sweep.group' is deprecated (it meant both cases per Dask task and cases per local batch); "
+    "read as 'task' (cases dealt to a worker process at once); write 'task = {n}' instead "
+    "(and 'batch' for cases simulated together)"
+)
 _VARY_KEYS = {"name", "key", "keys", "scale", "values", "distribution", "low", "high", "mean", "std"}
 _DISTS = {"uniform": ("low", "high"), "normal": ("mean", "std"), "lognormal": ("mean", "std")}
 
@@ -79,7 +91,9 @@ class Sweep:
     vary: list
     path: Path | None = None
     start_s: float | None = None  #: where each run starts in the motion (None: the strong motion of a record)
-    group: int | None = None  #: cases per batch / per Dask task (None: the executor's default)
+    task: int | None = None  #: cases dealt to a worker process at once (None: chosen by sim.sweep.split)
+    batch: int | None = None  #: cases simulated together on one batch (None: the task)
+    warnings: list = field(default_factory=list)  #: what the file should change (one line each, with the file)
 
     def cases(self) -> list[Case]:
         """Every case, in a fixed order (the same file always gives the same cases)."""
@@ -147,9 +161,7 @@ def load_sweep(path) -> Sweep:
         _number(start, f"{src}: 'sweep.start_s'")
         if start < 0:
             raise SweepError(f"{src}: 'sweep.start_s' must be 0 or more seconds into the motion (got {start!r})")
-    group = sw.get("group")
-    if group is not None:
-        _number(group, f"{src}: 'sweep.group'", positive=True, integer=True)
+    task, batch, warns = _dealing(sw, src)
     it = sw.get("iterations")
     if it is not None:
         _number(it, f"{src}: 'sweep.iterations'", integer=True)
@@ -211,8 +223,32 @@ def load_sweep(path) -> Sweep:
         vary=vary,
         path=path,
         start_s=None if start is None else float(start),
-        group=group,
+        task=task,
+        batch=batch,
+        warnings=warns,
     )
 
 
-__all__ = ["Case", "Sweep", "SweepError", "Vary", "load_sweep"]
+def _dealing(sw: dict, src: str) -> tuple:
+    """``task`` and ``batch`` of the [sweep] table ``sw`` (the old ``group`` read as
+    ``task``, with a warning) and the warnings."""
+    for key in ("task", "batch", "group"):
+        if sw.get(key) is not None:
+            _number(sw[key], f"{src}: 'sweep.{key}'", positive=True, integer=True)
+    task, warns = sw.get("task"), []
+    if "group" in sw:
+        if task is not None:
+            raise SweepError(
+                f"{src}: 'sweep.group' and 'sweep.task' both given; remove 'group' (the old name of 'task')"
+            )
+        task = sw["group"]
+        warns.append(f"{src}: " + GROUP_DEPRECATED.format(n=task))
+    batch = sw.get("batch")
+    if task is not None and batch is not None and batch > task:
+        raise SweepError(
+            f"{src}: 'sweep.batch' ({batch}) is more than 'sweep.task' ({task}); a batch is part of a task"
+        )
+    return task, batch, warns
+
+
+__all__ = ["GROUP_DEPRECATED", "Case", "Sweep", "SweepError", "Vary", "load_sweep"]

@@ -540,7 +540,7 @@ def test_sigint_during_sweep_keeps_complete_cases_only(tmp_path, capsys):
         "[output]\nsample_rate_hz = 4000.0\n"
     )
     (tmp_path / "sw.toml").write_text(
-        '[sweep]\nname = "interrupt"\nscenario = "rice.toml"\niterations = 0\nmode = "grid"\ngroup = 1\n'
+        '[sweep]\nname = "interrupt"\nscenario = "rice.toml"\niterations = 0\nmode = "grid"\ntask = 1\n'
         '[[vary]]\nname = "bulk_modulus_pa"\nkey = "table.fluid.bulk_modulus_pa"\n'
         "values = [4.0e8, 4.5e8, 5.0e8, 5.5e8, 6.0e8, 6.5e8]\n"
     )
@@ -549,8 +549,8 @@ def test_sigint_during_sweep_keeps_complete_cases_only(tmp_path, capsys):
         ["sweep", str(tmp_path / "sw.toml"), "--out", str(out), "--workers", "1"],
         tmp_path,
         # the first case written: five are left to run when the signal goes (a fixed delay
-        # after the start raced a fast machine, which finished all six first); `group = 1`
-        # makes each case its own group, so a case file is written as soon as it finishes
+        # after the start raced a fast machine, which finished all six first); `task = 1`
+        # makes each case its own task, so a case file is written as soon as it finishes
         lambda s: (out / "cases" / "00000.json").exists(),
     )
     assert r.running, "the sweep ended before the signal: nothing was interrupted"
@@ -576,7 +576,7 @@ def test_ctrl_c_in_a_sweep_case_stops_the_sweep(tmp_path, capsys, monkeypatch):
     writes no case, no table (deterministic: the interrupt is raised from the loop)."""
     (tmp_path / "sine.toml").write_text(SINE.format(dur=0.2))
     (tmp_path / "sw.toml").write_text(
-        '[sweep]\nname = "stop"\nscenario = "sine.toml"\niterations = 0\nmode = "grid"\ngroup = 1\n'
+        '[sweep]\nname = "stop"\nscenario = "sine.toml"\niterations = 0\nmode = "grid"\ntask = 1\n'
         '[[vary]]\nname = "bulk_modulus_pa"\nkey = "table.fluid.bulk_modulus_pa"\nvalues = [0.8e9, 1.0e9, 1.2e9]\n'
     )
     n, real = {"k": 0}, S.Simulation.loop_gap

@@ -114,9 +114,11 @@ def test_dask_local_cluster_runs_a_tiny_sweep(tmp_path, sweep_file):
     pytest.importorskip("dask.distributed")
     sw = load_sweep(sweep_file)
     res = run_sweep(sw, tmp_path / "dask", workers=2, executor="dask")
-    loc = run_sweep(sw, tmp_path / "local", workers=2)
-    assert res["ran"] == 4
-    assert [r["limiting_utilisation"] for r in res["rows"]] == [r["limiting_utilisation"] for r in loc["rows"]]
+    loc = run_sweep(sw, tmp_path / "local", processes=1, task=4)
+    assert res["ran"] == 4 and res["split"]["processes"] == 2  # a LocalCluster of two worker processes
+    timing = ("case_wall_s", "sim_wall_s")
+    for a, b in zip(res["rows"], loc["rows"], strict=True):  # the same results table, case for case
+        assert {k: v for k, v in a.items() if k not in timing} == {k: v for k, v in b.items() if k not in timing}
     assert json.loads((tmp_path / "dask" / "sweep.json").read_text())["executor"] == "dask"
 
 
@@ -224,8 +226,10 @@ def test_feasibility_suite_runs_its_cases_together_with_each_cases_own_verdict()
     from sim.assess import study
 
     pay = mjcf.load_payload("rigid_20t")
-    rows = study.suite("cgs", ["elcentro1940"], [0.3, 0.6], [pay], window_s=1.0, nthread=2)
+    rows = study.suite("cgs", ["elcentro1940"], [0.3, 0.6], [pay], window_s=1.0, nthread=2, processes=1)
     assert [r["scale"] for r in rows] == [0.3, 0.6] and all(r["simulated"] for r in rows)
+    # a worker process per case (each its own task, one thread): the same rows
+    assert study.suite("cgs", ["elcentro1940"], [0.3, 0.6], [pay], window_s=1.0, nthread=1, processes=2) == rows
     for r in rows:
         alone = study.assess(
             study.Case(table="cgs", motion="elcentro1940", payload=pay, scale=r["scale"], window_s=1.0)
