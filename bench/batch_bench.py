@@ -209,4 +209,34 @@ def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads:
     return out
 
 
-__all__ = ["bare_rate", "callback_vs_bare", "main", "plain_batch_rate", "plain_step_rate"]
+def cli(argv=None) -> int:
+    """The batch block alone, on the 20 t scene: ``python -m bench.batch_bench [--threads T]
+    [--sizes 1,16,64,256] [--seconds S] [--scene-seconds S]`` (e.g. 16 threads on a 16-core
+    machine, beside MuJoCo's own batch of plain models)."""
+    import argparse
+
+    import mjcf
+    from bench.__main__ import strong_motion
+    from sim.effects import build_model
+
+    ap = argparse.ArgumentParser(prog="python -m bench.batch_bench")
+    ap.add_argument("--threads", type=int, default=None, help="batch threads (default: the cores)")
+    ap.add_argument("--sizes", default="1,8,32,128", help="batch sizes N, comma-separated (default 1,8,32,128)")
+    ap.add_argument("--seconds", type=float, default=0.5, help="simulated seconds per batch (default 0.5)")
+    ap.add_argument("--scene-seconds", type=float, default=15.0, help="El Centro seconds of the single run")
+    args = ap.parse_args(argv)
+    sizes = tuple(int(x) for x in args.sizes.split(","))
+    tm = build_model(mjcf.load_table("cgs"), mjcf.load_payload("rigid_20t"))
+    b = main(tm, strong_motion(args.scene_seconds), batch_seconds=args.seconds, sizes=sizes, threads=args.threads)
+    n = b["summary_n"]
+    print(f"single loop / bare mj_step: {b['callback_ratio']:.3f}")
+    print(f"batch efficiency ({n} sims, {b['threads']} threads): {b['batches'][n]['efficiency']:.3f}")
+    return 0
+
+
+__all__ = ["bare_rate", "callback_vs_bare", "cli", "main", "plain_batch_rate", "plain_step_rate"]
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(cli())
