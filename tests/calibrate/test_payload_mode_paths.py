@@ -86,7 +86,6 @@ def test_rigid_specimen_adds_no_mode(declared, tmp_path):
     assert res.effects_added == [], res.effects_added
 
 
-@pytest.mark.slow  # 41 s on a loaded 2-core machine
 def test_undeclared_flexible_specimen_found_on_a_replay(tmp_path):
     """The worked example's 2-storey frame (2 x 150 kg, first mode 4.0 Hz, 2 %) on the lab
     table, not declared (``--payload none``): its first mode found as an added modal mass,
