@@ -5,7 +5,8 @@ A candidate is one registered effect type at one place of the table: the hydraul
 effects (:mod:`sim.effects.hydraulic`) at each actuator and each class (the supply drop
 at the supply), the mechanical effects with a coefficient that vanishes (spring,
 viscous damping, power-law damping, Coulomb friction, added mass) at each DOF, actuator
-and class, and the sensor effects (:mod:`sim.effects.sensors`: gain, offset, delay,
+and class, a specimen's modes (``payload_mode`` at each translational DOF: no modal mass
+is its neutral value, its frequency scanned, :func:`mode_candidates`), and the sensor effects (:mod:`sim.effects.sensors`: gain, offset, delay,
 low-pass) on each compared channel and on each of its columns (what part of a load
 cell's offset an over-actuated table's replay can tell: :func:`internal_force_part`).
 
