@@ -5,7 +5,8 @@ A candidate is one registered effect type at one place of the table: the hydraul
 effects (:mod:`sim.effects.hydraulic`) at each actuator and each class (the supply drop
 at the supply), the mechanical effects with a coefficient that vanishes (spring,
 viscous damping, power-law damping, Coulomb friction, added mass) at each DOF, actuator
-and class, and the sensor effects (:mod:`sim.effects.sensors`: gain, offset, delay,
+and class, a specimen's modes (``payload_mode`` at each translational DOF: no modal mass
+is its neutral value, its frequency scanned, :func:`mode_candidates`), and the sensor effects (:mod:`sim.effects.sensors`: gain, offset, delay,
 low-pass) on each compared channel and on each of its columns (what part of a load
 cell's offset an over-actuated table's replay can tell: :func:`internal_force_part`).
 
@@ -66,6 +67,25 @@ FOUNDATION_LINE_RATIO = 2.0**0.25
 #: fit the foundation's damping ratio as a second parameter (from the declared value; the
 #: screening steps only the frequency), else hold it at the description's value
 FOUNDATION_FIT_DAMPING = True
+#: a specimen's mode (``payload_mode``) on these paths: at most this many at one DOF (a
+#: second one in a later round, as the mechanical path's law)
+MODE_REPEATS = 3
+#: its screening scans the frequency on a grid this ratio apart (12 %: a 5 % damped mode's
+#: half-power band is +/- 5 %, so the nearest point is within about one band of it) from
+#: MODE_MIN_HZ up to MODE_MAX_SHARE x the record rate (and MODE_MAX_HZ), the damping ratio
+#: held at MODE_DAMPING (freed in the refinement): at its neutral value (no modal mass) a
+#: mode changes nothing, so a linearisation there sees no frequency (as the foundation's)
+MODE_LINE_RATIO = 2.0 ** (1.0 / 6.0)
+MODE_MIN_HZ = 1.0
+MODE_MAX_HZ = 60.0
+MODE_MAX_SHARE = 0.4
+#: assumed: 3 %, the middle of the mechanical path's damping grid (steel and RC specimens 1-5 %)
+MODE_DAMPING = 0.03
+#: the mode's frequency is fitted as log(f) (steps of this, relative) and its damping
+#: ratio within these bounds (the mechanical law's scan limits: below 0.05 % no record
+#: resolves the band, above 1 nothing rings)
+MODE_LOG_STEP = 0.03
+MODE_DAMPING_BOUNDS = (0.0005, 1.0)
 #: the force a mechanical candidate's screening step adds: this share of the mean
 #: actuator's capability A_a p_s (assumed: 1 %, the order of the seal friction of a
 #: servo-actuator, docs/effects.md; large enough to stand above round-off, small enough
@@ -92,6 +112,8 @@ class Candidate:
     grid: float | None = None  # the parameter (index 0) is realised on this grid
     ref: dict = field(default_factory=dict)  # constants of a transformed parameter (foundation_mode)
     line: tuple | None = None  # the line search's points (internal values), instead of its steps
+    #: points (whole internal vectors) the screening steps from, the best kept (a mode's frequencies)
+    scan: tuple | None = None
 
     @property
     def key(self) -> tuple:
@@ -101,6 +123,12 @@ class Candidate:
         """Parameter values (the effect's own keys, SI) for the internal ``theta``."""
         if self.type == "sensor_lowpass":  # internal: 1/cutoff (s), neutral 0 = no filter
             return {"cutoff_hz": 1.0 / float(theta[0]) if theta[0] > 0 else math.inf}
+        if self.type == "payload_mode":  # internal: (mass, log f, damping)
+            return {
+                "mass_kg": float(theta[0]),
+                "frequency_hz": math.exp(float(theta[1])),
+                "damping_ratio": float(theta[2]),
+            }
         if self.type == "foundation_mode":  # internal: compliance s = (f_ref / f)^2, 0 = rigid
             s = float(theta[0])
             out = {"frequency_hz": self.ref["f_ref"] / math.sqrt(s) if s > 0 else math.inf}
@@ -112,6 +140,9 @@ class Candidate:
     def sigmas(self, theta, sigma) -> dict:
         if self.type == "sensor_lowpass":
             return {"cutoff_hz": float(sigma[0]) / float(theta[0]) ** 2 if theta[0] > 0 else math.inf}
+        if self.type == "payload_mode":  # df = f d(log f)
+            f = math.exp(float(theta[1]))
+            return {"mass_kg": float(sigma[0]), "frequency_hz": f * float(sigma[1]), "damping_ratio": float(sigma[2])}
         if self.type == "foundation_mode":  # df = f_ref / (2 s^1.5) ds (the held values: no interval)
             s = float(theta[0])
             d = 0.5 * float(sigma[0]) / s**1.5 if s > 0 else math.inf
@@ -251,6 +282,10 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
         and ("foundation_mode", "table") not in have
     ):
         out.append(foundation_candidate(cur, dt))
+    if "payload_mode" in EFFECTS and ((want and "payload_mode" in want) or _rigid(payload)):
+        # offered where a specimen may be flexible: a declared rigid payload, or when asked for
+        # (an undeclared specimen, --payload none): not in every bare table's default search
+        out += mode_candidates(cur, payload, accepted, motion_rms, Fs, 1.0 / prs[0].dt)
     fs = 1.0 / prs[0].dt
     for t in SENSOR:
         if t not in EFFECTS or (want and t not in want):
@@ -327,6 +362,61 @@ def foundation_candidate(desc, dt: float, fit_damping: bool | None = None) -> Ca
     )
 
 
+def _rigid(payload) -> bool:
+    from mjcf.description import RigidPayload
+
+    return isinstance(payload, RigidPayload)
+
+
+def mode_candidates(desc, payload, accepted, motion_rms, force_step: float, fs: float) -> list[Candidate]:
+    """A specimen's mode (``payload_mode``) at each translational DOF ``dof:x|y|z`` of the
+    table, while it holds fewer than :data:`MODE_REPEATS` of them. Internal parameters
+    (modal mass kg, log frequency, damping ratio); neutral: no modal mass.
+
+    * A declared rigid payload (:class:`mjcf.description.RigidPayload`) that is flexible:
+      the modal mass is taken out of it (``from_payload``: the table carries the same
+      weight, :class:`sim.effects.mechanical.PayloadMode`), from 0 up to what is left of
+      its mass after the modes already accepted; the mode at its centre of gravity.
+    * Otherwise (no payload, or one declared flexible): an added modal mass from 0,
+      unbounded (a specimen's modal mass may exceed the platen's: no plausibility bound).
+
+    The screening scans the frequency (:data:`MODE_LINE_RATIO` apart, ``scan``), the mass
+    stepped by the force step's worth of the place's recorded acceleration (as
+    ``added_mass``); the refinement fits all three."""
+    from mjcf.description import RigidPayload
+
+    rigid = isinstance(payload, RigidPayload)
+    taken = sum(float(e["mass_kg"]) for e in accepted if e["type"] == "payload_mode" and e.get("from_payload"))
+    m_max = float(payload.mass_kg) - taken if rigid else math.inf
+    f_hi = min(MODE_MAX_HZ, MODE_MAX_SHARE * fs)
+    freqs = _geometric(f_hi, MODE_MIN_HZ, MODE_LINE_RATIO)
+    out = []
+    for d in ("x", "y", "z"):
+        w = f"dof:{d}"
+        n_have = sum(1 for e in accepted if e["type"] == "payload_mode" and e["where"] == w)
+        if d not in desc.dofs or w not in motion_rms or n_have >= MODE_REPEATS or m_max <= 0:
+            continue
+        a = motion_rms[w][2]
+        if a <= 0:
+            continue
+        dm = min(force_step / a, 0.5 * m_max)
+        out.append(
+            Candidate(
+                "payload_mode",
+                w,
+                ("mass_kg", "frequency_hz", "damping_ratio"),
+                np.array([0.0, math.log(freqs[len(freqs) // 2]), MODE_DAMPING]),
+                np.array([dm, MODE_LOG_STEP, 0.1 * MODE_DAMPING]),
+                np.array([1e-6 * dm, math.log(0.5 * MODE_MIN_HZ), MODE_DAMPING_BOUNDS[0]]),
+                np.array([m_max, math.log(0.45 * fs), MODE_DAMPING_BOUNDS[1]]),
+                {"mass_kg": "kg", "frequency_hz": "Hz", "damping_ratio": "1"},
+                fixed={"from_payload": True} if rigid else {},
+                scan=tuple(np.array([0.0, math.log(f), MODE_DAMPING]) for f in freqs),
+            )
+        )
+    return out
+
+
 def _geometric(hi: float, lo: float, ratio: float) -> list:
     out = [hi]
     while out[-1] / ratio >= lo:
@@ -391,6 +481,9 @@ class Screen:
     ok: bool = True
     #: a sensor candidate's share of the residual of the columns it acts on (None: not a sensor)
     own: float | None = None
+    #: a candidate with a ``scan``: the linearised estimate from each of its points that
+    #: moves the stepped parameters into their range (the line search's points)
+    estimates: list = field(default_factory=list)
 
 
 def linear_fit(r0, S) -> tuple[np.ndarray, float]:
@@ -419,20 +512,25 @@ def screen(cands, prs, base_models, ctx, workers=None, say=None, counts=None) ->
     for ci, c in enumerate(cands):
         if c.sensor:
             continue
-        for p in c.screened:
-            th = c.neutral.copy()
-            th[p] += c.step[p]
-            for ri, pr in enumerate(prs):
-                jobs.append(pr.job(raw, src, payload, list(accepted) + [c.entry(th)]))
-                where.append((ci, p, ri))
+        for bi, base in enumerate(_bases(c)):
+            for p in c.screened:
+                th = base.copy()
+                th[p] += c.step[p]
+                for ri, pr in enumerate(prs):
+                    jobs.append(pr.job(raw, src, payload, list(accepted) + [c.entry(th)]))
+                    where.append((ci, bi, p, ri))
     if say:
         say(f"  screening: {len(jobs)} short replays ({len(prs)} windows of {prs[0].t[-1]:.2f} s) ...")
     models = simulate_many(jobs, workers=workers, counts=counts)
     got: dict = {}
-    for (ci, p, ri), m in zip(where, models):
-        got.setdefault(ci, {}).setdefault(p, [None] * len(prs))[ri] = m
+    for (ci, bi, p, ri), m in zip(where, models):
+        got.setdefault((ci, bi), {}).setdefault(p, [None] * len(prs))[ri] = m
     out = []
     for ci, c in enumerate(cands):
+        if c.scan is not None:
+            out.append(_best_of_scan(c, [got[(ci, bi)] for bi in range(len(c.scan))], prs, r0))
+            continue
+        got_c = got.get((ci, 0), {})
         cols = []
         own = None
         if c.sensor:
@@ -448,7 +546,7 @@ def screen(cands, prs, base_models, ctx, workers=None, say=None, counts=None) ->
         else:
             bad = False
             for p in c.screened:
-                r1 = stacked(prs, got[ci][p])
+                r1 = stacked(prs, got_c[p])
                 if r1 is None:
                     bad = True
                     break
@@ -462,6 +560,36 @@ def screen(cands, prs, base_models, ctx, workers=None, say=None, counts=None) ->
         th[list(c.screened)] += d
         out.append(Screen(c, score, _inside(c, th), own=own))
     return out
+
+
+def _bases(c: Candidate) -> tuple:
+    """The points the screening steps a candidate from: its scan, else its neutral value."""
+    return c.scan if c.scan is not None else (c.neutral,)
+
+
+def _best_of_scan(c: Candidate, got: list, prs, r0) -> Screen:
+    """The screening of a candidate with a ``scan`` (a mode's frequencies): the linearised
+    fit of the stepped parameters from each point, the best that moves them into their
+    range (a mode's mass up from none) kept, its point the estimate's start."""
+    from sim.calibrate.paths import stacked
+
+    best = Screen(c, 0.0, c.neutral.copy(), ok=False)
+    found = []
+    for base, models in zip(c.scan, got):
+        rs = [stacked(prs, models[p]) for p in c.screened]
+        if any(r is None for r in rs):
+            continue
+        S = np.stack([(r1 - r0) / c.step[p] for r1, p in zip(rs, c.screened)], axis=1)
+        d, score = linear_fit(r0, S)
+        th = base.copy()
+        th[list(c.screened)] += d
+        if np.any(th[list(c.screened)] <= c.neutral[list(c.screened)]):
+            continue  # it asks for less than none (a negative modal mass): not this effect
+        found.append(_inside(c, th))
+        if not best.ok or score > best.score:
+            best = Screen(c, score, found[-1])
+    best.estimates = found
+    return best
 
 
 def acts_on(cand: Candidate):
@@ -600,6 +728,7 @@ __all__ = [
     "acts_on",
     "build_order",
     "candidates",
+    "mode_candidates",
     "foundation_candidate",
     "internal_force_part",
     "refine_job",

@@ -234,6 +234,46 @@ def test_vertical_payload_mode_starts_in_equilibrium(cgs):
     assert tm.info.support_loads_n.sum() - cgs.info.support_loads_n.sum() == pytest.approx(2000.0 * 9.81, rel=1e-6)
 
 
+def test_payload_mode_from_payload_is_the_clamped_block():
+    """``from_payload``: 60 % of a declared 1.5 t rigid block moved onto a 6 Hz mode along
+    x (on the lab table) is mjcf.builder's clamped block (``clamp_mass_fraction`` 0.6) as
+    far as x goes: the same total mass, the same mass matrix along the platen's x and
+    the mode's, the same spring; more mass than the payload has is one line."""
+    from mjcf.description import parse_payload
+
+    block = {
+        "type": "rigid",
+        "name": "b",
+        "mass_kg": 1500.0,
+        "com_m": [0.0, 0.0, 0.3],
+        "inertia_kg_m2": [200.0, 200.0, 300.0],
+        "footprint_m": [1.0, 1.0],
+        "height_m": 0.6,
+    }
+    lab = mjcf.load_table("lab")
+    rigid = parse_payload({"payload": block})
+    clamp = parse_payload({"payload": {**block, "clamp_frequency_hz": 6.0, "clamp_mass_fraction": 0.6}})
+    mode = {"type": "payload_mode", "where": "dof:x", "from_payload": True, "frequency_hz": 6.0}
+    tm = build_model(_with_effects(lab, [{**mode, "mass_kg": 900.0, "damping_ratio": 0.02}]), rigid)
+    ref = build_model(lab, clamp)
+    assert sum(tm.model.body_mass) == pytest.approx(sum(ref.model.body_mass), rel=1e-12)
+    j, jr = tm.model.joint("payload_mode_x1_slide"), ref.model.joint("payload_clamp_x")
+    assert tm.model.jnt_stiffness[j.id] == pytest.approx(ref.model.jnt_stiffness[jr.id], rel=1e-12)
+    assert tm.model.body_pos[tm.model.body("payload_mode_x1").id][2] == pytest.approx(0.3)
+
+    def mass_x(m, d_mode):
+        d = mujoco.MjData(m)
+        mujoco.mj_forward(m, d)
+        M = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, M)
+        k = [tm.platen_dadr, d_mode]
+        return M[np.ix_(k, k)]
+
+    assert mass_x(tm.model, j.dofadr[0]) == pytest.approx(mass_x(ref.model, jr.dofadr[0]), rel=1e-9)
+    with pytest.raises(ScenarioError, match="from_payload"):
+        build_model(_with_effects(lab, [{**mode, "mass_kg": 1600.0, "damping_ratio": 0.02}]), rigid)
+
+
 def test_cg_offset_moves_the_support_loads(cgs):
     """A 20 t block's centre of gravity moved by dx: the supports' moment about y grows by W dx."""
     payload = mjcf.load_payload("rigid_20t")
