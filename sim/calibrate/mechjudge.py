@@ -175,7 +175,7 @@ def timed_first(st: RoundState, cur, scored: list, rnd, say) -> tuple[list, dict
             ahead.append((expl, law, w, new))
             continue
         rows.append({"round": rnd, **new["row"]})
-        say(timing.log_line(new["row"]))
+        say(timing.log_line(new["row"]).replace("  ACCEPTED", "  passes"))
         if new["accepted"]:
             new["row"] = rows[-1]
             return ahead, new, rows
@@ -217,6 +217,7 @@ def forward_search(st: RoundState, cur, cands: list, max_rounds: int, say) -> tu
         if win is None:  # a sensor's timing: the records re-timed, the model refitted on them
             st.mfit, st.mho = timed["mfit"], timed["mho"]
             st.timed_added.append(timing.added_entry(timed["row"]))
+            say(f"  ACCEPTED {timed['row']['name']} at {timed['row']['where']}")
             win = (timed["fit"],)
         elif timed is not None:
             timed["row"]["accepted"] = False
