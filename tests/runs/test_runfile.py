@@ -217,7 +217,7 @@ BAD_CASES = {
     "wrong_acc_columns": (dict(accelerometers=np.zeros((N, 5))), "'accelerometers' has 5 columns"),
     "wrong_specimen_columns": (
         dict(specimen_acceleration=np.zeros((N, 3))),
-        "'specimen_acceleration' has 3 columns but there are 2 specimen sensors",
+        "'specimen_acceleration' has 3 columns but there are 2 sensors in meta specimen_sensors",
     ),
     "one_d_channel": (dict(reference=np.zeros(N)), "'reference' has shape (256,)"),
     "no_input": (dict(reference=None, valve_command=None), "neither valve_command nor reference"),
