@@ -19,8 +19,6 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.errors import RunFileError
-
 
 @dataclass
 class ClosedLoopOutcome:
@@ -78,54 +76,40 @@ def tracking_of(t, reference, dofs, displacement, acceleration) -> dict:
 
 
 def closed_loop_replay(source, *, table: str | None = None, payload: str | None = None, progress: bool = False):
-    """Run ``source``'s (a run-file path) reference closed loop through the model (its
-    carried or given table and payload); a :class:`ClosedLoopOutcome`."""
-    from mjcf.description import DOFS6
+    """Run ``source``'s (a run-file path or :class:`~sim.runs.runfile.RunFile`) reference
+    closed loop through the model (its carried or given table and payload); a
+    :class:`ClosedLoopOutcome`. The model's channels are compared with the record's, and
+    its tracking figured, through the chain the record declares
+    (:func:`sim.calibrate.replay.comparison`)."""
     from sim.calibrate.paths import _closed_loop_setup
-    from sim.calibrate.replay import record_channels, residuals
-    from sim.effects import build_model
-    from sim.runs.build import build_runfile
-    from sim.runs.runfile import RunFile, payload_of, read_run, table_of
+    from sim.calibrate.replay import comparison, model_run, read_record, record_channels, record_model
 
-    name = str(source)
-    src = read_run(source, require=("reference",))
-    desc = table_of(src, table)
-    bad = [d for d in src.dofs if d not in DOFS6]
-    if bad:
-        raise RunFileError(f"{name}: DOF column(s) {bad} are not DOF names ({', '.join(DOFS6)}); fix meta.dofs")
-    pl = payload_of(src, payload)
-    tm = build_model(desc, pl)
-    t = np.asarray(src.t, float) - float(src.t[0])
-    sim, ref = _closed_loop_setup(tm, t, _pose6(src.reference, src.dofs, len(t)))
+    name, src = read_record(source, "reference")
+    rec = record_model(name, src, table, payload, check_actuators=False)
+    t = rec.t
+    sim, ref = _closed_loop_setup(rec.tm, t, _pose6(src.reference, src.dofs, len(t)))
     res = sim.run(reference=ref, progress=progress)
-    chans, extras, n = record_channels(res, tm, t, src.dofs, sim.gains.rate_hz)
-    chans["reference"] = np.asarray(src.reference[:n], float).copy()
-    tick_run = build_runfile(
-        res, tm, description=f"closed-loop run of {Path(name).name}'s reference", payload_name=pl.name if pl else None
-    )
-    meta = dict(tick_run.meta)
-    meta.update({"sample_rate_hz": src.sample_rate_hz, "dofs": list(src.dofs), "closed_loop_of": name})
-    meta["model_tick_hz"] = sim.gains.rate_hz
-    run = RunFile(t=np.asarray(src.t[:n], float).copy(), meta=meta, extras=extras, **chans)
-    if res.incomplete_reason:
-        run.mark_incomplete(res.incomplete_reason)
-    tn = t[:n]
-    model = tracking_of(tn, src.reference[:n], src.dofs, chans["table_displacement"], chans["table_acceleration"])
+    chans, extras, n = record_channels(res, rec.tm, t, src.dofs, sim.gains.rate_hz)
+    notes = []
+    meta = {"closed_loop_of": name, "model_tick_hz": sim.gains.rate_hz}
+    run = model_run(rec, res, chans, extras, n, f"closed-loop run of {Path(name).name}'s reference", meta, notes)
     rec_d = src.table_displacement[:n] if src.table_displacement is not None else None
     rec_a = src.table_acceleration[:n] if src.table_acceleration is not None else None
-    record = tracking_of(tn, src.reference[:n], src.dofs, rec_d, rec_a)
-    notes = [
+    notes += [
         f"{m} not recorded: the record's {m} figures are NaN"
         for m, x in (("table_displacement", rec_d), ("table_acceleration", rec_a))
         if x is None
     ]
+    resid, model = comparison(src, run, notes)
+    tn = t[:n]
+    ref_n = src.reference[:n]
     return ClosedLoopOutcome(
         run=run,
         result=res,
         source=name,
-        model_tracking=model,
-        record_tracking=record,
-        residual_nrmse=residuals(src, run),
+        model_tracking=tracking_of(tn, ref_n, src.dofs, model["table_displacement"], model["table_acceleration"]),
+        record_tracking=tracking_of(tn, ref_n, src.dofs, rec_d, rec_a),
+        residual_nrmse=resid,
         notes=notes,
     )
 

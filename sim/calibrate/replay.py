@@ -78,9 +78,11 @@ def tick_rate(record_hz: float, hold: str = "zoh") -> float:
     return float(record_hz) if abs(r - round(r)) < 1e-9 and round(r) >= 1 else TICK_HZ
 
 
-def _columns(src, ch: str, run) -> np.ndarray | None:
-    """``run``'s channel ``ch`` with the columns of ``src`` (by name); None if a name is missing."""
-    a, b = getattr(src, ch), getattr(run, ch)
+def _columns(src, ch: str, run, model: dict | None = None) -> np.ndarray | None:
+    """``run``'s channel ``ch`` (``model[ch]`` in ``run``'s columns where given) with the
+    columns of ``src`` (by name); None if a name is missing."""
+    a = getattr(src, ch)
+    b = getattr(run, ch) if model is None or ch not in model else model[ch]
     if a is None or b is None:
         return None
     names_a, names_b = src.column_names(ch), run.column_names(ch)
@@ -119,10 +121,11 @@ def not_compared(src, run) -> dict:
     return out
 
 
-def residuals(src, run) -> dict:
+def residuals(src, run, model: dict | None = None) -> dict:
     """NRMSE of every channel the record and the replay share (by column name), plus the
     band-passed displacements and, for a record without velocity, the velocity from its
-    displacement. Keys: channel names; ``<channel>_bandpassed`` and
+    displacement. ``model``: the replay's channels as compared (:func:`through_declared_chain`),
+    in place of ``run``'s own. Keys: channel names; ``<channel>_bandpassed`` and
     ``table_velocity_from_displacement`` for the derived comparisons."""
     from sim.assess.metrics import nrmse
     from sim.runs.runfile import CHANNELS
@@ -134,7 +137,7 @@ def residuals(src, run) -> dict:
     for ch in CHANNELS:
         if ch in INPUTS:
             continue
-        b = _columns(src, ch, run)
+        b = _columns(src, ch, run, model)
         if b is None:
             continue
         a = getattr(src, ch)[:n]
@@ -149,12 +152,129 @@ def residuals(src, run) -> dict:
             ab, bb = bandpass(a, fs, DISPLACEMENT_BAND_HZ), bandpass(b, fs, DISPLACEMENT_BAND_HZ)
             out[ch + "_bandpassed"] = {nm: nrmse(bb[:, j], ab[:, j]) for j, nm in enumerate(src.column_names(ch))}
     if src.table_velocity is None and src.table_displacement is not None and run.table_velocity is not None:
-        b = _columns(src, "table_displacement", run)
+        b = _columns(src, "table_displacement", run, model)
         if b is not None and n > 2:
             va = np.gradient(src.table_displacement[:n], 1.0 / fs, axis=0)
             vb = np.gradient(b[:n], 1.0 / fs, axis=0)
             out["table_velocity_from_displacement"] = {nm: nrmse(vb[:, j], va[:, j]) for j, nm in enumerate(src.dofs)}
     return out
+
+
+@dataclass
+class RecordModel:
+    """A record and the model it is replayed through: the record's name and run, the
+    table description, payload and built model, and the record's time from 0."""
+
+    name: str
+    src: object
+    desc: object
+    payload: object
+    tm: object
+    t: np.ndarray
+
+
+def read_record(source, require: str) -> tuple[str, object]:
+    """``(name, run)`` of ``source`` (a run-file path, or a
+    :class:`~sim.runs.runfile.RunFile` checked here), which must hold channel ``require``."""
+    from sim.runs.runfile import read_run
+
+    if isinstance(source, (str, Path)):
+        return str(source), read_run(source, require=(require,))
+    source.validate(require=(require,))
+    return source.path or "<run>", source
+
+
+def record_model(name: str, src, table: str | None, payload: str | None, *, check_actuators: bool) -> RecordModel:
+    """The model a record is replayed through: ``table``/``payload`` when given, else the
+    descriptions the run carries (``meta.table_description``/``meta.payload_description``),
+    else the stock files its meta names. The record's DOF columns must be DOF names and,
+    with ``check_actuators``, its actuator columns the table's (one-line errors)."""
+    from mjcf.description import DOFS6
+    from sim.effects import build_model
+    from sim.runs.runfile import payload_of, table_of
+
+    desc = table_of(src, table)
+    if check_actuators and list(src.actuators) != list(desc.actuator_names):
+        raise RunFileError(
+            f"{name}: actuators {src.actuators} do not match table '{desc.name}' "
+            f"({list(desc.actuator_names)}); give --table or rename the actuator columns"
+        )
+    missing = [d for d in src.dofs if d not in DOFS6]
+    if missing:
+        raise RunFileError(f"{name}: DOF column(s) {missing} are not DOF names ({', '.join(DOFS6)}); fix meta.dofs")
+    pl = payload_of(src, payload)
+    t = np.asarray(src.t, float) - float(src.t[0])
+    return RecordModel(name=name, src=src, desc=desc, payload=pl, tm=build_model(desc, pl), t=t)
+
+
+def model_run(rec: RecordModel, res, chans: dict, extras: dict, n: int, description: str, meta: dict, notes: list):
+    """The model's run file at the record's first ``n`` instants: its channels ``chans``
+    (:func:`record_channels`), the record's reference kept, the specimen sensors the
+    record declares (:func:`_specimen_at_record`, a note for each the model cannot give),
+    the record's rate and DOF columns, and ``meta`` added to the model's own."""
+    from sim.runs.build import build_runfile
+    from sim.runs.runfile import RunFile
+
+    src = rec.src
+    pl = rec.payload
+    tick_run = build_runfile(res, rec.tm, description=description, payload_name=pl.name if pl else None)
+    m = dict(tick_run.meta)
+    m.update({"sample_rate_hz": src.sample_rate_hz, "dofs": list(src.dofs)})
+    m.update(meta)
+    if src.reference is not None:
+        chans["reference"] = np.asarray(src.reference[:n], float).copy()
+    if src.meta.get("specimen_sensors"):
+        m["specimen_sensors"] = list(src.meta["specimen_sensors"])
+        chans["specimen_acceleration"] = _specimen_at_record(res, pl, m["specimen_sensors"], rec.t[:n], notes)
+    run = RunFile(t=np.asarray(src.t[:n], float).copy(), meta=m, extras=extras, **chans)
+    if res.incomplete_reason:
+        run.mark_incomplete(res.incomplete_reason)
+    return run
+
+
+def through_declared_chain(src, run) -> tuple[dict, str | None]:
+    """The model's channels of ``run`` (all but the inputs) as the record ``src`` holds
+    them: through the recorder chain it declares (:func:`sim.calibrate.conditioning.apply`:
+    ``meta.recorder``'s anti-alias low-pass, then each channel's declared conditioner and
+    delay, ``meta.channel_conditioning``), as calibration compares them; and the line
+    that says so (None when the record declares nothing)."""
+    from sim.calibrate import conditioning
+    from sim.runs.runfile import CHANNELS
+
+    chans = {c: getattr(run, c) for c in CHANNELS if c not in INPUTS and getattr(run, c) is not None}
+    known = {"recorder": conditioning.recorder(src), "channels": conditioning.channel_conditioning(src)}
+    fc = known["recorder"].get("anti_alias_hz")
+    applied = [c for c in known["channels"] if c in chans and getattr(src, c) is not None]
+    if not applied and not fc:
+        return chans, None
+    parts = []
+    if applied:
+        parts.append(
+            "the declared conditioning of " + ", ".join(f"{c} ({_chain_text(known['channels'][c])})" for c in applied)
+        )
+    if fc:
+        parts.append(f"the recorder's {int(known['recorder'].get('anti_alias_order', 4))}-pole {fc:g} Hz anti-alias")
+    return conditioning.apply(chans, known, run.sample_rate_hz), "compared through " + " and ".join(parts)
+
+
+def _chain_text(spec: dict) -> str:
+    """``4-pole 50 Hz low-pass, 2.00 ms delay`` for a declared conditioning."""
+    out = []
+    if spec.get("lowpass_hz"):
+        out.append(f"{spec['lowpass_order']}-pole {spec['lowpass_hz']:g} Hz low-pass")
+    if spec.get("delay_s"):
+        out.append(f"{1e3 * spec['delay_s']:.2f} ms delay")
+    return ", ".join(out) or "nothing"
+
+
+def comparison(src, run, notes: list) -> tuple[dict, dict]:
+    """``(residual NRMSE, model channels as compared)`` of the replay ``run`` against the
+    record ``src``, through the record's declared chain (:func:`through_declared_chain`;
+    its line goes into ``notes``)."""
+    model, line = through_declared_chain(src, run)
+    if line:
+        notes.append(line)
+    return residuals(src, run, model), model
 
 
 def replay(
@@ -178,38 +298,57 @@ def replay(
     simulated one (its valves had no hidden null: it replays to round-off). ``hold``:
     ``"zoh"`` or ``"linear"`` (command onto the model's ticks).
     """
-    from sim.calibrate.valve_null import estimate
-    from sim.effects import build_model
-    from sim.runs.build import build_runfile
-    from sim.runs.runfile import RunFile, payload_of, read_run, table_of
-
-    name = str(source) if isinstance(source, (str, Path)) else (source.path or "<run>")
-    src = read_run(source, require=("valve_command",)) if isinstance(source, (str, Path)) else source
-    if not isinstance(source, (str, Path)):
-        src.validate(require=("valve_command",))
+    name, src = read_record(source, "valve_command")
     hold = hold or src.meta.get("command_hold", "zoh")
     if hold not in ("zoh", "linear"):
         raise RunFileError(
             f"{name}: command hold must be 'zoh' or 'linear' (got {hold!r}); fix meta.command_hold or --hold"
         )
-    desc = table_of(src, table)  # --table, else the description the run carries, else the stock file
-    if list(src.actuators) != list(desc.actuator_names):
-        raise RunFileError(
-            f"{name}: actuators {src.actuators} do not match table '{desc.name}' "
-            f"({list(desc.actuator_names)}); give --table or rename the actuator columns"
-        )
-    from mjcf.description import DOFS6
-
-    missing = [d for d in src.dofs if d not in DOFS6]
-    if missing:
-        raise RunFileError(f"{name}: DOF column(s) {missing} are not DOF names ({', '.join(DOFS6)}); fix meta.dofs")
-    pl = payload_of(src, payload)
-    tm = build_model(desc, pl)
-
+    rec = record_model(name, src, table, payload, check_actuators=True)
+    desc = rec.desc
     notes = []
     if bias is None:
         bias = "estimate" if src.source == "measured" else "none"
-    t_rec = np.asarray(src.t, float) - float(src.t[0])
+    u, vn = _with_valve_null(src, desc, bias, drift, notes)
+    rate = tick_rate(src.sample_rate_hz, hold)
+    if rate != src.sample_rate_hz:
+        notes.append(
+            f"record at {src.sample_rate_hz:g} Hz: command "
+            + ("held (zero-order hold)" if hold == "zoh" else "interpolated")
+            + f" onto the model's {rate:g} Hz ticks, model sampled at the record's instants"
+        )
+    res, chans, extras, n = run_at_record(rec.tm, rec.t, u, src.dofs, hold=hold, progress=progress)
+    meta = {"replay_of": name, "model_tick_hz": rate}
+    if vn is not None:
+        meta["valve_null"] = vn
+    run = model_run(rec, res, chans, extras, n, f"open-loop replay of {Path(name).name}", meta, notes)
+    frac = _stroke_fractions(desc, res, notes)
+    notes.append(
+        f"open loop the displacement is the integral of the flow (a small flow error drifts): "
+        f"displacements are also compared band-passed {DISPLACEMENT_BAND_HZ[0]:g}-"
+        f"{min(DISPLACEMENT_BAND_HZ[1], 0.45 * src.sample_rate_hz):g} Hz; velocity and acceleration "
+        "are the meaningful comparisons"
+    )
+    resid, _ = comparison(src, run, notes)
+    return ReplayOutcome(
+        run=run,
+        result=res,
+        residual_nrmse=resid,
+        source=name,
+        valve_null=vn,
+        tick_hz=rate,
+        notes=notes,
+        stroke_fraction=frac,
+        not_compared=not_compared(src, run),
+        hold=hold,
+    )
+
+
+def _with_valve_null(src, desc, bias, drift: bool, notes: list) -> tuple[np.ndarray, dict | None]:
+    """The record's valve commands with the valve null offset :func:`replay`'s ``bias``
+    asks for, and that offset as the summary gives it (None: none added)."""
+    from sim.calibrate.valve_null import estimate
+
     u = np.asarray(src.valve_command, float)
     vn = None
     if bias == "estimate":
@@ -228,31 +367,12 @@ def replay(
             raise RunFileError(f"replay bias must be 'estimate', 'none' or a number (got {bias!r})") from None
         vn = {"offset": {a: b for a in src.actuators}, "method": "given"}
         u = u + b
-    rate = tick_rate(src.sample_rate_hz, hold)
-    if rate != src.sample_rate_hz:
-        notes.append(
-            f"record at {src.sample_rate_hz:g} Hz: command "
-            + ("held (zero-order hold)" if hold == "zoh" else "interpolated")
-            + f" onto the model's {rate:g} Hz ticks, model sampled at the record's instants"
-        )
-    res, chans, extras, n = run_at_record(tm, t_rec, u, src.dofs, hold=hold, progress=progress)
-    tick_run = build_runfile(
-        res, tm, description=f"open-loop replay of {Path(name).name}", payload_name=pl.name if pl else None
-    )
-    meta = dict(tick_run.meta)
-    meta.update(
-        {"sample_rate_hz": src.sample_rate_hz, "dofs": list(src.dofs), "replay_of": name, "model_tick_hz": rate}
-    )
-    if vn is not None:
-        meta["valve_null"] = vn
-    if src.reference is not None:
-        chans["reference"] = np.asarray(src.reference[:n], float).copy()
-    if src.meta.get("specimen_sensors"):
-        meta["specimen_sensors"] = list(src.meta["specimen_sensors"])
-        chans["specimen_acceleration"] = _specimen_at_record(res, pl, meta["specimen_sensors"], t_rec[:n], notes)
-    run = RunFile(t=np.asarray(src.t[:n], float).copy(), meta=meta, extras=extras, **chans)
-    if res.incomplete_reason:
-        run.mark_incomplete(res.incomplete_reason)
+    return u, vn
+
+
+def _stroke_fractions(desc, res, notes: list) -> dict:
+    """Peak stroke of each actuator in the replay ``res`` (fraction of its half-stroke); a
+    note when one reached its end cushions."""
     half = np.array([a.cls.half_stroke_m for a in desc.actuators])
     peak = np.nanmax(np.abs(res.channels["actuator_displacement"]), axis=0) / half
     frac = {a: float(p) for a, p in zip(desc.actuator_names, peak)}
@@ -268,24 +388,7 @@ def replay(
             f"actuator(s) {', '.join(hit)} reached the end cushions: the replay drifted to the stroke end "
             "(a valve null bias not removed, or a flow-gain error); the comparison after that is meaningless"
         )
-    notes.append(
-        f"open loop the displacement is the integral of the flow (a small flow error drifts): "
-        f"displacements are also compared band-passed {DISPLACEMENT_BAND_HZ[0]:g}-"
-        f"{min(DISPLACEMENT_BAND_HZ[1], 0.45 * src.sample_rate_hz):g} Hz; velocity and acceleration "
-        "are the meaningful comparisons"
-    )
-    return ReplayOutcome(
-        run=run,
-        result=res,
-        residual_nrmse=residuals(src, run),
-        source=name,
-        valve_null=vn,
-        tick_hz=rate,
-        notes=notes,
-        stroke_fraction=frac,
-        not_compared=not_compared(src, run),
-        hold=hold,
-    )
+    return frac
 
 
 def _specimen_at_record(res, payload, sensors, t_rec, notes) -> np.ndarray:
@@ -360,4 +463,18 @@ def record_channels(res, tm, t_rec, dofs, rate: float):
     return chans, extras, n
 
 
-__all__ = ["ReplayOutcome", "record_channels", "replay", "replay_setup", "residuals", "run_at_record", "tick_rate"]
+__all__ = [
+    "RecordModel",
+    "ReplayOutcome",
+    "comparison",
+    "model_run",
+    "read_record",
+    "record_channels",
+    "record_model",
+    "replay",
+    "replay_setup",
+    "residuals",
+    "run_at_record",
+    "through_declared_chain",
+    "tick_rate",
+]
