@@ -9,7 +9,12 @@ and written as a run file. Beside it stand two sets of tracking figures per comm
 DOF (:func:`sim.assess.metrics.tracking`: displacement and acceleration NRMSE against
 the reference, PGA ratio): the model's (its table motion against the reference) and the
 record's own (the measured table motion against the same reference), so that a lab sees
-whether the model tracks as its table did.
+whether the model tracks as its table did. The record's set-up, the model's run file
+(with the specimen's floor sensors the record declares) and the comparison through the
+record's declared conditioning are the open-loop replay's own
+(:func:`sim.calibrate.replay.record_model`, :func:`~sim.calibrate.replay.model_run`,
+:func:`~sim.calibrate.replay.comparison`): the model's tracking is figured on its
+channels as the record's sensors would give them.
 """
 
 from __future__ import annotations

@@ -13,6 +13,13 @@ recorded motion (:mod:`sim.calibrate.valve_null`) and added to the command, so t
 offset the closed loop hid does not walk the open-loop model to its end stop. Open loop,
 the displacement is the integral of the flow: any small flow error accumulates, so the
 residual is also given for velocity, acceleration and the band-passed displacement.
+
+The model's channels are compared as the record's chain gives them: through the
+recorder's anti-alias and each channel's conditioner and delay that the record declares
+(``meta.recorder``, ``meta.channel_conditioning``; :func:`through_declared_chain`, as
+calibration compares them); the replay's run file keeps the model's own channels. The
+record's set-up, the model's run file and this comparison are shared with the
+closed-loop replay (:mod:`sim.calibrate.closed_replay`).
 """
 
 from __future__ import annotations
