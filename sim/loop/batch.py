@@ -35,16 +35,18 @@ _INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 
 
 class BatchRunner:
-    """N closed-loop simulations of one table on one ``mujoco.batch.Batch`` of
-    ``nthread`` threads (0: all cores)."""
+    """N simulations of one table on one ``mujoco.batch.Batch`` of ``nthread`` threads (0:
+    all cores); ``open_loop``: for valve-command replays only (a bearing-guided platen
+    runs on the callback open loop, not closed)."""
 
-    def __init__(self, sims: list, *, nthread: int = 0):
+    def __init__(self, sims: list, *, nthread: int = 0, open_loop: bool = False):
         if not sims:
             raise ValueError("BatchRunner needs at least one simulation")
         for s in sims:
-            why = CB.accepts(s)
+            why = CB.accepts(s, open_loop=open_loop)
             if why:
                 raise ScenarioError(f"a simulation of this batch cannot run on the callback: {why}")
+        self.open_loop = open_loop
         self.sims = list(sims)
         self.nthread = nthread or os.cpu_count() or 1
         compiled = {}  # one model per table model (simulations of one TableModel share it)
@@ -81,6 +83,8 @@ class BatchRunner:
         :class:`sim.loop.simulation.RunResult` per simulation."""
         sims, N = self.sims, len(self.sims)
         refs, vcs = _inputs(N, references, valve_commands)
+        if self.open_loop and references is not None:
+            raise ValueError("this batch was made for valve-command replays (open_loop=True); give valve_commands")
         ns = np.array([CB.run_length(s, r, v, duration_s) for s, r, v in zip(sims, refs, vcs)])
         from hydraulics import _layout as HL
 
@@ -163,7 +167,8 @@ def run_batch(
     duration_s: float | None = None,
 ) -> list:
     """:meth:`BatchRunner.run` of a new runner: one result per simulation."""
-    return BatchRunner(sims, nthread=nthread).run(references, valve_commands=valve_commands, duration_s=duration_s)
+    runner = BatchRunner(sims, nthread=nthread, open_loop=references is None)
+    return runner.run(references, valve_commands=valve_commands, duration_s=duration_s)
 
 
 #: model sizes that do not size MjData (the names' text and the model's own buffer)
@@ -205,7 +210,8 @@ def run_many(
     candidates): simulations the callback can run (:func:`sim.loop.callback.accepts`)
     go to :class:`BatchRunner` in batches of up to ``group`` simulations that share a
     layout, on ``nthread`` threads (0: all cores); the others (the Rice table's analog
-    loop, per-step effects, a valve delay) run their own ``run``. Every result equals
+    loop, per-step effects, a valve delay, a bearing-guided platen closed loop) run their
+    own ``run``. Every result equals
     the simulation's own ``Simulation.run`` bit for bit (``tests/loop/test_batch.py``,
     ``tests/loop/test_batch_open.py``). A simulation that diverges ends early with
     ``incomplete_reason`` set, as in ``Simulation.run``; the others are not affected.
@@ -220,8 +226,9 @@ def run_many(
     out: list = [None] * len(sims)
     pending: dict = {}  # batch key -> indices waiting for a batch
     order = []
+    open_loop = references is None
     for i, s in enumerate(sims):
-        if isinstance(s, Simulation) and CB.accepts(s) is None:
+        if isinstance(s, Simulation) and CB.accepts(s, open_loop=open_loop) is None:
             k = _batch_key(s)
             if k not in pending:
                 pending[k] = []
@@ -235,7 +242,7 @@ def run_many(
         idx = pending[k]
         for j in range(0, len(idx), group):
             part = idx[j : j + group]
-            runner = BatchRunner([sims[i] for i in part], nthread=nthread)
+            runner = BatchRunner([sims[i] for i in part], nthread=nthread, open_loop=open_loop)
             if references is not None:
                 res = runner.run([refs[i] for i in part])
             else:

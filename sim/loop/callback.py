@@ -28,7 +28,10 @@ measured on the last step's kinematics, which is what the callback sees on that 
 Open loop (a context built with ``valve_command``, scalar ``S_OPEN`` = 1): the first
 step of tick ``k`` records, holds the recorded command ``VC[k]`` and runs the pre-step
 (:func:`sim.loop._kernels.tick_first_step_open`), as ``Simulation.run(valve_command=...)``
-does; the later steps are the same as closed loop.
+does; the later steps are the same as closed loop. A bearing-guided platen (scalar
+``S_GUIDED``) runs open loop only: its acceleration is recorded from its slides' DOFs
+(``PSD``, plus a spring-mounted foundation's ``FND``) as the loop records it; closed
+loop its controller reads the slides in Python, which the compiled tick does not.
 
 ``mjData`` field addresses are read from the MjData struct (:func:`sim.loop.mjlayout.field_offsets`,
 found by matching the Python binding's array addresses, so no header layout is assumed);
@@ -60,13 +63,13 @@ _FIELDS = ("qpos", "qvel", "qacc", "ctrl", "qfrc_applied", "xpos", "xmat", "user
 # ---- context scalars
 # fmt: off
 (S_N, S_SPT, S_GAP_EVERY, S_RELIEF, S_PD, S_PB, S_DT, S_ZSS, S_AC, S_AN, S_DONE, S_PENDING, S_CODE, S_VALUE,
- S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ, S_VAPOUR, S_OPEN, S_CALLS) = range(25)
-NS = 25
+ S_TICK, S_NQ, S_NV, S_NA, S_NBODY, S_NFR, S_NAIR, S_NEQ, S_VAPOUR, S_OPEN, S_CALLS, S_GUIDED) = range(26)
+NS = 26
 # ---- context arrays (descriptor rows: address, dim0, dim1, dim2)
 ARRAYS = ("Q", "V", "ACC", "HSP", "HF", "HPA", "HPB", "HCMD", "EPS", "EGAS", "GAP",
           "SREF", "VREF", "VFF", "QA", "DA", "IDS", "CONSTS", "J", "JP", "NN", "GAINS", "CSTATE", "PLHP", "PLPREV",
           "CMD2", "X2", "V2", "X", "Y", "IC", "ICS", "BUF", "P", "G", "FRD", "FRFC", "ZFR", "AQ", "AD", "AF0",
-          "XMP", "GB1", "GB2", "GA1", "GA2", "VC", "W0")
+          "XMP", "GB1", "GB2", "GA1", "GA2", "VC", "W0", "PSD", "FND")
 # fmt: on
 A = {name: i for i, name in enumerate(ARRAYS)}
 NCTX = NS + 4 * len(ARRAYS)
@@ -263,6 +266,9 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud, wn):
         )
     else:
         kk = k if j == 1 else -1
+        if kk >= 0 and C[S_GUIDED] > 0:  # a bearing-guided platen: its slides' acceleration, as the loop records it
+            _record_guided(k, C, qacc)
+            kk = -1
         FL.later_step(
             kk,
             qpos,
@@ -306,14 +312,30 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud, wn):
         XMP[pb, r] = xmat[pb, r]
 
 
+@numba.njit(**_J)
+def _record_guided(k, C, qacc):
+    """Row ``k`` of the recorder's platen acceleration of a bearing-guided platen from the
+    tick's first step (still in ``qacc``): per guided DOF its slide's, plus a spring-mounted
+    foundation's slide along it (absolute), the loop's ``ACC[k, :n] = qacc[fnd] + qacc[slide]``."""
+    ACC = _f2(C, A_ACC)
+    psd = _i1(C, A_PSD)
+    fnd = _i1(C, A_FND)
+    for i in range(psd.shape[0]):
+        if fnd.shape[0]:
+            ACC[k, i] = qacc[fnd[i]] + qacc[psd[i]]
+        else:
+            ACC[k, i] = qacc[psd[i]]
+
+
 A_Q, A_V, A_ACC, A_HSP, A_HF, A_HPA, A_HPB, A_HCMD, A_EPS, A_EGAS, A_GAP = range(11)
 (A_SREF, A_VREF, A_VFF, A_QA, A_DA, A_IDS, A_CONSTS, A_J, A_JP, A_NN, A_GAINS, A_CSTATE, A_PLHP, A_PLPREV) = range(
     11, 25
 )
 A_CMD2, A_X2, A_V2, A_X, A_Y, A_IC, A_ICS, A_BUF, A_P, A_G, A_FRD, A_FRFC, A_ZFR, A_AQ, A_AD, A_AF0 = range(25, 41)
-A_XMP, A_GB1, A_GB2, A_GA1, A_GA2, A_VC, A_W0 = range(41, 48)
+A_XMP, A_GB1, A_GB2, A_GA1, A_GA2, A_VC, A_W0, A_PSD, A_FND = range(41, 50)
 assert (
-    A_W0 == A["W0"]
+    A_FND == A["FND"]
+    and A_W0 == A["W0"]
     and A_VC == A["VC"]
     and A_GA2 == A["GA2"]
     and A_XMP == A["XMP"]
@@ -404,13 +426,17 @@ def callback_model(sim) -> mujoco.MjModel:
     return spec.compile()
 
 
-def accepts(sim) -> str | None:
+def accepts(sim, *, open_loop: bool = False) -> str | None:
     """Why ``sim`` cannot run on the callback (None: it can): the callback is the fused
-    loop, closed or open (free platen, no per-step effects, no valve delay, two or more
-    physics steps per controller tick, the recorder sampling every tick)."""
+    loop, closed or open (free platen, or a bearing-guided one open loop; no per-step
+    effects, no valve delay, no stop at the stroke ends, two or more physics steps per
+    controller tick, the recorder sampling every tick). ``open_loop``: the run replays
+    valve commands (the controller does not run)."""
     tm, hs = sim.tm, sim.hs
-    if not tm.platen_free:
-        return "the platen is not free (bearing-guided table)"
+    if not tm.platen_free and not open_loop:
+        return "the platen is not free (bearing-guided table): closed loop runs on the Python loop"
+    if getattr(sim.controller, "stroke_limit_m", None) is not None:
+        return "the controller stops the run at the stroke ends (the loop's check)"
     if tm.step_effects:
         return "the table has per-step effects"
     if any(getattr(e, "fault", False) for e in tm.effects):  # faults: their hooks run in the Python loop only
@@ -499,6 +525,8 @@ class Context:
         arr["W0"] = np.zeros(len(WARN_IDX), dtype=np.int64)
         arr["GB1"], arr["GB2"] = sim._g_b1.astype(np.int64), sim._g_b2.astype(np.int64)
         arr["GA1"], arr["GA2"] = np.ascontiguousarray(sim._g_a1), np.ascontiguousarray(sim._g_a2)
+        arr["PSD"] = np.asarray(tm.platen_slide_dadr, dtype=np.int64)
+        arr["FND"] = np.asarray(sim._fnd_d if sim._fnd_d is not None else np.zeros(0), dtype=np.int64)
         C = np.zeros(NCTX)
         C[S_N], C[S_SPT], C[S_GAP_EVERY] = n, sim.steps_per_tick, gap_every
         C[S_RELIEF] = sim.hp.relief_pressure_pa * (1 + 1e-9)  # the bounds of Simulation._check
@@ -507,11 +535,14 @@ class Context:
         C[S_ZSS], C[S_AC], C[S_AN] = tm.friction_presliding_m, tm.air_area_over_volume, tm.air_exponent
         C[S_DONE] = -1
         C[S_OPEN] = 0.0 if valve_command is None else 1.0
+        C[S_GUIDED] = 0.0 if tm.platen_free else 1.0
+        if not tm.platen_free and valve_command is None:
+            raise ValueError("a bearing-guided platen runs closed loop on the Python loop, not the callback")
         C[S_NQ], C[S_NV], C[S_NA], C[S_NBODY] = m.nq, m.nv, m.nu, m.nbody
         for name, a in arr.items():
             want = (
                 np.int64
-                if name in ("QA", "DA", "IDS", "IC", "ICS", "FRD", "AQ", "AD", "GB1", "GB2", "W0")
+                if name in ("QA", "DA", "IDS", "IC", "ICS", "FRD", "AQ", "AD", "GB1", "GB2", "W0", "PSD", "FND")
                 else np.float64
             )
             if a.dtype != want or not a.flags.c_contiguous:
@@ -635,7 +666,7 @@ def run_callback(
     ``sim.run(valve_command=...)``. ``progress``: the loop's progress bar on stderr,
     drawn between chunks. Ctrl-C (seen between chunks) keeps the ticks done, marked
     incomplete, and raises :class:`~sim.errors.RunInterrupted` with them, as the loop does."""
-    why = accepts(sim)
+    why = accepts(sim, open_loop=valve_command is not None)
     if why:
         raise ScenarioError(f"the callback route cannot run this table: {why}; use Simulation.run")
     n = run_length(sim, reference, valve_command, duration_s)

@@ -82,3 +82,50 @@ def test_batch_route_equals_one_job_at_a_time(short_run, path):
     for a, b, c in zip(one, here, pooled):
         _equal(a, b)
         _equal(a, c)
+
+
+@pytest.fixture(scope="module")
+def lab_run():
+    """1 s of the bearing-guided ``lab`` table with its two-storey frame (band-limited
+    noise along x, closed loop), as a record."""
+    import mjcf
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+    from sim.runs.build import build_runfile
+    from sim.scenario import motions as M
+    from sim.scenario.reference import reference_from_motions
+
+    desc, pay = mjcf.load_table("lab"), mjcf.load_payload("lab_2storey")
+    tm = build_model(desc, pay)
+    mo = {
+        "x": M.white_noise(duration_s=SECONDS, sample_rate_hz=1024.0, band_hz=(2.0, 15.0), seed=5, rms_acceleration=1.0)
+    }
+    ref = reference_from_motions(mo, 1024.0, SECONDS)
+    res = Simulation(tm).run(reference=ref)
+    assert res.incomplete_reason is None
+    return desc, pay, build_runfile(res, tm, source="simulated", reference=ref, payload_name="lab_2storey")
+
+
+@pytest.mark.parametrize("path", ["replay", "closed_loop"])
+def test_guided_table_replays_take_the_batch_route(lab_run, path):
+    """A uni-axial table's platen runs on bearings: its replays (open loop) take the batch
+    route, bit for bit; its closed-loop runs stay on the loop (the controller's compiled
+    tick is the free platen's), each its own ``simulate_job``."""
+    from sim.calibrate import paths as P
+
+    desc, pay, run = lab_run
+    (pr,) = P.path_runs([run], desc, path)
+    extras = [
+        [],
+        [{"type": "valve_flow_gain", "where": "actuator:A", "factor": 0.9}],
+        [{"type": "bulk_modulus", "where": "actuator:A", "bulk_modulus_pa": 0.7e9}],
+    ]
+    jobs = [pr.job(copy.deepcopy(desc.raw), str(desc.source), pay, e) for e in extras]
+    one = [P.simulate_job(j) for j in jobs]
+    assert all(m is not None for m in one)
+    assert not np.array_equal(one[0]["table_acceleration"], one[1]["table_acceleration"])  # the candidates act
+    counts: dict = {}
+    here = P.simulate_jobs(jobs, counts)
+    assert counts == ({"batch": 3, "fallback": 0} if path == "replay" else {"batch": 0, "fallback": 3})
+    for a, b in zip(one, here):
+        _equal(a, b)

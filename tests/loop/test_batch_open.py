@@ -142,3 +142,49 @@ def test_closed_loop_callback_checks_the_last_tick_as_the_loop_does():
     assert (len(loop.t) - 1) % 8 and np.isfinite(loop.extras["loop_gap"][-1])
     sim.reset()
     _same(loop, run_callback(sim, ref, duration_s=0.2))
+
+
+def _lab_sim(payload=None, foundation=None):
+    """The bearing-guided uni-axial ``lab`` table (optionally with a payload, or its
+    foundation on springs) at the replay's 1024 Hz ticks."""
+    import mjcf
+    from mjcf.description import parse_table
+    from sim.control.tvc import ControllerGains
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+
+    base = mjcf.load_table("lab")
+    raw = copy.deepcopy(base.raw)
+    if foundation:
+        raw["foundation"]["mode"] = foundation
+    tm = build_model(parse_table(raw, src=base.source), mjcf.load_payload(payload) if payload else None)
+    return Simulation(tm, gains=ControllerGains(rate_hz=1024.0))
+
+
+def test_a_bearing_guided_table_replays_on_the_callback_bit_for_bit():
+    """Calibration replays of the ``lab`` tables (platen on bearings) once all fell back
+    from the batch route: the callback recorded the platen's acceleration as a free
+    platen's six DOFs. Open loop it records the slides' (plus a spring-mounted
+    foundation's) as the loop does; closed loop stays on the loop."""
+    sims = [_lab_sim(), _lab_sim("lab_2storey"), _lab_sim(foundation="spring")]
+    assert not sims[0].tm.platen_free and sims[2]._fnd_d is not None
+    vcs = [_commands(30 + i, na=1) for i in range(3)]
+    singles = []
+    for s, vc in zip(sims, vcs):
+        assert accepts(s, open_loop=True) is None
+        assert "bearing-guided" in accepts(s)  # closed loop: the Python loop
+        s.reset()
+        singles.append(s.run(valve_command=vc))
+        s.reset()
+        _same(singles[-1], run_callback(s, valve_command=vc))
+        s.reset()
+    a = singles[0].channels["table_acceleration"]
+    assert np.abs(a[:, 0]).max() > 0.1  # a run that moves the platen
+    assert np.array_equal(a[:, 1:], np.zeros_like(a[:, 1:]))  # the guided DOF only (x)
+    counts: dict = {}
+    many = run_many(sims[:2], valve_commands=vcs[:2], nthread=1, counts=counts)
+    assert counts == {"batch": 2, "fallback": 0}
+    for one, b in zip(singles, many):
+        _same(one, b)
+    with pytest.raises(ValueError, match="valve_commands"):
+        BatchRunner(sims[:1], open_loop=True).run([None])
