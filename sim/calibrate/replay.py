@@ -194,12 +194,15 @@ def read_record(source, require: str) -> tuple[str, object]:
 def record_model(name: str, src, table: str | None, payload: str | None, *, check_actuators: bool) -> RecordModel:
     """The model a record is replayed through: ``table``/``payload`` when given, else the
     descriptions the run carries (``meta.table_description``/``meta.payload_description``),
-    else the stock files its meta names. The record's DOF columns must be DOF names and,
-    with ``check_actuators``, its actuator columns the table's (one-line errors)."""
+    else the stock files its meta names. The record's declared conditioning must be
+    readable, its DOF columns DOF names and, with ``check_actuators``, its actuator
+    columns the table's (one-line errors)."""
     from mjcf.description import DOFS6
+    from sim.calibrate.conditioning import channel_conditioning
     from sim.effects import build_model
     from sim.runs.runfile import payload_of, table_of
 
+    channel_conditioning(src)  # a declaration the comparison cannot read: said before the run
     desc = table_of(src, table)
     if check_actuators and list(src.actuators) != list(desc.actuator_names):
         raise RunFileError(

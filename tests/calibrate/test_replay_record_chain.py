@@ -107,3 +107,17 @@ def test_closed_loop_replay_compares_through_the_declared_conditioner(frame_run,
         "compared through the declared conditioning of table_acceleration (4-pole 50 Hz low-pass, 3.00 ms delay)"
         in (printed)
     )
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_a_bad_declaration_is_one_line_before_the_run(frame_run, tmp_path, capsys, closed):
+    from sim.runs.runfile import read_run, write_run
+
+    run = read_run(frame_run)
+    run.meta["channel_conditioning"] = {"table_acceleration": {"lowpass_hz": -50.0, "lowpass_order": 4}}
+    bad = write_run(tmp_path / "bad.run.npz", run)
+    args = ["replay", str(bad), "--out", str(tmp_path / "o")] + (["--closed-loop"] if closed else [])
+    assert main(args) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error")]
+    assert len(err) == 1 and "channel_conditioning.table_acceleration.lowpass_hz" in err[0], err
+    assert str(bad) in err[0] and not (tmp_path / "o").exists()

@@ -361,6 +361,8 @@ def _mutate(a, case):
         a["reference"] = a.pop("valve_command")[:, :1] @ np.zeros((1, 6))
     elif case == "text channel":
         a["valve_command"] = np.array([["a", "b"]] * len(a["t"]))
+    elif case == "bad conditioning":  # replay compares through the declared chain (issue #24)
+        a["meta"]["channel_conditioning"] = {"table_acceleration": {"lowpass_hz": -50.0, "lowpass_order": 4}}
     return a
 
 
@@ -375,6 +377,7 @@ RUNFILES = {
     "unknown array": ("replay", ["unknown array(s) forces"]),
     "no valve command": ("replay", ["no channel 'valve_command'"]),
     "text channel": ("replay", ["'valve_command'", "type"]),
+    "bad conditioning": ("replay", ["meta.channel_conditioning.table_acceleration.lowpass_hz", "cut-off > 0 Hz"]),
 }
 
 
