@@ -177,7 +177,6 @@ LONG_FUNCTIONS = {
     "sim/calibrate/pathsearch.py::calibrate_path": "to split: issue 26, owned by the calibration helpers",
     "sim/calibrate/search.py::calibrate": "to split: issue 26, owned by the calibration helpers",
     "sim/calibrate/sensitivity.py::candidates": "to split: issue 26, owned by the calibration helpers",
-    "sim/calibrate/replay.py::replay": "to split: issue 26, owned by the calibration helpers",
     "sim/calibrate/revisit.py::revisit_accepted": "to split: issue 26, owned by the calibration helpers",
 }
 
