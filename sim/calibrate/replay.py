@@ -253,25 +253,33 @@ def through_declared_chain(src, run) -> tuple[dict, str | None]:
 
     chans = {c: getattr(run, c) for c in CHANNELS if c not in INPUTS and getattr(run, c) is not None}
     known = {"recorder": conditioning.recorder(src), "channels": conditioning.channel_conditioning(src)}
+    fs = run.sample_rate_hz
     fc = known["recorder"].get("anti_alias_hz")
+    fc = fc if fc and fc < 0.5 * fs else None  # conditioning.apply filters below the Nyquist frequency only
     applied = [c for c in known["channels"] if c in chans and getattr(src, c) is not None]
     if not applied and not fc:
         return chans, None
     parts = []
     if applied:
         parts.append(
-            "the declared conditioning of " + ", ".join(f"{c} ({_chain_text(known['channels'][c])})" for c in applied)
+            "the declared conditioning of "
+            + ", ".join(f"{c} ({_chain_text(known['channels'][c], fs)})" for c in applied)
         )
     if fc:
         parts.append(f"the recorder's {int(known['recorder'].get('anti_alias_order', 4))}-pole {fc:g} Hz anti-alias")
-    return conditioning.apply(chans, known, run.sample_rate_hz), "compared through " + " and ".join(parts)
+    return conditioning.apply(chans, known, fs), "compared through " + " and ".join(parts)
 
 
-def _chain_text(spec: dict) -> str:
-    """``4-pole 50 Hz low-pass, 2.00 ms delay`` for a declared conditioning."""
+def _chain_text(spec: dict, fs: float) -> str:
+    """``4-pole 50 Hz low-pass, 2.00 ms delay`` for a declared conditioning of a record at
+    ``fs`` (a low-pass at or above its Nyquist frequency is not applied, and says so)."""
     out = []
     if spec.get("lowpass_hz"):
-        out.append(f"{spec['lowpass_order']}-pole {spec['lowpass_hz']:g} Hz low-pass")
+        above = spec["lowpass_hz"] >= 0.5 * fs
+        out.append(
+            f"{spec['lowpass_order']}-pole {spec['lowpass_hz']:g} Hz low-pass"
+            + (f" at or above the record's Nyquist frequency {0.5 * fs:g} Hz: not applied" if above else "")
+        )
     if spec.get("delay_s"):
         out.append(f"{1e3 * spec['delay_s']:.2f} ms delay")
     return ", ".join(out) or "nothing"

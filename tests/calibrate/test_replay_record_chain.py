@@ -121,3 +121,24 @@ def test_a_bad_declaration_is_one_line_before_the_run(frame_run, tmp_path, capsy
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error")]
     assert len(err) == 1 and "channel_conditioning.table_acceleration.lowpass_hz" in err[0], err
     assert str(bad) in err[0] and not (tmp_path / "o").exists()
+
+
+def test_a_low_pass_above_the_nyquist_frequency_is_said_not_applied(frame_run):
+    """A declared low-pass at or above the record's Nyquist frequency cannot be applied
+    at its rate (:func:`sim.calibrate.conditioning.condition_channel` skips it); the line
+    says so, and the declared delay is still applied."""
+    from sim.calibrate.replay import through_declared_chain
+    from sim.runs.runfile import read_run
+    from sim.signals.sensing import fractional_delay
+
+    run = read_run(frame_run)
+    run.meta["channel_conditioning"] = {
+        "table_acceleration": {"delay_s": 0.001, "lowpass_hz": 600.0, "lowpass_order": 2}
+    }
+    model, line = through_declared_chain(run, run)
+    assert "2-pole 600 Hz low-pass at or above the record's Nyquist frequency 512 Hz: not applied" in line
+    assert "1.00 ms delay" in line
+    np.testing.assert_array_equal(
+        model["table_acceleration"], fractional_delay(run.table_acceleration, 0.001, 1 / 1024)
+    )
+    np.testing.assert_array_equal(model["actuator_force"], run.actuator_force)  # nothing declared: as it is
