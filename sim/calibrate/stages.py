@@ -57,11 +57,34 @@ def plan(runs, path: str | None) -> list[str]:
     return [p for p in ("mechanical",) if p in have] + dynamic
 
 
+def on_mechanical(effect: str) -> bool:
+    """Whether the mechanical path can look for this effect type (a force law or a
+    sensor's timing)."""
+    from sim.calibrate.laws import LAWS
+    from sim.calibrate.timing import TIMING_EFFECTS
+
+    return effect in LAWS or effect in TIMING_EFFECTS
+
+
 def stage_effects(effects, after_mechanical: bool):
-    """The effect types a stage looks for (None: every one); ``()`` when none is left."""
+    """The effect types a stage looks for (None: every one); ``()`` when none is left.
+    After the mechanical path: what it cannot see, and any type named in ``effects``
+    that it cannot look for."""
     if not after_mechanical:
         return effects
-    return tuple(t for t in AFTER_MECHANICAL if not effects or t in effects)
+    if not effects:
+        return AFTER_MECHANICAL
+    return tuple(t for t in effects if t in AFTER_MECHANICAL or not on_mechanical(t))
+
+
+def first_stage(stages, effects):
+    """``(stages, effects of the first)``: with ``effects`` named and a later stage, the
+    mechanical path looks only for the named types it can see, and is left out when it
+    can see none of them."""
+    if not effects or len(stages) < 2 or stages[0] != "mechanical":
+        return stages, effects
+    mech = [t for t in effects if on_mechanical(t)]
+    return (stages, mech) if mech else (stages[1:], effects)
 
 
 def with_effects(desc, entries):
@@ -97,7 +120,8 @@ def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, wo
     """Every stage of ``stages`` in turn (``search_one(path, desc, effects)`` is one
     path's search), stage 1's effects judged on the pooled evidence; the combined
     :class:`~sim.calibrate.search.CalibrationResult` (without the pooled baseline)."""
-    first = search_one(stages[0], desc, effects)
+    stages, first_effects = first_stage(stages, effects)
+    first = search_one(stages[0], desc, first_effects)
     if len(stages) == 1:
         return first
     path = stages[1]
