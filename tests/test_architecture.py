@@ -174,10 +174,7 @@ LONG_FUNCTIONS = {
     "sim/loop/callback.py::coupled_step": "compiled kernel: the numba control callback, one body per physics step",
     "sim/loop/simulation.py::Simulation.run": "to split: issue 26, owned by the speed helper (sim/loop/*)",
     "sim/assess/study.py::max_scale": "to split: issue 26, owned by the speed helper (sim/assess/study.py)",
-    "sim/calibrate/pathsearch.py::calibrate_path": "to split: issue 26, owned by the calibration helpers",
-    "sim/calibrate/search.py::calibrate": "to split: issue 26, owned by the calibration helpers",
     "sim/calibrate/sensitivity.py::candidates": "to split: issue 26, owned by the calibration helpers",
-    "sim/calibrate/revisit.py::revisit_accepted": "to split: issue 26, owned by the calibration helpers",
 }
 
 

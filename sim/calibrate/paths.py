@@ -72,6 +72,9 @@ class PathRun:
     #: columns not compared: channel -> places the run does not excite (:func:`sim.calibrate.windows.excited`)
     not_excited: dict = field(default_factory=dict)
     origin: tuple = ()  # a window's (start, first scored, stop) samples in its record
+    #: the record's force holds the actuators' total in one column, the others zero (the
+    #: NEES-UCSD runs: column E the measured total, W zero): the model's is summed to match
+    force_total: bool = False
 
     @property
     def dt(self) -> float:
@@ -123,6 +126,7 @@ class PathRun:
             {c: list(v) for c, v in self.columns.items()},
             self.conditioning,
             dict(self.bandpass),
+            self.force_total,
         )
 
     def only(self, keep) -> "PathRun":
@@ -228,9 +232,19 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
                 valve_null=vn,
                 bandpass=bands,
                 not_excited=quiet,
+                force_total=holds_total(r.actuator_force),
             )
         )
     return out
+
+
+def holds_total(force) -> bool:
+    """A force record with one column moving and every other zero throughout holds the
+    actuators' total in that column (how the NEES-UCSD runs are written), not each one's."""
+    if force is None or force.shape[1] < 2:
+        return False
+    zero = np.all(np.asarray(force) == 0, axis=0)
+    return int(np.sum(~zero)) == 1
 
 
 # ------------------------------------------------------------------ the simulation
@@ -261,7 +275,7 @@ def _setup(job):
     """The simulation of one job, ready to run from its reset: ``(sim, reference,
     valve_command, post)`` (one of reference / valve_command None; ``post(result)`` gives
     :func:`simulate_job`'s answer), or None when the model refuses the candidate."""
-    raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands = job
+    raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands, total = job
     from mjcf.description import parse_table
     from sim.effects import build_model
 
@@ -297,6 +311,9 @@ def _setup(job):
         chans, n = chans_of(res)
         lag = float(getattr(res, "force_lag_s", 0.0) or 0.0)
         chans = conditioning.force_at_record_instant(chans, lag, cond, float(t[1] - t[0]))
+        if total and "actuator_force" in chans:  # the record's one column holds the total
+            f = chans["actuator_force"]
+            chans["actuator_force"] = np.repeat(f.sum(axis=1, keepdims=True), f.shape[1], axis=1)
         return _compared(chans, n, t, columns, cond, bands)
 
     return sim, ref, cmd, post

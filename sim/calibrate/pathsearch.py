@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -264,200 +265,313 @@ def _bic(rss, n, p) -> float:
     return n * math.log(max(rss, 1e-300) / n) + p * math.log(n)
 
 
-def calibrate_path(
-    runs, ho_given, desc, payload, path, *, effects=None, margin, max_rounds, workers=None, say=None, timing=None
-):
-    """The search on ``path``; returns the fields of a
-    :class:`sim.calibrate.search.CalibrationResult` as a dict."""
-    from sim.calibrate import paths as P
-    from sim.calibrate.acceptance import implausible_candidate, table_scale
-    from sim.calibrate.revisit import revisit_accepted
-    from sim.calibrate.search import UNEXPLAINED_FRACTION, Z95, accept_numbers
-    from sim.calibrate.sensitivity import candidates, refine_job, screen, sensor_model
-    from sim.parallel import map_jobs
+@dataclass
+class PathState:
+    """The search's state on one path: the runs, the current model's channels and
+    errors, what was accepted and tried, and the replays' counts and times."""
 
-    say = say or (lambda *_: None)
-    tm = {"simulate_s": 0.0, "screen_s": 0.0, "refine_s": 0.0, "accept_s": 0.0, "replays": 0}
-    routes: dict = {"batch": 0, "fallback": 0}  # where the replays ran (sim.calibrate.paths.simulate_many)
-    fit_runs, ho_runs, score_from, ho_note = _split(runs, ho_given)
-    pfit = P.path_runs(fit_runs, desc, path)
-    pho = P.path_runs(ho_runs, desc, path, score_from=score_from)
-    wscr, wref = search_windows(pfit)
-    tm.update(window_seconds(pfit, wscr, wref))
-    raw, src = desc.raw, str(desc.source)
-    mot = motion_rms(runs, desc)
-    peaks = motion_rms(runs, desc, stat="peak")  # the plausibility test's recorded motion
-    scale = table_scale(desc, payload)
-    accepted: list = []
+    path: str
+    desc: object
+    payload: object
+    effects: object
+    margin: float
+    workers: object
+    say: object
+    pfit: list
+    pho: list
+    wscr: list
+    wref: list
+    ho_note: str
+    mot: dict
+    peaks: dict
+    scale: object
+    tm: dict = field(default_factory=dict)
+    routes: dict = field(default_factory=lambda: {"batch": 0, "fallback": 0})
+    items: list = field(default_factory=list)  # the accepted effects: {"cand", "theta", "unc"}, in order
+    accepted: list = field(default_factory=list)  # their description entries
+    dropped: set = field(default_factory=set)  # (type, where) dropped by a backward pass: not tried again
+    tried: list = field(default_factory=list)
+    models: dict = field(default_factory=dict)  # "fit", "ho", "scr", "ref": the current model's channels
+    e_ho: float = math.nan
+    rss: float = math.nan
+    n_par: int = 0
+    N: int = 0
+    flat: float = math.nan
 
-    def sims(prs_lists, extra):
-        jobs = [p.job(raw, src, payload, extra) for prs in prs_lists for p in prs]
+    @property
+    def ctx(self) -> tuple:
+        return (self.desc.raw, str(self.desc.source), self.payload, list(self.accepted))
+
+    def simulate(self, prs_lists, extra) -> list:
+        """The model with ``extra`` entries on every run of each list (one list each)."""
+        from sim.calibrate import paths as P
+
+        jobs = [p.job(self.desc.raw, str(self.desc.source), self.payload, extra) for prs in prs_lists for p in prs]
         t = time.perf_counter()
-        ms = P.simulate_many(jobs, workers=workers, counts=routes)
-        tm["simulate_s"] += time.perf_counter() - t
-        tm["replays"] += len(jobs)
+        ms = P.simulate_many(jobs, workers=self.workers, counts=self.routes)
+        self.tm["simulate_s"] += time.perf_counter() - t
+        self.tm["replays"] += len(jobs)
         out, k = [], 0
         for prs in prs_lists:
             out.append(ms[k : k + len(prs)])
             k += len(prs)
         return out
 
-    mfit, mho, mscr, mref = sims([pfit, pho, wscr, wref], accepted)
+
+def calibrate_path(
+    runs, ho_given, desc, payload, path, *, effects=None, margin, max_rounds, workers=None, say=None, timing=None
+):
+    """The search on ``path``; returns the fields of a
+    :class:`sim.calibrate.search.CalibrationResult` as a dict."""
+    st = _start(runs, ho_given, desc, payload, path, effects, margin, workers, say or (lambda *_: None))
+    mho0, e_ho0 = st.models["ho"], st.e_ho
+    for rnd in range(max_rounds):
+        winner = _round(st, rnd)
+        if winner is None:
+            break
+        _take(st, winner, rnd)
+    return _outputs(st, mho0, e_ho0, timing)
+
+
+def _start(runs, ho_given, desc, payload, path, effects, margin, workers, say) -> PathState:
+    """The runs on ``path``, their windows, and the declared model's channels and errors."""
+    from sim.calibrate import paths as P
+    from sim.calibrate.acceptance import table_scale
+    from sim.calibrate.residuals import CalibrationError
+
+    fit_runs, ho_runs, score_from, ho_note = _split(runs, ho_given)
+    pfit = P.path_runs(fit_runs, desc, path)
+    pho = P.path_runs(ho_runs, desc, path, score_from=score_from)
+    wscr, wref = search_windows(pfit)
+    st = PathState(
+        path,
+        desc,
+        payload,
+        effects,
+        margin,
+        workers,
+        say,
+        pfit,
+        pho,
+        wscr,
+        wref,
+        ho_note,
+        mot=motion_rms(runs, desc),
+        peaks=motion_rms(runs, desc, stat="peak"),  # the plausibility test's recorded motion
+        scale=table_scale(desc, payload),
+    )
+    st.tm = {"simulate_s": 0.0, "screen_s": 0.0, "refine_s": 0.0, "accept_s": 0.0, "replays": 0}
+    st.tm.update(window_seconds(pfit, wscr, wref))
+    mfit, mho, mscr, mref = st.simulate([pfit, pho, wscr, wref], [])
     for p, m in zip(pfit + pho, mfit + mho):
         if m is None:
-            from sim.calibrate.residuals import CalibrationError
-
             raise CalibrationError(
                 f"{p.name}: the declared model's {path.replace('_', '-')} run diverged or stopped early; "
                 "check the table description against the run (valve map, controller, payload)"
             )
-    mho0 = mho
-    e_ho0 = P.nrmse(pho, mho)
-    e_ho = e_ho0
+    st.models = {"fit": mfit, "ho": mho, "scr": mscr, "ref": mref}
+    st.e_ho = P.nrmse(pho, mho)
     r = P.stacked(pfit, mfit)
-    N = len(r)
-    rss, n_par = float(r @ r), 0
-    flat = P.flatness(pfit, mfit)
-    say(f"{path} path: {len(pfit)} fit runs, {len(pho)} held out; held-out NRMSE {e_ho0:.4f}")
-    tried, added = [], []
-    items: list = []  # the accepted effects: {"cand", "theta", "unc"}, in the order accepted
-    dropped: set = set()  # (type, where) dropped by a backward pass: not tried again
-    for rnd in range(max_rounds):
-        ctx = (raw, src, payload, list(accepted))
-        cands = [c for c in candidates(desc, payload, wscr, accepted, mot, effects) if c.key not in dropped]
-        t = time.perf_counter()
-        sc = screen(cands, wscr, mscr, ctx, workers=workers, say=say, counts=routes)
-        tm["screen_s"] += time.perf_counter() - t
-        tm["replays"] += sum(len(c.screened) * len(c.scan or (0,)) for c in cands if not c.sensor) * len(wscr)
-        sc.sort(key=lambda s: -s.score)
-        top = to_refine(sc)
-        say("  best by sensitivity: " + ", ".join(f"{s.cand.type} {s.cand.where} {100 * s.score:.1f} %" for s in top))
-        if not top:
-            for s in sc[:5]:
-                tried.append(_row(rnd, s, None, None, f"explains less than {100 * MIN_SCORE:g} % (linearised)"))
-            break
-        t = time.perf_counter()
-        starts = line_search(top, wscr, mscr, ctx, workers=workers, counts=routes)
-        tm["replays"] += sum(len(v["tried"]) for v in starts.values()) * len(wscr)
-        tm["line_search_replays"] = tm.get("line_search_replays", 0) + sum(len(v["tried"]) for v in starts.values())
-        jobs = [(s.cand, starts.get(id(s), {}).get("start", s.theta), wref, mref, ctx, MAX_NFEV) for s in top]
-        for s in top:
-            if id(s) in starts and starts[id(s)]["start"] is not s.theta:
-                say(f"  line search: {s.cand.type} {s.cand.where} starts at {s.cand.values(starts[id(s)]['start'])}")
-        sens = [j for j in jobs if j[0].sensor]
-        mods = [j for j in jobs if not j[0].sensor]
-        ref = {id(j): refine_job(j) for j in sens}
-        for j, rf in zip(mods, map_jobs(refine_job, mods, workers=workers)):
-            ref[id(j)] = rf
-        refined = [ref[id(j)] for j in jobs]
-        tm["refine_s"] += time.perf_counter() - t
-        refined.sort(key=lambda rf: -rf.explained)
-        say(
-            "  refined: "
-            + ", ".join(
-                f"{rf.cand.type} {rf.cand.where} {rf.cand.values(rf.theta)} {100 * rf.explained:.1f} %"
-                for rf in refined
-            )
+    st.N, st.rss, st.flat = len(r), float(r @ r), P.flatness(pfit, mfit)
+    say(f"{path} path: {len(pfit)} fit runs, {len(pho)} held out; held-out NRMSE {st.e_ho:.4f}")
+    return st
+
+
+def _round(st: PathState, rnd: int):
+    """One round: screen every candidate, refine the best, judge them best first; the
+    winner (``(refined, unc, mfit, mho, e_ho, rss, n_par, flat)``) or None."""
+    from sim.calibrate.sensitivity import candidates, screen
+
+    cands = [
+        c for c in candidates(st.desc, st.payload, st.wscr, st.accepted, st.mot, st.effects) if c.key not in st.dropped
+    ]
+    t = time.perf_counter()
+    sc = screen(cands, st.wscr, st.models["scr"], st.ctx, workers=st.workers, say=st.say, counts=st.routes)
+    st.tm["screen_s"] += time.perf_counter() - t
+    st.tm["replays"] += sum(len(c.screened) * len(c.scan or (0,)) for c in cands if not c.sensor) * len(st.wscr)
+    sc.sort(key=lambda s: -s.score)
+    top = to_refine(sc)
+    st.say("  best by sensitivity: " + ", ".join(f"{s.cand.type} {s.cand.where} {100 * s.score:.1f} %" for s in top))
+    if not top:
+        for s in sc[:5]:
+            st.tried.append(_row(rnd, s, None, None, f"explains less than {100 * MIN_SCORE:g} % (linearised)"))
+        return None
+    refined = _refine(st, top)
+    winner = _judge_best_first(st, rnd, top, refined)
+    _record_the_rest(st, rnd, sc, top, refined, winner)
+    return winner
+
+
+def _refine(st: PathState, top) -> list:
+    """The line search, then the refinement of each of ``top``, best explained first."""
+    from sim.calibrate.sensitivity import refine_job
+    from sim.parallel import map_jobs
+
+    t = time.perf_counter()
+    wscr, mscr, ctx = st.wscr, st.models["scr"], st.ctx
+    starts = line_search(top, wscr, mscr, ctx, workers=st.workers, counts=st.routes)
+    n_line = sum(len(v["tried"]) for v in starts.values())
+    st.tm["replays"] += n_line * len(wscr)
+    st.tm["line_search_replays"] = st.tm.get("line_search_replays", 0) + n_line
+    jobs = [
+        (s.cand, starts.get(id(s), {}).get("start", s.theta), st.wref, st.models["ref"], ctx, MAX_NFEV) for s in top
+    ]
+    for s in top:
+        if id(s) in starts and starts[id(s)]["start"] is not s.theta:
+            st.say(f"  line search: {s.cand.type} {s.cand.where} starts at {s.cand.values(starts[id(s)]['start'])}")
+    sens = [j for j in jobs if j[0].sensor]
+    mods = [j for j in jobs if not j[0].sensor]
+    ref = {id(j): refine_job(j) for j in sens}
+    for j, rf in zip(mods, map_jobs(refine_job, mods, workers=st.workers)):
+        ref[id(j)] = rf
+    refined = sorted((ref[id(j)] for j in jobs), key=lambda rf: -rf.explained)
+    st.tm["refine_s"] += time.perf_counter() - t
+    st.say(
+        "  refined: "
+        + ", ".join(
+            f"{rf.cand.type} {rf.cand.where} {rf.cand.values(rf.theta)} {100 * rf.explained:.1f} %" for rf in refined
         )
-        winner = None
-        for rf in refined:  # best first, each on the whole runs (a nested refit is judged next)
+    )
+    return refined
+
+
+def _judge_best_first(st: PathState, rnd: int, top, refined):
+    """Each refined candidate, best first, on the whole runs (a nested refit is judged
+    right after the one it comes from); the first that passes, or None."""
+    from sim.calibrate.acceptance import implausible_candidate
+
+    for rf in refined:
+        sc_of = next(s.score for s in top if s.cand.key == rf.cand.key)
+        if not rf.ok:
+            st.tried.append(_row(rnd, None, rf, None, rf.why, score=sc_of))
+            continue
+        bad = implausible_candidate(rf.cand, rf.cand.values(rf.theta), st.scale, st.peaks)
+        if bad:  # refused before its whole-run replay: it stands in for something else
+            st.tried.append({**_row(rnd, None, rf, None, bad, score=sc_of), "compensation": True})
+            st.say(f"  {rf.cand.type:20s} {rf.cand.where:26s} ({bad})")
+            continue
+        nested = refit_at_bound(rf, (st.wref, st.models["ref"], st.ctx))
+        if nested is not None:  # judged right after it: its parameter held at the bound
+            refined.insert(_index(refined, rf) + 1, nested)
+        winner = _judge_whole_runs(st, rnd, rf, sc_of)
+        if winner is not None:
+            return winner
+    return None
+
+
+def _judge_whole_runs(st: PathState, rnd: int, rf, sc_of):
+    """One refined candidate judged on the whole fit and held-out runs; the winner tuple
+    when it passes, else None (its row in ``st.tried`` either way)."""
+    from sim.calibrate import paths as P
+    from sim.calibrate.search import Z95, accept_numbers
+    from sim.calibrate.sensitivity import sensor_model
+
+    pfit, pho = st.pfit, st.pho
+    t = time.perf_counter()
+    if rf.cand.sensor:
+        ms = [sensor_model(rf.cand, rf.theta, p, m) for p, m in zip(pfit + pho, st.models["fit"] + st.models["ho"])]
+    else:
+        (ms,) = st.simulate([pfit + pho], st.accepted + [rf.cand.entry(rf.theta)])
+    st.tm["accept_s"] += time.perf_counter() - t
+    mf, mh = ms[: len(pfit)], ms[len(pfit) :]
+    rn = P.stacked(pfit, mf)
+    if rn is None or any(m is None for m in mh):
+        st.tried.append(_row(rnd, None, rf, None, "the whole-run replay diverged", score=sc_of))
+        return None
+    e_new, rss_new, p_new, f_new = P.nrmse(pho, mh), float(rn @ rn), st.n_par + len(rf.theta), P.flatness(pfit, mf)
+    okp, why, unc = param_check(rf, Z95)
+    bics = (_bic(st.rss, st.N, st.n_par), _bic(rss_new, st.N, p_new))
+    local = None
+    if not okp:
+        ok = False
+    elif rf.cand.sensor:  # judged on the columns it acts on
+        cur = (st.models["fit"], st.models["ho"])
+        ok, why, local = judge_sensor(rf.cand, pfit, pho, cur, (mf, mh), bics, st.margin)
+    else:
+        ok, why = accept_numbers(st.e_ho, e_new, *bics, st.flat, f_new, st.margin)
+    row = _row(rnd, None, rf, unc, why, score=sc_of)
+    if local is not None:
+        row["on_its_columns"] = local
+    row.update({"holdout_error": e_new, "bic_change": bics[1] - bics[0], "flatness": f_new, "accepted": ok})
+    st.tried.append(row)
+    st.say(
+        f"  {rf.cand.type:20s} {rf.cand.where:26s} explains {100 * rf.explained:6.2f} %  held-out {e_new:.4f}"
+        + ("  ACCEPTED" if ok else f"  ({why})")
+    )
+    return (rf, unc, mf, mh, e_new, rss_new, p_new, f_new) if ok else None
+
+
+def _record_the_rest(st: PathState, rnd: int, sc, top, refined, winner) -> None:
+    """The rows of the refined candidates after the winner and of the next screened ones,
+    for the record, with their linearised scores on their own columns."""
+    if winner is not None:
+        for rf in refined[_index(refined, winner[0]) + 1 :]:
             sc_of = next(s.score for s in top if s.cand.key == rf.cand.key)
-            if not rf.ok:
-                tried.append(_row(rnd, None, rf, None, rf.why, score=sc_of))
-                continue
-            bad = implausible_candidate(rf.cand, rf.cand.values(rf.theta), scale, peaks)
-            if bad:  # refused before its whole-run replay: it stands in for something else
-                tried.append({**_row(rnd, None, rf, None, bad, score=sc_of), "compensation": True})
-                say(f"  {rf.cand.type:20s} {rf.cand.where:26s} ({bad})")
-                continue
-            nested = refit_at_bound(rf, (wref, mref, ctx))
-            if nested is not None:  # judged right after it: its parameter held at the bound
-                refined.insert(_index(refined, rf) + 1, nested)
-            t = time.perf_counter()
-            if rf.cand.sensor:
-                ms = [sensor_model(rf.cand, rf.theta, p, m) for p, m in zip(pfit + pho, mfit + mho)]
-            else:
-                jobs = [p.job(raw, src, payload, accepted + [rf.cand.entry(rf.theta)]) for p in pfit + pho]
-                ms = P.simulate_many(jobs, workers=workers, counts=routes)
-                tm["replays"] += len(jobs)
-            tm["accept_s"] += time.perf_counter() - t
-            mf, mh = ms[: len(pfit)], ms[len(pfit) :]
-            rn = P.stacked(pfit, mf)
-            if rn is None or any(m is None for m in mh):
-                tried.append(_row(rnd, None, rf, None, "the whole-run replay diverged", score=sc_of))
-                continue
-            e_new = P.nrmse(pho, mh)
-            rss_new = float(rn @ rn)
-            p_new = n_par + len(rf.theta)
-            f_new = P.flatness(pfit, mf)
-            okp, why, unc = param_check(rf, Z95)
-            bics = (_bic(rss, N, n_par), _bic(rss_new, N, p_new))
-            local = None
-            if not okp:
-                ok = False
-            elif rf.cand.sensor:  # judged on the columns it acts on
-                ok, why, local = judge_sensor(rf.cand, pfit, pho, (mfit, mho), (mf, mh), bics, margin)
-            else:
-                ok, why = accept_numbers(e_ho, e_new, *bics, flat, f_new, margin)
-            row = _row(rnd, None, rf, unc, why, score=sc_of)
-            if local is not None:
-                row["on_its_columns"] = local
-            row.update({"holdout_error": e_new, "bic_change": _bic(rss_new, N, p_new) - _bic(rss, N, n_par)})
-            row.update({"flatness": f_new, "accepted": ok})
-            tried.append(row)
-            say(
-                f"  {rf.cand.type:20s} {rf.cand.where:26s} explains {100 * rf.explained:6.2f} %  held-out {e_new:.4f}"
-                + ("  ACCEPTED" if ok else f"  ({why})")
-            )
-            if ok:
-                winner = (rf, unc, mf, mh, e_new, rss_new, p_new, f_new)
-                break
-        if winner is not None:  # the refined ones after it, for the record
-            for rf in refined[_index(refined, winner[0]) + 1 :]:
-                sc_of = next(s.score for s in top if s.cand.key == rf.cand.key)
-                why = f"refined, not judged: {winner[0].cand.type} {winner[0].cand.where} explains more and passed"
-                tried.append(_row(rnd, None, rf, None, why if rf.ok else rf.why, score=sc_of))
-        for s in [s for s in sc if all(s is not x for x in top)][:10]:  # the next ones by score, for the record
-            tried.append(_row(rnd, s, None, None, "not refined (lower linearised score)"))
-        own_of = {s.cand.key: s.own for s in sc if s.own is not None}
-        for row in tried:
-            if row["round"] == rnd and (row["name"], row["where"]) in own_of:
-                row["linearised_score_own_columns"] = own_of[(row["name"], row["where"])]
-        if winner is None:
-            break
-        rf, unc, mfit, mho, e_ho, rss, n_par, flat = winner
-        items.append({"cand": rf.cand, "theta": np.array(rf.theta, float), "unc": unc})
-        if len(items) >= 2:  # the accepted effects revisited: joint refit, backward pass (sim.calibrate.revisit)
-            t = time.perf_counter()
-            st = {"mfit": mfit, "mho": mho, "e_ho": e_ho, "rss": rss, "n_par": n_par, "flat": flat}
-            ctx_r = (pfit, pho, wref, (raw, src, payload), N, margin, workers, routes)
-            plaus = lambda c, v: implausible_candidate(c, v, scale, peaks)  # noqa: E731
-            items, st, rows = revisit_accepted(items, st, ctx_r, rnd, say, implausible=plaus)
-            mfit, mho, e_ho, rss, n_par, flat = (st[k] for k in ("mfit", "mho", "e_ho", "rss", "n_par", "flat"))
-            tried.extend(rows)
-            dropped |= {(r["name"], r["where"]) for r in rows if r["revisited"] == "dropped"}
-            tm["revisit_s"] = tm.get("revisit_s", 0.0) + time.perf_counter() - t
-            tm["revisit_replays"] = tm.get("revisit_replays", 0) + st["replays"]
-            tm["replays"] += st["replays"]
-        accepted = [a["cand"].entry(a["theta"]) for a in items]
-        added = [_found(a, path, pfit, desc) for a in items]
-        mscr, mref = sims([wscr, wref], accepted)
-    per, per_run, quiet = path_errors(pho, mho0, mho)
+            why = f"refined, not judged: {winner[0].cand.type} {winner[0].cand.where} explains more and passed"
+            st.tried.append(_row(rnd, None, rf, None, why if rf.ok else rf.why, score=sc_of))
+    for s in [s for s in sc if all(s is not x for x in top)][:10]:  # the next ones by score, for the record
+        st.tried.append(_row(rnd, s, None, None, "not refined (lower linearised score)"))
+    own_of = {s.cand.key: s.own for s in sc if s.own is not None}
+    for row in st.tried:
+        if row["round"] == rnd and (row["name"], row["where"]) in own_of:
+            row["linearised_score_own_columns"] = own_of[(row["name"], row["where"])]
+
+
+def _take(st: PathState, winner, rnd: int) -> None:
+    """The winner added to the model; from the second on, the accepted effects revisited
+    (joint refit, backward pass: :mod:`sim.calibrate.revisit`); the windows replayed."""
+    from sim.calibrate.acceptance import implausible_candidate
+    from sim.calibrate.revisit import revisit_accepted
+
+    rf, unc, mfit, mho, st.e_ho, st.rss, st.n_par, st.flat = winner
+    st.models.update(fit=mfit, ho=mho)
+    st.items.append({"cand": rf.cand, "theta": np.array(rf.theta, float), "unc": unc})
+    if len(st.items) >= 2:
+        t = time.perf_counter()
+        keys = ("mfit", "mho", "e_ho", "rss", "n_par", "flat")
+        state = dict(zip(keys, (mfit, mho, st.e_ho, st.rss, st.n_par, st.flat)))
+        ctx_r = (st.pfit, st.pho, st.wref, st.ctx[:3], st.N, st.margin, st.workers, st.routes)
+        plaus = lambda c, v: implausible_candidate(c, v, st.scale, st.peaks)  # noqa: E731
+        st.items, state, rows = revisit_accepted(st.items, state, ctx_r, rnd, st.say, implausible=plaus)
+        mfit, mho, st.e_ho, st.rss, st.n_par, st.flat = (state[k] for k in keys)
+        st.models.update(fit=mfit, ho=mho)
+        st.tried.extend(rows)
+        st.dropped |= {(r["name"], r["where"]) for r in rows if r["revisited"] == "dropped"}
+        st.tm["revisit_s"] = st.tm.get("revisit_s", 0.0) + time.perf_counter() - t
+        st.tm["revisit_replays"] = st.tm.get("revisit_replays", 0) + state["replays"]
+        st.tm["replays"] += state["replays"]
+    st.accepted = [a["cand"].entry(a["theta"]) for a in st.items]
+    st.models["scr"], st.models["ref"] = st.simulate([st.wscr, st.wref], st.accepted)
+
+
+def _outputs(st: PathState, mho0, e_ho0, timing) -> dict:
+    """The fields of a :class:`sim.calibrate.search.CalibrationResult`."""
+    from sim.calibrate import paths as P
+    from sim.calibrate.search import UNEXPLAINED_FRACTION
+
+    per, per_run, quiet = path_errors(st.pho, mho0, st.models["ho"])
     if timing is not None:
-        timing.update(tm)
-        timing["replays_batch"], timing["replays_fallback"] = routes["batch"], routes["fallback"]
+        timing.update(st.tm)
+        timing["replays_batch"], timing["replays_fallback"] = st.routes["batch"], st.routes["fallback"]
     return {
-        "holdout": [str(p.name) for p in pho],
-        "holdout_note": ho_note,
+        "holdout": [str(p.name) for p in st.pho],
+        "holdout_note": st.ho_note,
         "error_before": e_ho0,
-        "error_after": e_ho,
-        "effects_added": added,
-        "candidates": tried,
-        "unexplained": P.unexplained(pfit, mfit, UNEXPLAINED_FRACTION),
+        "error_after": st.e_ho,
+        "effects_added": [_found(a, st.path, st.pfit, st.desc) for a in st.items],
+        "candidates": st.tried,
+        "unexplained": P.unexplained(st.pfit, st.models["fit"], UNEXPLAINED_FRACTION),
         "per_channel": per,
         "per_run": per_run,
         "not_excited": quiet,
-        "series": {"kind": "path", "holdout": pho, "before": mho0, "after": mho, "fit": pfit, "fit_after": mfit},
+        "series": {
+            "kind": "path",
+            "holdout": st.pho,
+            "before": mho0,
+            "after": st.models["ho"],
+            "fit": st.pfit,
+            "fit_after": st.models["fit"],
+        },
     }
 
 

@@ -172,6 +172,22 @@ def places(desc, kinds, payload: bool = False) -> list[str]:
     return out
 
 
+def supported_paths(runs) -> list[str]:
+    """The residual paths every run supports, in :data:`PATHS` order: mechanical (forces
+    and motion), replay (valve commands and an output to compare), closed loop (the
+    reference and an output)."""
+    have = [{c for c in MECH_CHANNELS + ("valve_command", "reference") if getattr(r, c) is not None} for r in runs]
+    outputs = [bool(h & set(FIT_CHANNELS)) for h in have]
+    need = {"mechanical": None, "replay": "valve_command", "closed_loop": "reference"}
+    out = []
+    for path, chan in need.items():
+        if chan is None and all(set(MECH_CHANNELS) <= h for h in have):
+            out.append(path)
+        elif chan is not None and all(chan in h and o for h, o in zip(have, outputs)):
+            out.append(path)
+    return out
+
+
 def choose_path(runs) -> str:
     """The residual path every run supports (mechanical first, then replay, then closed
     loop; the last two need a recorded output to compare: force, acceleration or
@@ -543,6 +559,7 @@ __all__ = [
     "CalibrationError",
     "MechRun",
     "PATHS",
+    "supported_paths",
     "check_path",
     "choose_path",
     "mechanical_runs",

@@ -175,30 +175,41 @@ def revisit_accepted(items, st, ctx, rnd, say=None, implausible=None) -> tuple[l
     ``refitted`` / ``refit_not_kept`` / ``kept`` / ``dropped``). ``implausible``:
     ``(cand, values) -> reason`` (empty: plausible); a joint refit that takes an effect
     where the table cannot have it is not kept (sim.calibrate.acceptance)."""
-    from sim.calibrate import paths as P
-    from sim.calibrate.pathsearch import _bic
-    from sim.calibrate.search import Z95
-    from sim.calibrate.sensitivity import acts_on
+    rv = _Revisit(ctx, rnd, dict(st, replays=0), say or (lambda *_: None), implausible)
+    items = rv.joint_refit(items)
+    items = rv.backward(items)
+    return items, rv.st, rv.rows
 
-    say = say or (lambda *_: None)
-    pfit, pho, wref, base, N, margin, workers, counts = ctx
-    raw, src, payload = base
-    st = dict(st, replays=0)
-    rows: list = []
 
-    def whole(its, thetas):
+class _Revisit:
+    """One revisit: its context, the current model's numbers (``st``) and its rows."""
+
+    def __init__(self, ctx, rnd, st, say, implausible):
+        self.pfit, self.pho, self.wref, self.base, self.N, self.margin, self.workers, self.counts = ctx
+        self.rnd, self.st, self.say, self.implausible = rnd, st, say, implausible
+        self.rows: list = []
+
+    def whole(self, its, thetas) -> dict | None:
+        """The whole fit and held-out runs replayed with ``its`` at ``thetas``."""
+        from sim.calibrate import paths as P
+
+        raw, src, payload = self.base
+        pfit, pho = self.pfit, self.pho
         jobs = [p.job(raw, src, payload, [a["cand"].entry(th) for a, th in zip(its, thetas)]) for p in pfit + pho]
-        ms = P.simulate_many(jobs, workers=workers, counts=counts)
-        st["replays"] += len(jobs)
+        ms = P.simulate_many(jobs, workers=self.workers, counts=self.counts)
+        self.st["replays"] += len(jobs)
         mf, mh = ms[: len(pfit)], ms[len(pfit) :]
         rn = P.stacked(pfit, mf)
         if rn is None or any(m is None for m in mh):
             return None
         return {"mfit": mf, "mho": mh, "e_ho": P.nrmse(pho, mh), "rss": float(rn @ rn), "flat": P.flatness(pfit, mf)}
 
-    def joint(its):
-        out = refit([(a["cand"], a["theta"]) for a in its], wref, base, workers, counts)
-        st["replays"] += out["replays"]
+    def joint(self, its):
+        """``its`` refitted together on the refinement windows, with their intervals."""
+        from sim.calibrate.search import Z95
+
+        out = refit([(a["cand"], a["theta"]) for a in its], self.wref, self.base, self.workers, self.counts)
+        self.st["replays"] += out["replays"]
         new = []
         for k, a in enumerate(its):
             b = dict(a, theta=np.asarray(out["thetas"][k], float))
@@ -208,10 +219,10 @@ def revisit_accepted(items, st, ctx, rnd, say=None, implausible=None) -> tuple[l
             new.append(b)
         return new, out
 
-    def row(a, how, why, num=None, expl=0.0):
+    def row(self, a, how, why, num=None, expl=0.0) -> dict:
         c = a["cand"]
         r = {
-            "round": rnd,
+            "round": self.rnd,
             "name": c.type,
             "where": c.where,
             "explained_fraction": expl,
@@ -228,61 +239,80 @@ def revisit_accepted(items, st, ctx, rnd, say=None, implausible=None) -> tuple[l
         r.update(num or {})
         return r
 
-    # the joint refit of every accepted effect
-    new, out = joint(items)
-    moved = any(not np.array_equal(a["theta"], b["theta"]) for a, b in zip(items, new))
-    bad = next((x for b in new if implausible and (x := implausible(b["cand"], b["cand"].values(b["theta"])))), "")
-    w = whole(new, [b["theta"] for b in new]) if moved and not bad else None
-    if w is not None and w["e_ho"] <= st["e_ho"]:
-        for a, b in zip(items, new):
-            why = (
-                f"joint refit with the {len(items) - 1} other accepted effect(s) on the refinement windows "
-                f"(residual {out['rss0']:.4g} -> {out['rss']:.4g}): {a['cand'].values(a['theta'])} -> "
-                f"{b['cand'].values(b['theta'])}; held-out {st['e_ho']:.5f} -> {w['e_ho']:.5f}"
-            )
-            rows.append(row(b, "refitted", why, {"holdout_error": w["e_ho"], "flatness": w["flat"]}))
-        st.update(w)
-        items = new
-    else:
-        why = "joint refit: no parameter moved" if not moved else "joint refit not kept: "
-        if moved and bad:
-            why += bad
-        elif moved:
-            why += "a whole-run replay diverged" if w is None else f"held-out {st['e_ho']:.5f} -> {w['e_ho']:.5f} rises"
-        rows += [row(a, "refit_not_kept", why) for a in items]
-    say(f"  revisit: {rows[-1]['reason']}")
+    def joint_refit(self, items) -> list:
+        """Every accepted effect refitted jointly; kept when the held-out error does not rise."""
+        st = self.st
+        new, out = self.joint(items)
+        moved = any(not np.array_equal(a["theta"], b["theta"]) for a, b in zip(items, new))
+        imp = self.implausible
+        bad = next((x for b in new if imp and (x := imp(b["cand"], b["cand"].values(b["theta"])))), "")
+        w = self.whole(new, [b["theta"] for b in new]) if moved and not bad else None
+        if w is not None and w["e_ho"] <= st["e_ho"]:
+            for a, b in zip(items, new):
+                why = (
+                    f"joint refit with the {len(items) - 1} other accepted effect(s) on the refinement windows "
+                    f"(residual {out['rss0']:.4g} -> {out['rss']:.4g}): {a['cand'].values(a['theta'])} -> "
+                    f"{b['cand'].values(b['theta'])}; held-out {st['e_ho']:.5f} -> {w['e_ho']:.5f}"
+                )
+                self.rows.append(self.row(b, "refitted", why, {"holdout_error": w["e_ho"], "flatness": w["flat"]}))
+            st.update(w)
+            items = new
+        else:
+            why = "joint refit: no parameter moved" if not moved else "joint refit not kept: "
+            if moved and bad:
+                why += bad
+            elif moved:
+                why += (
+                    "a whole-run replay diverged"
+                    if w is None
+                    else f"held-out {st['e_ho']:.5f} -> {w['e_ho']:.5f} rises"
+                )
+            self.rows += [self.row(a, "refit_not_kept", why) for a in items]
+        self.say(f"  revisit: {self.rows[-1]['reason']}")
+        return items
 
-    # the backward pass: each effect accepted before the newest, taken out (the others refitted)
-    changed = True
-    while changed and len(items) >= 2:
-        changed = False
-        for i in range(len(items) - 1):
-            a = items[i]
-            rest, _ = joint(items[:i] + items[i + 1 :])
-            w = whole(rest, [b["theta"] for b in rest])
-            if w is None:
-                rows.append(row(a, "kept", "kept: the model without it diverged"))
-                continue
-            p_rest = st["n_par"] - len(a["theta"])
-            b_with, b_without = _bic(st["rss"], N, st["n_par"]), _bic(w["rss"], N, p_rest)
-            if a["cand"].sensor:  # judged on the columns it acts on, as when it was added
-                keep = acts_on(a["cand"])
-                on = [p.only(keep) for p in pho]
-                e_with, e_without = P.nrmse(on, st["mho"]), P.nrmse(on, w["mho"])
-            else:
-                e_with, e_without = st["e_ho"], w["e_ho"]
-            drop, why = drop_rule(e_with, e_without, b_with, b_without, margin)
-            num = {"holdout_error": w["e_ho"], "bic_change": b_without - b_with, "flatness": w["flat"]}
-            expl = (w["rss"] - st["rss"]) / w["rss"] if w["rss"] > 0 else 0.0
-            rows.append(row(a, "dropped" if drop else "kept", why, num, expl))
-            say(f"  backward: {a['cand'].type} {a['cand'].where}: {why}")
-            if drop:
-                items = rest
-                st.update(w)
-                st["n_par"] = p_rest
-                changed = True
-                break
-    return items, st, rows
+    def backward(self, items) -> list:
+        """Each effect accepted before the newest, taken out (the others refitted): dropped
+        when the model does as well without it (:func:`drop_rule`)."""
+        changed = True
+        while changed and len(items) >= 2:
+            changed = False
+            for i in range(len(items) - 1):
+                rest = self.without(items, i)
+                if rest is not None:
+                    items, changed = rest, True
+                    break
+        return items
+
+    def without(self, items, i: int) -> list | None:
+        """The items without item ``i`` when it is dropped, else None (its row written)."""
+        from sim.calibrate import paths as P
+        from sim.calibrate.pathsearch import _bic
+        from sim.calibrate.sensitivity import acts_on
+
+        st, a = self.st, items[i]
+        rest, _ = self.joint(items[:i] + items[i + 1 :])
+        w = self.whole(rest, [b["theta"] for b in rest])
+        if w is None:
+            self.rows.append(self.row(a, "kept", "kept: the model without it diverged"))
+            return None
+        p_rest = st["n_par"] - len(a["theta"])
+        b_with, b_without = _bic(st["rss"], self.N, st["n_par"]), _bic(w["rss"], self.N, p_rest)
+        if a["cand"].sensor:  # judged on the columns it acts on, as when it was added
+            on = [p.only(acts_on(a["cand"])) for p in self.pho]
+            e_with, e_without = P.nrmse(on, st["mho"]), P.nrmse(on, w["mho"])
+        else:
+            e_with, e_without = st["e_ho"], w["e_ho"]
+        drop, why = drop_rule(e_with, e_without, b_with, b_without, self.margin)
+        num = {"holdout_error": w["e_ho"], "bic_change": b_without - b_with, "flatness": w["flat"]}
+        expl = (w["rss"] - st["rss"]) / w["rss"] if w["rss"] > 0 else 0.0
+        self.rows.append(self.row(a, "dropped" if drop else "kept", why, num, expl))
+        self.say(f"  backward: {a['cand'].type} {a['cand'].where}: {why}")
+        if not drop:
+            return None
+        st.update(w)
+        st["n_par"] = p_rest
+        return rest
 
 
 __all__ = ["JOINT_NFEV", "drop_rule", "entries", "free_index", "refit", "revisit_accepted"]

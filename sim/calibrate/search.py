@@ -59,6 +59,8 @@ class CalibrationResult:
     baseline: dict | None = None
     #: the calibrated model's held-out error is below the baseline's (None: no baseline)
     beats_baseline: bool | None = None
+    #: each residual path's own figures (:func:`sim.calibrate.stages.summary`)
+    paths: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
         keys = (
@@ -79,6 +81,7 @@ class CalibrationResult:
             "beats_baseline",
             "timing",
             "unknowns_identified",
+            "paths",
         )
         return {k: getattr(self, k) for k in keys}
 
@@ -345,17 +348,42 @@ def calibrate(
     workers: int | None = None,
 ) -> CalibrationResult:
     """Calibrate ``table`` (default: the runs' table) against the runs; see the module
-    docstring. ``path``: force a residual path (default: chosen by the channels every
-    run has, :func:`sim.calibrate.residuals.choose_path`); ``workers``: processes of the
-    replay and closed-loop searches (default: every core)."""
-    from sim.calibrate.acceptance import table_scale
-    from sim.calibrate.mechjudge import RoundState, forward_search
-    from sim.calibrate.residuals import PATHS, check_path, choose_path, mechanical_runs, nrmse_runs, places
-    from sim.calibrate.trace import Term, fit_terms, flatness, predict
+    docstring. ``path``: narrow the search to one residual path (default: every path the
+    runs support, :mod:`sim.calibrate.stages`); ``workers``: processes of the replay and
+    closed-loop searches (default: every core)."""
+    from sim.calibrate.mechsearch import mechanical_stage
+    from sim.calibrate.stages import plan, run_stages
     from sim.calibrate.unknowns import identify as identify_unknowns
 
     say = log or (lambda *_: None)
     t0 = time.perf_counter()
+    runs, ho_given, desc, pl = _inputs(run_paths, holdout, table, payload, effects, effect_file, path)
+    stages = plan(runs + ho_given, path)
+    desc, unk = identify_unknowns(runs, ho_given, desc, pl, workers=workers, say=say)
+
+    def search_one(p, d, eff):
+        if p == "mechanical":
+            kw = {"payload": payload, "accel_lowpass_hz": accel_lowpass_hz}
+            res = mechanical_stage(runs, ho_given, d, pl, effects=eff, margin=margin, say=say, t0=t0, **kw)
+        else:
+            res = _calibrate_path(runs, ho_given, d, pl, p, eff, margin, workers, say, t0)
+        return _with_baseline(res, say)
+
+    kw = {"effects": effects, "search_one": search_one, "say": say, "workers": workers}
+    res = run_stages(runs, ho_given, desc, pl, stages, **kw)
+    res.unknowns_identified = unk
+    if not res.paths:
+        from sim.calibrate.stages import summary
+
+        res.paths = {res.residual_path: summary(res)}
+    return res
+
+
+def _inputs(run_paths, holdout, table, payload, effects, effect_file, path):
+    """The fit runs, the given held-out runs, the declared description and payload,
+    each checked (one-line errors)."""
+    from sim.calibrate.residuals import PATHS
+
     if not run_paths:
         raise CalibrationError("no runs given: name the .run.npz files to calibrate against")
     _check_names(run_paths, holdout)
@@ -373,156 +401,7 @@ def calibrate(
                 f"{r.name}: actuators {r.actuators} do not match table '{desc.name}' "
                 f"({list(desc.actuator_names)}); give --table"
             )
-    path = check_path(all_runs, path) if path else choose_path(all_runs)
-    desc, unk = identify_unknowns(all_runs[: len(run_paths)], ho_given, desc, pl, workers=workers, say=say)
-    if path != "mechanical":
-        res = _calibrate_path(all_runs[: len(run_paths)], ho_given, desc, pl, path, effects, margin, workers, say, t0)
-        res.unknowns_identified = unk
-        return _with_baseline(res, say)
-    laws = candidate_laws(effects)
-    if not effects:  # laws for a specimen that is there but not declared: only when told so
-        laws = [w for w in laws if w.when == "always" or (w.when == "undeclared_specimen" and payload == "none")]
-    lp = desc.accelerometer_bandwidth_hz if accel_lowpass_hz == "table" else accel_lowpass_hz
-    if lp and lp >= 0.5 * runs[0].sample_rate_hz:
-        lp = None  # the conditioner is above the recorder's Nyquist: it does not delay the record
-    fit_runs, ho_runs, ho_note = split_holdout(runs, ho_given)
-    t1 = time.perf_counter()
-    mfit = mechanical_runs(fit_runs, desc, pl, accel_lowpass_hz=lp)
-    mho = mechanical_runs(ho_runs, desc, pl, accel_lowpass_hz=lp)
-    t2 = time.perf_counter()
-    scale = table_scale(desc, pl)
-    cur = fit_terms(mfit, [])
-    e_ho0 = nrmse_runs(mho, predict(mho, cur))
-    mfit0, mho0 = mfit, mho  # the declared timing: the "before" of the report
-    e_ho = e_ho0
-    flat = flatness(mfit, cur.residuals)
-    say(f"{path} path: {len(fit_runs)} fit runs, {len(ho_runs)} held out; held-out NRMSE {e_ho0:.4f}")
-    # a law of the actuators' own loads needs each actuator's force: a record with an
-    # actuator's force zero throughout holds a total (the NEES-UCSD runs: column E the
-    # measured total, W zero), not each actuator's own
-    own_forces = not any(np.all(mr.extra["actuator_force"] == 0, axis=0).any() for mr in mfit)
-    laws = [law for law in laws if own_forces or not law.load]
-    cands = [
-        (law, w)
-        for law in laws
-        for w in distinct_places(mfit[0], [p for p in places(desc, law.places, pl is not None) if law.acts_at(p)])
-    ]
-    st = RoundState(mfit, mho, e_ho, flat, margin, scale, effects=effects, timing_on=True)
-    cur, tried, n_fits = forward_search(st, cur, cands, MAX_ROUNDS, say)
-    e_ho, flat = st.e_ho, st.flat
-    mfit, mho = st.mfit, st.mho  # a sensor's timing found: the records re-timed
-    added, timed_added = [], st.timed_added
-    # Backward: a term accepted early may be superseded by later ones (viscous damping
-    # standing in for friction the flatness test kept out until a specimen's mode was in):
-    # drop a term whose removal keeps the held-out error within the acceptance margin.
-    dropped = True
-    while dropped and len(cur.terms) > 1:
-        dropped = False
-        for i, t in enumerate(cur.terms):
-            rest = fit_terms(mfit, cur.terms[:i] + cur.terms[i + 1 :])
-            n_fits += 1
-            e_rest = nrmse_runs(mho, predict(mho, rest))
-            if e_rest <= (1 + margin) * e_ho:
-                why = (
-                    f"dropped: without it the held-out error is {e_ho:.4f} -> {e_rest:.4f} (within {100 * margin:g} %)"
-                )
-                say(f"  {t.law.type:18s} {t.where:14s} {why}")
-                expl = (rest.rss - cur.rss) / rest.rss if rest.rss > 0 else 0.0
-                tried.append(
-                    _backward_row(t, cur.values[i], {}, rest, cur, e_rest, expl, flatness(mfit, rest.residuals), why)
-                )
-                cur, e_ho, dropped = rest, e_rest, True
-                break
-    # A term whose nesting parameter ended at the simpler law's value once the later terms
-    # were in (a load-growing friction that stood in for the damping, its coefficient now
-    # 0 +/- its interval) is that simpler law: replaced by it (at the same place, named as
-    # the simpler law's candidates name it), when the held-out error stays within the margin.
-    from sim.calibrate.laws import LAWS
-
-    demoted = True
-    while demoted:
-        demoted = False
-        for i, t in enumerate(cur.terms):
-            for name, (at, simpler) in t.law.nested.items():
-                s95 = Z95 * cur.sigma[i].get(name, math.inf)
-                if simpler not in LAWS or abs(cur.values[i][name] - at) > s95:
-                    continue
-                law2 = LAWS[simpler]
-                w2 = _same_place(mfit[0], t.where, places(desc, law2.places, pl is not None))
-                if w2 is None or any(
-                    (u.law.name, u.where) == (law2.name, w2) for j, u in enumerate(cur.terms) if j != i
-                ):
-                    continue
-                alt = fit_terms(mfit, cur.terms[:i] + [Term(law2, w2)] + cur.terms[i + 1 :])
-                n_fits += 1
-                e_alt = nrmse_runs(mho, predict(mho, alt))
-                if e_alt > (1 + margin) * e_ho:
-                    continue
-                why = (
-                    f"replaced by {simpler} at {w2}: {name} = {cur.values[i][name]:.4g} +/-{s95:.3g} holds {at:g} "
-                    f"(held-out {e_ho:.4f} -> {e_alt:.4f})"
-                )
-                say(f"  {t.law.type:18s} {t.where:14s} {why}")
-                unc95 = {k: Z95 * v for k, v in cur.sigma[i].items()}
-                tried.append(
-                    _backward_row(t, cur.values[i], unc95, alt, cur, e_alt, 0.0, flatness(mfit, alt.residuals), why)
-                )
-                cur, e_ho, demoted = alt, e_alt, True
-                break
-            if demoted:
-                break
-    for i, t in enumerate(cur.terms):
-        _, _, unc = param_report(t, cur.values[i], cur.sigma[i])
-        added.append(
-            {
-                "name": t.law.name,
-                "where": t.where,
-                **({"options": dict(t.law.options)} if t.law.options else {}),
-                **({"label": f"{t.law.name} {t.index + 1}"} if getattr(t.law, "repeats", 1) > 1 else {}),
-                **({"fixed": dict(t.law.fixed)} if t.law.fixed else {}),
-                "parameters": cur.values[i],
-                "uncertainty": unc,
-                "units": t.law.units,
-            }
-        )
-    added += timed_added
-    ho_res = predict(mho, cur)
-    ho_res0 = [mr.residual for mr in mho0]
-    per, per_run, quiet = mechanical_errors(mho, ho_res0, ho_res)
-    t3 = time.perf_counter()
-    res = CalibrationResult(
-        table=desc.name,
-        table_source=str(desc.source),
-        runs=[str(r.name) for r in runs],
-        holdout=[str(r.name) for r in ho_runs],
-        holdout_note=ho_note,
-        residual_path=path,
-        error_before=e_ho0,
-        error_after=nrmse_runs(mho, ho_res),
-        effects_added=added,
-        candidates=tried,
-        unexplained=unexplained(mfit, cur.residuals),
-        per_channel=per,
-        per_run=per_run,
-        not_excited=quiet,
-        timing={
-            "read_s": t1 - t0,
-            "residuals_s": t2 - t1,
-            "search_s": t3 - t2,
-            "total_s": t3 - t0,
-            "least_squares_fits": n_fits,
-        },
-        series={
-            "fit": mfit,
-            "holdout": mho,
-            "before": ho_res0,
-            "after": ho_res,
-            "fit_before": [mr.residual for mr in mfit0],
-            "fit_after": cur.residuals,
-        },
-        unknowns_identified=unk,
-    )
-    return _with_baseline(res, say)
+    return runs, ho_given, desc, pl
 
 
 def _with_baseline(res: CalibrationResult, say) -> CalibrationResult:
@@ -566,77 +445,32 @@ def _calibrate_path(runs, ho_given, desc, pl, path, effects, margin, workers, sa
     )
 
 
-def _backward_row(t, values, unc, new, cur, e_new, explained, flat, why) -> dict:
-    """The ``candidates`` row of a term the backward pass dropped or replaced (``new``:
-    the fit without it or with its replacement, ``cur``: the fit before)."""
-    return {
-        "round": "backward",
-        "name": t.law.name,
-        "where": t.where,
-        **({"options": dict(t.law.options)} if t.law.options else {}),
-        "explained_fraction": explained,
-        "parameters": values,
-        "uncertainty": unc,
-        "holdout_error": e_new,
-        "bic_change": new.bic - cur.bic,
-        "flatness": flat,
-        "accepted": False,
-        "reason": why,
-    }
+# the mechanical stage's helpers, where they were before (sim.calibrate.mechsearch)
+def mechanical_errors(mho, before, after):
+    from sim.calibrate.mechsearch import mechanical_errors as errors
 
-
-def _same_place(mr, where, wheres) -> str | None:
-    """The first of ``wheres`` whose force maps into DOF space as ``where``'s does (on a
-    uni-axial table ``dof:x`` for ``actuator:E``), else None."""
-    m0 = np.atleast_2d(mr.place_motion(where)[3]).astype(float)
-    m0 = m0 / (np.linalg.norm(m0) or 1.0)
-    for w in wheres:
-        m = np.atleast_2d(mr.place_motion(w)[3]).astype(float)
-        m = m / (np.linalg.norm(m) or 1.0)
-        if m.shape == m0.shape and min(np.abs(m - m0).max(), np.abs(m + m0).max()) < 1e-6:
-            return w
-    return None
-
-
-def distinct_places(mr, wheres) -> list:
-    """Places whose force maps into DOF space differently (a uni-axial table's actuators
-    and classes all push along x: one place, ``dof:x``, stands for them)."""
-    out, maps = [], []
-    for w in wheres:
-        m = np.atleast_2d(mr.place_motion(w)[3]).astype(float)
-        m = m / (np.linalg.norm(m) or 1.0)
-        if any(q.shape == m.shape and min(np.abs(q - m).max(), np.abs(q + m).max()) < 1e-6 for q in maps):
-            continue
-        maps.append(m)
-        out.append(w)
-    return out
-
-
-def mechanical_errors(mho, before, after) -> tuple[dict, dict, list]:
-    """Where the held-out error sits: per run and excited DOF (``"<run>:<dof>"`` ->
-    before/after), per run (pooled over its excited DOFs), and the ``"<run>:<dof>"`` the
-    runs do not excite (:func:`sim.calibrate.residuals.excited_dofs`), left out of both."""
-    from sim.calibrate.residuals import nrmse_runs
-
-    per, per_run, quiet = {}, {}, []
-    for mr, e0, e1 in zip(mho, before, after):
-        run = Path(mr.name).name
-        per_run[run] = {"before": nrmse_runs([mr], [e0]), "after": nrmse_runs([mr], [e1])}
-        for j, d in enumerate(mr.dofs):
-            if mr.excited is not None and not mr.excited[j]:
-                quiet.append(f"{run}:{d}")
-                continue
-            per[f"{run}:{d}"] = {"before": _nrmse_col(mr, e0, j), "after": _nrmse_col(mr, e1, j)}
-    return per, per_run, quiet
-
-
-def _nrmse_col(mr, e, j) -> float:
-    F = mr.demean(mr.force)[mr.rows, j]
-    den = float(np.sum(F**2))
-    return float(math.sqrt(np.sum(e[mr.rows, j] ** 2) / den)) if den > 0 else float("nan")
+    return errors(mho, before, after)
 
 
 # ------------------------------------------------------------------ outputs
+def effect_entry(e: dict, tag: str) -> tuple[dict, dict]:
+    """The description's ``[[effect]]`` entry of an ``effects_added`` item (sourced with
+    ``tag``) and the comments of its parameters' lines."""
+    opts = e.get("options", {})  # a variant of the effect (friction growing with the stroke)
+    entry = {"type": e["name"], "where": e["where"], **opts, **e["parameters"], "source": tag}
+    if "label" in e:  # one of several terms of a law at a place (a specimen's modes)
+        entry = {"type": e["name"], "where": e["where"], "name": e["label"], **e["parameters"], "source": tag}
+    comments = {
+        k: f"+/-{e['uncertainty'][k]:.3g} {e['units'][k]} (95 %)"
+        if k in e["uncertainty"]
+        else "fixed at its bound (the nested law), not fitted"
+        if k in e.get("fixed", {})
+        else "held at the description's value, not fitted"
+        for k in e["parameters"]
+    }
+    return entry, comments
+
+
 def write_outputs(result: CalibrationResult, out, run_names) -> dict:
     """``calibration.json`` and ``<table>_calibrated.toml`` (the original with every
     comment kept and the accepted ``[[effect]]`` entries, sourced) into ``out``."""
@@ -648,18 +482,7 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
     tag = "calibrated: shaketable calibrate " + " ".join(Path(p).name for p in run_names)
     doc = TomlText.read(result.table_source)
     for e in result.effects_added:
-        opts = e.get("options", {})  # a variant of the effect (friction growing with the stroke)
-        entry = {"type": e["name"], "where": e["where"], **opts, **e["parameters"], "source": tag}
-        if "label" in e:  # one of several terms of a law at a place (a specimen's modes)
-            entry = {"type": e["name"], "where": e["where"], "name": e["label"], **e["parameters"], "source": tag}
-        comments = {
-            k: f"+/-{e['uncertainty'][k]:.3g} {e['units'][k]} (95 %)"
-            if k in e["uncertainty"]
-            else "fixed at its bound (the nested law), not fitted"
-            if k in e.get("fixed", {})
-            else "held at the description's value, not fitted"
-            for k in e["parameters"]
-        }
+        entry, comments = effect_entry(e, tag)
         doc.set_effect(entry, comments=comments)
     write_identified(doc, result.unknowns_identified, tag)
     toml_path = out / f"{result.table}_calibrated.toml"

@@ -111,7 +111,13 @@ def cmd_calibrate(args) -> int:
     if args.json:
         print(json_text(js, indent=2))
         return 0
-    print(f"held-out NRMSE {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} % ({res.holdout_note})")
+    pooled = " (pooled over the paths)" if len(res.paths) > 1 else ""
+    print(
+        f"held-out NRMSE{pooled} {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} % ({res.holdout_note})"
+    )
+    if len(res.paths) > 1:
+        for name, p in res.paths.items():
+            print(f"  {name} path: {100 * p['error_before']:.2f} % -> {100 * p['error_after']:.2f} %")
     if res.not_excited:
         print(f"  not excited, left out of the error: {', '.join(res.not_excited)}")
     _print_baseline(res)
@@ -122,7 +128,8 @@ def cmd_calibrate(args) -> int:
             else f"{k} = {v:.6g} {e['units'][k]} (held at the description's value)"
             for k, v in e["parameters"].items()
         )
-        print(f"  added {e['name']} at {e['where']}: {vals}")
+        found = f" (on the {e['path']} path)" if "path" in e else ""
+        print(f"  added {e['name']} at {e['where']}{found}: {vals}")
     if res.unexplained:
         u = res.unexplained
         print(
@@ -172,8 +179,9 @@ def add_parsers(sub) -> None:
     c.add_argument(
         "--path",
         choices=("mechanical", "replay", "closed_loop"),
-        help="the residual path (default: chosen by the channels every run has: mechanical, "
-        "else replay of the valve commands, else closed loop on the reference)",
+        help="narrow the search to one residual path (default: every path the runs support: "
+        "the mechanical path where they record forces and motion, then the replay of the valve "
+        "commands, else the closed loop on the reference, for what the first cannot see)",
     )
     c.add_argument("--workers", type=int, help="processes for the replay / closed-loop search (default: every core)")
     c.add_argument(

@@ -160,7 +160,7 @@ def test_calibrate_writes_the_baseline_and_its_verdict(lab_runs, tmp_path, capsy
     beside before/after, with per run/column figures under the same keys; report.md shows
     them side by side; the flag, report and CLI agree with the numbers."""
     out = tmp_path / "out"
-    assert main(["calibrate", *lab_runs, "--table", "lab", "--out", str(out)]) == 0
+    assert main(["calibrate", *lab_runs, "--table", "lab", "--out", str(out), "--path", "mechanical"]) == 0
     printed = capsys.readouterr().out
     js = json.loads((out / "calibration.json").read_text(), parse_constant=lambda c: pytest.fail(c))
     b = js["baseline"]

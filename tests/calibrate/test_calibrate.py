@@ -60,7 +60,9 @@ def _effect(res, name):
 def test_nees_ucsd_friction_and_power_damping_found(ucsd_runs, tmp_path):
     """The NEES-UCSD case, two effects at once: from mass and hold-down stiffness only,
     the periodic tests add Coulomb friction and power-law damping at the paper's values."""
-    res = S.calibrate(ucsd_runs, table=declared(tmp_path, ("platen_coulomb", "platen_power_damping")))
+    res = S.calibrate(
+        ucsd_runs, table=declared(tmp_path, ("platen_coulomb", "platen_power_damping")), path="mechanical"
+    )
     assert res.residual_path == "mechanical"
     assert {(e["name"], e["where"]) for e in res.effects_added} == {
         ("coulomb_friction", "dof:x"),
@@ -79,7 +81,7 @@ def test_nees_ucsd_friction_and_power_damping_found(ucsd_runs, tmp_path):
 
 
 def test_missing_hold_down_spring_found(ucsd_runs, tmp_path):
-    res = S.calibrate(ucsd_runs, table=declared(tmp_path, ("platen_spring",)))
+    res = S.calibrate(ucsd_runs, table=declared(tmp_path, ("platen_spring",)), path="mechanical")
     (e,) = res.effects_added
     assert (e["name"], e["where"]) == ("spring", "dof:x")
     assert e["parameters"]["stiffness_n_m"] == pytest.approx(K_E, rel=0.10)
@@ -92,7 +94,7 @@ def test_missing_mass_found(ucsd_runs, tmp_path):
     def lighter(doc):
         doc.set_value("platen", "mass_kg", 130000.0, "test: 10 t less than the truth")
 
-    res = S.calibrate(ucsd_runs, table=declared(tmp_path, edit=lighter))
+    res = S.calibrate(ucsd_runs, table=declared(tmp_path, edit=lighter), path="mechanical")
     (e,) = res.effects_added
     assert (e["name"], e["where"]) == ("added_mass", "dof:x")
     assert e["parameters"]["mass_kg"] == pytest.approx(10000.0, rel=0.10)
@@ -137,7 +139,7 @@ def test_ucsd_planted_effect_found(case, ucsd_runs, tmp_path):
 
     planted, keys, payload = UCSD_PLANTED[case]
     runs = [r["path"] for r in ucsd_programme(UCSD_SET, workers=2, out_dir=tmp_path, effects=planted)]
-    res = S.calibrate(runs, table=str(UCSD_TOML), payload=payload)
+    res = S.calibrate(runs, table=str(UCSD_TOML), payload=payload, path="mechanical")
     (e,) = res.effects_added
     p = planted[0]
     assert (e["name"], e["where"]) == (p["type"], p["where"]), res.effects_added
@@ -152,7 +154,7 @@ def test_load_law_needs_each_actuators_force(ucsd_runs):
     """The NEES-UCSD runs hold the measured total force in column E (W zero): a friction
     growing with an actuator's own force is not a candidate on them (planted at E, it was
     found at 0.0027 for 0.01: the law read the total, the model E's own force)."""
-    res = S.calibrate(ucsd_runs, table=str(UCSD_TOML))
+    res = S.calibrate(ucsd_runs, table=str(UCSD_TOML), path="mechanical")
     assert res.candidates and not any(c.get("options") == {"grows_with": "load"} for c in res.candidates)
     assert any(c.get("options") == {"grows_with": "displacement"} for c in res.candidates)
 
@@ -162,12 +164,12 @@ _FLOOR = {}
 
 def _clean_floor(runs):
     if "e" not in _FLOOR:
-        _FLOOR["e"] = S.calibrate(runs, table=str(UCSD_TOML)).error_before
+        _FLOOR["e"] = S.calibrate(runs, table=str(UCSD_TOML), path="mechanical").error_before
     return _FLOOR["e"]
 
 
 def test_clean_runs_add_nothing(ucsd_runs):
-    res = S.calibrate(ucsd_runs, table=str(UCSD_TOML))
+    res = S.calibrate(ucsd_runs, table=str(UCSD_TOML), path="mechanical")
     assert res.effects_added == []
     assert res.error_after == res.error_before
     assert res.candidates and not any(c["accepted"] for c in res.candidates)
@@ -204,7 +206,7 @@ def pickup_runs(ucsd_runs, tmp_path):
 
 
 def test_line_pickup_reported_unexplained_not_papered_over(pickup_runs):
-    res = S.calibrate(pickup_runs, table=str(UCSD_TOML))
+    res = S.calibrate(pickup_runs, table=str(UCSD_TOML), path="mechanical")
     assert res.effects_added == []
     u = res.unexplained
     assert u is not None and u["peak_hz"] == pytest.approx(60.0, abs=1.0)
@@ -221,7 +223,9 @@ def test_cli_writes_json_report_and_commented_table(ucsd_runs, tmp_path):
     decl = declared(tmp_path, ("platen_coulomb", "platen_power_damping"))
     out = tmp_path / "out"
     fit, ho = ucsd_runs[:5], ucsd_runs[5:]
-    rc = main(["calibrate", *fit, "--table", decl, "--holdout", *ho, "--out", str(out), "--json"])
+    rc = main(
+        ["calibrate", *fit, "--table", decl, "--holdout", *ho, "--out", str(out), "--json", "--path", "mechanical"]
+    )
     assert rc == 0
     js = json.loads((out / "calibration.json").read_text(), parse_constant=lambda c: pytest.fail(c))
     for k in ("error_before", "error_after", "residual_path", "effects_added", "candidates", "unexplained"):
@@ -368,10 +372,10 @@ def test_cgs_lateral_seal_friction_found_and_clean_runs_add_nothing(tmp_path):
     seal = raw["actuator_class"]["lateral"]["seal_friction_n"]
     (tmp_path / "clean").mkdir()
     (tmp_path / "lat").mkdir()
-    clean = S.calibrate(_cgs_runs(tmp_path / "clean", raw), accel_lowpass_hz=None)
+    clean = S.calibrate(_cgs_runs(tmp_path / "clean", raw), accel_lowpass_hz=None, path="mechanical")
     assert clean.effects_added == []
     raw["actuator_class"]["lateral"]["seal_friction_n"] = 2 * seal
-    res = S.calibrate(_cgs_runs(tmp_path / "lat", raw), accel_lowpass_hz=None)
+    res = S.calibrate(_cgs_runs(tmp_path / "lat", raw), accel_lowpass_hz=None, path="mechanical")
     (e,) = res.effects_added
     assert (e["name"], e["where"]) == ("coulomb_friction", "class:lateral")
     assert e["parameters"]["force_n"] == pytest.approx(seal, rel=0.10)

@@ -169,7 +169,7 @@ def calibrate_case(paths):
     anti-alias filter on every channel: no extra accelerometer conditioner to undo."""
     from sim.calibrate import search as S
 
-    res = S.calibrate(paths, accel_lowpass_hz=None)
+    res = S.calibrate(paths, accel_lowpass_hz=None, path="mechanical")
     res.series = {}  # arrays stay in the worker
     return res
 

@@ -72,7 +72,7 @@ def measured_runs(out, sensors, seeds=(1, 2, 3), seconds=6.0):
 @pytest.fixture(scope="module")
 def clean(tmp_path_factory):
     paths = measured_runs(tmp_path_factory.mktemp("clean"), ARTIFACTS)
-    return S.calibrate(paths)
+    return S.calibrate(paths, path="mechanical")
 
 
 def test_clean_runs_with_every_artifact_add_nothing(clean):
@@ -87,7 +87,7 @@ def test_force_sensor_delay_found(clean, tmp_path):
     """A load cell 4 ms late (the channel's sample taken 4 ms before its time stamp)."""
     sensors = copy.deepcopy(ARTIFACTS)
     sensors["channel"]["actuator_force"]["skew_s"] = -0.004
-    res = S.calibrate(measured_runs(tmp_path, sensors))
+    res = S.calibrate(measured_runs(tmp_path, sensors), path="mechanical")
     (e,) = res.effects_added
     assert (e["name"], e["where"]) == ("sensor_delay", "channel:actuator_force")
     d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
@@ -104,7 +104,7 @@ def test_accelerometer_conditioner_mismatch_found(clean, tmp_path):
     sensors = copy.deepcopy(ARTIFACTS)
     acc = sensors["channel"]["table_acceleration"]
     acc.update(lowpass_hz=30.0, declared_lowpass_hz=100.0, declared_lowpass_order=4)
-    res = S.calibrate(measured_runs(tmp_path, sensors))
+    res = S.calibrate(measured_runs(tmp_path, sensors), path="mechanical")
     (e,) = res.effects_added
     assert (e["name"], e["where"], e["options"]) == ("sensor_lowpass", "channel:table_acceleration", {"order": 4})
     fc, u = e["parameters"]["cutoff_hz"], e["uncertainty"]["cutoff_hz"]
@@ -120,7 +120,7 @@ def test_undeclared_accelerometer_lag_found(clean, tmp_path):
     acc = sensors["channel"]["table_acceleration"]
     del acc["declared"]
     acc.update(declared_lowpass_hz=100.0, declared_lowpass_order=4)  # the lag is not declared
-    res = S.calibrate(measured_runs(tmp_path, sensors))
+    res = S.calibrate(measured_runs(tmp_path, sensors), path="mechanical")
     (e,) = res.effects_added
     assert (e["name"], e["where"]) == ("sensor_delay", "channel:table_acceleration")
     d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
@@ -151,7 +151,7 @@ def test_mains_pickup_on_the_load_cell_is_not_a_sensor_fault(tmp_path):
         r = read_run(p)
         r.actuator_force[:, 0] += 3e3 * np.sin(2 * np.pi * 60.0 * r.t + 0.3)
         paths.append(str(write_run(p, r)))
-    res = S.calibrate(paths)
+    res = S.calibrate(paths, path="mechanical")
     assert res.effects_added == []
     lows = [c for c in res.candidates if c["name"] == "sensor_lowpass"]
     assert [c["options"] for c in lows] == [{"order": 4}] and abs(lows[0]["parameters"]["cutoff_hz"] - 100.0) < 0.5

@@ -1,0 +1,326 @@
+"""The mechanical path as one stage of the search (:func:`sim.calibrate.search.calibrate`).
+
+The residual is the recorded generalised force minus the declared model's force for the
+recorded motion (:func:`sim.calibrate.residuals.mechanical_runs`); each candidate law is a
+least-squares term of it (:mod:`sim.calibrate.trace`). The stage runs the forward search
+(:func:`sim.calibrate.mechjudge.forward_search`: screen, refine, judge, with the sensor
+timing candidates), then two backward passes (:func:`backward_pass`,
+:func:`demote_nested`), and returns a :class:`sim.calibrate.search.CalibrationResult`
+without its baseline.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class MechStage:
+    """What the stage works on: the fit and held-out runs on the mechanical path, the
+    acceptance margin and the log."""
+
+    mfit: list
+    mho: list
+    margin: float
+    say: object
+    n_fits: int = 0
+
+
+def accel_lowpass(desc, accel_lowpass_hz, rate_hz: float):
+    """The accelerometer conditioner the records went through: the table's (``"table"``)
+    or the one given; None above the recorder's Nyquist (it does not delay the record)."""
+    lp = desc.accelerometer_bandwidth_hz if accel_lowpass_hz == "table" else accel_lowpass_hz
+    return None if lp and lp >= 0.5 * rate_hz else lp
+
+
+def stage_laws(effects, payload) -> list:
+    """The candidate laws: ``effects`` or the library; the laws of a specimen that is there
+    but not declared only with ``--payload none`` (or when named)."""
+    from sim.calibrate.search import candidate_laws
+
+    laws = candidate_laws(effects)
+    if not effects:
+        laws = [w for w in laws if w.when == "always" or (w.when == "undeclared_specimen" and payload == "none")]
+    return laws
+
+
+def stage_candidates(laws, mfit, desc, pl) -> list:
+    """``(law, place)`` pairs: each law at the places it acts on, one place per distinct
+    force direction. A law of the actuators' own loads needs each actuator's force: a
+    record with an actuator's force zero throughout holds a total (the NEES-UCSD runs:
+    column E the measured total, W zero), not each actuator's own."""
+    from sim.calibrate.residuals import places
+
+    own_forces = not any(np.all(mr.extra["actuator_force"] == 0, axis=0).any() for mr in mfit)
+    laws = [law for law in laws if own_forces or not law.load]
+    return [
+        (law, w)
+        for law in laws
+        for w in distinct_places(mfit[0], [p for p in places(desc, law.places, pl is not None) if law.acts_at(p)])
+    ]
+
+
+def mechanical_stage(runs, ho_given, desc, pl, *, effects, payload, accel_lowpass_hz, margin, say, t0):
+    """The mechanical path's search on ``runs`` (held out: ``ho_given`` or a share of
+    ``runs``); a :class:`~sim.calibrate.search.CalibrationResult` without its baseline."""
+    from sim.calibrate.acceptance import table_scale
+    from sim.calibrate.mechjudge import RoundState, forward_search
+    from sim.calibrate.residuals import mechanical_runs, nrmse_runs
+    from sim.calibrate.search import MAX_ROUNDS, split_holdout
+    from sim.calibrate.trace import fit_terms, flatness, predict
+
+    lp = accel_lowpass(desc, accel_lowpass_hz, runs[0].sample_rate_hz)
+    fit_runs, ho_runs, ho_note = split_holdout(runs, ho_given)
+    t1 = time.perf_counter()
+    mfit = mechanical_runs(fit_runs, desc, pl, accel_lowpass_hz=lp)
+    mho = mechanical_runs(ho_runs, desc, pl, accel_lowpass_hz=lp)
+    t2 = time.perf_counter()
+    cur = fit_terms(mfit, [])
+    e_ho0 = nrmse_runs(mho, predict(mho, cur))
+    say(f"mechanical path: {len(fit_runs)} fit runs, {len(ho_runs)} held out; held-out NRMSE {e_ho0:.4f}")
+    cands = stage_candidates(stage_laws(effects, payload), mfit, desc, pl)
+    flat = flatness(mfit, cur.residuals)
+    st = RoundState(mfit, mho, e_ho0, flat, margin, table_scale(desc, pl), effects=effects, timing_on=True)
+    cur, tried, n_fits = forward_search(st, cur, cands, MAX_ROUNDS, say)
+    ms = MechStage(st.mfit, st.mho, margin, say, n_fits)  # a sensor's timing found: the records re-timed
+    cur, e_ho = backward_pass(ms, cur, st.e_ho, tried)
+    cur, e_ho = demote_nested(ms, cur, e_ho, tried, desc, pl)
+    t3 = time.perf_counter()
+    times = {"read_s": t1 - t0, "residuals_s": t2 - t1, "search_s": t3 - t2, "total_s": t3 - t0}
+    return _result(ms, cur, tried, st.timed_added, (mfit, mho), (e_ho0, times, ho_note), desc, runs)
+
+
+def _result(ms, cur, tried, timed_added, declared, facts, desc, runs):
+    """The stage's :class:`~sim.calibrate.search.CalibrationResult` (``declared``: the
+    fit and held-out runs at the declared timing, the report's "before")."""
+    from sim.calibrate.residuals import nrmse_runs
+    from sim.calibrate.search import CalibrationResult, unexplained
+    from sim.calibrate.trace import predict
+
+    (mfit0, mho0), (e_ho0, times, ho_note) = declared, facts
+    ho_res = predict(ms.mho, cur)
+    ho_res0 = [mr.residual for mr in mho0]
+    per, per_run, quiet = mechanical_errors(ms.mho, ho_res0, ho_res)
+    return CalibrationResult(
+        table=desc.name,
+        table_source=str(desc.source),
+        runs=[str(r.name) for r in runs],
+        holdout=[str(mr.name) for mr in ms.mho],
+        holdout_note=ho_note,
+        residual_path="mechanical",
+        error_before=e_ho0,
+        error_after=nrmse_runs(ms.mho, ho_res),
+        effects_added=added_entries(cur) + timed_added,
+        candidates=tried,
+        unexplained=unexplained(ms.mfit, cur.residuals),
+        per_channel=per,
+        per_run=per_run,
+        not_excited=quiet,
+        timing={**times, "least_squares_fits": ms.n_fits},
+        series={
+            "fit": ms.mfit,
+            "holdout": ms.mho,
+            "before": ho_res0,
+            "after": ho_res,
+            "fit_before": [mr.residual for mr in mfit0],
+            "fit_after": cur.residuals,
+        },
+    )
+
+
+def backward_pass(ms: MechStage, cur, e_ho: float, tried: list):
+    """Drop a term whose removal keeps the held-out error within the acceptance margin: a
+    term accepted early may be superseded by later ones (viscous damping standing in for
+    friction the flatness test kept out until a specimen's mode was in). ``(fit, error)``."""
+    from sim.calibrate.residuals import nrmse_runs
+    from sim.calibrate.trace import fit_terms, flatness, predict
+
+    dropped = True
+    while dropped and len(cur.terms) > 1:
+        dropped = False
+        for i, t in enumerate(cur.terms):
+            rest = fit_terms(ms.mfit, cur.terms[:i] + cur.terms[i + 1 :])
+            ms.n_fits += 1
+            e_rest = nrmse_runs(ms.mho, predict(ms.mho, rest))
+            if e_rest > (1 + ms.margin) * e_ho:
+                continue
+            why = f"dropped: without it the held-out error is {e_ho:.4f} -> {e_rest:.4f} (within {100 * ms.margin:g} %)"
+            ms.say(f"  {t.law.type:18s} {t.where:14s} {why}")
+            expl = (rest.rss - cur.rss) / rest.rss if rest.rss > 0 else 0.0
+            flat = flatness(ms.mfit, rest.residuals)
+            tried.append(backward_row(t, cur.values[i], {}, rest, cur, e_rest, expl, flat, why))
+            cur, e_ho, dropped = rest, e_rest, True
+            break
+    return cur, e_ho
+
+
+def demote_nested(ms: MechStage, cur, e_ho: float, tried: list, desc, pl):
+    """Replace a term whose nesting parameter ended at the simpler law's value once the
+    later terms were in (a load-growing friction that stood in for the damping, its
+    coefficient now 0 +/- its interval) by that simpler law at the same place, when the
+    held-out error stays within the margin. ``(fit, error)``."""
+    demoted = True
+    while demoted:
+        demoted = False
+        for i, t in enumerate(cur.terms):
+            for name, (at, simpler) in t.law.nested.items():
+                alt = _demoted(ms, cur, i, name, at, simpler, desc, pl)
+                if alt is None or alt[1] > (1 + ms.margin) * e_ho:
+                    continue
+                (fit, e_alt, w2) = alt
+                _log_demotion(ms, cur, i, name, at, (simpler, w2), (fit, e_ho, e_alt), tried)
+                cur, e_ho, demoted = fit, e_alt, True
+                break
+            if demoted:
+                break
+    return cur, e_ho
+
+
+def _demoted(ms: MechStage, cur, i: int, name: str, at: float, simpler: str, desc, pl):
+    """``(fit, held-out error, place)`` with term ``i`` replaced by ``simpler``, or None
+    when its parameter ``name`` is off ``at`` or the simpler law has no place of its own."""
+    from sim.calibrate.laws import LAWS
+    from sim.calibrate.residuals import nrmse_runs, places
+    from sim.calibrate.search import Z95
+    from sim.calibrate.trace import Term, fit_terms, predict
+
+    t = cur.terms[i]
+    s95 = Z95 * cur.sigma[i].get(name, math.inf)
+    if simpler not in LAWS or abs(cur.values[i][name] - at) > s95:
+        return None
+    law2 = LAWS[simpler]
+    w2 = same_place(ms.mfit[0], t.where, places(desc, law2.places, pl is not None))
+    if w2 is None or any((u.law.name, u.where) == (law2.name, w2) for j, u in enumerate(cur.terms) if j != i):
+        return None
+    alt = fit_terms(ms.mfit, cur.terms[:i] + [Term(law2, w2)] + cur.terms[i + 1 :])
+    ms.n_fits += 1
+    return alt, nrmse_runs(ms.mho, predict(ms.mho, alt)), w2
+
+
+def _log_demotion(ms: MechStage, cur, i, name, at, simpler_at, fits, tried) -> None:
+    from sim.calibrate.search import Z95
+    from sim.calibrate.trace import flatness
+
+    (simpler, w2), (alt, e_ho, e_alt), t = simpler_at, fits, cur.terms[i]
+    s95 = Z95 * cur.sigma[i].get(name, math.inf)
+    why = (
+        f"replaced by {simpler} at {w2}: {name} = {cur.values[i][name]:.4g} +/-{s95:.3g} holds {at:g} "
+        f"(held-out {e_ho:.4f} -> {e_alt:.4f})"
+    )
+    ms.say(f"  {t.law.type:18s} {t.where:14s} {why}")
+    unc95 = {k: Z95 * v for k, v in cur.sigma[i].items()}
+    tried.append(backward_row(t, cur.values[i], unc95, alt, cur, e_alt, 0.0, flatness(ms.mfit, alt.residuals), why))
+
+
+def added_entries(cur) -> list:
+    """The ``effects_added`` entries of the fit's terms."""
+    from sim.calibrate.search import param_report
+
+    out = []
+    for i, t in enumerate(cur.terms):
+        _, _, unc = param_report(t, cur.values[i], cur.sigma[i])
+        out.append(
+            {
+                "name": t.law.name,
+                "where": t.where,
+                **({"options": dict(t.law.options)} if t.law.options else {}),
+                **({"label": f"{t.law.name} {t.index + 1}"} if getattr(t.law, "repeats", 1) > 1 else {}),
+                **({"fixed": dict(t.law.fixed)} if t.law.fixed else {}),
+                "parameters": cur.values[i],
+                "uncertainty": unc,
+                "units": t.law.units,
+            }
+        )
+    return out
+
+
+def backward_row(t, values, unc, new, cur, e_new, explained, flat, why) -> dict:
+    """The ``candidates`` row of a term the backward pass dropped or replaced (``new``:
+    the fit without it or with its replacement, ``cur``: the fit before)."""
+    return {
+        "round": "backward",
+        "name": t.law.name,
+        "where": t.where,
+        **({"options": dict(t.law.options)} if t.law.options else {}),
+        "explained_fraction": explained,
+        "parameters": values,
+        "uncertainty": unc,
+        "holdout_error": e_new,
+        "bic_change": new.bic - cur.bic,
+        "flatness": flat,
+        "accepted": False,
+        "reason": why,
+    }
+
+
+def _direction(mr, where) -> np.ndarray:
+    m = np.atleast_2d(mr.place_motion(where)[3]).astype(float)
+    return m / (np.linalg.norm(m) or 1.0)
+
+
+def _parallel(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and min(np.abs(a - b).max(), np.abs(a + b).max()) < 1e-6
+
+
+def same_place(mr, where, wheres) -> str | None:
+    """The first of ``wheres`` whose force maps into DOF space as ``where``'s does (on a
+    uni-axial table ``dof:x`` for ``actuator:E``), else None."""
+    m0 = _direction(mr, where)
+    return next((w for w in wheres if _parallel(_direction(mr, w), m0)), None)
+
+
+def distinct_places(mr, wheres) -> list:
+    """Places whose force maps into DOF space differently (a uni-axial table's actuators
+    and classes all push along x: one place, ``dof:x``, stands for them)."""
+    out, maps = [], []
+    for w in wheres:
+        m = _direction(mr, w)
+        if not any(_parallel(q, m) for q in maps):
+            maps.append(m)
+            out.append(w)
+    return out
+
+
+def mechanical_errors(mho, before, after) -> tuple[dict, dict, list]:
+    """Where the held-out error sits: per run and excited DOF (``"<run>:<dof>"`` ->
+    before/after), per run (pooled over its excited DOFs), and the ``"<run>:<dof>"`` the
+    runs do not excite (:func:`sim.calibrate.residuals.excited_dofs`), left out of both."""
+    from sim.calibrate.residuals import nrmse_runs
+
+    per, per_run, quiet = {}, {}, []
+    for mr, e0, e1 in zip(mho, before, after):
+        run = Path(mr.name).name
+        per_run[run] = {"before": nrmse_runs([mr], [e0]), "after": nrmse_runs([mr], [e1])}
+        for j, d in enumerate(mr.dofs):
+            if mr.excited is not None and not mr.excited[j]:
+                quiet.append(f"{run}:{d}")
+                continue
+            per[f"{run}:{d}"] = {"before": _nrmse_col(mr, e0, j), "after": _nrmse_col(mr, e1, j)}
+    return per, per_run, quiet
+
+
+def _nrmse_col(mr, e, j) -> float:
+    F = mr.demean(mr.force)[mr.rows, j]
+    den = float(np.sum(F**2))
+    return float(math.sqrt(np.sum(e[mr.rows, j] ** 2) / den)) if den > 0 else float("nan")
+
+
+__all__ = [
+    "MechStage",
+    "accel_lowpass",
+    "added_entries",
+    "backward_pass",
+    "backward_row",
+    "demote_nested",
+    "distinct_places",
+    "mechanical_errors",
+    "mechanical_stage",
+    "same_place",
+    "stage_candidates",
+    "stage_laws",
+]

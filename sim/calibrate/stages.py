@@ -1,0 +1,248 @@
+"""One search across every residual path the records support.
+
+A user does not choose where an effect shows. The records decide which paths they
+support (:func:`sim.calibrate.residuals.supported_paths`); the search runs them as stages:
+
+1. **mechanical** (recorded forces against recorded motion): mechanical effects, the
+   specimen's modes and the force and acceleration sensors' timing are judged here,
+   where the evidence is most direct and every fit is a least-squares solve;
+2. **replay** of the valve commands (else **closed loop** on the reference): started
+   from the model with stage 1's effects in, it looks for what stage 1 cannot see:
+   hydraulic and valve effects and the foundation (:data:`AFTER_MECHANICAL`). Without stage 1 it looks for everything.
+
+The held-out judgement pools the paths' evidence (:func:`pool`, the RMS of the paths'
+held-out NRMSEs): stage 1's effects stay in only when the pooled held-out error with
+them is below the pooled error without them (the replay of the held-out runs through
+the final model less stage 1's effects). ``--path`` narrows the search to one path.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import replace
+
+#: effect types the mechanical path cannot see: a later stage looks only for these (the
+#: force and acceleration sensors' timing and the specimen's modes are judged on the
+#: mechanical path, on the same channels the later stage compares)
+AFTER_MECHANICAL = (
+    "valve_delay",
+    "valve_bandwidth",
+    "valve_flow_gain",
+    "valve_null_offset",
+    "bulk_modulus",
+    "leakage",
+    "supply_pressure_drop",
+    "foundation_mode",
+)
+
+
+def pool(errors) -> float:
+    """The paths' held-out NRMSEs pooled: their RMS (each path weighs the same)."""
+    errors = [e for e in errors if e is not None and math.isfinite(e)]
+    return math.sqrt(sum(e * e for e in errors) / len(errors)) if errors else math.nan
+
+
+def plan(runs, path: str | None) -> list[str]:
+    """The stages: ``[path]`` when given (checked against the runs), else the mechanical
+    path where every run supports it, then replay (else closed loop)."""
+    from sim.calibrate.residuals import check_path, choose_path, supported_paths
+
+    if path:
+        return [check_path(runs, path)]
+    have = supported_paths(runs)
+    if not have:
+        choose_path(runs)  # the one-line error naming what the first run lacks
+    dynamic = [p for p in ("replay", "closed_loop") if p in have][:1]
+    return [p for p in ("mechanical",) if p in have] + dynamic
+
+
+def on_mechanical(effect: str) -> bool:
+    """Whether the mechanical path can look for this effect type (a force law or a
+    sensor's timing)."""
+    from sim.calibrate.laws import LAWS
+    from sim.calibrate.timing import TIMING_EFFECTS
+
+    return effect in LAWS or effect in TIMING_EFFECTS
+
+
+def stage_effects(effects, after_mechanical: bool):
+    """The effect types a stage looks for (None: every one); ``()`` when none is left.
+    After the mechanical path: what it cannot see, and any type named in ``effects``
+    that it cannot look for."""
+    if not after_mechanical:
+        return effects
+    if not effects:
+        return AFTER_MECHANICAL
+    return tuple(t for t in effects if t in AFTER_MECHANICAL or not on_mechanical(t))
+
+
+def first_stage(stages, effects):
+    """``(stages, effects of the first)``: with ``effects`` named and a later stage, the
+    mechanical path looks only for the named types it can see, and is left out when it
+    can see none of them."""
+    if not effects or len(stages) < 2 or stages[0] != "mechanical":
+        return stages, effects
+    mech = [t for t in effects if on_mechanical(t)]
+    return (stages, mech) if mech else (stages[1:], effects)
+
+
+def with_effects(desc, entries):
+    """``desc`` with the description entries ``entries`` added to its ``[[effect]]`` list."""
+    from mjcf.description import parse_table
+    from sim.calibrate.sensitivity import build_order
+
+    raw = copy.deepcopy(desc.raw)
+    raw["effect"] = build_order(list(raw.get("effect", [])) + [dict(e) for e in entries])
+    return parse_table(raw, src=desc.source)
+
+
+def entries_of(res, tag: str = "calibrated") -> list:
+    """The description entries of a result's ``effects_added``."""
+    from sim.calibrate.search import effect_entry
+
+    return [effect_entry(e, tag)[0] for e in res.effects_added]
+
+
+def holdout_error(runs, ho_given, desc, payload, path, entries, workers) -> float:
+    """The held-out NRMSE of ``path`` replayed through ``desc`` with ``entries`` added
+    (the same held-out runs and scored samples as the stage's own search)."""
+    from sim.calibrate import paths as P
+    from sim.calibrate.pathsearch import _split
+
+    _fit, ho_runs, score_from, _note = _split(runs, ho_given)
+    pho = P.path_runs(ho_runs, desc, path, score_from=score_from)
+    ms = P.simulate_many([p.job(desc.raw, str(desc.source), payload, entries) for p in pho], workers=workers)
+    return math.inf if any(m is None for m in ms) else P.nrmse(pho, ms)
+
+
+def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, workers):
+    """Every stage of ``stages`` in turn (``search_one(path, desc, effects)`` is one
+    path's search), stage 1's effects judged on the pooled evidence; the combined
+    :class:`~sim.calibrate.search.CalibrationResult` (without the pooled baseline)."""
+    stages, first_effects = first_stage(stages, effects)
+    first = search_one(stages[0], desc, first_effects)
+    if len(stages) == 1:
+        return first
+    path = stages[1]
+    later = stage_effects(effects, after_mechanical=True)
+    kept = entries_of(first)
+    say(f"{path} path, after the mechanical path: looking for {', '.join(later) or 'nothing'}")
+    second = search_one(path, with_effects(desc, kept), later) if later else None
+    if second is None:
+        return first
+    ev = _pooled_evidence(runs, ho_given, desc, pl, first, second, workers)
+    say(
+        f"pooled held-out NRMSE (mechanical, {path}): declared {ev['before']:.4f}; with every effect "
+        f"{ev['with']:.4f}; without the mechanical path's {ev['without']:.4f}"
+    )
+    if kept and not ev["with"] < ev["without"]:
+        return _disagree(first, second, ev, say)
+    return combine(first, second, ev)
+
+
+def _pooled_evidence(runs, ho_given, desc, pl, first, second, workers) -> dict:
+    """The two paths' held-out errors: the declared model's, the final model's, and the
+    final model's without stage 1's effects (stage 2 replayed without them)."""
+    path = second.residual_path
+    e_decl = holdout_error(runs, ho_given, desc, pl, path, [], workers)
+    without = (
+        holdout_error(runs, ho_given, desc, pl, path, entries_of(second), workers) if first.effects_added else None
+    )
+    dyn_without = second.error_after if without is None else without
+    return {
+        "path": path,
+        "declared": e_decl,
+        "without_first": dyn_without,
+        "before": pool([first.error_before, e_decl]),
+        "with": pool([first.error_after, second.error_after]),
+        "without": pool([first.error_before, dyn_without]),
+    }
+
+
+def summary(res) -> dict:
+    """One path's figures for ``calibration.json``'s ``paths``."""
+    return {
+        "holdout": res.holdout,
+        "error_before": res.error_before,
+        "error_after": res.error_after,
+        "effects_added": [f"{e['name']} at {e['where']}" for e in res.effects_added],
+        "per_run": res.per_run,
+        "per_channel": res.per_channel,
+        "not_excited": res.not_excited,
+        "baseline_error": (res.baseline or {}).get("holdout_error"),
+        "beats_baseline": res.beats_baseline,
+    }
+
+
+def _tagged(rows, path: str) -> list:
+    return [{**r, "path": path} for r in rows]
+
+
+def combine(first, second, ev, first_kept: bool = True):
+    """The result of two stages: the pooled errors at the top, each path's in ``paths``;
+    the per-column figures, the series and the baseline's columns of the last stage."""
+    p1, p2 = first.residual_path, second.residual_path
+    s1 = summary(first)
+    if not first_kept:
+        s1.update(error_after=first.error_before, effects_added=[], refused="the paths disagree (pooled evidence)")
+    s2 = {**summary(second), "error_before_declared": ev["declared"]}
+    out = replace(
+        second,
+        runs=first.runs,
+        residual_path=f"{p1} + {p2}",
+        error_before=ev["before"],
+        error_after=ev["with"] if first_kept else pool([first.error_before, ev["without_first"]]),
+        effects_added=_tagged(first.effects_added if first_kept else [], p1) + _tagged(second.effects_added, p2),
+        candidates=_tagged(first.candidates, p1) + _tagged(second.candidates, p2),
+        unexplained=second.unexplained or first.unexplained,
+        timing={
+            "total_s": first.timing.get("total_s", 0.0) + second.timing.get("total_s", 0.0),
+            p1: first.timing,
+            p2: second.timing,
+        },
+        paths={p1: s1, p2: s2},
+        baseline=_pooled_baseline(first, second),
+    )
+    from sim.calibrate.baseline import beats
+
+    out.beats_baseline = beats(out.error_after, out.baseline)
+    return out
+
+
+def _disagree(first, second, ev, say):
+    """Stage 1's effects refused on the pooled evidence: the final model is stage 2's
+    effects on the declared model (its held-out error measured, ``ev["without_first"]``)."""
+    say(
+        f"  the mechanical path's effects refused: with them the pooled held-out error is {ev['with']:.4f}, "
+        f"without them {ev['without']:.4f} (the paths disagree)"
+    )
+    why = f"refused on the pooled evidence: {ev['with']:.4f} with, {ev['without']:.4f} without (paths disagree)"
+    for e in first.effects_added:
+        first.candidates.append(
+            {"round": "pooled", "name": e["name"], "where": e["where"], "accepted": False, "reason": why}
+        )
+    return combine(first, second, ev, first_kept=False)
+
+
+def _pooled_baseline(first, second) -> dict | None:
+    """The last stage's baseline with its held-out error replaced by the paths' pooled one."""
+    b1, b2 = first.baseline, second.baseline
+    if not b1 or not b2:
+        return b2
+    per_path = {first.residual_path: b1.get("holdout_error"), second.residual_path: b2.get("holdout_error")}
+    return {**b2, "holdout_error": pool(per_path.values()), "per_path": per_path}
+
+
+__all__ = [
+    "AFTER_MECHANICAL",
+    "combine",
+    "entries_of",
+    "holdout_error",
+    "plan",
+    "pool",
+    "run_stages",
+    "stage_effects",
+    "summary",
+    "with_effects",
+]
