@@ -38,6 +38,7 @@ import numpy as np
 from hydraulics.params import HydraulicsParamError
 from sim.calibrate import conditioning
 from sim.calibrate.residuals import CalibrationError, check_finite
+from sim.calibrate.specimen_model import sensors_of
 from sim.calibrate.windows import QUIET_COLUMN, dof_weights, excited
 from sim.errors import UserError
 
@@ -50,6 +51,12 @@ FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_velocity")
 #: nothing about its sensors)
 NOISE_COLUMN = 3.0
 DOF_CHANNELS = ("table_displacement", "table_velocity", "table_acceleration")
+#: accelerometers on the specimen: compared where the model gives their reading
+#: (:mod:`sim.calibrate.specimen_model`), so that a specimen's mode is pinned by them too
+SPECIMEN = "specimen_acceleration"
+#: ``path_runs(payload=...)`` not given: the specimen channel is not compared (the model
+#: it would be compared with is not known)
+NOT_GIVEN = object()
 
 
 @dataclass
@@ -72,6 +79,8 @@ class PathRun:
     #: columns not compared: channel -> places the run does not excite (:func:`sim.calibrate.windows.excited`)
     not_excited: dict = field(default_factory=dict)
     origin: tuple = ()  # a window's (start, first scored, stop) samples in its record
+    #: the run's ``meta.specimen_sensors`` (one per column of ``specimen_acceleration``)
+    specimen: list = field(default_factory=list)
 
     @property
     def dt(self) -> float:
@@ -123,6 +132,7 @@ class PathRun:
             {c: list(v) for c, v in self.columns.items()},
             self.conditioning,
             dict(self.bandpass),
+            list(self.specimen),
         )
 
     def only(self, keep) -> "PathRun":
@@ -140,6 +150,8 @@ class PathRun:
             for j in cols:
                 if ch.startswith("table_"):
                     out.append((ch, j, f"dof:{self.dofs[j]}"))
+                elif ch == SPECIMEN:
+                    out.append((ch, j, f"sensor:{_place(self, ch, j)}"))
                 else:
                     out.append((ch, j, f"actuator:{self.actuators[j]}"))
         return out
@@ -159,9 +171,11 @@ def fit_channels(run) -> list[str]:
     return have
 
 
-def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[PathRun]:
+def path_runs(runs, desc, path: str, *, score_from: dict | None = None, payload=NOT_GIVEN) -> list[PathRun]:
     """The records of ``runs`` on ``path`` (``"replay"`` or ``"closed_loop"``).
-    ``score_from``: run name -> first scored sample (the held-out part of one run)."""
+    ``score_from``: run name -> first scored sample (the held-out part of one run);
+    ``payload``: the model's payload (None: a bare table); given, a run's
+    ``specimen_acceleration`` is compared where the model reads it (:func:`specimen_columns`)."""
     from mjcf.description import DOFS6
     from sim.calibrate.replay import DISPLACEMENT_BAND_HZ
     from sim.calibrate.valve_null import declared_null, estimate
@@ -187,6 +201,9 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
                 drive[:, DOFS6.index(d)] = r.reference[:, j]
         rec, cols, bands, quiet = {}, {}, {}, {}
         known = conditioning.of_run(r)
+        readable = specimen_columns(r, payload)
+        if readable:
+            chans = chans + [SPECIMEN]
         for c in chans:
             x = np.asarray(getattr(r, c), float)
             if c == "table_displacement":
@@ -199,8 +216,10 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
             # both paths (sim.calibrate.windows.excited)
             w = dof_weights(J6, r.dofs, "motion") if c.startswith("table_") else None
             on = excited(rms, w) & (rms > NOISE_COLUMN * noise)
+            if c == SPECIMEN:  # the model reads these sensors only
+                on &= np.isin(np.arange(x.shape[1]), readable)
             keep = [j for j in range(x.shape[1]) if on[j]]
-            names = r.dofs if c.startswith("table_") else r.actuators
+            names = r.dofs if c.startswith("table_") else (r.column_names(c) if c == SPECIMEN else r.actuators)
             if len(keep) < x.shape[1]:
                 quiet[c] = [names[j] for j in range(x.shape[1]) if not on[j]]
             if keep:
@@ -228,9 +247,25 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
                 valve_null=vn,
                 bandpass=bands,
                 not_excited=quiet,
+                specimen=sensors_of(r) if SPECIMEN in cols else [],
             )
         )
     return out
+
+
+def specimen_columns(run, payload) -> list[int]:
+    """The columns of ``run``'s ``specimen_acceleration`` the model with ``payload`` reads
+    (:func:`sim.calibrate.specimen_model.readable`); [] without the channel, or when the
+    payload is not given (:data:`NOT_GIVEN`)."""
+    if payload is NOT_GIVEN or getattr(run, SPECIMEN, None) is None:
+        return []
+    sensors = sensors_of(run)
+    if len(sensors) != run.specimen_acceleration.shape[1]:
+        return []
+    check_finite(run, [SPECIMEN])
+    from sim.calibrate.specimen_model import readable
+
+    return readable(sensors, payload)
 
 
 # ------------------------------------------------------------------ the simulation
@@ -261,7 +296,7 @@ def _setup(job):
     """The simulation of one job, ready to run from its reset: ``(sim, reference,
     valve_command, post)`` (one of reference / valve_command None; ``post(result)`` gives
     :func:`simulate_job`'s answer), or None when the model refuses the candidate."""
-    raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands = job
+    raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands, specimen = job
     from mjcf.description import parse_table
     from sim.effects import build_model
 
@@ -295,11 +330,27 @@ def _setup(job):
         if res.incomplete_reason:
             return None
         chans, n = chans_of(res)
+        if SPECIMEN in columns:
+            chans[SPECIMEN] = _specimen_at(res, tm, payload, specimen, t[:n])
         lag = float(getattr(res, "force_lag_s", 0.0) or 0.0)
         chans = conditioning.force_at_record_instant(chans, lag, cond, float(t[1] - t[0]))
         return _compared(chans, n, t, columns, cond, bands)
 
     return sim, ref, cmd, post
+
+
+def _specimen_at(res, tm, payload, sensors, t) -> np.ndarray:
+    """The model's specimen sensors (:func:`sim.calibrate.specimen_model.model_specimen`)
+    at the record's instants ``t``."""
+    from sim.calibrate.specimen_model import model_specimen
+    from sim.signals.resample import interpolate
+
+    # a sensor the model does not read is NaN there; it is not compared (path_runs), and a
+    # NaN would stop the comparison of the others (_compared)
+    arr = np.nan_to_num(model_specimen(res, tm, payload, sensors), nan=0.0)
+    if len(res.t) >= len(t) and np.allclose(res.t[: len(t)], t):
+        return arr[: len(t)]
+    return interpolate(res.t, arr, t)
 
 
 def _compared(chans, n, t, columns, cond, bands) -> dict | None:
@@ -511,6 +562,8 @@ def column_errors(pr: PathRun, model: dict) -> dict:
 
 
 def _place(pr, ch, j) -> str:
+    if ch == SPECIMEN:
+        return str(pr.specimen[j].get("name", f"s{j}"))
     return pr.dofs[j] if ch.startswith("table_") else pr.actuators[j]
 
 

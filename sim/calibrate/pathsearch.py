@@ -274,14 +274,15 @@ def calibrate_path(
     from sim.calibrate.revisit import revisit_accepted
     from sim.calibrate.search import UNEXPLAINED_FRACTION, Z95, accept_numbers
     from sim.calibrate.sensitivity import candidates, refine_job, screen, sensor_model
+    from sim.calibrate.sensortiming import prefer_timing
     from sim.parallel import map_jobs
 
     say = say or (lambda *_: None)
     tm = {"simulate_s": 0.0, "screen_s": 0.0, "refine_s": 0.0, "accept_s": 0.0, "replays": 0}
     routes: dict = {"batch": 0, "fallback": 0}  # where the replays ran (sim.calibrate.paths.simulate_many)
     fit_runs, ho_runs, score_from, ho_note = _split(runs, ho_given)
-    pfit = P.path_runs(fit_runs, desc, path)
-    pho = P.path_runs(ho_runs, desc, path, score_from=score_from)
+    pfit = P.path_runs(fit_runs, desc, path, payload=payload)  # payload: its specimen sensors compared
+    pho = P.path_runs(ho_runs, desc, path, score_from=score_from, payload=payload)
     wscr, wref = search_windows(pfit)
     tm.update(window_seconds(pfit, wscr, wref))
     raw, src = desc.raw, str(desc.source)
@@ -352,6 +353,7 @@ def calibrate_path(
         refined = [ref[id(j)] for j in jobs]
         tm["refine_s"] += time.perf_counter() - t
         refined.sort(key=lambda rf: -rf.explained)
+        refined = prefer_timing(refined, pho, mho, margin, say)  # a delay or a conditioner first
         say(
             "  refined: "
             + ", ".join(
