@@ -38,7 +38,7 @@ import numpy as np
 from hydraulics.params import HydraulicsParamError
 from sim.calibrate import conditioning
 from sim.calibrate.residuals import CalibrationError, check_finite
-from sim.calibrate.specimen_model import sensors_of
+from sim.calibrate.specimen_model import sensors_of, watch_modes
 from sim.calibrate.windows import QUIET_COLUMN, dof_weights, excited
 from sim.errors import UserError
 
@@ -210,6 +210,12 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None, payload=
                 band = (DISPLACEMENT_BAND_HZ[0], min(DISPLACEMENT_BAND_HZ[1], 0.45 * r.sample_rate_hz))
                 x = bandpass(x, r.sample_rate_hz, band)
                 bands[c] = band
+            if c == SPECIMEN:
+                # an accelerometer's zero is set anew each record (docs/sensors.md offset_rms),
+                # and a body that starts and ends at rest has a mean acceleration of zero: the
+                # record's mean is its sensor's zero (0.05 m/s^2 of it took the 6 Hz block's
+                # frequency interval from +/-0.0026 Hz without the sensor to +/-0.0039 Hz with it)
+                x = x - x.mean(axis=0)
             rms = np.sqrt(np.mean((x - x.mean(axis=0)) ** 2, axis=0))
             noise = conditioning.noise_floor(x, r.sample_rate_hz)
             # a DOF channel in actuator units (a rotation as the strokes it takes): one rule for
@@ -308,6 +314,7 @@ def _setup(job):
     try:  # a candidate's value the model refuses (a supply drop below the return): no model
         desc = parse_table(raw, src=src)
         tm = build_model(desc, payload)
+        modes = watch_modes(tm) if SPECIMEN in columns else []  # their slides recorded
         if path == "replay":
             from sim.calibrate.replay import record_channels, replay_setup
 
@@ -331,7 +338,7 @@ def _setup(job):
             return None
         chans, n = chans_of(res)
         if SPECIMEN in columns:
-            chans[SPECIMEN] = _specimen_at(res, tm, payload, specimen, t[:n])
+            chans[SPECIMEN] = _specimen_at(res, tm, payload, specimen, modes, t[:n])
         lag = float(getattr(res, "force_lag_s", 0.0) or 0.0)
         chans = conditioning.force_at_record_instant(chans, lag, cond, float(t[1] - t[0]))
         return _compared(chans, n, t, columns, cond, bands)
@@ -339,7 +346,7 @@ def _setup(job):
     return sim, ref, cmd, post
 
 
-def _specimen_at(res, tm, payload, sensors, t) -> np.ndarray:
+def _specimen_at(res, tm, payload, sensors, modes, t) -> np.ndarray:
     """The model's specimen sensors (:func:`sim.calibrate.specimen_model.model_specimen`)
     at the record's instants ``t``."""
     from sim.calibrate.specimen_model import model_specimen
@@ -347,7 +354,7 @@ def _specimen_at(res, tm, payload, sensors, t) -> np.ndarray:
 
     # a sensor the model does not read is NaN there; it is not compared (path_runs), and a
     # NaN would stop the comparison of the others (_compared)
-    arr = np.nan_to_num(model_specimen(res, tm, payload, sensors), nan=0.0)
+    arr = np.nan_to_num(model_specimen(res, tm, payload, sensors, modes), nan=0.0)
     if len(res.t) >= len(t) and np.allclose(res.t[: len(t)], t):
         return arr[: len(t)]
     return interpolate(res.t, arr, t)
