@@ -628,12 +628,11 @@ def unexplained(prs, models, fraction: float) -> dict | None:
                 _, C = sig.coherence(e, drive[:, q], fs=1.0 / pr.dt, nperseg=nper)
                 coh = max(coh, float(C[k]))
             place = _place(pr, ch, j)
+            kind = "dof" if ch.startswith("table_") else ("sensor" if ch == SPECIMEN else "actuator")
             best = {
                 "peak_hz": float(f[k]),
                 "channel": f"{ch}[{j}]",
-                "where": (f"dof:{place}" if ch.startswith("table_") else f"actuator:{place}")
-                if coh >= 0.5
-                else f"channel:{ch}[{j}]",
+                "where": f"{kind}:{place}" if coh >= 0.5 else f"channel:{ch}[{j}]",
                 "fraction_of_residual": frac,
                 "coherence_with_drive": coh,
                 "run": pr.name,
