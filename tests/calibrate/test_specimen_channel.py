@@ -63,8 +63,9 @@ def block_reading(res, tm) -> np.ndarray:
     return -(k * q + c * np.gradient(q, np.asarray(res.t, float))) / float(m.body_mass[m.jnt_bodyid[j]])
 
 
-def block_runs(out, seeds=(1, 2, 3), seconds=3.0, measure=True) -> list:
-    """(with the block's accelerometer, without it) run paths, or the unmeasured runs."""
+def block_runs(out, seeds=(1, 2, 3), seconds=3.0, measure=True, truth=FLEXIBLE) -> list:
+    """(with the block's accelerometer, without it) run paths, or the unmeasured runs; the
+    block ``truth`` (a rigid one's accelerometer reads the platen's acceleration)."""
     import mjcf
     from mjcf.description import parse_payload
     from sim.effects import build_model
@@ -75,7 +76,7 @@ def block_runs(out, seeds=(1, 2, 3), seconds=3.0, measure=True) -> list:
     from sim.scenario import motions as M
     from sim.scenario.reference import reference_from_motions
 
-    tm = build_model(mjcf.load_table("lab"), parse_payload(tomllib.loads(FLEXIBLE), src="<truth>"))
+    tm = build_model(mjcf.load_table("lab"), parse_payload(tomllib.loads(truth), src="<truth>"))
     runs = []
     for s in seeds:
         mo = M.white_noise(
@@ -85,7 +86,10 @@ def block_runs(out, seeds=(1, 2, 3), seconds=3.0, measure=True) -> list:
         res = Simulation(tm).run(reference=ref)
         assert res.incomplete_reason is None
         run = build_runfile(res, tm, source="simulated", reference=ref)
-        run.specimen_acceleration = block_reading(res, tm)[:, None]
+        rigid = truth == BLOCK
+        run.specimen_acceleration = (
+            res.channels["table_acceleration"][:, :1] if rigid else block_reading(res, tm)[:, None]
+        ).copy()
         run.meta["specimen_sensors"] = [dict(SENSOR)]
         runs.append(measure_run(run, _sensors(), seed=s) if measure else run)
     if not measure:
@@ -178,3 +182,12 @@ def test_block_accelerometer_narrows_the_mode(with_sensor, without_sensor):
     assert u1["frequency_hz"] < 0.25 * u0["frequency_hz"], (u0, u1)
     assert u1["damping_ratio"] < 0.25 * u0["damping_ratio"], (u0, u1)
     assert u1["mass_kg"] < 1.2 * u0["mass_kg"], (u0, u1)
+
+
+def test_rigid_block_with_its_accelerometer_adds_no_mode(declared, tmp_path):
+    """The block rigid (its accelerometer reads the platen's acceleration), the same
+    artifacts: no mode added."""
+    with_, _without = block_runs(tmp_path, truth=BLOCK)
+    res = S.calibrate(with_, table="lab", payload=declared, path="replay", effects=["payload_mode"], workers=2)
+    assert res.effects_added == [], res.effects_added
+    assert any("specimen_acceleration[B1]" in k for k in res.per_channel)
