@@ -418,7 +418,7 @@ def path_baseline(pfit, pho) -> dict:
         per.update({f"{Path(pr.name).name}:{k}": v for k, v in P.column_errors(pr, m).items()})
     first = pho[0]
     orders = {
-        f"{ch}[{first.dofs[j] if ch.startswith('table_') else first.actuators[j]}]": _orders(m)
+        f"{ch}[{P._place(first, ch, j)}]": _orders(m)  # a DOF, an actuator or a specimen sensor
         for (ch, j), m in models.items()
     }
     out = _summary(P.nrmse(pho, preds), per, orders, skipped)

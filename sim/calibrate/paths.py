@@ -38,6 +38,7 @@ import numpy as np
 from hydraulics.params import HydraulicsParamError
 from sim.calibrate import conditioning
 from sim.calibrate.residuals import CalibrationError, check_finite
+from sim.calibrate.specimen_model import sensors_of, watch_modes
 from sim.calibrate.windows import QUIET_COLUMN, dof_weights, excited
 from sim.errors import UserError
 
@@ -50,6 +51,12 @@ FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_velocity")
 #: nothing about its sensors)
 NOISE_COLUMN = 3.0
 DOF_CHANNELS = ("table_displacement", "table_velocity", "table_acceleration")
+#: accelerometers on the specimen: compared where the model gives their reading
+#: (:mod:`sim.calibrate.specimen_model`), so that a specimen's mode is pinned by them too
+SPECIMEN = "specimen_acceleration"
+#: ``path_runs(payload=...)`` not given: the specimen channel is not compared (the model
+#: it would be compared with is not known)
+NOT_GIVEN = object()
 
 
 @dataclass
@@ -75,6 +82,8 @@ class PathRun:
     #: the record's force holds the actuators' total in one column, the others zero (the
     #: NEES-UCSD runs: column E the measured total, W zero): the model's is summed to match
     force_total: bool = False
+    #: the run's ``meta.specimen_sensors`` (one per column of ``specimen_acceleration``)
+    specimen: list = field(default_factory=list)
 
     @property
     def dt(self) -> float:
@@ -127,6 +136,7 @@ class PathRun:
             self.conditioning,
             dict(self.bandpass),
             self.force_total,
+            list(self.specimen),
         )
 
     def only(self, keep) -> "PathRun":
@@ -144,6 +154,8 @@ class PathRun:
             for j in cols:
                 if ch.startswith("table_"):
                     out.append((ch, j, f"dof:{self.dofs[j]}"))
+                elif ch == SPECIMEN:
+                    out.append((ch, j, f"sensor:{_place(self, ch, j)}"))
                 else:
                     out.append((ch, j, f"actuator:{self.actuators[j]}"))
         return out
@@ -163,9 +175,11 @@ def fit_channels(run) -> list[str]:
     return have
 
 
-def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[PathRun]:
+def path_runs(runs, desc, path: str, *, score_from: dict | None = None, payload=NOT_GIVEN) -> list[PathRun]:
     """The records of ``runs`` on ``path`` (``"replay"`` or ``"closed_loop"``).
-    ``score_from``: run name -> first scored sample (the held-out part of one run)."""
+    ``score_from``: run name -> first scored sample (the held-out part of one run);
+    ``payload``: the model's payload (None: a bare table); given, a run's
+    ``specimen_acceleration`` is compared where the model reads it (:func:`specimen_columns`)."""
     from mjcf.description import DOFS6
     from sim.calibrate.replay import DISPLACEMENT_BAND_HZ
     from sim.calibrate.valve_null import declared_null, estimate
@@ -191,20 +205,31 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
                 drive[:, DOFS6.index(d)] = r.reference[:, j]
         rec, cols, bands, quiet = {}, {}, {}, {}
         known = conditioning.of_run(r)
+        readable = specimen_columns(r, payload)
+        if readable:
+            chans = chans + [SPECIMEN]
         for c in chans:
             x = np.asarray(getattr(r, c), float)
             if c == "table_displacement":
                 band = (DISPLACEMENT_BAND_HZ[0], min(DISPLACEMENT_BAND_HZ[1], 0.45 * r.sample_rate_hz))
                 x = bandpass(x, r.sample_rate_hz, band)
                 bands[c] = band
+            if c == SPECIMEN:
+                # an accelerometer's zero is set anew each record (docs/sensors.md offset_rms),
+                # and a body that starts and ends at rest has a mean acceleration of zero: the
+                # record's mean is its sensor's zero (0.05 m/s^2 of it took the 6 Hz block's
+                # frequency interval from +/-0.0026 Hz without the sensor to +/-0.0039 Hz with it)
+                x = x - x.mean(axis=0)
             rms = np.sqrt(np.mean((x - x.mean(axis=0)) ** 2, axis=0))
             noise = conditioning.noise_floor(x, r.sample_rate_hz)
             # a DOF channel in actuator units (a rotation as the strokes it takes): one rule for
             # both paths (sim.calibrate.windows.excited)
             w = dof_weights(J6, r.dofs, "motion") if c.startswith("table_") else None
             on = excited(rms, w) & (rms > NOISE_COLUMN * noise)
+            if c == SPECIMEN:  # the model reads these sensors only
+                on &= np.isin(np.arange(x.shape[1]), readable)
             keep = [j for j in range(x.shape[1]) if on[j]]
-            names = r.dofs if c.startswith("table_") else r.actuators
+            names = r.dofs if c.startswith("table_") else (r.column_names(c) if c == SPECIMEN else r.actuators)
             if len(keep) < x.shape[1]:
                 quiet[c] = [names[j] for j in range(x.shape[1]) if not on[j]]
             if keep:
@@ -233,6 +258,7 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None) -> list[
                 bandpass=bands,
                 not_excited=quiet,
                 force_total=holds_total(r.actuator_force),
+                specimen=sensors_of(r) if SPECIMEN in cols else [],
             )
         )
     return out
@@ -245,6 +271,21 @@ def holds_total(force) -> bool:
         return False
     zero = np.all(np.asarray(force) == 0, axis=0)
     return int(np.sum(~zero)) == 1
+
+
+def specimen_columns(run, payload) -> list[int]:
+    """The columns of ``run``'s ``specimen_acceleration`` the model with ``payload`` reads
+    (:func:`sim.calibrate.specimen_model.readable`); [] without the channel, or when the
+    payload is not given (:data:`NOT_GIVEN`)."""
+    if payload is NOT_GIVEN or getattr(run, SPECIMEN, None) is None:
+        return []
+    sensors = sensors_of(run)
+    if len(sensors) != run.specimen_acceleration.shape[1]:
+        return []
+    check_finite(run, [SPECIMEN])
+    from sim.calibrate.specimen_model import readable
+
+    return readable(sensors, payload)
 
 
 # ------------------------------------------------------------------ the simulation
@@ -275,7 +316,7 @@ def _setup(job):
     """The simulation of one job, ready to run from its reset: ``(sim, reference,
     valve_command, post)`` (one of reference / valve_command None; ``post(result)`` gives
     :func:`simulate_job`'s answer), or None when the model refuses the candidate."""
-    raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands, total = job
+    raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands, total, specimen = job
     from mjcf.description import parse_table
     from sim.effects import build_model
 
@@ -287,6 +328,7 @@ def _setup(job):
     try:  # a candidate's value the model refuses (a supply drop below the return): no model
         desc = parse_table(raw, src=src)
         tm = build_model(desc, payload)
+        modes = watch_modes(tm) if SPECIMEN in columns else []  # their slides recorded
         if path == "replay":
             from sim.calibrate.replay import record_channels, replay_setup
 
@@ -309,6 +351,8 @@ def _setup(job):
         if res.incomplete_reason:
             return None
         chans, n = chans_of(res)
+        if SPECIMEN in columns:
+            chans[SPECIMEN] = _specimen_at(res, tm, payload, specimen, modes, t[:n])
         lag = float(getattr(res, "force_lag_s", 0.0) or 0.0)
         chans = conditioning.force_at_record_instant(chans, lag, cond, float(t[1] - t[0]))
         if total and "actuator_force" in chans:  # the record's one column holds the total
@@ -317,6 +361,20 @@ def _setup(job):
         return _compared(chans, n, t, columns, cond, bands)
 
     return sim, ref, cmd, post
+
+
+def _specimen_at(res, tm, payload, sensors, modes, t) -> np.ndarray:
+    """The model's specimen sensors (:func:`sim.calibrate.specimen_model.model_specimen`)
+    at the record's instants ``t``."""
+    from sim.calibrate.specimen_model import model_specimen
+    from sim.signals.resample import interpolate
+
+    # a sensor the model does not read is NaN there; it is not compared (path_runs), and a
+    # NaN would stop the comparison of the others (_compared)
+    arr = np.nan_to_num(model_specimen(res, tm, payload, sensors, modes), nan=0.0)
+    if len(res.t) >= len(t) and np.allclose(res.t[: len(t)], t):
+        return arr[: len(t)]
+    return interpolate(res.t, arr, t)
 
 
 def _compared(chans, n, t, columns, cond, bands) -> dict | None:
@@ -528,6 +586,8 @@ def column_errors(pr: PathRun, model: dict) -> dict:
 
 
 def _place(pr, ch, j) -> str:
+    if ch == SPECIMEN:
+        return str(pr.specimen[j].get("name", f"s{j}"))
     return pr.dofs[j] if ch.startswith("table_") else pr.actuators[j]
 
 
@@ -585,12 +645,11 @@ def unexplained(prs, models, fraction: float) -> dict | None:
                 _, C = sig.coherence(e, drive[:, q], fs=1.0 / pr.dt, nperseg=nper)
                 coh = max(coh, float(C[k]))
             place = _place(pr, ch, j)
+            kind = "dof" if ch.startswith("table_") else ("sensor" if ch == SPECIMEN else "actuator")
             best = {
                 "peak_hz": float(f[k]),
                 "channel": f"{ch}[{j}]",
-                "where": (f"dof:{place}" if ch.startswith("table_") else f"actuator:{place}")
-                if coh >= 0.5
-                else f"channel:{ch}[{j}]",
+                "where": f"{kind}:{place}" if coh >= 0.5 else f"channel:{ch}[{j}]",
                 "fraction_of_residual": frac,
                 "coherence_with_drive": coh,
                 "run": pr.name,

@@ -340,8 +340,8 @@ def _start(runs, ho_given, desc, payload, path, effects, margin, workers, say) -
     from sim.calibrate.residuals import CalibrationError
 
     fit_runs, ho_runs, score_from, ho_note = _split(runs, ho_given)
-    pfit = P.path_runs(fit_runs, desc, path)
-    pho = P.path_runs(ho_runs, desc, path, score_from=score_from)
+    pfit = P.path_runs(fit_runs, desc, path, payload=payload)  # payload: its specimen sensors compared
+    pho = P.path_runs(ho_runs, desc, path, score_from=score_from, payload=payload)
     wscr, wref = search_windows(pfit)
     st = PathState(
         path,
@@ -405,6 +405,7 @@ def _round(st: PathState, rnd: int):
 def _refine(st: PathState, top) -> list:
     """The line search, then the refinement of each of ``top``, best explained first."""
     from sim.calibrate.sensitivity import refine_job
+    from sim.calibrate.sensortiming import prefer_timing
     from sim.parallel import map_jobs
 
     t = time.perf_counter()
@@ -425,6 +426,8 @@ def _refine(st: PathState, top) -> list:
     for j, rf in zip(mods, map_jobs(refine_job, mods, workers=st.workers)):
         ref[id(j)] = rf
     refined = sorted((ref[id(j)] for j in jobs), key=lambda rf: -rf.explained)
+    # a delay or a conditioner first (sim.calibrate.sensortiming)
+    refined = prefer_timing(refined, st.pho, st.models["ho"], st.margin, st.say)
     st.tm["refine_s"] += time.perf_counter() - t
     st.say(
         "  refined: "

@@ -55,6 +55,16 @@ HYDRAULIC = (
     "supply_pressure_drop",
 )
 SENSOR = ("sensor_gain", "sensor_offset", "sensor_delay", "sensor_lowpass")
+#: a sensor delay's range on these paths: a channel up to MAX_DELAY_S late (assumed: 50 ms,
+#: ten times the largest conditioner delay of the tables here, 4.2 ms for 4 poles at 100 Hz;
+#: the mechanical path's bound, sim.calibrate.timing.MAX_DELAY_S) or up to
+#: MAX_ADVANCE_SAMPLES samples early. A sensor cannot answer before its cause: a channel
+#: that leads the motion is a recorder's timing, not physics (a multiplexed or separately
+#: clocked channel, a conditioner on the *other* channels; issue 23: a pressure leading
+#: by 1-2 samples at 204.8 Hz), a few samples at most; a wider advance would let a delay
+#: stand in for a model that responds late (a valve, an oil column)
+MAX_DELAY_S = 0.05
+MAX_ADVANCE_SAMPLES = 8
 #: the foundation mode's softest frequency searched (Hz): below the runs' band (1-30 Hz on
 #: the CGS tests) a reaction mass on its soil is no longer a foundation but another table mode
 FOUNDATION_MIN_HZ = 1.0
@@ -300,8 +310,8 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
                     c = ("gain", 1.0, 0.01, -1e3, 1e3, "1")
                 elif t == "sensor_offset":
                     c = ("offset", 0.0, 0.01 * sc, -1e12, 1e12, "channel units")
-                elif t == "sensor_delay":
-                    c = ("delay_s", 0.0, 0.5 / fs, 0.0, 10.0, "s")
+                elif t == "sensor_delay":  # either sign: a channel may lead its motion (an advance)
+                    c = ("delay_s", 0.0, 0.5 / fs, -MAX_ADVANCE_SAMPLES / fs, MAX_DELAY_S, "s")
                 else:  # internal 1/cutoff: the first step a filter at fs/4; the cutoff stays below Nyquist
                     c = ("cutoff_hz", 0.0, 4.0 / fs, 2.2 / fs, math.inf, "Hz")
                 k, x0, h, lo, hi, unit = c

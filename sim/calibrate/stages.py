@@ -111,7 +111,7 @@ def holdout_error(runs, ho_given, desc, payload, path, entries, workers) -> floa
     from sim.calibrate.pathsearch import _split
 
     _fit, ho_runs, score_from, _note = _split(runs, ho_given)
-    pho = P.path_runs(ho_runs, desc, path, score_from=score_from)
+    pho = P.path_runs(ho_runs, desc, path, score_from=score_from, payload=payload)
     ms = P.simulate_many([p.job(desc.raw, str(desc.source), payload, entries) for p in pho], workers=workers)
     return math.inf if any(m is None for m in ms) else P.nrmse(pho, ms)
 
