@@ -62,6 +62,11 @@ class CalibrationResult:
     #: each residual path's own figures (:func:`sim.calibrate.stages.summary`)
     paths: dict = field(default_factory=dict)
 
+    def searched_paths(self) -> list[str]:
+        """The residual paths the search ran on (a path the records could not take is in
+        ``paths`` with the reason it was left out)."""
+        return [k for k, p in self.paths.items() if "skipped" not in p] or [self.residual_path]
+
     def to_json(self) -> dict:
         keys = (
             "table",
@@ -362,16 +367,18 @@ def calibrate(
     desc, unk = identify_unknowns(runs, ho_given, desc, pl, workers=workers, say=say)
 
     def search_one(p, d, eff):
+        t_stage = time.perf_counter()  # each path's timing from its own start
         if p == "mechanical":
             kw = {"payload": payload, "accel_lowpass_hz": accel_lowpass_hz}
-            res = mechanical_stage(runs, ho_given, d, pl, effects=eff, margin=margin, say=say, t0=t0, **kw)
+            res = mechanical_stage(runs, ho_given, d, pl, effects=eff, margin=margin, say=say, t0=t_stage, **kw)
         else:
-            res = _calibrate_path(runs, ho_given, d, pl, p, eff, margin, workers, say, t0)
+            res = _calibrate_path(runs, ho_given, d, pl, p, eff, margin, workers, say, t_stage)
         return _with_baseline(res, say)
 
     kw = {"effects": effects, "search_one": search_one, "say": say, "workers": workers}
     res = run_stages(runs, ho_given, desc, pl, stages, **kw)
     res.unknowns_identified = unk
+    res.timing["total_s"] = time.perf_counter() - t0  # the unknowns, every path and the pooled verdict
     if not res.paths:
         from sim.calibrate.stages import summary
 

@@ -22,6 +22,8 @@ import copy
 import math
 from dataclasses import replace
 
+from sim.calibrate.residuals import CalibrationError
+
 #: effect types the mechanical path cannot see: a later stage looks only for these (the
 #: force and acceleration sensors' timing and the specimen's modes are judged on the
 #: mechanical path, on the same channels the later stage compares)
@@ -128,8 +130,13 @@ def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, wo
     later = stage_effects(effects, after_mechanical=True)
     kept = entries_of(first)
     say(f"{path} path, after the mechanical path: looking for {', '.join(later) or 'nothing'}")
-    second = search_one(path, with_effects(desc, kept), later) if later else None
-    if second is None:
+    if not later:
+        return first
+    try:
+        second = search_one(path, with_effects(desc, kept), later)
+    except CalibrationError as e:  # the records do not replay through the model: say so, keep stage 1
+        say(f"{path} path left out: {e}")
+        first.paths = {first.residual_path: summary(first), path: {"skipped": str(e)}}
         return first
     ev = _pooled_evidence(runs, ho_given, desc, pl, first, second, workers)
     say(

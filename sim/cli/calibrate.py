@@ -111,13 +111,17 @@ def cmd_calibrate(args) -> int:
     if args.json:
         print(json_text(js, indent=2))
         return 0
-    pooled = " (pooled over the paths)" if len(res.paths) > 1 else ""
+    pooled = " (pooled over the paths)" if len(res.searched_paths()) > 1 else ""
     print(
         f"held-out NRMSE{pooled} {100 * res.error_before:.2f} % -> {100 * res.error_after:.2f} % ({res.holdout_note})"
     )
     if len(res.paths) > 1:
         for name, p in res.paths.items():
-            print(f"  {name} path: {100 * p['error_before']:.2f} % -> {100 * p['error_after']:.2f} %")
+            if "skipped" in p:
+                print(f"  {name} path left out: {p['skipped']}")
+                continue
+            before = p.get("error_before_declared", p["error_before"])
+            print(f"  {name} path: {100 * before:.2f} % -> {100 * p['error_after']:.2f} %")
     if res.not_excited:
         print(f"  not excited, left out of the error: {', '.join(res.not_excited)}")
     _print_baseline(res)

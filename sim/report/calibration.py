@@ -247,13 +247,16 @@ def _paths_md(res) -> list[str]:
         "|---|---|---|---|---|",
     ]
     for name, p in res.paths.items():
+        if "skipped" in p:
+            L.append(f"| {name} | - | - | - | left out: {p['skipped']} |")
+            continue
         before = p.get("error_before_declared", p["error_before"])
         found = ", ".join(p["effects_added"]) or "none"
         refused = f" ({p['refused']})" if p.get("refused") else ""
         L.append(
             f"| {name} | {_pct(before)} | {_pct(p['error_after'])} | {_pct(p.get('baseline_error'))} | {found}{refused} |"
         )
-    per_ch = {f"{name}: {k}": v for name, p in res.paths.items() for k, v in p["per_channel"].items()}
+    per_ch = {f"{name}: {k}": v for name, p in res.paths.items() for k, v in p.get("per_channel", {}).items()}
     L += ["", "| path: run: channel or DOF | before | after |", "|---|---|---|"]
     L += [f"| `{k}` | {_pct(v['before'])} | {_pct(v['after'])} |" for k, v in per_ch.items()]
     return L + [""]
@@ -314,7 +317,7 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
     )
     L += [
         "",
-        f"Held-out NRMSE{' (pooled over the paths: the RMS of theirs)' if len(res.paths) > 1 else ''}: "
+        f"Held-out NRMSE{' (pooled over the paths: the RMS of theirs)' if len(res.searched_paths()) > 1 else ''}: "
         f"**{100 * res.error_before:.2f} %** (declared model) -> "
         f"**{100 * res.error_after:.2f} %** (calibrated).",
         "",
@@ -370,37 +373,48 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
     else:
         L.append("No spectral line holds a notable share of the residual left.")
     L += ["", "## Figures", ""] + [f"![{f}]({f})" for f in figs]
-    tm = res.timing
+    if len(res.searched_paths()) > 1:
+        L += ["", f"Time: {res.timing['total_s']:.1f} s in all."]
+        for name in res.searched_paths():
+            L += _time_md(res.timing.get(name, {}), f"{name} path: ")
+    else:
+        L += _time_md(res.timing, "Time: ")
+    return "\n".join(L)
+
+
+def _time_md(tm: dict, head: str) -> list[str]:
+    """Where one path's search spent its time."""
+    if not tm:
+        return []
     if "least_squares_fits" in tm:
-        L += [
+        return [
             "",
-            f"Time: {tm['total_s']:.1f} s (reading {tm['read_s']:.1f} s, residuals {tm['residuals_s']:.1f} s, "
+            f"{head}{tm['total_s']:.1f} s (reading {tm['read_s']:.1f} s, residuals {tm['residuals_s']:.1f} s, "
             f"search {tm['search_s']:.1f} s, {tm['least_squares_fits']} candidate fits).",
             "",
         ]
-    else:
+    L = [
+        "",
+        f"{head}{tm['total_s']:.1f} s (reading {tm['read_s']:.1f} s; simulations of the current model "
+        f"{tm['simulate_s']:.1f} s, screening {tm['screen_s']:.1f} s, refinement {tm['refine_s']:.1f} s, "
+        f"whole-run acceptance {tm['accept_s']:.1f} s; {tm['replays']} replays).",
+        "",
+    ]
+    if "screen_window_replay_s" in tm:
         L += [
-            "",
-            f"Time: {tm['total_s']:.1f} s (reading {tm['read_s']:.1f} s; simulations of the current model "
-            f"{tm['simulate_s']:.1f} s, screening {tm['screen_s']:.1f} s, refinement {tm['refine_s']:.1f} s, "
-            f"whole-run acceptance {tm['accept_s']:.1f} s; {tm['replays']} replays).",
+            f"Windows (chosen by excitation): each screening replay {tm['screen_window_replay_s']:.2f} s "
+            f"(the first {tm['screen_window_replay_s_first_seconds']:.2f} s would be the fixed window), "
+            f"each refinement evaluation {tm['refine_windows_replay_s']:.2f} s over all fit runs "
+            f"(fixed: {tm['refine_windows_replay_s_first_seconds']:.2f} s); "
+            + "; ".join(
+                f"{w['stage']} `{w['run']}` scored {w['scored_from_s']:.2f}-{w['to_s']:.2f} s "
+                f"(replayed from {w['replayed_from_s']:.2f} s)"
+                for w in tm.get("windows", [])
+            )
+            + ".",
             "",
         ]
-        if "screen_window_replay_s" in tm:
-            L += [
-                f"Windows (chosen by excitation): each screening replay {tm['screen_window_replay_s']:.2f} s "
-                f"(the first {tm['screen_window_replay_s_first_seconds']:.2f} s would be the fixed window), "
-                f"each refinement evaluation {tm['refine_windows_replay_s']:.2f} s over all fit runs "
-                f"(fixed: {tm['refine_windows_replay_s_first_seconds']:.2f} s); "
-                + "; ".join(
-                    f"{w['stage']} `{w['run']}` scored {w['scored_from_s']:.2f}-{w['to_s']:.2f} s "
-                    f"(replayed from {w['replayed_from_s']:.2f} s)"
-                    for w in tm.get("windows", [])
-                )
-                + ".",
-                "",
-            ]
-    return "\n".join(L)
+    return L
 
 
 def baseline_md(res) -> list[str]:
