@@ -13,7 +13,8 @@ Three paths, chosen by the channels every run has (:func:`choose_path`):
   static part is removed per run and DOF (the paper's pressures were high-passed). An
   accelerometer conditioner (``accel_lowpass_hz``) delays the recorded acceleration
   alone; every other term is passed through the same analog filter
-  (:func:`sim.identify.least_squares.analog_lowpass`) so the balance stays exact.
+  (:class:`sim.calibrate.conditioning.Conditioner`, discretised at 1 kHz or more as
+  ``run --measure`` applies it) so the balance stays exact.
   Samples where the table is still (|v| below :data:`sim.calibrate.laws.DEADBAND`, and
   the filter's memory after them) are left out: there the friction force is anything
   within its bounds.
@@ -61,7 +62,9 @@ class MechRun:
     actuators: list
     classes: dict  # class name -> actuator indices
     rows: np.ndarray  # bool (n,): samples in the fit
-    prefilter: tuple | None = None
+    #: the acceleration's conditioner applied to every other term: a
+    #: :class:`sim.calibrate.conditioning.Conditioner` (or a digital filter's (b, a))
+    prefilter: object = None
     #: a delay (s) after the prefilter: the acceleration's own sensor delay
     #: (:mod:`sim.calibrate.timing`), applied to every other term as the prefilter is
     filter_delay_s: float = 0.0
@@ -84,7 +87,9 @@ class MechRun:
         return x - x[self.rows].mean(axis=0)
 
     def filt(self, x: np.ndarray) -> np.ndarray:
-        if self.prefilter is not None:
+        if callable(self.prefilter):  # the analog conditioner (sim.calibrate.conditioning.Conditioner)
+            x = self.prefilter(x)
+        elif self.prefilter is not None:  # a digital filter's (b, a)
             import scipy.signal as sig
 
             x = sig.lfilter(*self.prefilter, x, axis=0)
@@ -249,7 +254,7 @@ def _still_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.n
     if prefilter is not None:
         from sim.identify.least_squares import filter_memory_s
 
-        m = int(math.ceil(filter_memory_s(prefilter, dt) / dt))
+        m = int(math.ceil(filter_memory_s(getattr(prefilter, "ba", prefilter), dt) / dt))
         still = np.convolve(still.astype(float), np.ones(m + 1))[:n] > 0
     if np.count_nonzero(keep & ~still) >= 16:
         keep &= ~still
