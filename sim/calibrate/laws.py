@@ -88,6 +88,9 @@ class Law:
     #: the basis needs the load at the place (``s["_load"]``: the recorded actuator force's
     #: magnitude, N, per actuator of the place)
     load: bool = False
+    #: the basis applies the sensor prefilter itself (``s["_filt"]``: the CG offset's
+    #: weight term), so it changes with the records' timing, not with the motion alone
+    filters_inside: bool = False
     #: shape parameter -> (low, high): how far its scan may extend past the grid when the
     #: optimum sits on the grid's edge (physical limits; "nyquist": 0.4 x the record rate);
     #: a parameter without one stays inside its grid
@@ -393,6 +396,7 @@ add_law(
         _cg_offset,
         places=("payload",),
         inertial=True,  # the prefilter is applied inside (to the weight's term only)
+        filters_inside=True,
         what="the payload's centre of gravity off where it is declared by (dx, dy, dz)",
         second_order=_cg_offset_second,
     )

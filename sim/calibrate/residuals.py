@@ -46,6 +46,13 @@ class CalibrationError(UserError):
     """Runs that cannot be calibrated together (one line: file, field, fix)."""
 
 
+#: bytes of the bases of laws with a shape (scanned: a mode's frequency and damping) a run
+#: keeps for its re-timed copies and the next rounds' scans (:meth:`MechRun.basis`; a
+#: 2.5 s CGS run's payload-mode grids, 288 points at each of 3 DOFs, hold 17 MB); the
+#: shapeless ones are all kept
+BASIS_BYTES = 32 * 2**20
+
+
 @dataclass
 class MechRun:
     """One run on the mechanical path (DOF space of the table's own DOFs)."""
@@ -146,13 +153,39 @@ class MechRun:
         Q = b[:, None] * m[None, :] if b.ndim == 1 else b @ m
         return Q if law.inertial else self.filt(Q)
 
+    def basis(self, law, where: str, shape: dict) -> list:
+        """The law's unfiltered columns (:func:`_raw_columns`), kept in ``extra["basis"]``,
+        which the run's re-timed copies share (:func:`sim.calibrate.timing.retime`): they
+        depend on the recorded motion and the shape alone, a load's law also on the force
+        delay (the load is the re-timed force), and a law that filters inside on the
+        timing: its columns are made anew. A timing search re-times the runs at every
+        point it tries, and every round scans a mode's grid again: the accepted terms'
+        columns (a dry friction's pre-sliding series) and the grid's (a mode's interpolated
+        filter) need not be made again."""
+        if getattr(law, "filters_inside", False):
+            return _raw_columns(self, law, where, shape)
+        key = (law.type, where, tuple(sorted(shape.items())))
+        if getattr(law, "load", False):
+            key += (self.extra.get("timing", {}).get("force_delay_s"),)
+        cache = self.extra.setdefault("basis", {})
+        if key in cache:
+            cache[key] = cache.pop(key)  # the most recent last
+        else:
+            bs = _law_basis(self, law, where, shape)
+            scanned = [k for k in cache if k[2]]
+            size = sum(b.nbytes for k in scanned for b in cache[k])
+            while scanned and size + sum(b.nbytes for b in bs) > BASIS_BYTES:  # the least recently used go
+                size -= sum(b.nbytes for b in cache.pop(scanned.pop(0)))
+            cache[key] = bs
+        return _to_dofs(cache[key], self.place_motion(where)[3])
+
     def columns(self, law, where: str, shape: dict) -> list:
         """One (n, k) generalised force per linear coefficient of ``law`` (unit value) at ``where``."""
         key = (law.type, where, tuple(sorted(shape.items())))
         cache = self.extra.setdefault("raw_columns", {})
         if key in cache:
             return cache[key]
-        Qs = [Q if law.inertial else self.filt(Q) for Q in _raw_columns(self, law, where, shape)]
+        Qs = [Q if law.inertial else self.filt(Q) for Q in self.basis(law, where, shape)]
         if len(cache) > 128:  # shape scans make many; the accepted terms' come back
             for k in [k for k in cache if k[2]][:64]:
                 del cache[k]
@@ -320,7 +353,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             if law.second_order is not None:
                 other = other + mr.second(law, where, vals, vals)
         mr.model = a @ Me.T + mr.filt(other)
-        mr.extra.update(inertial=a @ Me.T, other=other, timing=known)
+        mr.extra.update(inertial=a @ Me.T, other=other, timing=known, basis={})
         mr.rows = _still_rows(v, pre, r.dt)
         mr.excited = excited_dofs(mr, J6)
         out.append(mr)
@@ -368,12 +401,21 @@ def _law_args(mr, shape) -> dict:
 
 def _raw_columns(mr, law, where, shape) -> list:
     """The law's unfiltered DOF-space force per linear coefficient (list of (n, k))."""
-    u, v, a, m = mr.place_motion(where)
+    return _to_dofs(_law_basis(mr, law, where, shape), mr.place_motion(where)[3])
+
+
+def _law_basis(mr, law, where, shape) -> list:
+    """The law's force at its place per linear coefficient (list of (n,) or (n, m))."""
+    u, v, a, _m = mr.place_motion(where)
     s = _law_args(mr, shape)
     if getattr(law, "load", False):
         s["_load"] = mr.place_load(where)
     b = np.asarray(law.basis(u, v, a, s), float)
-    bs = [b] if len(law.linears) == 1 else list(b)
+    return [b] if len(law.linears) == 1 else list(b)
+
+
+def _to_dofs(bs: list, m: np.ndarray) -> list:
+    """A place's forces ``bs`` in DOF space through its map ``m`` (:meth:`MechRun.place_motion`)."""
     return [x[:, None] * m[None, :] if x.ndim == 1 else x @ m for x in bs]
 
 

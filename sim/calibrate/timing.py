@@ -129,7 +129,7 @@ def retime(mr, state: dict):
 
     old = mr.extra["timing"]
     same_filter = all(old[k] == state[k] for k in ("accel_delay_s", "accel_lowpass_hz", "accel_lowpass_order"))
-    keep = ("force_at_instant", "inertial", "other", "w") + (
+    keep = ("force_at_instant", "inertial", "other", "w", "basis") + (
         ("raw_columns", "columns", "second") if same_filter else ()
     )
     new = dataclasses.replace(mr, extra={k: mr.extra[k] for k in keep if k in mr.extra})
