@@ -11,6 +11,7 @@ model's channels before comparing and searches for what they do not say
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -130,6 +131,17 @@ CONDITIONER_RATE_HZ = 1000.0
 _EDGE = 16
 
 
+@functools.lru_cache(maxsize=256)
+def _bilinear(cutoff_hz: float, fs: float, order: int) -> tuple:
+    """:func:`sim.identify.least_squares.analog_lowpass`, made once per cut-off and rate
+    (``scipy.signal.bilinear`` is slow; a timing search filters at each point it tries)."""
+    from sim.identify.least_squares import analog_lowpass
+
+    b, a = analog_lowpass(cutoff_hz, fs, order)
+    b.flags.writeable = a.flags.writeable = False
+    return b, a
+
+
 def oversampling(fs: float) -> int:
     """The whole multiple of the record rate ``fs`` at which its conditioner is filtered."""
     return max(1, math.ceil(CONDITIONER_RATE_HZ / fs - 1e-9))
@@ -154,9 +166,7 @@ def analog_response(x: np.ndarray, cutoff_hz: float, order: int, fs: float, from
         x = np.concatenate([np.repeat(x[:1], _EDGE, axis=0), x, np.repeat(x[-1:], _EDGE, axis=0)])
         x = sig.resample_poly(x, P, 1, axis=0, window=("kaiser", 12.0))
     if from_rest:
-        from sim.identify.least_squares import analog_lowpass
-
-        y = sig.lfilter(*analog_lowpass(cutoff_hz, fs * P, order), x, axis=0)
+        y = sig.lfilter(*_bilinear(float(cutoff_hz), float(fs * P), int(order)), x, axis=0)
     else:
         y = sensing.lowpass(x, cutoff_hz, order, fs * P, analog=True)
     return y if P == 1 else y[::P][_EDGE : _EDGE + n]
@@ -178,9 +188,7 @@ class Conditioner:
     def ba(self) -> tuple:
         """The recursive filter (b, a) of it at the record's own rate (the same
         low-frequency delay), for how long it remembers a sample."""
-        from sim.identify.least_squares import analog_lowpass
-
-        return analog_lowpass(self.cutoff_hz, self.fs, self.order)
+        return _bilinear(float(self.cutoff_hz), float(self.fs), int(self.order))
 
 
 def noise_floor(x: np.ndarray, fs: float) -> np.ndarray:

@@ -31,6 +31,7 @@ library to load).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Callable
@@ -279,11 +280,49 @@ def _mode(u, v, a, s):
     P = max(1, math.ceil(np.pi * f * dt / math.sqrt(3.0 * MODE_WARP)))
     # (a Kaiser window of beta 12: passband gain within 2e-6 to 0.1 x the record rate; the
     # default beta 5 is 0.1 % high at 7.5 Hz in 200 Hz, which biased a modal mass)
-    x = sig.resample_poly(a, P, 1, axis=0, window=("kaiser", 12.0)) if P > 1 else a
-    h = dt / P
+    x = _upsampled(a, P) if P > 1 else a
+    return sig.lfilter(*_mode_filter(float(f), float(z), dt / P), x, axis=0)[::P]
+
+
+#: bytes of interpolated records :func:`_upsampled` keeps (the least recently used go)
+UPSAMPLED_BYTES = 64 * 2**20
+_UPSAMPLED: dict = {}
+
+
+def _upsampled(a: np.ndarray, P: int) -> np.ndarray:
+    """``a`` interpolated ``P`` times (band-limited, :func:`_mode`), kept by its content:
+    a mode's scan filters one record at every grid point and in every round, and the
+    interpolation costs three times the filter."""
+    import hashlib
+
+    import scipy.signal as sig
+
+    a = np.ascontiguousarray(a, float)
+    key = (P, a.shape, hashlib.blake2b(a.tobytes(), digest_size=16).digest())
+    if key in _UPSAMPLED:
+        _UPSAMPLED[key] = _UPSAMPLED.pop(key)  # the most recent last
+        return _UPSAMPLED[key]
+    x = sig.resample_poly(a, P, 1, axis=0, window=("kaiser", 12.0))
+    x.flags.writeable = False
+    size = sum(v.nbytes for v in _UPSAMPLED.values())
+    while _UPSAMPLED and size + x.nbytes > UPSAMPLED_BYTES:
+        size -= _UPSAMPLED.pop(next(iter(_UPSAMPLED))).nbytes
+    if x.nbytes <= UPSAMPLED_BYTES:
+        _UPSAMPLED[key] = x
+    return x
+
+
+@functools.lru_cache(maxsize=1024)
+def _mode_filter(f: float, z: float, h: float) -> tuple:
+    """The mode's discrete filter (b, a) at step ``h`` (:func:`_mode`), made once per
+    frequency, damping and step: ``scipy.signal.bilinear`` is slow, and every round of
+    the search scans the same grid."""
+    import scipy.signal as sig
+
     w = 2.0 / h * np.tan(np.pi * f * h)
     b, den = sig.bilinear([2 * z * w, w * w], [1.0, 2 * z * w, w * w], 1.0 / h)
-    return sig.lfilter(b, den, x, axis=0)[::P]
+    b.flags.writeable = den.flags.writeable = False
+    return b, den
 
 
 add_law(
