@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -286,7 +287,7 @@ def _mode(u, v, a, s):
 
 #: bytes of interpolated records :func:`_upsampled` keeps (the least recently used go)
 UPSAMPLED_BYTES = 64 * 2**20
-_UPSAMPLED: dict = {}
+_UPSAMPLED: OrderedDict = OrderedDict()
 
 
 def _upsampled(a: np.ndarray, P: int) -> np.ndarray:
@@ -300,13 +301,13 @@ def _upsampled(a: np.ndarray, P: int) -> np.ndarray:
     a = np.ascontiguousarray(a, float)
     key = (P, a.shape, hashlib.blake2b(a.tobytes(), digest_size=16).digest())
     if key in _UPSAMPLED:
-        _UPSAMPLED[key] = _UPSAMPLED.pop(key)  # the most recent last
+        _UPSAMPLED.move_to_end(key)
         return _UPSAMPLED[key]
     x = sig.resample_poly(a, P, 1, axis=0, window=("kaiser", 12.0))
     x.flags.writeable = False
-    size = sum(v.nbytes for v in _UPSAMPLED.values())
-    while _UPSAMPLED and size + x.nbytes > UPSAMPLED_BYTES:
-        size -= _UPSAMPLED.pop(next(iter(_UPSAMPLED))).nbytes
+    size = sum(v.nbytes for v in _UPSAMPLED.values())  # (a few dozen records)
+    while _UPSAMPLED and size + x.nbytes > UPSAMPLED_BYTES:  # the least recently used go
+        size -= _UPSAMPLED.popitem(last=False)[1].nbytes
     if x.nbytes <= UPSAMPLED_BYTES:
         _UPSAMPLED[key] = x
     return x

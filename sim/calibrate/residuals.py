@@ -30,6 +30,7 @@ coherence with the states).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -51,6 +52,34 @@ class CalibrationError(UserError):
 #: 2.5 s CGS run's payload-mode grids, 288 points at each of 3 DOFs, hold 17 MB); the
 #: shapeless ones are all kept
 BASIS_BYTES = 32 * 2**20
+
+
+class BasisCache:
+    """A run's law bases by ``(law type, place, shape[, force delay])``
+    (:meth:`MechRun.basis`): the shapeless ones all, those with a shape up to
+    :data:`BASIS_BYTES`, the least recently used dropped first."""
+
+    def __init__(self):
+        self.shapeless: dict = {}
+        self.scanned: OrderedDict = OrderedDict()
+        self.nbytes = 0
+
+    def get(self, key: tuple, make) -> list:
+        if not key[2]:
+            if key not in self.shapeless:
+                self.shapeless[key] = make()
+            return self.shapeless[key]
+        if key in self.scanned:
+            self.scanned.move_to_end(key)
+            return self.scanned[key]
+        bs = make()
+        n = sum(b.nbytes for b in bs)
+        while self.scanned and self.nbytes + n > BASIS_BYTES:
+            _k, old = self.scanned.popitem(last=False)
+            self.nbytes -= sum(b.nbytes for b in old)
+        self.scanned[key] = bs
+        self.nbytes += n
+        return bs
 
 
 @dataclass
@@ -167,17 +196,9 @@ class MechRun:
         key = (law.type, where, tuple(sorted(shape.items())))
         if getattr(law, "load", False):
             key += (self.extra.get("timing", {}).get("force_delay_s"),)
-        cache = self.extra.setdefault("basis", {})
-        if key in cache:
-            cache[key] = cache.pop(key)  # the most recent last
-        else:
-            bs = _law_basis(self, law, where, shape)
-            scanned = [k for k in cache if k[2]]
-            size = sum(b.nbytes for k in scanned for b in cache[k])
-            while scanned and size + sum(b.nbytes for b in bs) > BASIS_BYTES:  # the least recently used go
-                size -= sum(b.nbytes for b in cache.pop(scanned.pop(0)))
-            cache[key] = bs
-        return _to_dofs(cache[key], self.place_motion(where)[3])
+        cache = self.extra.setdefault("basis", BasisCache())
+        bs = cache.get(key, lambda: _law_basis(self, law, where, shape))
+        return _to_dofs(bs, self.place_motion(where)[3])
 
     def columns(self, law, where: str, shape: dict) -> list:
         """One (n, k) generalised force per linear coefficient of ``law`` (unit value) at ``where``."""
@@ -353,7 +374,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             if law.second_order is not None:
                 other = other + mr.second(law, where, vals, vals)
         mr.model = a @ Me.T + mr.filt(other)
-        mr.extra.update(inertial=a @ Me.T, other=other, timing=known, basis={})
+        mr.extra.update(inertial=a @ Me.T, other=other, timing=known, basis=BasisCache())
         mr.rows = _still_rows(v, pre, r.dt)
         mr.excited = excited_dofs(mr, J6)
         out.append(mr)
