@@ -56,7 +56,8 @@ BASIS_BYTES = 32 * 2**20
 
 class BasisCache:
     """A run's law bases by ``(law type, place, shape[, force delay])``
-    (:meth:`MechRun.basis`): the shapeless ones all, those with a shape up to
+    (:meth:`MechRun.basis`): those of fixed laws (no shape, no load) all, the others (a
+    scan's grid, a load's law at each force delay a search tries) up to
     :data:`BASIS_BYTES`, the least recently used dropped first."""
 
     def __init__(self):
@@ -65,7 +66,7 @@ class BasisCache:
         self.nbytes = 0
 
     def get(self, key: tuple, make) -> list:
-        if not key[2]:
+        if not key[2] and len(key) == 3:
             if key not in self.shapeless:
                 self.shapeless[key] = make()
             return self.shapeless[key]
