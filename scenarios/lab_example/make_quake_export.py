@@ -134,7 +134,12 @@ def lab_record(run, *, bias: float = 0.01, seed: int = SEED, pressure_lead_s: fl
     floors, _ = specimen_accelerations(
         t, run.table_acceleration, run.extras["payload_qpos"], mjcf.load_payload(PAYLOAD), sensors
     )
-    acc_t = sensing.lowpass(run.table_acceleration[:, [x]], ACC_LOWPASS_HZ, ACC_LOWPASS_ORDER, run.sample_rate_hz)
+    # the analog conditioner as `run --measure` models one (sim.runs.measure): at the 1024 Hz
+    # simulation rate, bilinear without pre-warping (a digital Butterworth pre-warped at 50 Hz
+    # has 0.7 % less delay: a 50.4 Hz analog conditioner, not the declared one)
+    acc_t = sensing.lowpass(
+        run.table_acceleration[:, [x]], ACC_LOWPASS_HZ, ACC_LOWPASS_ORDER, run.sample_rate_hz, analog=True
+    )
     n = int(np.floor(t[-1] * RATE_HZ + 1e-9)) + 1
     tr = np.arange(n) / RATE_HZ
     rng = np.random.default_rng(seed)

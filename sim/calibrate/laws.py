@@ -31,7 +31,9 @@ library to load).
 
 from __future__ import annotations
 
+import functools
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -88,6 +90,9 @@ class Law:
     #: the basis needs the load at the place (``s["_load"]``: the recorded actuator force's
     #: magnitude, N, per actuator of the place)
     load: bool = False
+    #: the basis applies the sensor prefilter itself (``s["_filt"]``: the CG offset's
+    #: weight term), so it changes with the records' timing, not with the motion alone
+    filters_inside: bool = False
     #: shape parameter -> (low, high): how far its scan may extend past the grid when the
     #: optimum sits on the grid's edge (physical limits; "nyquist": 0.4 x the record rate);
     #: a parameter without one stays inside its grid
@@ -276,11 +281,49 @@ def _mode(u, v, a, s):
     P = max(1, math.ceil(np.pi * f * dt / math.sqrt(3.0 * MODE_WARP)))
     # (a Kaiser window of beta 12: passband gain within 2e-6 to 0.1 x the record rate; the
     # default beta 5 is 0.1 % high at 7.5 Hz in 200 Hz, which biased a modal mass)
-    x = sig.resample_poly(a, P, 1, axis=0, window=("kaiser", 12.0)) if P > 1 else a
-    h = dt / P
+    x = _upsampled(a, P) if P > 1 else a
+    return sig.lfilter(*_mode_filter(float(f), float(z), dt / P), x, axis=0)[::P]
+
+
+#: bytes of interpolated records :func:`_upsampled` keeps (the least recently used go)
+UPSAMPLED_BYTES = 64 * 2**20
+_UPSAMPLED: OrderedDict = OrderedDict()
+
+
+def _upsampled(a: np.ndarray, P: int) -> np.ndarray:
+    """``a`` interpolated ``P`` times (band-limited, :func:`_mode`), kept by its content:
+    a mode's scan filters one record at every grid point and in every round, and the
+    interpolation costs three times the filter."""
+    import hashlib
+
+    import scipy.signal as sig
+
+    a = np.ascontiguousarray(a, float)
+    key = (P, a.shape, hashlib.blake2b(a.tobytes(), digest_size=16).digest())
+    if key in _UPSAMPLED:
+        _UPSAMPLED.move_to_end(key)
+        return _UPSAMPLED[key]
+    x = sig.resample_poly(a, P, 1, axis=0, window=("kaiser", 12.0))
+    x.flags.writeable = False
+    size = sum(v.nbytes for v in _UPSAMPLED.values())  # (a few dozen records)
+    while _UPSAMPLED and size + x.nbytes > UPSAMPLED_BYTES:  # the least recently used go
+        size -= _UPSAMPLED.popitem(last=False)[1].nbytes
+    if x.nbytes <= UPSAMPLED_BYTES:
+        _UPSAMPLED[key] = x
+    return x
+
+
+@functools.lru_cache(maxsize=1024)
+def _mode_filter(f: float, z: float, h: float) -> tuple:
+    """The mode's discrete filter (b, a) at step ``h`` (:func:`_mode`), made once per
+    frequency, damping and step: ``scipy.signal.bilinear`` is slow, and every round of
+    the search scans the same grid."""
+    import scipy.signal as sig
+
     w = 2.0 / h * np.tan(np.pi * f * h)
     b, den = sig.bilinear([2 * z * w, w * w], [1.0, 2 * z * w, w * w], 1.0 / h)
-    return sig.lfilter(b, den, x, axis=0)[::P]
+    b.flags.writeable = den.flags.writeable = False
+    return b, den
 
 
 add_law(
@@ -393,6 +436,7 @@ add_law(
         _cg_offset,
         places=("payload",),
         inertial=True,  # the prefilter is applied inside (to the weight's term only)
+        filters_inside=True,
         what="the payload's centre of gravity off where it is declared by (dx, dy, dz)",
         second_order=_cg_offset_second,
     )

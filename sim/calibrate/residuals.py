@@ -13,7 +13,8 @@ Three paths, chosen by the channels every run has (:func:`choose_path`):
   static part is removed per run and DOF (the paper's pressures were high-passed). An
   accelerometer conditioner (``accel_lowpass_hz``) delays the recorded acceleration
   alone; every other term is passed through the same analog filter
-  (:func:`sim.identify.least_squares.analog_lowpass`) so the balance stays exact.
+  (:class:`sim.calibrate.conditioning.Conditioner`, discretised at 1 kHz or more as
+  ``run --measure`` applies it) so the balance stays exact.
   Samples where the table is still (|v| below :data:`sim.calibrate.laws.DEADBAND`, and
   the filter's memory after them) are left out: there the friction force is anything
   within its bounds.
@@ -29,6 +30,7 @@ coherence with the states).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,6 +45,42 @@ PATHS = ("mechanical", "replay", "closed_loop")
 
 class CalibrationError(UserError):
     """Runs that cannot be calibrated together (one line: file, field, fix)."""
+
+
+#: bytes of the bases of laws with a shape (scanned: a mode's frequency and damping) a run
+#: keeps for its re-timed copies and the next rounds' scans (:meth:`MechRun.basis`; a
+#: 2.5 s CGS run's payload-mode grids, 288 points at each of 3 DOFs, hold 17 MB); the
+#: shapeless ones are all kept
+BASIS_BYTES = 32 * 2**20
+
+
+class BasisCache:
+    """A run's law bases by ``(law type, place, shape[, force delay])``
+    (:meth:`MechRun.basis`): those of fixed laws (no shape, no load) all, the others (a
+    scan's grid, a load's law at each force delay a search tries) up to
+    :data:`BASIS_BYTES`, the least recently used dropped first."""
+
+    def __init__(self):
+        self.shapeless: dict = {}
+        self.scanned: OrderedDict = OrderedDict()
+        self.nbytes = 0
+
+    def get(self, key: tuple, make) -> list:
+        if not key[2] and len(key) == 3:
+            if key not in self.shapeless:
+                self.shapeless[key] = make()
+            return self.shapeless[key]
+        if key in self.scanned:
+            self.scanned.move_to_end(key)
+            return self.scanned[key]
+        bs = make()
+        n = sum(b.nbytes for b in bs)
+        while self.scanned and self.nbytes + n > BASIS_BYTES:
+            _k, old = self.scanned.popitem(last=False)
+            self.nbytes -= sum(b.nbytes for b in old)
+        self.scanned[key] = bs
+        self.nbytes += n
+        return bs
 
 
 @dataclass
@@ -61,7 +99,9 @@ class MechRun:
     actuators: list
     classes: dict  # class name -> actuator indices
     rows: np.ndarray  # bool (n,): samples in the fit
-    prefilter: tuple | None = None
+    #: the acceleration's conditioner applied to every other term: a
+    #: :class:`sim.calibrate.conditioning.Conditioner` (or a digital filter's (b, a))
+    prefilter: object = None
     #: a delay (s) after the prefilter: the acceleration's own sensor delay
     #: (:mod:`sim.calibrate.timing`), applied to every other term as the prefilter is
     filter_delay_s: float = 0.0
@@ -84,7 +124,9 @@ class MechRun:
         return x - x[self.rows].mean(axis=0)
 
     def filt(self, x: np.ndarray) -> np.ndarray:
-        if self.prefilter is not None:
+        if callable(self.prefilter):  # the analog conditioner (sim.calibrate.conditioning.Conditioner)
+            x = self.prefilter(x)
+        elif self.prefilter is not None:  # a digital filter's (b, a)
             import scipy.signal as sig
 
             x = sig.lfilter(*self.prefilter, x, axis=0)
@@ -141,13 +183,31 @@ class MechRun:
         Q = b[:, None] * m[None, :] if b.ndim == 1 else b @ m
         return Q if law.inertial else self.filt(Q)
 
+    def basis(self, law, where: str, shape: dict) -> list:
+        """The law's unfiltered columns (:func:`_raw_columns`), kept in ``extra["basis"]``,
+        which the run's re-timed copies share (:func:`sim.calibrate.timing.retime`): they
+        depend on the recorded motion and the shape alone, a load's law also on the force
+        delay (the load is the re-timed force), and a law that filters inside on the
+        timing: its columns are made anew. A timing search re-times the runs at every
+        point it tries, and every round scans a mode's grid again: the accepted terms'
+        columns (a dry friction's pre-sliding series) and the grid's (a mode's interpolated
+        filter) need not be made again."""
+        if getattr(law, "filters_inside", False):
+            return _raw_columns(self, law, where, shape)
+        key = (law.type, where, tuple(sorted(shape.items())))
+        if getattr(law, "load", False):
+            key += (self.extra.get("timing", {}).get("force_delay_s"),)
+        cache = self.extra.setdefault("basis", BasisCache())
+        bs = cache.get(key, lambda: _law_basis(self, law, where, shape))
+        return _to_dofs(bs, self.place_motion(where)[3])
+
     def columns(self, law, where: str, shape: dict) -> list:
         """One (n, k) generalised force per linear coefficient of ``law`` (unit value) at ``where``."""
         key = (law.type, where, tuple(sorted(shape.items())))
         cache = self.extra.setdefault("raw_columns", {})
         if key in cache:
             return cache[key]
-        Qs = [Q if law.inertial else self.filt(Q) for Q in _raw_columns(self, law, where, shape)]
+        Qs = [Q if law.inertial else self.filt(Q) for Q in self.basis(law, where, shape)]
         if len(cache) > 128:  # shape scans make many; the accepted terms' come back
             for k in [k for k in cache if k[2]][:64]:
                 del cache[k]
@@ -265,7 +325,7 @@ def _still_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.n
     if prefilter is not None:
         from sim.identify.least_squares import filter_memory_s
 
-        m = int(math.ceil(filter_memory_s(prefilter, dt) / dt))
+        m = int(math.ceil(filter_memory_s(getattr(prefilter, "ba", prefilter), dt) / dt))
         still = np.convolve(still.astype(float), np.ones(m + 1))[:n] > 0
     if np.count_nonzero(keep & ~still) >= 16:
         keep &= ~still
@@ -331,7 +391,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             if law.second_order is not None:
                 other = other + mr.second(law, where, vals, vals)
         mr.model = a @ Me.T + mr.filt(other)
-        mr.extra.update(inertial=a @ Me.T, other=other, timing=known)
+        mr.extra.update(inertial=a @ Me.T, other=other, timing=known, basis=BasisCache())
         mr.rows = _still_rows(v, pre, r.dt)
         mr.excited = excited_dofs(mr, J6)
         out.append(mr)
@@ -379,12 +439,21 @@ def _law_args(mr, shape) -> dict:
 
 def _raw_columns(mr, law, where, shape) -> list:
     """The law's unfiltered DOF-space force per linear coefficient (list of (n, k))."""
-    u, v, a, m = mr.place_motion(where)
+    return _to_dofs(_law_basis(mr, law, where, shape), mr.place_motion(where)[3])
+
+
+def _law_basis(mr, law, where, shape) -> list:
+    """The law's force at its place per linear coefficient (list of (n,) or (n, m))."""
+    u, v, a, _m = mr.place_motion(where)
     s = _law_args(mr, shape)
     if getattr(law, "load", False):
         s["_load"] = mr.place_load(where)
     b = np.asarray(law.basis(u, v, a, s), float)
-    bs = [b] if len(law.linears) == 1 else list(b)
+    return [b] if len(law.linears) == 1 else list(b)
+
+
+def _to_dofs(bs: list, m: np.ndarray) -> list:
+    """A place's forces ``bs`` in DOF space through its map ``m`` (:meth:`MechRun.place_motion`)."""
     return [x[:, None] * m[None, :] if x.ndim == 1 else x @ m for x in bs]
 
 

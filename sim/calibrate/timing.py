@@ -103,11 +103,12 @@ def declared_state(run, accel_lowpass_hz, table_order: int = TABLE_ORDER) -> dic
     }
 
 
-def prefilter_of(state: dict, run) -> tuple | None:
-    """The analog filter (b, a) of the acceleration's conditioner in ``state`` at the
-    run's rate (one-line error when above the Nyquist frequency)."""
+def prefilter_of(state: dict, run):
+    """The acceleration's analog conditioner in ``state`` at the run's rate
+    (:class:`sim.calibrate.conditioning.Conditioner`; one-line error when above the
+    Nyquist frequency)."""
+    from sim.calibrate.conditioning import Conditioner
     from sim.calibrate.residuals import CalibrationError
-    from sim.identify.least_squares import analog_lowpass
 
     fc = state["accel_lowpass_hz"]
     if not fc:
@@ -117,23 +118,23 @@ def prefilter_of(state: dict, run) -> tuple | None:
             f"{run.name}: the accelerometer low-pass {fc:g} Hz is above the Nyquist frequency "
             f"{0.5 / run.dt:g} Hz; give --accel-lowpass none or declare a lower cut-off"
         )
-    return analog_lowpass(fc, 1.0 / run.dt, state["accel_lowpass_order"])
+    return Conditioner(float(fc), int(state["accel_lowpass_order"]), 1.0 / run.dt)
 
 
 def retime(mr, state: dict):
     """A mechanical run (:class:`sim.calibrate.residuals.MechRun`) with the force and
     acceleration timing of ``state`` in place of its own (same rows, same weights: every
     timing is scored by one measure; the terms' columns kept while the filter is)."""
-    from sim.identify.least_squares import analog_lowpass
+    from sim.calibrate.conditioning import Conditioner
 
     old = mr.extra["timing"]
     same_filter = all(old[k] == state[k] for k in ("accel_delay_s", "accel_lowpass_hz", "accel_lowpass_order"))
-    keep = ("force_at_instant", "inertial", "other", "w") + (
+    keep = ("force_at_instant", "inertial", "other", "w", "basis") + (
         ("raw_columns", "columns", "second") if same_filter else ()
     )
     new = dataclasses.replace(mr, extra={k: mr.extra[k] for k in keep if k in mr.extra})
     fc = state["accel_lowpass_hz"]
-    new.prefilter = analog_lowpass(fc, 1.0 / mr.dt, state["accel_lowpass_order"]) if fc else None
+    new.prefilter = Conditioner(float(fc), int(state["accel_lowpass_order"]), 1.0 / mr.dt) if fc else None
     new.filter_delay_s = state["accel_delay_s"]
     f = shift(mr.extra["force_at_instant"], -state["force_delay_s"], mr.dt)
     new.force = new.filt(f @ mr.J)

@@ -230,3 +230,30 @@ def test_bad_declared_conditioning_is_one_line(cond, match):
     with pytest.raises(CalibrationError, match=match) as ei:
         channel_conditioning(SimpleNamespace(name="rec.run.npz", meta={"channel_conditioning": cond}))
     assert "\n" not in str(ei.value) and "rec.run.npz: meta.channel_conditioning" in str(ei.value)
+
+
+def test_conditioner_at_a_low_record_rate_is_the_recorders():
+    """A 4-pole 50 Hz conditioner applied to a 204.8 Hz record (calibration's model of it)
+    is the one a recorder applied at the simulation's 1024 Hz, then kept every fifth sample
+    (`run --measure`): 0.05 % RMS apart. Filtered at the record's own rate it was 6 % apart,
+    its band warped into a 51 Hz conditioner's (docs/lab-example.md step 8)."""
+    import scipy.signal as sig
+
+    from sim.calibrate.conditioning import Conditioner, analog_response
+    from sim.identify.least_squares import analog_lowpass
+    from sim.signals import sensing
+
+    rng = np.random.default_rng(7)
+    x = sig.lfilter(*sig.butter(4, 25.0, fs=FS), rng.standard_normal(20480))  # a test's band, 0-25 Hz
+    truth = sensing.lowpass(x, 50.0, 4, FS, analog=True)[::5]
+    k = slice(100, -100)
+
+    def apart(y):
+        return np.std((y - truth)[k]) / np.std(truth[k])
+
+    assert apart(analog_response(x[::5], 50.0, 4, FS / 5)) < 1e-3
+    assert apart(sensing.lowpass(x[::5], 50.0, 4, FS / 5, analog=True)) > 0.03  # the record's own rate
+    assert apart(Conditioner(50.0, 4, FS / 5)(x[::5])) < 1e-3  # from rest: the start is in the lead-in
+    np.testing.assert_array_equal(  # at 1 kHz or more: the record's own rate, as before
+        Conditioner(100.0, 4, FS)(x), sig.lfilter(*analog_lowpass(100.0, FS, 4), x)
+    )

@@ -532,3 +532,45 @@ def test_worked_example_end_to_end_through_the_cli(tmp_path, capsys):
     assert js["error_after"] < 0.5 * js["error_before"]
     assert js["beats_baseline"] and js["error_after"] < js["baseline"]["holdout_error"]
     assert "linear ARX baseline" in (cal / "report.md").read_text()
+
+
+def _with_offsets_and_drift(path, seed: int):
+    """The run at ``path`` with what a real chain adds per record: a DC offset (zeroed
+    before the test, so different each time) and a random-walk drift on the acceleration
+    and the force (sizes: of the accelerometer noise and 2-3 % of the friction per sqrt(s))."""
+    from sim.runs.runfile import write_run
+
+    r = read_run(path)
+    rng = np.random.default_rng([seed, 23])
+    dt = r.dt
+    for ch, offset, drift in (("table_acceleration", 0.05, 0.002), ("actuator_force", 200.0, 30.0)):
+        x = getattr(r, ch)
+        walk = np.cumsum(rng.standard_normal(x.shape), axis=0) * drift * np.sqrt(dt)
+        setattr(r, ch, x + offset * rng.standard_normal(x.shape[1]) + walk)
+    return write_run(path, r)
+
+
+def test_clean_light_lab_records_add_no_sensor_timing(tmp_path):
+    """docs/lab-example.md step 8, shortened: the light table's records with the pressure on
+    time (no skew), quiet lead-ins, per-record offsets and drift, and the declared 50 Hz
+    conditioner the recorder really has. Calibration adds the friction and the modes and no
+    sensor timing: the conditioner candidate's interval holds the declared 50 Hz (the model
+    filtered the other terms at the record's 204.8 Hz and found 51.2 Hz before the
+    conditioner was discretised at 1 kHz, sim.calibrate.conditioning.CONDITIONER_RATE_HZ)."""
+    mod = _quake_example()
+    csvs = mod.make_export(tmp_path / "ex", durations={"elcentro": 10.0, "corralitos": 8.0}, pressure_lead_s=0.0)
+    runs = tmp_path / "runs"
+    assert main(["import", *map(str, csvs.values()), "--map", str(LIGHT_MAP), "--out", str(runs)]) == 0
+    paths = [str(_with_offsets_and_drift(runs / f"{name}.run.npz", i)) for i, name in enumerate(csvs)]
+    cal = tmp_path / "cal"
+    assert main(["calibrate", paths[0], "--holdout", paths[1], "--payload", "none", "--out", str(cal)]) == 0
+    js = json.loads((cal / "calibration.json").read_text())
+    added = [(e["name"], e["where"]) for e in js["effects_added"]]
+    assert not [a for a in added if a[0].startswith("sensor_")], added
+    assert ("coulomb_friction", "dof:x") in added and ("payload_mode", "dof:x") in added
+    lows = [c for c in js["candidates"] if c["name"] == "sensor_lowpass" and isinstance(c["round"], int)]
+    assert lows and not any(c["accepted"] for c in lows)
+    last = max(lows, key=lambda c: c["round"])  # the friction and both modes in: the sensors alone are left
+    fc, u = last["parameters"]["cutoff_hz"], last["uncertainty"]["cutoff_hz"]
+    assert abs(fc - mod.ACC_LOWPASS_HZ) <= u and "holds the declared conditioner" in last["reason"], last
+    assert js["error_after"] < 0.1 * js["error_before"]
