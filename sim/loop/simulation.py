@@ -333,7 +333,7 @@ class Simulation:
 
     def _start_hooks(self, reference):
         """The controller-tick hooks of fault effects (sim/effects/faults.py), started, or None."""
-        hooks = hooks_for(self)  # faults:
+        hooks = hooks_for(self)  # faults: started before the loop, called at its ticks
         if hooks is not None:
             if reference is None:
                 raise ScenarioError("fault effects act on closed-loop runs; this is an open-loop replay")
