@@ -172,8 +172,6 @@ LONG_FUNCTIONS = {
     "valve, supply and chamber steps in one loop body; the same steps are named functions in the numpy "
     "backend (hydraulics/_numpy_step.py), which test_backends_agree holds it to",
     "sim/loop/callback.py::coupled_step": "compiled kernel: the numba control callback, one body per physics step",
-    "sim/loop/simulation.py::Simulation.run": "to split: issue 26, owned by the speed helper (sim/loop/*)",
-    "sim/assess/study.py::max_scale": "to split: issue 26, owned by the speed helper (sim/assess/study.py)",
     "sim/calibrate/sensitivity.py::candidates": "to split: issue 26, owned by the calibration helpers",
 }
 

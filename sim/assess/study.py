@@ -403,54 +403,111 @@ def max_scale(
     the limiting check just above it (``limiting_above``), ``max_scale_runs``
     (simulations) and ``max_scale_rounds`` (rounds of simulations run together).
     """
-    import os
-
-    from sim.assess.many import batchable, run_plans
-
     if max_rounds is None and max_runs is None:
         max_rounds = 6
     round_cap = max_rounds if max_rounds is not None else 10**9
     run_cap = max_runs if max_runs is not None else 10**9
-    say = progress or (lambda text: None)
     prep = prepare(case)
-    cache: dict[float, dict] = {}  # scale -> its verdict (simulated, or failing without a simulation)
-    count = {"runs": 0, "rounds": 0, "steps": 0}
+    search = _ScaleSearch(prep, progress or (lambda text: None), nthread)
+    s0 = float(case.scale)
+    scale_free = [c["name"] for c in prep.static if not c["pass"]]
+    needs, pre0 = search.free(s0)
+    k = 1 if scale_free else _round_size(prep, s0, nthread)
+    if needs:
+        search.first_round(s0, pre0, k, rel_tol, run_cap)
+    search.count["steps"] = 0
+    first = search.cache[s0]
+    result = _finish(prep, dict(first))
+    if scale_free:  # the specimen cannot be built at any scale
+        return _with_max(result, search, None, scale_free[0], scale_free[0])
+    search.refine(k, rel_tol, run_cap, round_cap)
+    lo, hi = _bracket(search.cache)
+    if lo is None:  # even the smallest scale tried fails
+        return _with_max(result, search, None, first["limiting"], search.cache[hi]["limiting"])
+    above = search.cache.get(hi) if hi is not None else None
+    at = search.cache[lo]
+    if result.get("_outcome") is None and at.get("_outcome") is not None:
+        result["_outcome"] = at["_outcome"]  # the report's figures: the run at the largest scale
+        result["figures_scale"] = float(lo)
+    limiting = at["limiting"] if above is None else _first_failed(above)
+    upper = None if hi is None else float(hi)
+    return _with_max(result, search, lo, limiting, None if above is None else _first_failed(above), at, upper)
 
-    def free(s):
+
+def _round_size(prep: Prepared, s0: float, nthread: int) -> int:
+    """How many simulations a round runs together: ``nthread`` (0: all cores) where the
+    case's runs go on the batch, else 1 (e.g. drive iterations)."""
+    import os
+
+    from sim.assess.many import batchable
+
+    _, plan0 = stage(prep, s0, simulate=True)
+    return max(1, int(nthread or os.cpu_count() or 1)) if batchable(plan0) else 1
+
+
+def _with_max(result: dict, search: "_ScaleSearch", lo, limiting, above, at=None, upper=...) -> dict:
+    """``result`` with the search's answer: ``max_scale`` ``lo`` (None: none passes) and
+    ``max_scale_upper`` (the smallest failing scale, when one passes), the check that
+    limits it, the verdict there (``at``) and the check failing just above, with the
+    simulations and rounds it took."""
+    result["max_scale"] = None if lo is None else float(lo)
+    if upper is not ...:
+        result["max_scale_upper"] = upper
+    result.update(
+        max_scale_limiting=limiting,
+        at_max=None if at is None else _strip(at),
+        limiting_above=above,
+        max_scale_runs=search.count["runs"],
+        max_scale_rounds=search.count["rounds"],
+    )
+    return result
+
+
+class _ScaleSearch:
+    """The state of a :func:`max_scale` search on the prepared case ``prep``: every
+    verdict so far by scale (``cache``: simulated, or failing without a simulation) and
+    the simulations, rounds and steps counted."""
+
+    def __init__(self, prep: Prepared, say, nthread: int):
+        self.prep, self.say, self.nthread = prep, say, nthread
+        self.cache: dict[float, dict] = {}
+        self.count = {"runs": 0, "rounds": 0, "steps": 0}
+
+    def free(self, s: float) -> tuple[bool, dict]:
         """(needs a simulation, the verdict of the checks without one) at ``s``."""
-        pre = evaluate(prep, s, simulate=False)
-        if pre["feasible"] and prep.buildable:
+        pre = evaluate(self.prep, s, simulate=False)
+        if pre["feasible"] and self.prep.buildable:
             return True, pre
-        say(f"scale {s:.4g}: {pre['limiting']} fails without a simulation")
-        cache[s] = pre
-        count["steps"] += 1  # evaluations without a simulation are free; never loop for ever
+        self.say(f"scale {s:.4g}: {pre['limiting']} fails without a simulation")
+        self.cache[s] = pre
+        self.count["steps"] += 1  # evaluations without a simulation are free; never loop for ever
         return False, pre
 
-    def simulate(scales):
-        staged = [stage(prep, s, simulate=True, slot=j) for j, s in enumerate(scales)]
+    def simulate(self, scales: list[float]) -> None:
+        """One round: the simulations at ``scales`` together, their verdicts cached."""
+        from sim.assess.many import run_plans
+
+        staged = [stage(self.prep, s, simulate=True, slot=j) for j, s in enumerate(scales)]
+        count = self.count
         count["runs"] += len(scales)
         count["rounds"] += 1
         count["steps"] += 1
-        say(
-            f"round {count['rounds']}: simulating scale{'s' if len(scales) > 1 else ''} "
+        many = len(scales) > 1
+        self.say(
+            f"round {count['rounds']}: simulating scale{'s' if many else ''} "
             + ", ".join(f"{s:.4g}" for s in scales)
-            + f" (run{'s' if len(scales) > 1 else ''} {count['runs'] - len(scales) + 1}"
-            + (f"-{count['runs']})" if len(scales) > 1 else ")")
+            + f" (run{'s' if many else ''} {count['runs'] - len(scales) + 1}"
+            + (f"-{count['runs']})" if many else ")")
         )
-        outs = run_plans([plan for _, plan in staged], nthread=nthread)
+        outs = run_plans([plan for _, plan in staged], nthread=self.nthread)
         for s, o in zip(scales, outs):
             if isinstance(o, UserError):
                 raise o
-            cache[s] = settle(prep, s, o)
+            self.cache[s] = settle(self.prep, s, o)
 
-    s0 = float(case.scale)
-    scale_free = [c["name"] for c in prep.static if not c["pass"]]
-    needs, pre0 = free(s0)
-    k = 1
-    if not scale_free:  # the specimen can be built: one round runs k simulations where the batch takes them
-        _, plan0 = stage(prep, s0, simulate=True)
-        k = max(1, int(nthread or os.cpu_count() or 1)) if batchable(plan0) else 1
-    if needs:
+    def first_round(self, s0: float, pre0: dict, k: int, rel_tol: float, run_cap: int) -> None:
+        """``s0``, and with ``k > 1`` up to ``k - 1`` scales spread in log scale from it to
+        just under where the rated envelope fails (from ``pre0``, the verdict at ``s0``)."""
         todo = [s0]
         n = min(k, run_cap) - 1
         if n > 0:
@@ -458,61 +515,27 @@ def max_scale(
             top = (s0 / u if u > 0 else s0 * 4) * 0.995  # just under where the envelope fails
             if top > s0 * (1 + rel_tol):
                 for s in (s0 * (top / s0) ** (j / n) for j in range(1, n + 1)):
-                    if not free(s)[0]:  # the envelope is linear in the scale: not expected
+                    if not self.free(s)[0]:  # the envelope is linear in the scale: not expected
                         break
                     todo.append(s)
-        simulate(todo)
-    count["steps"] = 0
-    first = cache[s0]
-    result = _finish(prep, dict(first))
-    if scale_free:
-        result.update(
-            max_scale=None,
-            max_scale_limiting=scale_free[0],
-            at_max=None,
-            limiting_above=scale_free[0],
-            max_scale_runs=count["runs"],
-            max_scale_rounds=count["rounds"],
-        )
-        return result
-    while count["runs"] < run_cap and count["rounds"] < round_cap and count["steps"] <= 40:
-        lo, hi = _bracket(cache)
-        scales = _next_scales(cache, lo, hi, min(k, run_cap - count["runs"]), rel_tol)
-        if not scales:
-            break
-        todo = []
-        for s in scales:  # ascending: a scale failing without a simulation fails every larger one
-            if not free(s)[0]:
+        self.simulate(todo)
+
+    def refine(self, k: int, rel_tol: float, run_cap: int, round_cap: int) -> None:
+        """Rounds of up to ``k`` simulations (:func:`_next_scales`) until the bracket is
+        within ``rel_tol`` or the budget is spent."""
+        count = self.count
+        while count["runs"] < run_cap and count["rounds"] < round_cap and count["steps"] <= 40:
+            lo, hi = _bracket(self.cache)
+            scales = _next_scales(self.cache, lo, hi, min(k, run_cap - count["runs"]), rel_tol)
+            if not scales:
                 break
-            todo.append(s)
-        else:
-            simulate(todo)
-    lo, hi = _bracket(cache)
-    if lo is None:
-        result.update(
-            max_scale=None,
-            max_scale_limiting=first["limiting"],
-            at_max=None,
-            limiting_above=cache[hi]["limiting"],
-            max_scale_runs=count["runs"],
-            max_scale_rounds=count["rounds"],
-        )
-        return result
-    above = cache.get(hi) if hi is not None else None
-    at = cache[lo]
-    if result.get("_outcome") is None and at.get("_outcome") is not None:
-        result["_outcome"] = at["_outcome"]  # the report's figures: the run at the largest scale
-        result["figures_scale"] = float(lo)
-    result.update(
-        max_scale=float(lo),
-        max_scale_upper=None if hi is None else float(hi),
-        max_scale_limiting=(above or at)["limiting"] if above is None else _first_failed(above),
-        at_max=_strip(at),
-        limiting_above=None if above is None else _first_failed(above),
-        max_scale_runs=count["runs"],
-        max_scale_rounds=count["rounds"],
-    )
-    return result
+            todo = []
+            for s in scales:  # ascending: a scale failing without a simulation fails every larger one
+                if not self.free(s)[0]:
+                    break
+                todo.append(s)
+            else:
+                self.simulate(todo)
 
 
 def _bracket(cache: dict) -> tuple[float | None, float | None]:

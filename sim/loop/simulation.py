@@ -27,7 +27,6 @@ of the recorded commands reproduces the run to round-off.
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -42,6 +41,7 @@ from sim.effects.faults import hooks_for  # faults:
 from sim.effects.registry import dahl_step
 from sim.errors import RunInterrupted, ScenarioError, is_interrupt
 from sim.loop.recorder import derive, foundation_slides
+from sim.loop.wiring import Recording, Tally, Wiring
 from sim.scenario.reference import Reference, reference_from_motions
 from sim.validate import check_samples
 
@@ -274,18 +274,43 @@ class Simulation:
         physics steps per tick): recorder, controller and pre-step in one compiled call per
         physics step (same results; ``timing`` then has the three together under
         ``fused_s`` and no separate hydraulics/controller split).
+
+        Steps: the run's length (:meth:`_run_length`), the controller started on the
+        reference or the commands taken (:meth:`_start_input`), the recorder's arrays
+        (:class:`Recording`), the fault hooks, the kernels' arguments (:class:`Wiring`),
+        then one of the two loops (:meth:`_loop_fused`, :meth:`_loop_stepwise`) and the
+        channels derived from what it recorded (:meth:`_result`).
         """
-        if fast:
-            from hydraulics import _layout as HL
-            from sim.loop import _kernels as FL
         if (reference is None) == (valve_command is None):
             raise ValueError("give exactly one of reference and valve_command")
-        tm, m, d, hs = self.tm, self.m, self.d, self.hs
-        ctrl = self.controller
-        ctrl.reset()
+        self.controller.reset()
+        n, tps, at_ticks = self._run_length(reference, valve_command, duration_s)
+        w0 = self.d.warning.number[self._warn_idx].copy()  # MuJoCo's warning counts at the start
+        self._warn0 = [int(v) for v in w0]
+        vc_all = self._start_input(reference, valve_command, n, tps, at_ticks, kinematics, fast)
+        rec = Recording(n, self.m.nq, self.m.nv, self.tm.n_act)
+        hooks = self._start_hooks(reference)
+        io = Wiring(self, fast, w0)
+        clock = time.perf_counter
+        wall0 = clock()
+        if hooks is None and fuse and io.fused and self._fuses(reference, tps):  # faults: the fused tick has no hooks
+            tally = self._loop_fused(n, rec, io, gap_every, progress)
+        else:
+            tally = self._loop_stepwise(n, tps, rec, io, hooks, vc_all, gap_every, progress)
+        wall = clock() - wall0
+        if progress:
+            sys.stderr.write("\r" + " " * 70 + "\r")
+            sys.stderr.flush()
+        result = self._result(rec, tally, wall)
+        if tally.interrupted:
+            raise RunInterrupted(result)
+        return result
+
+    def _run_length(self, reference, valve_command, duration_s) -> tuple[int, int, bool]:
+        """(samples ``n`` to record, controller ticks per sample, whether ``reference`` is
+        sampled at the controller rate rather than the recorder's)."""
         rate = self.gains.rate_hz
-        cp, spt = self.steps_per_tick, self.steps_per_sample
-        tps = spt // cp  # controller ticks per recorded sample
+        tps = self.steps_per_sample // self.steps_per_tick  # controller ticks per recorded sample
         at_ticks = (  # a reference sampled at the controller rate (else at the recorder's)
             reference is not None
             and tps > 1
@@ -295,356 +320,229 @@ class Simulation:
         n_in = len(reference.t) // (tps if at_ticks else 1) if reference is not None else len(valve_command)
         n = n_in if duration_s is None else min(n_in, int(round(duration_s * rate)) + 1)
         check_samples(n, f"a run of {n / rate:g} s at {rate:g} Hz", None, ScenarioError)  # before allocating
-        na = tm.n_act
-        wnum = d.warning.number  # MuJoCo's warning counters (a view)
-        w0 = wnum[self._warn_idx].copy()
-        self._warn0 = [int(v) for v in w0]
-        if reference is not None:
-            ref_ticks = reference if tps == 1 or at_ticks else self._at_ticks(reference, n, tps)
-            ctrl.start(tm, d, hs, ref_ticks, n * tps, kinematics=kinematics, fast=fast)
-        else:
-            vc_all = np.ascontiguousarray(valve_command[:n], dtype=np.float64)
-        Q = np.full((n, m.nq), np.nan)
-        V = np.full((n, m.nv), np.nan)
-        ACC = np.full((n, 6), np.nan)
-        H = {
-            k: np.full((n, na), np.nan)
-            for k in ("valve_command", "spool_position", "actuator_force", "pressure_a", "pressure_b")
-        }
-        ex = {
-            "supply_pressure": np.full(n, np.nan),
-            "accumulator_gas_volume": np.full(n, np.nan),
-            "loop_gap": np.full(n, np.nan),
-        }
-        Hsp, Hf, Hpa, Hpb = H["spool_position"], H["actuator_force"], H["pressure_a"], H["pressure_b"]
-        Eps, Egas = ex["supply_pressure"], ex["accumulator_gas_volume"]
-        st = hs.state
-        spool, pa, pb, force, psup, gasv = st.spool[0], st.p_a[0], st.p_b[0], hs.force[0], st.p_supply, st.gas_volume
-        ids = tm.actuator_ids
-        qa, da = tm.stroke_qadr, tm.stroke_dadr
-        pd, pb_ = tm.platen_dadr, tm.platen_body
-        x2 = np.zeros((1, na))
-        v2 = np.zeros((1, na))
-        cmd2 = np.zeros((1, na))
-        cmd = cmd2[0]
-        qpos, qvel, qacc, dctrl = d.qpos, d.qvel, d.qacc, d.ctrl
-        qa64, da64, ids64 = (np.asarray(a, dtype=np.int64) for a in (qa, da, ids))
-        free = tm.platen_free
-        effects = tm.step_effects
-        fr_dofs, fr_fc, fr_zss = tm.friction_dofs, tm.friction_force, tm.friction_presliding_m
-        nfr = len(fr_dofs)
-        air = (tm.air_qadr, tm.air_dadr, tm.air_preload, float(tm.air_area_over_volume), float(tm.air_exponent))
-        nair = len(tm.air_qadr)
-        nq = nfr or nair  # qfrc_applied written by the loop every step
-        zfr = self._zfr
-        qfa = d.qfrc_applied
-        fused = fast and hs.delay_steps == 0 and hs.backend == "numba"  # one compiled call per step
-        slide_d, n_pd = np.asarray(tm.platen_slide_dadr, dtype=np.int64), len(tm.platen_dof_index)
-        fnd_d = self._fnd_d  # a spring-mounted foundation's slides: absolute table acceleration
-        xmat = d.xmat
-        step = mujoco.mj_step
-        hooks = hooks_for(self)  # faults: controller-tick hooks of fault effects (sim/effects/faults.py), or None
+        return n, tps, at_ticks
+
+    def _start_input(self, reference, valve_command, n, tps, at_ticks, kinematics, fast):
+        """Closed loop: start the controller on the reference at its ticks (returns None);
+        open loop: the first ``n`` recorded commands, contiguous float64."""
+        if reference is None:
+            return np.ascontiguousarray(valve_command[:n], dtype=np.float64)
+        ref_ticks = reference if tps == 1 or at_ticks else self._at_ticks(reference, n, tps)
+        self.controller.start(self.tm, self.d, self.hs, ref_ticks, n * tps, kinematics=kinematics, fast=fast)
+        return None
+
+    def _start_hooks(self, reference):
+        """The controller-tick hooks of fault effects (sim/effects/faults.py), started, or None."""
+        hooks = hooks_for(self)  # faults: started before the loop, called at its ticks
         if hooks is not None:
             if reference is None:
                 raise ScenarioError("fault effects act on closed-loop runs; this is an open-loop replay")
-            hooks.start(d)
-        fuse_tick = (
-            hooks is None  # faults: the fused tick has no hooks
-            and fast
-            and fuse
-            and fused
-            and free
+            hooks.start(self.d)
+        return hooks
+
+    def _fuses(self, reference, tps: int) -> bool:
+        """Whether recorder, controller tick and pre-step can run as one compiled call per
+        physics step (given the compiled hydraulic step and no fault hooks): closed loop on a
+        free platen, no per-step effects, two or more steps per tick, recording every tick."""
+        return (
+            self.tm.platen_free
             and reference is not None
-            and not effects
-            and spt >= 2
+            and not self.tm.step_effects
+            and self.steps_per_sample >= 2
             and tps == 1
-            and ctrl.has_compiled_tick()
+            and self.controller.has_compiled_tick()
         )
-        if fuse_tick:
-            first, later = FL.tick_first_step, FL.later_step
-            s_ref_all, v_ref_all, vff_all = ctrl.s_ref_all, ctrl.v_ref_all, ctrl.vff_all
-            g = ctrl.kernel_args()
-            hyd_args = (
-                qa64,
-                da64,
-                ids64,
-                cmd2,
-                x2,
-                v2,
-                hs._X,
-                hs._Y,
-                hs._IC,
-                hs._ICS,
-                hs._buf,
-                hs._P,
-                hs._G,
-                fr_dofs,
-                fr_fc,
-                zfr,
-                fr_zss,
-                self.dt,
-            ) + air
-            first_args = (
-                (
-                    qpos,
-                    qvel,
-                    xmat,
-                    dctrl,
-                    qfa,
-                    Q,
-                    V,
-                    Hsp,
-                    Hf,
-                    Hpa,
-                    Hpb,
-                    H["valve_command"],
-                    Eps,
-                    Egas,
-                    s_ref_all,
-                    v_ref_all,
-                    vff_all,
-                    qa64,
-                    da64,
-                    ids64,
-                    pd,
-                    pb_,
-                )
-                + g
-                + hyd_args[3:]
-            )
-            later_args = (qpos, qvel, qacc, dctrl, qfa, ACC, pd) + hyd_args
-        one = na == 1
-        q0, d0, i0 = int(qa64[0]), int(da64[0]), int(ids64[0])
-        closed = reference is not None
-        tick = ctrl.tick
-        sub_ticks = closed and tps > 1  # controller ticks between recorded samples (open loop: commands held)
-        healthy, glim, lims, widx = self._fl_healthy, GAP_LIMIT_M, self._pressure_limits(), self._warn_idx
-        slim = math.inf if ctrl.stroke_limit_m is None else float(ctrl.stroke_limit_m)
-        t_ctrl = t_hyd = t_phys = t_out = t_fused = 0.0
-        reason = None
+
+    def _loop_fused(self, n, rec, io, gap_every, progress) -> Tally:
+        """The run with one compiled call per physics step (recorder, controller tick and
+        hydraulics together, :func:`sim.loop._kernels.tick_first_step` then
+        :func:`~sim.loop._kernels.later_step`) between the ``mj_step`` calls."""
+        from sim.loop import _kernels as FL
+
+        first, later, step, m, d = FL.tick_first_step, FL.later_step, mujoco.mj_step, self.m, self.d
+        first_args, later_args = io.fused_args(rec, self.controller)
+        spt = self.steps_per_sample
+        t_phys = t_out = t_fused = 0.0
+        reason, interrupted, done = None, False, 0
         clock = time.perf_counter
-        wall0 = clock()
-        last_print = wall0
-        k = -1
-        done = 0
+        last_print = clock()
         try:
             for k in range(n):
-                if fuse_tick:
-                    # ---- recorder, controller tick, hydraulics: one compiled call per physics step
-                    t0 = clock()
-                    first(k, *first_args)
-                    t1 = clock()
-                    step(m, d)
-                    t2 = clock()
-                    later(k, *later_args)  # also records the first step's platen acceleration
-                    t3 = clock()
-                    step(m, d)
-                    t4 = clock()
-                    t_fused += (t1 - t0) + (t3 - t2)
-                    t_phys += (t2 - t1) + (t4 - t3)
-                    for _ in range(spt - 2):
-                        later(-1, *later_args)
-                        t6 = clock()
-                        step(m, d)
-                        t7 = clock()
-                        t_fused += t6 - t4
-                        t_phys += t7 - t6
-                        t4 = t7
-                else:
-                    # ---- recorder: raw state at t_k
-                    t0 = clock()
-                    if fast:
-                        FL.record(
-                            k,
-                            qpos,
-                            qvel,
-                            Q,
-                            V,
-                            hs._X,
-                            hs._Y,
-                            HL.SPOOL,
-                            HL.FORCE,
-                            HL.PA,
-                            HL.PB,
-                            Hsp,
-                            Hf,
-                            Hpa,
-                            Hpb,
-                            HL.PS,
-                            HL.GASV,
-                            Eps,
-                            Egas,
-                        )
-                    else:
-                        Q[k] = qpos
-                        V[k] = qvel
-                        Hsp[k] = spool
-                        Hf[k] = force
-                        Hpa[k] = pa
-                        Hpb[k] = pb
-                        Eps[k] = psup[0]
-                        Egas[k] = gasv[0]
-                    t1 = clock()
-                    t_out += t1 - t0
-                    # ---- controller tick (valve commands held until the next tick)
-                    if hooks is not None:  # faults: the tick with feedback faults, interlock, stuck valves
-                        hooks.tick(k, k / rate, ctrl.s_ref_all, ctrl.v_ref_all, ctrl.vff_all, d, force, psup[0], cmd)
-                    elif closed:
-                        tick(k * tps, cmd)
-                    else:
-                        cmd[:] = vc_all[k]
-                    H["valve_command"][k] = cmd
-                    t2 = clock()
-                    t_ctrl += t2 - t1
-                    # ---- physics steps of this sample: (later controller ticks,) hydraulics, then mj_step
-                    for j in range(spt):
-                        t3 = clock()
-                        if j and sub_ticks and j % cp == 0:
-                            tick(k * tps + j // cp, cmd)
-                        if fused and nq:
-                            FL.pre_step_friction(
-                                qpos,
-                                qvel,
-                                dctrl,
-                                qa64,
-                                da64,
-                                ids64,
-                                cmd2,
-                                x2,
-                                v2,
-                                hs._X,
-                                hs._Y,
-                                hs._IC,
-                                hs._ICS,
-                                hs._buf,
-                                0,
-                                hs._P,
-                                hs._G,
-                                qfa,
-                                fr_dofs,
-                                fr_fc,
-                                zfr,
-                                fr_zss,
-                                self.dt,
-                                *air,
-                            )
-                        elif fused:
-                            FL.pre_step(
-                                qpos,
-                                qvel,
-                                dctrl,
-                                qa64,
-                                da64,
-                                ids64,
-                                cmd2,
-                                x2,
-                                v2,
-                                hs._X,
-                                hs._Y,
-                                hs._IC,
-                                hs._ICS,
-                                hs._buf,
-                                0,
-                                hs._P,
-                                hs._G,
-                            )
-                        elif one:  # one actuator (a uni-axial table): scalar copies, ~10x cheaper than a fancy index
-                            x2[0, 0] = qpos[q0]
-                            v2[0, 0] = qvel[d0]
-                            f = hs.step(cmd2, x2, v2)
-                            dctrl[i0] = f[0, 0]
-                        else:
-                            x2[0] = qpos[qa64]  # (int64 indices: a fancy index with MuJoCo's int32 ones is slower)
-                            v2[0] = qvel[da64]
-                            f = hs.step(cmd2, x2, v2)
-                            dctrl[ids64] = f[0]
-                        if not (fused and nq) and (effects or nq):
-                            qfa[:] = 0.0
-                            if nfr:
-                                if fast:
-                                    FL.presliding_friction(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss, self.dt)
-                                else:
-                                    self._presliding_numpy(qvel, qfa, fr_dofs, fr_fc, zfr, fr_zss)
-                            if nair:
-                                if fast:
-                                    FL.air_springs(qpos, qfa, *air)
-                                else:
-                                    self._air_numpy(qpos, qfa, *air)
-                        for e in effects:
-                            e.apply(m, d)
-                        t4 = clock()
-                        step(m, d)
-                        t5 = clock()
-                        t_hyd += t4 - t3
-                        t_phys += t5 - t4
-                        if j == 0:
-                            if free:
-                                ACC[k] = qacc[pd : pd + 6]
-                            elif fnd_d is not None:
-                                ACC[k, :n_pd] = qacc[fnd_d] + qacc[slide_d]
-                            else:
-                                ACC[k, :n_pd] = qacc[slide_d]
-                done = k + 1  # tick k is complete (kept even if the check below stops the run)
-                # ---- divergence checks (one compiled test; the message only when it fails)
-                if k % gap_every == 0 or k == n - 1:
+                t0 = clock()
+                first(k, *first_args)
+                t1 = clock()
+                step(m, d)
+                t2 = clock()
+                later(k, *later_args)  # also records the first step's platen acceleration
+                t3 = clock()
+                step(m, d)
+                t4 = clock()
+                t_fused += (t1 - t0) + (t3 - t2)
+                t_phys += (t2 - t1) + (t4 - t3)
+                for _ in range(spt - 2):
+                    later(-1, *later_args)
                     t6 = clock()
-                    gap = self.loop_gap()
-                    ex["loop_gap"][k] = gap
-                    if not (
-                        gap <= glim and healthy(qpos, qvel, st.p_a, st.p_b, psup, *lims, wnum, widx, w0, qa64, slim)
-                    ):
-                        reason = self._check(k / rate, gap)
+                    step(m, d)
+                    t7 = clock()
+                    t_fused += t6 - t4
+                    t_phys += t7 - t6
+                    t4 = t7
+                done = k + 1  # tick k is complete (kept even if the check below stops the run)
+                if k % gap_every == 0 or k == n - 1:  # divergence checks (a call every gap_every ticks)
+                    t6 = clock()
+                    reason = self._diverged(k, io, rec.ex["loop_gap"])
                     t_out += clock() - t6
                     if reason:
                         break
                 if progress and clock() - last_print > 0.25:
-                    last_print = clock()
-                    frac = (k + 1) / n
-                    bar = "#" * int(30 * frac)
-                    sys.stderr.write(f"\r  [{bar:<30s}] {100 * frac:5.1f} %  t = {k / rate:7.2f} s")
-                    sys.stderr.flush()
-        except (KeyboardInterrupt, SystemError) as e:  # Ctrl-C: keep the ticks done so far, marked incomplete
-            if not is_interrupt(e):  # (SystemError: the Ctrl-C landed in a numba call)
-                raise
-            reason = f"interrupted (Ctrl-C) at t = {done / rate:.4f} s of {n / rate:.4f} s"
-            interrupted = True
-        else:
-            interrupted = False
-        wall = clock() - wall0
-        if progress:
-            sys.stderr.write("\r" + " " * 70 + "\r")
-            sys.stderr.flush()
-        n_done = done
-        t7 = clock()
-        ch = self._derive(Q[:n_done], V[:n_done], ACC[:n_done])
-        for key, arr in H.items():
+                    last_print = self._show_progress(k, n)
+        except (KeyboardInterrupt, SystemError) as e:
+            reason, interrupted = self._interrupted(e, done, n), True
+        return Tally(done, reason, interrupted, t_phys=t_phys, t_out=t_out, t_fused=t_fused)
+
+    def _loop_stepwise(self, n, tps, rec, w, hooks, vc_all, gap_every, progress) -> Tally:
+        """The run one physics step at a time: per sample the recorder and the controller tick
+        (or the recorded command, or the fault hooks), then per physics step the hydraulic
+        step, the loop's own forces and effects, and ``mj_step``. One body on purpose: it is
+        the per-step hot path; everything it calls is set up once (:class:`Wiring`)."""
+        m, d, hs, ctrl, tick, closed = self.m, self.d, self.hs, self.controller, self.controller.tick, vc_all is None
+        rate, cp, spt, step = self.gains.rate_hz, self.steps_per_tick, self.steps_per_sample, mujoco.mj_step
+        sub_ticks = closed and tps > 1  # controller ticks between recorded samples (open loop: commands held)
+        qpos, qvel, qacc, dctrl, qfa = w.qpos, w.qvel, w.qacc, w.dctrl, w.qfa
+        x2, v2, cmd2, cmd, force, psup = w.x2, w.v2, w.cmd2, w.cmd, w.force, w.psup
+        record, rec_args, fused, pre_step, pre_args = w.record, w.record_args(rec), w.fused, w.pre_step, w.pre_args
+        one, q0, d0, i0, qa64, da64, ids64 = w.one, w.q0, w.d0, w.i0, w.qa64, w.da64, w.ids64
+        clear_qfa, own_forces = w.clear_qfa, w.own_forces  # pre-sliding friction, air springs
+        effects, free, pd, fnd_d, slide_d, n_pd = w.effects, w.free, w.pd, w.fnd_d, w.slide_d, w.n_pd
+        ACC, Hcmd = rec.ACC, rec.H["valve_command"]
+        t_ctrl = t_hyd = t_phys = t_out = 0.0
+        reason, interrupted, done = None, False, 0
+        clock = time.perf_counter
+        last_print = clock()
+        try:
+            for k in range(n):
+                t0 = clock()  # ---- recorder: raw state at t_k
+                record(k, *rec_args)
+                t1 = clock()
+                t_out += t1 - t0
+                # ---- controller tick (valve commands held until the next tick)
+                if hooks is not None:  # faults: the tick with feedback faults, interlock, stuck valves
+                    hooks.tick(k, k / rate, ctrl.s_ref_all, ctrl.v_ref_all, ctrl.vff_all, d, force, psup[0], cmd)
+                elif closed:
+                    tick(k * tps, cmd)
+                else:
+                    cmd[:] = vc_all[k]
+                Hcmd[k] = cmd
+                t2 = clock()
+                t_ctrl += t2 - t1
+                # ---- physics steps of this sample: (later controller ticks,) hydraulics, then mj_step
+                for j in range(spt):
+                    t3 = clock()
+                    if j and sub_ticks and j % cp == 0:
+                        tick(k * tps + j // cp, cmd)
+                    if fused:  # one compiled call: strokes, hydraulic step, forces (and friction, air springs)
+                        pre_step(*pre_args)
+                    elif one:  # one actuator (a uni-axial table): scalar copies, ~10x cheaper than a fancy index
+                        x2[0, 0] = qpos[q0]
+                        v2[0, 0] = qvel[d0]
+                        f = hs.step(cmd2, x2, v2)
+                        dctrl[i0] = f[0, 0]
+                    else:
+                        x2[0] = qpos[qa64]  # (int64 indices: a fancy index with MuJoCo's int32 ones is slower)
+                        v2[0] = qvel[da64]
+                        f = hs.step(cmd2, x2, v2)
+                        dctrl[ids64] = f[0]
+                    if clear_qfa:
+                        qfa[:] = 0.0
+                        for f, args in own_forces:
+                            f(*args)
+                    for e in effects:
+                        e.apply(m, d)
+                    t4 = clock()
+                    step(m, d)
+                    t5 = clock()
+                    t_hyd += t4 - t3
+                    t_phys += t5 - t4
+                    if j == 0:
+                        if free:
+                            ACC[k] = qacc[pd : pd + 6]
+                        elif fnd_d is not None:
+                            ACC[k, :n_pd] = qacc[fnd_d] + qacc[slide_d]
+                        else:
+                            ACC[k, :n_pd] = qacc[slide_d]
+                done = k + 1  # tick k is complete (kept even if the check below stops the run)
+                if k % gap_every == 0 or k == n - 1:  # divergence checks (a call every gap_every ticks)
+                    t6 = clock()
+                    reason = self._diverged(k, w, rec.ex["loop_gap"])
+                    t_out += clock() - t6
+                    if reason:
+                        break
+                if progress and clock() - last_print > 0.25:
+                    last_print = self._show_progress(k, n)
+        except (KeyboardInterrupt, SystemError) as e:
+            reason, interrupted = self._interrupted(e, done, n), True
+        return Tally(done, reason, interrupted, t_ctrl=t_ctrl, t_hyd=t_hyd, t_phys=t_phys, t_out=t_out)
+
+    def _diverged(self, k: int, io, gaps) -> str | None:
+        """Why the run must stop after sample ``k`` (None: it goes on): the loop-closure gap,
+        recorded in ``gaps``, and one compiled test of the state; the message only when it fails."""
+        gap = self.loop_gap()
+        gaps[k] = gap
+        if gap <= GAP_LIMIT_M and self._fl_healthy(*io.health_args):
+            return None
+        return self._check(k / self.gains.rate_hz, gap)
+
+    def _show_progress(self, k: int, n: int) -> float:
+        """The progress bar on stderr after sample ``k`` of ``n``; returns when it was drawn."""
+        now = time.perf_counter()
+        frac = (k + 1) / n
+        bar = "#" * int(30 * frac)
+        sys.stderr.write(f"\r  [{bar:<30s}] {100 * frac:5.1f} %  t = {k / self.gains.rate_hz:7.2f} s")
+        sys.stderr.flush()
+        return now
+
+    def _interrupted(self, e: BaseException, done: int, n: int) -> str:
+        """The reason of a run stopped by Ctrl-C after ``done`` of ``n`` samples (re-raises
+        ``e`` when it is not an interrupt: a SystemError is one when the Ctrl-C landed in a
+        numba call)."""
+        if not is_interrupt(e):
+            raise e
+        rate = self.gains.rate_hz
+        return f"interrupted (Ctrl-C) at t = {done / rate:.4f} s of {n / rate:.4f} s"
+
+    def _result(self, rec: Recording, tally: Tally, wall: float) -> RunResult:
+        """The run's result from the ``tally.done`` samples recorded: the channels derived
+        from the raw state (:func:`sim.loop.recorder.derive`), the hydraulic channels and
+        the extras, with the timing of each part."""
+        t7 = time.perf_counter()
+        n_done, ex = tally.done, rec.ex
+        ch = self._derive(rec.Q[:n_done], rec.V[:n_done], rec.ACC[:n_done])
+        for key, arr in rec.H.items():
             ch[key] = arr[:n_done]
         for key in ex:
             ex[key] = ex[key][:n_done]
         if "_payload_qpos" in ch:
             ex["payload_qpos"] = ch.pop("_payload_qpos")
-        t_post = clock() - t7
-        result = RunResult(
+        t_post = time.perf_counter() - t7
+        rate = self.gains.rate_hz
+        return RunResult(
             t=np.arange(n_done) / rate,
             channels=ch,
             extras=ex,
             wall_s=wall + t_post,
             sim_s=n_done / rate,
             timing={
-                "physics_s": t_phys,
-                "hydraulics_s": t_hyd,
-                "controller_s": t_ctrl,
-                "output_s": t_out + t_post,
-                "fused_s": t_fused,
-                "steps": n_done * spt,
+                "physics_s": tally.t_phys,
+                "hydraulics_s": tally.t_hyd,
+                "controller_s": tally.t_ctrl,
+                "output_s": tally.t_out + t_post,
+                "fused_s": tally.t_fused,
+                "steps": n_done * self.steps_per_sample,
             },
-            incomplete_reason=reason,
-            interrupted=interrupted,
+            incomplete_reason=tally.reason,
+            interrupted=tally.interrupted,
             force_lag_s=self.dt,
         )
-        if interrupted:
-            raise RunInterrupted(result)
-        return result
 
     def _derive(self, Q, V, ACC) -> dict:
         """Recorder channels from raw qpos/qvel/platen-qacc samples (:func:`sim.loop.recorder.derive`)."""

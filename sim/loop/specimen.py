@@ -53,12 +53,25 @@ def specimen_sensors(tm) -> SpecimenSensors | None:
     K += np.diag([m.jnt_stiffness[j] for j in jid])
     C += np.diag([m.dof_damping[k] for k in dadr])
     mass = np.array([m.body_mass[m.jnt_bodyid[j]] for j in jid], float)
-    direction = [1.0, 0.0, 0.0] if pay.direction == "x" else [0.0, 1.0, 0.0]
-    meta = [
-        {"name": f"F{i + 1}", "height_m": float(pay.base_m[2] + (i + 1) * pay.storey_height_m), "direction": direction}
-        for i in range(len(jid))
-    ]
+    direction, heights = frame_axis(pay), floor_heights(pay)
+    meta = [{"name": f"F{i + 1}", "height_m": heights[i], "direction": direction} for i in range(len(jid))]
     return SpecimenSensors(qadr=qadr, dadr=dadr, K=K, C=C, mass=mass, meta=meta)
+
+
+def floor_heights(payload) -> list[float]:
+    """Heights (m above the platen's top surface) of a shear-frame payload's floors, or []:
+    floor ``i`` (from 1) at ``base_m[2] + i * storey_height_m`` (``mjcf.builder``)."""
+    from mjcf.description import ShearFramePayload
+
+    if not isinstance(payload, ShearFramePayload):
+        return []
+    z0, h = float(payload.base_m[2]), float(payload.storey_height_m)
+    return [z0 + (i + 1) * h for i in range(len(payload.mass_kg))]
+
+
+def frame_axis(payload) -> list[float]:
+    """The unit vector along which a shear frame's floors slide (its ``direction``, x or y)."""
+    return [1.0, 0.0, 0.0] if getattr(payload, "direction", "x") == "x" else [0.0, 1.0, 0.0]
 
 
 def _fixed_tendon_row(m, t: int, jid: list) -> np.ndarray:
@@ -80,4 +93,4 @@ def specimen_acceleration(sensors: SpecimenSensors, Q: np.ndarray, V: np.ndarray
     return -(q @ sensors.K.T + qd @ sensors.C.T) / sensors.mass[None, :]
 
 
-__all__ = ["SpecimenSensors", "specimen_acceleration", "specimen_sensors"]
+__all__ = ["SpecimenSensors", "floor_heights", "frame_axis", "specimen_acceleration", "specimen_sensors"]
