@@ -172,7 +172,6 @@ LONG_FUNCTIONS = {
     "valve, supply and chamber steps in one loop body; the same steps are named functions in the numpy "
     "backend (hydraulics/_numpy_step.py), which test_backends_agree holds it to",
     "sim/loop/callback.py::coupled_step": "compiled kernel: the numba control callback, one body per physics step",
-    "sim/calibrate/sensitivity.py::candidates": "to split: issue 26, owned by the calibration helpers",
 }
 
 

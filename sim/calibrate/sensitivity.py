@@ -170,16 +170,38 @@ class Candidate:
 
 
 # ------------------------------------------------------------------ the candidates
-def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[Candidate]:
-    """Every candidate of the library on this table for the compared channels of ``prs``;
-    ``accepted``: entries already added (their parameters are the new neutral values);
-    ``motion_rms``: place -> (u, v, a) RMS of the recorded motion (mechanical steps);
-    ``effects``: only these types (None: all)."""
+@dataclass
+class _Table:
+    """What the candidates of a table are built from: the current model's description,
+    hydraulics and step, the force step of the screening, the places, and the filter."""
+
+    cur: object
+    hp: object
+    dt: float
+    Fs: float
+    hyd_places: list
+    mech_places: list
+    want: set | None
+    have: set
+
+    def spec(self, t, k):
+        from sim.effects.base import EFFECTS
+
+        u, lo, hi, _d = EFFECTS[t].SPEC[k]
+        return u, lo, hi
+
+    def offered(self, t) -> bool:
+        """An effect type the registry holds and the search was asked for."""
+        from sim.effects.base import EFFECTS
+
+        return t in EFFECTS and not (self.want and t not in self.want)
+
+
+def _table_of(desc, payload, accepted, effects) -> _Table:
+    """The current model (the description with ``accepted`` in) as a :class:`_Table`."""
     from hydraulics.params import HydraulicParams
     from mjcf.description import parse_table
     from sim.effects import build_model
-    from sim.effects.base import EFFECTS
-    from sim.effects.hydraulic import actuator_indices
 
     raw = dict(desc.raw)
     raw["effect"] = build_order(list(raw.get("effect", [])) + [dict(e) for e in accepted])
@@ -188,27 +210,46 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
     hp = HydraulicParams.from_table(cur.raw)
     for e in tm.effects:
         hp = e.edit_hydraulics(hp)
-    dt = float(tm.model.opt.timestep)
     cap = float(np.mean(hp.area_a_m2)) * hp.supply_pressure_pa
-    Fs = FORCE_STEP * cap
-    want = set(effects) if effects else None
-    have = {(e["type"], e["where"]) for e in accepted}
     names = list(cur.actuator_names)
     classes = sorted({a.cls.name for a in cur.actuators})
     hyd_places = [f"class:{c}" for c in classes] + ([f"actuator:{a}" for a in names] if len(names) > 1 else [])
     mech_places = [f"dof:{d}" for d in cur.dofs] + hyd_places
-    out = []
+    want = set(effects) if effects else None
+    have = {(e["type"], e["where"]) for e in accepted}
+    return _Table(cur, hp, float(tm.model.opt.timestep), FORCE_STEP * cap, hyd_places, mech_places, want, have)
 
-    def spec(t, k):
-        u, lo, hi, _d = EFFECTS[t].SPEC[k]
-        return u, lo, hi
+
+def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[Candidate]:
+    """Every candidate of the library on this table for the compared channels of ``prs``;
+    ``accepted``: entries already added (their parameters are the new neutral values);
+    ``motion_rms``: place -> (u, v, a) RMS of the recorded motion (mechanical steps);
+    ``effects``: only these types (None: all)."""
+    from sim.effects.base import EFFECTS
+
+    tb = _table_of(desc, payload, accepted, effects)
+    out = _hydraulic_candidates(tb) + _mechanical_candidates(tb, motion_rms)
+    if tb.offered("foundation_mode") and ("foundation_mode", "table") not in tb.have:
+        out.append(foundation_candidate(tb.cur, tb.dt))
+    if "payload_mode" in EFFECTS and ((tb.want and "payload_mode" in tb.want) or _rigid(payload)):
+        # offered where a specimen may be flexible: a declared rigid payload, or when asked for
+        # (an undeclared specimen, --payload none): not in every bare table's default search
+        out += mode_candidates(tb.cur, payload, accepted, motion_rms, tb.Fs, 1.0 / prs[0].dt)
+    return out + _sensor_candidates(tb, prs)
+
+
+def _hydraulic_candidates(tb: _Table) -> list[Candidate]:
+    """The valve, oil, leakage and supply candidates at each hydraulic place."""
+    from sim.effects.base import EFFECTS
+    from sim.effects.hydraulic import actuator_indices
 
     class _W:  # an effect-like object for actuator_indices
         def __init__(self, where):
             self.where, self.source = where, "candidate"
 
+    out, hp, dt, have, hyd_places, spec = [], tb.hp, tb.dt, tb.have, tb.hyd_places, tb.spec
     for t in HYDRAULIC:
-        if t not in EFFECTS or (want and t not in want):
+        if not tb.offered(t):
             continue
         for w in ["supply"] if t == "supply_pressure_drop" else hyd_places:
             if (t, w) in have:
@@ -257,10 +298,16 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
                     grid=grid,
                 )
             )
+    return out
+
+
+def _mechanical_candidates(tb: _Table, motion_rms) -> list[Candidate]:
+    """The force laws at each mechanical place, stepped by the recorded motion there."""
+    out, have, Fs, spec = [], tb.have, tb.Fs, tb.spec
     for t, (key, shape) in MECHANICAL.items():
-        if t not in EFFECTS or (want and t not in want):
+        if not tb.offered(t):
             continue
-        for w in mech_places:
+        for w in tb.mech_places:
             if (t, w) in have or w not in motion_rms:
                 continue
             u, v, a = motion_rms[w]
@@ -286,19 +333,14 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
                     units,
                 )
             )
-    if (
-        "foundation_mode" in EFFECTS
-        and (not want or "foundation_mode" in want)
-        and ("foundation_mode", "table") not in have
-    ):
-        out.append(foundation_candidate(cur, dt))
-    if "payload_mode" in EFFECTS and ((want and "payload_mode" in want) or _rigid(payload)):
-        # offered where a specimen may be flexible: a declared rigid payload, or when asked for
-        # (an undeclared specimen, --payload none): not in every bare table's default search
-        out += mode_candidates(cur, payload, accepted, motion_rms, Fs, 1.0 / prs[0].dt)
-    fs = 1.0 / prs[0].dt
+    return out
+
+
+def _sensor_candidates(tb: _Table, prs) -> list[Candidate]:
+    """The gain, offset, delay and low-pass of each compared channel and column."""
+    out, have, fs = [], tb.have, 1.0 / prs[0].dt
     for t in SENSOR:
-        if t not in EFFECTS or (want and t not in want):
+        if not tb.offered(t):
             continue
         for ch, cols in prs[0].columns.items():
             for w in [f"channel:{ch}"] + [f"channel:{ch}[{j}]" for j in cols]:
