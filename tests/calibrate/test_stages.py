@@ -217,3 +217,25 @@ def test_the_mechanical_paths_effects_stay_only_on_the_pooled_evidence(monkeypat
         assert res.paths["mechanical"]["refused"]
         assert any(c["round"] == "pooled" and not c["accepted"] for c in res.candidates)
     assert res.baseline["holdout_error"] == pytest.approx(0.9)
+
+
+@pytest.mark.slow
+def test_cgs_valve_delay_found_with_the_default_paths(tmp_path):
+    """CGS runs with valve commands, forces and motion (3-axis noise, the 1024 Hz recorder
+    model), every vertical valve 6 physics steps of 1/2048 s late: with no path named, the mechanical
+    path adds nothing for it (a valve delay does not change the force-motion balance) and
+    the replay finds it at its class, its value (the 2.930 ms realised) inside its interval."""
+    from tests.calibrate.test_calibrate_paths import EFFECTS as PATH_EFFECTS
+    from tests.calibrate.test_calibrate_paths import _cgs_measured
+
+    truth = 6 / 2048
+    paths = _cgs_measured(tmp_path, [{"type": "valve_delay", "where": "class:vertical", "delay_s": truth}])
+    res = S.calibrate(paths, effects=["coulomb_friction", "viscous_damping", *PATH_EFFECTS], workers=2)
+    assert res.residual_path == "mechanical + replay"
+    found = [(e["name"], e["where"], e["path"]) for e in res.effects_added]
+    assert found[:1] == [("valve_delay", "class:vertical", "replay")], found
+    assert all(p == "replay" for *_, p in found), found
+    e = res.effects_added[0]
+    assert abs(e["parameters"]["delay_s"] - truth) <= e["uncertainty"]["delay_s"], e
+    rep = res.paths["replay"]
+    assert rep["error_after"] < (1 - S.HOLDOUT_MARGIN) * rep["error_before_declared"], rep
