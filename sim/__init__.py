@@ -14,6 +14,16 @@ and ``effects``) -> ``runs`` (run files) -> ``assess`` / ``identify`` / ``calibr
 
 from __future__ import annotations
 
+import os
+
+# One BLAS thread per process unless the caller says otherwise, set before numpy loads:
+# the heavy work runs in worker processes (sim.parallel.map_jobs: sweeps, calibration
+# candidates), and OpenBLAS's own threads then wait on one another. Measured on a loaded
+# 2-core machine: a 153 x 153 solve of the ARX baseline took 210 ms with its threads and
+# 0.27 ms with one; a CGS mechanical calibration 205 s and 13.6 s, with the same results.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 _API = {
     "load_scenario": "sim.scenario.files",
     "Scenario": "sim.scenario.files",
