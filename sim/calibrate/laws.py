@@ -248,7 +248,11 @@ add_law(
 add_law(
     Law(
         "added_mass",
-        {"mass_kg": ("kg", -np.inf, np.inf)},
+        # >= 0, as the description's added_mass effect: a table lighter than declared has a
+        # wrong moving mass ([platen] mass_kg, or an [unknown] range on it), not a negative
+        # mass on it; a negative fit (a declared specimen's mass counted twice) is refused at
+        # its bound instead of written into a description no command could load
+        {"mass_kg": ("kg", 0.0, np.inf)},
         "mass_kg",
         lambda u, v, a, s: a,
         inertial=True,

@@ -84,6 +84,10 @@ class PathRun:
     force_total: bool = False
     #: the run's ``meta.specimen_sensors`` (one per column of ``specimen_acceleration``)
     specimen: list = field(default_factory=list)
+    #: how the recorder's command is held between its samples (``meta.command_hold``):
+    #: the replay applies it as ``replay`` does (a 204.8 Hz drive held where the lab's
+    #: controller interpolated it reads as a different valve)
+    hold: str = "zoh"
 
     @property
     def dt(self) -> float:
@@ -137,6 +141,7 @@ class PathRun:
             dict(self.bandpass),
             self.force_total,
             list(self.specimen),
+            self.hold,
         )
 
     def only(self, keep) -> "PathRun":
@@ -258,6 +263,7 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None, payload=
                 bandpass=bands,
                 not_excited=quiet,
                 force_total=holds_total(r.actuator_force),
+                hold=str(r.meta.get("command_hold") or "zoh"),
                 specimen=sensors_of(r) if SPECIMEN in cols else [],
             )
         )
@@ -316,7 +322,7 @@ def _setup(job):
     """The simulation of one job, ready to run from its reset: ``(sim, reference,
     valve_command, post)`` (one of reference / valve_command None; ``post(result)`` gives
     :func:`simulate_job`'s answer), or None when the model refuses the candidate."""
-    raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands, total, specimen = job
+    raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands, total, specimen, hold = job
     from mjcf.description import parse_table
     from sim.effects import build_model
 
@@ -332,7 +338,7 @@ def _setup(job):
         if path == "replay":
             from sim.calibrate.replay import record_channels, replay_setup
 
-            sim, cmd = replay_setup(tm, t, drive)
+            sim, cmd = replay_setup(tm, t, drive, hold=hold)
             ref = None
 
             def chans_of(res):

@@ -22,7 +22,7 @@ import copy
 import math
 from dataclasses import replace
 
-from sim.calibrate.residuals import CalibrationError
+from sim.errors import UserError
 
 #: effect types the mechanical path cannot see: a later stage looks only for these (the
 #: force and acceleration sensors' timing and the specimen's modes are judged on the
@@ -134,7 +134,7 @@ def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, wo
         return first
     try:
         second = search_one(path, with_effects(desc, kept), later)
-    except CalibrationError as e:  # the records do not replay through the model: say so, keep stage 1
+    except UserError as e:  # the records do not replay through the model: say so, keep stage 1
         say(f"{path} path left out: {e}")
         first.paths = {first.residual_path: summary(first), path: {"skipped": str(e)}}
         return first

@@ -491,6 +491,7 @@ def import_file(path, mp: ImportMap) -> Imported:
     if specs:  # docs/run-file.md: one entry per specimen_acceleration column, in order
         meta["specimen_sensors"] = [{"name": c.target, "height_m": c.height_m, "direction": c.direction} for c in specs]
     cond = channel_conditioning(mp)
+    cond.update(table_conditioning(desc, fs, set(chans) - set(cond)))
     if cond:
         meta["channel_conditioning"] = cond
     meta.update(_carried_descriptions(desc, payload))
@@ -523,6 +524,20 @@ def channel_conditioning(mp: ImportMap) -> dict:
             )
         by.setdefault(c.channel, c.name)
     return out
+
+
+def table_conditioning(desc, fs: float, undeclared) -> dict:
+    """The table's own accelerometer conditioner (``[sensors] accelerometer_bandwidth_hz``
+    and ``accelerometer_filter_order``) as the declared chain of ``table_acceleration``,
+    when the map declares none for it and the cut-off is below the recorder's Nyquist:
+    the lab's accelerometers went through it, and every path of calibration and
+    ``replay`` then compares the model's acceleration through it (the mechanical path
+    read the table's value already; the replay paths read only the run's)."""
+    bw = float(desc.accelerometer_bandwidth_hz or 0.0)
+    if "table_acceleration" not in undeclared or not 0.0 < bw < 0.5 * fs:
+        return {}
+    order = int(desc.raw.get("sensors", {}).get("accelerometer_filter_order", 4))
+    return {"table_acceleration": {"delay_s": 0.0, "lowpass_hz": bw, "lowpass_order": order}}
 
 
 def _carried_descriptions(desc, payload) -> dict:
