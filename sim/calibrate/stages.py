@@ -22,21 +22,13 @@ import copy
 import math
 from dataclasses import replace
 
+from sim.calibrate.sensitivity import HYDRAULIC
 from sim.errors import UserError
 
 #: effect types the mechanical path cannot see: a later stage looks only for these (the
 #: force and acceleration sensors' timing and the specimen's modes are judged on the
 #: mechanical path, on the same channels the later stage compares)
-AFTER_MECHANICAL = (
-    "valve_delay",
-    "valve_bandwidth",
-    "valve_flow_gain",
-    "valve_null_offset",
-    "bulk_modulus",
-    "leakage",
-    "supply_pressure_drop",
-    "foundation_mode",
-)
+AFTER_MECHANICAL = HYDRAULIC + ("foundation_mode",)
 
 
 def pool(errors) -> float:
