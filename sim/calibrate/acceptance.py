@@ -52,6 +52,10 @@ LEAK_SHARE = 1.0
 #: effective bulk modulus (Pa): oil 1.4-1.8 GPa, hoses and entrained air bring it to
 #: 0.3-1 GPa (Merritt, Hydraulic Control Systems, 1967); below 0.1 GPa the column is foam
 MIN_BULK_MODULUS_PA = 1e8
+#: ... and no effective value exceeds the stiffest mineral oil's with no air and rigid
+#: walls (1.8 GPa, the same source; 2.0 GPa with a margin): a stiffer column stands in for
+#: something else (a fitted 2.89 GPa on the worked example's declared-frame variant)
+MAX_BULK_MODULUS_PA = 2.0e9
 
 
 # ------------------------------------------------------------------ bounds
@@ -227,6 +231,11 @@ def _implausible_hydraulic(name: str, params: dict, scale: TableScale) -> str:
             )
     if name == "bulk_modulus" and params["bulk_modulus_pa"] < MIN_BULK_MODULUS_PA:
         return f"{COMPENSATION}: a bulk modulus of {params['bulk_modulus_pa']:.3g} Pa is below {MIN_BULK_MODULUS_PA:.3g} Pa"
+    if name == "bulk_modulus" and params["bulk_modulus_pa"] > MAX_BULK_MODULUS_PA:
+        return (
+            f"{COMPENSATION}: a bulk modulus of {params['bulk_modulus_pa']:.3g} Pa is above any oil's "
+            f"({MAX_BULK_MODULUS_PA:.3g} Pa)"
+        )
     return ""
 
 
