@@ -13,7 +13,8 @@ support (:func:`sim.calibrate.residuals.supported_paths`); the search runs them 
 The held-out judgement pools the paths' evidence (:func:`pool`, the RMS of the paths'
 held-out NRMSEs): stage 1's effects stay in only when the pooled held-out error with
 them is below the pooled error without them (the replay of the held-out runs through
-the final model less stage 1's effects). ``--path`` narrows the search to one path.
+the final model less stage 1's effects), and the later path's own error is not worse
+with them by more than the acceptance margin (:func:`agree`). ``--path`` narrows the search to one path.
 """
 
 from __future__ import annotations
@@ -135,9 +136,20 @@ def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, wo
         f"pooled held-out NRMSE (mechanical, {path}): declared {ev['before']:.4f}; with every effect "
         f"{ev['with']:.4f}; without the mechanical path's {ev['without']:.4f}"
     )
-    if kept and not ev["with"] < ev["without"]:
+    if kept and not agree(ev, second.error_after):
         return _disagree(first, second, ev, say)
     return combine(first, second, ev)
+
+
+def agree(ev: dict, later_after: float) -> bool:
+    """Whether the paths' evidence keeps stage 1's effects: the pooled held-out error is
+    lower with them, and the later path's is not worse with them than without by more
+    than the acceptance margin (an effect that is physically there does not make another
+    path's replay worse: a mode found on the mechanical path of a frame the replay
+    already models as flexible counts it twice, 55 % -> 74 % on the replay, measured)."""
+    from sim.calibrate.search import HOLDOUT_MARGIN
+
+    return ev["with"] < ev["without"] and later_after <= (1 + HOLDOUT_MARGIN) * ev["without_first"]
 
 
 def _pooled_evidence(runs, ho_given, desc, pl, first, second, workers) -> dict:
