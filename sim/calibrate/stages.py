@@ -198,6 +198,8 @@ def combine(first, second, ev, first_kept: bool = True):
     if not first_kept:
         s1.update(error_after=first.error_before, effects_added=[], refused="the paths disagree (pooled evidence)")
     s2 = {**summary(second), "error_before_declared": ev["declared"]}
+    if not first_kept:  # the later path's effects on the declared model alone (measured)
+        s2.update(error_after=ev["without_first"], per_channel={}, per_run={})
     out = replace(
         second,
         runs=first.runs,
@@ -224,15 +226,15 @@ def combine(first, second, ev, first_kept: bool = True):
 def _disagree(first, second, ev, say):
     """Stage 1's effects refused on the pooled evidence: the final model is stage 2's
     effects on the declared model (its held-out error measured, ``ev["without_first"]``)."""
-    say(
-        f"  the mechanical path's effects refused: with them the pooled held-out error is {ev['with']:.4f}, "
-        f"without them {ev['without']:.4f} (the paths disagree)"
+    why = (
+        f"refused on the pooled evidence (the paths disagree): pooled {ev['with']:.4f} with, {ev['without']:.4f} "
+        f"without; the {second.residual_path} path {second.error_after:.4f} with, {ev['without_first']:.4f} without"
     )
-    why = f"refused on the pooled evidence: {ev['with']:.4f} with, {ev['without']:.4f} without (paths disagree)"
+    say(f"  the mechanical path's effects {why}")
     for e in first.effects_added:
-        first.candidates.append(
-            {"round": "pooled", "name": e["name"], "where": e["where"], "accepted": False, "reason": why}
-        )
+        row = {"round": "pooled", "name": e["name"], "where": e["where"], "explained_fraction": 0.0}
+        row.update(parameters=e["parameters"], uncertainty=e["uncertainty"], holdout_error=ev["without_first"])
+        first.candidates.append({**row, "accepted": False, "reason": why})
     return combine(first, second, ev, first_kept=False)
 
 
