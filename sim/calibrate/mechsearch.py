@@ -129,8 +129,21 @@ def _result(ms, cur, tried, timed_added, declared, facts, desc, runs):
             "after": ho_res,
             "fit_before": [mr.residual for mr in mfit0],
             "fit_after": cur.residuals,
+            "terms": list(cur.terms),  # effects_added[i] is terms[i]; the timing entries follow
         },
     )
+
+
+def refit_subset(res, keep: list[int]):
+    """The mechanical stage ``res``'s terms ``keep`` (indices into its ``effects_added``)
+    refitted alone on its fit runs (its sensor timing kept): ``(held-out NRMSE, their
+    effects_added entries)``."""
+    from sim.calibrate.residuals import nrmse_runs
+    from sim.calibrate.trace import fit_terms, predict
+
+    terms = res.series["terms"]
+    fit = fit_terms(res.series["fit"], [terms[i] for i in keep])
+    return nrmse_runs(res.series["holdout"], predict(res.series["holdout"], fit)), added_entries(fit)
 
 
 def backward_pass(ms: MechStage, cur, e_ho: float, tried: list):
@@ -318,6 +331,7 @@ __all__ = [
     "backward_row",
     "demote_nested",
     "distinct_places",
+    "refit_subset",
     "mechanical_errors",
     "mechanical_stage",
     "same_place",

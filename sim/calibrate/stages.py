@@ -137,8 +137,37 @@ def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, wo
         f"{ev['with']:.4f}; without the mechanical path's {ev['without']:.4f}"
     )
     if kept and not agree(ev, second.error_after):
-        return _disagree(first, second, ev, say)
+        return _one_by_one(first, second, ev, (runs, ho_given, desc, pl, workers), say)
     return combine(first, second, ev)
+
+
+def _one_by_one(first, second, ev, ctx, say):
+    """The paths disagree on stage 1's effects together: keep the subset of its terms
+    they agree on (:func:`sim.calibrate.stageprune.prune`), else refuse them all."""
+    from sim.calibrate.stageprune import prune
+
+    pr = prune(first, second, ev, ctx) if first.series.get("terms") else None
+    if pr is None:
+        return _disagree(first, second, ev, say)
+    keep, ev_k = pr
+    n = len(first.series["terms"])
+    why = (
+        f"refused on the pooled evidence (the paths disagree on it): without it pooled {ev_k['with']:.4f}, "
+        f"the {second.residual_path} path {ev_k['later_with']:.4f} (with every effect {ev['with']:.4f}, "
+        f"{second.error_after:.4f})"
+    )
+    rows = []
+    for j, e in enumerate(first.effects_added[:n]):
+        if j not in keep:
+            say(f"  {e['name']} at {e['where']}: {why}")
+            row = {"round": "pooled", "name": e["name"], "where": e["where"], "explained_fraction": 0.0}
+            row.update(parameters=e["parameters"], uncertainty=e["uncertainty"], holdout_error=ev_k["later_with"])
+            rows.append({**row, "accepted": False, "reason": why})
+    added = ev_k["added"]  # the terms kept, refitted without the others, and the timing
+    first = replace(first, effects_added=added, error_after=ev_k["mech_with"], candidates=first.candidates + rows)
+    first.per_channel, first.per_run = {}, {}  # measured with every term: not this model's
+    second = replace(second, error_after=ev_k["later_with"], per_channel={}, per_run={})
+    return combine(first, second, ev_k)
 
 
 def agree(ev: dict, later_after: float) -> bool:

@@ -247,3 +247,30 @@ def test_cgs_valve_delay_found_with_the_default_paths(tmp_path):
     assert abs(e["parameters"]["delay_s"] - truth) <= e["uncertainty"]["delay_s"], e
     rep = res.paths["replay"]
     assert rep["error_after"] < (1 - S.HOLDOUT_MARGIN) * rep["error_before_declared"], rep
+
+
+def test_the_paths_keep_the_mechanical_effects_they_agree_on_one_by_one(monkeypatch):
+    """A friction and a mode from the mechanical path; the replay is worse with both (the
+    mode counted twice). Without the mode the paths agree: the friction stays, refitted
+    alone (its entry from the refit), the mode is refused with a pooled row."""
+    from sim.calibrate import mechsearch
+
+    first = _result("mechanical", 0.80, 0.20, ["coulomb_friction", "payload_mode"])
+    first.series = {"terms": ["friction term", "mode term"]}
+    second = _result("replay", 0.55, 0.75, [])
+    ev = {"with": G.pool([0.20, 0.75]), "without": G.pool([0.80, 0.55]), "without_first": 0.55, "declared": 0.55}
+    ev["before"] = ev["without"]
+
+    def refit(res, keep):  # the friction alone: 0.6 mechanical; the mode alone: 0.7
+        name = ["coulomb_friction", "payload_mode"][keep[0]]
+        e = {"name": name, "where": "dof:x", "parameters": {"force_n": 1040.0}, "uncertainty": {}, "units": {}}
+        return (0.6 if keep == [0] else 0.7), [e]
+
+    monkeypatch.setattr(mechsearch, "refit_subset", refit)
+    monkeypatch.setattr(G, "holdout_error", lambda *a: 0.18 if a[5][0]["type"] == "coulomb_friction" else 0.9)
+    res = G._one_by_one(first, second, ev, ([], [], None, None, 1), lambda *_: None)
+    assert [e["name"] for e in res.effects_added] == ["coulomb_friction"]
+    assert res.effects_added[0]["parameters"] == {"force_n": 1040.0}
+    assert res.paths["mechanical"]["error_after"] == 0.6 and res.paths["replay"]["error_after"] == 0.18
+    assert res.error_after == pytest.approx(G.pool([0.6, 0.18]))
+    assert [c["name"] for c in res.candidates if c["round"] == "pooled"] == ["payload_mode"]
