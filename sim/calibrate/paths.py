@@ -185,11 +185,8 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None, payload=
     ``score_from``: run name -> first scored sample (the held-out part of one run);
     ``payload``: the model's payload (None: a bare table); given, a run's
     ``specimen_acceleration`` is compared where the model reads it (:func:`specimen_columns`)."""
-    from mjcf.description import DOFS6
-    from sim.calibrate.replay import DISPLACEMENT_BAND_HZ
-    from sim.calibrate.valve_null import declared_null, estimate
+    from sim.calibrate.valve_null import declared_null
     from sim.control.tvc import dof_jacobian
-    from sim.signals.resample import bandpass
 
     out = []
     null0 = declared_null(desc) if path == "replay" else None
@@ -197,60 +194,20 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None, payload=
     for r in runs:
         chans = fit_channels(r)
         check_finite(r, chans + (["valve_command"] if path == "replay" else ["reference"]))
-        t = np.asarray(r.t, float) - float(r.t[0])
-        vn = None
-        if path == "replay":
-            est = estimate(r, desc, drift=False)
-            # the estimate is the whole null the motion shows: it replaces the declared one
-            drive = np.asarray(r.valve_command, float) + est.at(np.asarray(r.t, float)) - null0[None, :]
-            vn = est.as_dict(r.actuators)
-        else:
-            drive = np.zeros((r.n_samples, 6))
-            for j, d in enumerate(r.dofs):
-                drive[:, DOFS6.index(d)] = r.reference[:, j]
-        rec, cols, bands, quiet = {}, {}, {}, {}
-        known = conditioning.of_run(r)
+        drive, vn = _drive(r, desc, path, null0)
         readable = specimen_columns(r, payload)
-        if readable:
-            chans = chans + [SPECIMEN]
-        for c in chans:
-            x = np.asarray(getattr(r, c), float)
-            if c == "table_displacement":
-                band = (DISPLACEMENT_BAND_HZ[0], min(DISPLACEMENT_BAND_HZ[1], 0.45 * r.sample_rate_hz))
-                x = bandpass(x, r.sample_rate_hz, band)
-                bands[c] = band
-            if c == SPECIMEN:
-                # an accelerometer's zero is set anew each record (docs/sensors.md offset_rms),
-                # and a body that starts and ends at rest has a mean acceleration of zero: the
-                # record's mean is its sensor's zero (0.05 m/s^2 of it took the 6 Hz block's
-                # frequency interval from +/-0.0026 Hz without the sensor to +/-0.0039 Hz with it)
-                x = x - x.mean(axis=0)
-            rms = np.sqrt(np.mean((x - x.mean(axis=0)) ** 2, axis=0))
-            noise = conditioning.noise_floor(x, r.sample_rate_hz)
-            # a DOF channel in actuator units (a rotation as the strokes it takes): one rule for
-            # both paths (sim.calibrate.windows.excited)
-            w = dof_weights(J6, r.dofs, "motion") if c.startswith("table_") else None
-            on = excited(rms, w) & (rms > NOISE_COLUMN * noise)
-            if c == SPECIMEN:  # the model reads these sensors only
-                on &= np.isin(np.arange(x.shape[1]), readable)
-            keep = [j for j in range(x.shape[1]) if on[j]]
-            names = r.dofs if c.startswith("table_") else (r.column_names(c) if c == SPECIMEN else r.actuators)
-            if len(keep) < x.shape[1]:
-                quiet[c] = [names[j] for j in range(x.shape[1]) if not on[j]]
-            if keep:
-                rec[c], cols[c] = x, keep
+        rec, cols, bands, quiet = _compared_columns(r, chans + ([SPECIMEN] if readable else []), J6, readable)
         if not rec:
             raise CalibrationError(
                 f"{r.name}: no recorded output moves (actuator_force, table_acceleration, "
                 "table_velocity all silent); calibrate runs that excite the table"
             )
-        a = (score_from or {}).get(r.name, 0)
-        rows = slice(a, None)
+        rows = slice((score_from or {}).get(r.name, 0), None)
         out.append(
             PathRun(
                 name=r.name,
                 path=path,
-                t=t,
+                t=np.asarray(r.t, float) - float(r.t[0]),
                 drive=drive,
                 dofs=list(r.dofs),
                 actuators=list(r.actuators),
@@ -258,7 +215,7 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None, payload=
                 columns=cols,
                 scale=_scales(rec, cols, rows),
                 rows=rows,
-                conditioning=known,
+                conditioning=conditioning.of_run(r),
                 valve_null=vn,
                 bandpass=bands,
                 not_excited=quiet,
@@ -268,6 +225,59 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None, payload=
             )
         )
     return out
+
+
+def _drive(r, desc, path: str, null0):
+    """The replay's valve command (the null the motion shows in place of the declared
+    one) with that null, or the closed loop's reference pose: ``(drive, null or None)``."""
+    from mjcf.description import DOFS6
+    from sim.calibrate.valve_null import estimate
+
+    if path == "replay":
+        est = estimate(r, desc, drift=False)
+        # the estimate is the whole null the motion shows: it replaces the declared one
+        drive = np.asarray(r.valve_command, float) + est.at(np.asarray(r.t, float)) - null0[None, :]
+        return drive, est.as_dict(r.actuators)
+    drive = np.zeros((r.n_samples, 6))
+    for j, d in enumerate(r.dofs):
+        drive[:, DOFS6.index(d)] = r.reference[:, j]
+    return drive, None
+
+
+def _compared_columns(r, chans, J6, readable):
+    """Per channel of ``chans``, the record as compared and the columns the run excites
+    above their noise: ``(recorded, columns, bands, not excited)``."""
+    from sim.calibrate.replay import DISPLACEMENT_BAND_HZ
+    from sim.signals.resample import bandpass
+
+    rec, cols, bands, quiet = {}, {}, {}, {}
+    for c in chans:
+        x = np.asarray(getattr(r, c), float)
+        if c == "table_displacement":
+            band = (DISPLACEMENT_BAND_HZ[0], min(DISPLACEMENT_BAND_HZ[1], 0.45 * r.sample_rate_hz))
+            x = bandpass(x, r.sample_rate_hz, band)
+            bands[c] = band
+        if c == SPECIMEN:
+            # an accelerometer's zero is set anew each record (docs/sensors.md offset_rms),
+            # and a body that starts and ends at rest has a mean acceleration of zero: the
+            # record's mean is its sensor's zero (0.05 m/s^2 of it took the 6 Hz block's
+            # frequency interval from +/-0.0026 Hz without the sensor to +/-0.0039 Hz with it)
+            x = x - x.mean(axis=0)
+        rms = np.sqrt(np.mean((x - x.mean(axis=0)) ** 2, axis=0))
+        noise = conditioning.noise_floor(x, r.sample_rate_hz)
+        # a DOF channel in actuator units (a rotation as the strokes it takes): one rule for
+        # both paths (sim.calibrate.windows.excited)
+        w = dof_weights(J6, r.dofs, "motion") if c.startswith("table_") else None
+        on = excited(rms, w) & (rms > NOISE_COLUMN * noise)
+        if c == SPECIMEN:  # the model reads these sensors only
+            on &= np.isin(np.arange(x.shape[1]), readable)
+        keep = [j for j in range(x.shape[1]) if on[j]]
+        names = r.dofs if c.startswith("table_") else (r.column_names(c) if c == SPECIMEN else r.actuators)
+        if len(keep) < x.shape[1]:
+            quiet[c] = [names[j] for j in range(x.shape[1]) if not on[j]]
+        if keep:
+            rec[c], cols[c] = x, keep
+    return rec, cols, bands, quiet
 
 
 def holds_total(force) -> bool:

@@ -51,99 +51,115 @@ def entries(items, thetas=None) -> list[dict]:
     return [c.entry(th) for (c, _), th in zip(items, thetas or [t for _, t in items])]
 
 
-def refit(items, prs, base, workers=None, counts=None, max_nfev=JOINT_NFEV) -> dict:
-    """Joint least squares of the accepted ``items`` (``[(cand, theta)]``) on the windows
-    ``prs``; ``base = (raw, src, payload)``. Returns ``{"thetas": [...], "sigmas": [...],
-    "rss0", "rss", "replays"}`` (``sigmas`` per item, HAC covariance of the joint fit;
-    ``None`` for a held item)."""
-    from scipy.optimize import least_squares
+class _Joint:
+    """The replays of a joint fit of ``items`` on the windows ``prs``: the stacked
+    residual of a parameter vector (cached) and its forward-difference Jacobian, each
+    column one replay, all of a Jacobian in one batch over the workers."""
 
-    from sim.calibrate import paths as P
-    from sim.calibrate.hac import hac_sigma
+    def __init__(self, items, prs, base, workers, counts):
+        self.items, self.prs, self.base, self.workers, self.counts = items, prs, base, workers, counts
+        self.free = free_index(items)
+        self.n_rep = 0
+        self.cache: dict = {}
+        self.step = np.array([abs(items[i][0].step[p]) for i, p in self.free])
+        self.lo = np.array([items[i][0].lower[p] for i, p in self.free], float)
+        self.hi = np.array([items[i][0].upper[p] for i, p in self.free], float)
 
-    raw, src, payload = base
-    free = free_index(items)
-    n_rep = 0
-    cache: dict = {}
+    def sim_many(self, xs) -> list:
+        from sim.calibrate import paths as P
 
-    def sim_many(xs):
-        nonlocal n_rep
-        jobs = [pr.job(raw, src, payload, entries(items, _thetas(items, free, x))) for x in xs for pr in prs]
-        ms = P.simulate_many(jobs, workers=workers, counts=counts)
-        n_rep += len(jobs)
+        raw, src, payload = self.base
+        its, prs = self.items, self.prs
+        jobs = [pr.job(raw, src, payload, entries(its, _thetas(its, self.free, x))) for x in xs for pr in prs]
+        ms = P.simulate_many(jobs, workers=self.workers, counts=self.counts)
+        self.n_rep += len(jobs)
         n = len(prs)
         return [P.stacked(prs, ms[k * n : (k + 1) * n]) for k in range(len(xs))]
 
-    def fun(x):
+    def fun(self, x):
         k = tuple(np.round(x, 15))
-        if k not in cache:
-            (r,) = sim_many([np.asarray(x, float)])
-            cache[k] = r
-        return cache[k]
+        if k not in self.cache:
+            (r,) = self.sim_many([np.asarray(x, float)])
+            self.cache[k] = r
+        return self.cache[k]
 
-    x0 = np.array([items[i][1][p] for i, p in free], float)
-    r0 = fun(x0)
-    if r0 is None:
-        return {"thetas": [t for _, t in items], "sigmas": None, "rss0": math.inf, "rss": math.inf, "replays": n_rep}
-    step = np.array([abs(items[i][0].step[p]) for i, p in free])
-    lo = np.array([items[i][0].lower[p] for i, p in free], float)
-    hi = np.array([items[i][0].upper[p] for i, p in free], float)
-
-    def jac(x):
+    def jac(self, x):
         x = np.asarray(x, float)
-        r = fun(x)
-        hs = []
-        xs = []
+        r = self.fun(x)
+        hs, xs = [], []
         for k in range(len(x)):
-            h = 0.5 * step[k]
-            if x[k] + h > hi[k]:
+            h = 0.5 * self.step[k]
+            if x[k] + h > self.hi[k]:
                 h = -h
             xk = x.copy()
             xk[k] += h
             hs.append(h)
             xs.append(xk)
-        rs = sim_many(xs)  # the columns together: one batch over the workers
-        cols = []
-        for h, rk in zip(hs, rs):
-            if rk is None:
-                return None
-            cols.append((rk - r) / h)
-        return np.stack(cols, axis=1)
+        rs = self.sim_many(xs)  # the columns together: one batch over the workers
+        if any(rk is None for rk in rs):
+            return None
+        return np.stack([(rk - r) / h for h, rk in zip(hs, rs)], axis=1)
 
-    def fun_safe(x):
-        r = fun(x)
-        return r if r is not None else np.full_like(r0, 1e3)
 
-    def jac_safe(x):
-        J = jac(x)
-        return J if J is not None else np.zeros((len(r0), len(x)))
-
-    if len(free):
-        x_in = np.clip(x0, lo + 1e-9 * step, hi - 1e-9 * step)
-        sol = least_squares(
-            fun_safe, x_in, jac=jac_safe, bounds=(lo, hi), x_scale=step, max_nfev=max_nfev, method="trf"
-        )
-        x = sol.x if float(fun_safe(sol.x) @ fun_safe(sol.x)) <= float(r0 @ r0) else x0
-    else:
-        x = x0
-    r = fun_safe(x)
-    sig_items = None
-    if len(free):
-        J = jac(x)
-        if J is not None:
-            from sim.calibrate.paths import residual_segments
-
-            sig = hac_sigma(J, r, residual_segments(prs))
-            sig_items = [None if c.grid is not None else np.full(len(c.names), math.inf) for c, _ in items]
-            for (i, p), s in zip(free, sig):
-                sig_items[i][p] = s
+def refit(items, prs, base, workers=None, counts=None, max_nfev=JOINT_NFEV) -> dict:
+    """Joint least squares of the accepted ``items`` (``[(cand, theta)]``) on the windows
+    ``prs``; ``base = (raw, src, payload)``. Returns ``{"thetas": [...], "sigmas": [...],
+    "rss0", "rss", "replays"}`` (``sigmas`` per item, HAC covariance of the joint fit;
+    ``None`` for a held item)."""
+    jf = _Joint(items, prs, base, workers, counts)
+    x0 = np.array([items[i][1][p] for i, p in jf.free], float)
+    r0 = jf.fun(x0)
+    if r0 is None:
+        return {"thetas": [t for _, t in items], "sigmas": None, "rss0": math.inf, "rss": math.inf, "replays": jf.n_rep}
+    x = _solve(jf, x0, r0, max_nfev) if len(jf.free) else x0
+    r = _safe_fun(jf, x, r0)
+    sig_items = _sigmas(jf, x, r) if len(jf.free) else None
     return {
-        "thetas": _thetas(items, free, x),
+        "thetas": _thetas(items, jf.free, x),
         "sigmas": sig_items,
         "rss0": float(r0 @ r0),
         "rss": float(r @ r),
-        "replays": n_rep,
+        "replays": jf.n_rep,
     }
+
+
+def _safe_fun(jf: _Joint, x, r0):
+    """The residual at ``x``, or a large one where the replay diverged."""
+    r = jf.fun(x)
+    return r if r is not None else np.full_like(r0, 1e3)
+
+
+def _solve(jf: _Joint, x0, r0, max_nfev: int):
+    """The bounded least-squares solution from ``x0`` (``x0`` itself when it does not
+    lower the residual)."""
+    from scipy.optimize import least_squares
+
+    def jac_safe(x):
+        J = jf.jac(x)
+        return J if J is not None else np.zeros((len(r0), len(x)))
+
+    x_in = np.clip(x0, jf.lo + 1e-9 * jf.step, jf.hi - 1e-9 * jf.step)
+    fun = lambda x: _safe_fun(jf, x, r0)  # noqa: E731
+    sol = least_squares(
+        fun, x_in, jac=jac_safe, bounds=(jf.lo, jf.hi), x_scale=jf.step, max_nfev=max_nfev, method="trf"
+    )
+    return sol.x if float(fun(sol.x) @ fun(sol.x)) <= float(r0 @ r0) else x0
+
+
+def _sigmas(jf: _Joint, x, r):
+    """Per item, the HAC standard deviations of its free parameters at ``x`` (inf for a
+    parameter held; None for a scanned item; None in all when the Jacobian diverged)."""
+    from sim.calibrate.hac import hac_sigma
+    from sim.calibrate.paths import residual_segments
+
+    J = jf.jac(x)
+    if J is None:
+        return None
+    sig = hac_sigma(J, r, residual_segments(jf.prs))
+    sig_items = [None if c.grid is not None else np.full(len(c.names), math.inf) for c, _ in jf.items]
+    for (i, p), s in zip(jf.free, sig):
+        sig_items[i][p] = s
+    return sig_items
 
 
 def drop_rule(e_with, e_without, bic_with, bic_without, margin) -> tuple[bool, str]:
