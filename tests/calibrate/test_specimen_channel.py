@@ -24,20 +24,11 @@ import pytest
 
 from sim.calibrate import search as S
 
+# the block and its truth (60 % of it on a 6 Hz, 5 % mode) of the replay-path mode tests
+from tests.calibrate.test_payload_mode_paths import BLOCK, FLEXIBLE
+
 FS = 1024.0
-BLOCK = """[payload]
-type = "rigid"
-name = "block_1500"
-description = "1.5 t block (test)"
-source = "assumed: a test specimen"
-mass_kg = 1500.0
-com_m = [0.0, 0.0, 0.3]
-inertia_kg_m2 = [200.0, 200.0, 300.0]
-footprint_m = [1.0, 1.0]
-height_m = 0.6
-"""
-#: the truth: 60 % of the block on a 6 Hz, 5 % mode
-FLEXIBLE = BLOCK + "clamp_frequency_hz = 6.0\nclamp_damping_ratio = 0.05\nclamp_mass_fraction = 0.6\n"
+
 TRUTH = {"frequency_hz": 6.0, "damping_ratio": 0.05, "mass_kg": 900.0}
 SENSOR = {"name": "B1", "height_m": 0.6, "direction": [1.0, 0.0, 0.0]}
 
