@@ -1,18 +1,12 @@
-import os
+# First: `import sim` sets one BLAS thread per process before numpy loads (sim/__init__.py
+# gives the figures; a variable set by the caller wins), and mjcf loads numpy.
+import sim  # noqa: F401
 
-# One BLAS thread per process, set before numpy loads (a variable set by the caller wins).
-# The suite runs on a few shared cores and its programmes run worker processes of their
-# own (sim.parallel.map_jobs); OpenBLAS's threads then wait on one another: on the loaded
-# 2-core machine a 153 x 153 solve took 210 ms with its threads and 0.27 ms with one, and
-# one CGS mechanical calibration (test_cgs_mechanical, spring_and_coulomb) 205 s and 13.6 s,
-# with the same effects and values.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+# isort: split
+import pytest
 
-import pytest  # noqa: E402
-
-import mjcf  # noqa: E402
-from sim.effects import build_model  # noqa: E402
+import mjcf
+from sim.effects import build_model
 
 
 @pytest.fixture(scope="session")

@@ -238,11 +238,7 @@ def combine(first, second, ev, first_kept: bool = True):
         effects_added=_tagged(first.effects_added if first_kept else [], p1) + _tagged(second.effects_added, p2),
         candidates=_tagged(first.candidates, p1) + _tagged(second.candidates, p2),
         unexplained=second.unexplained or first.unexplained,
-        timing={
-            "total_s": first.timing.get("total_s", 0.0) + second.timing.get("total_s", 0.0),
-            p1: first.timing,
-            p2: second.timing,
-        },
+        timing={p1: first.timing, p2: second.timing},  # the total: set by the caller (search.calibrate)
         paths={p1: s1, p2: s2},
         baseline=_pooled_baseline(first, second),
     )

@@ -21,6 +21,7 @@ import types
 import pytest
 
 from sim.calibrate import search as S
+from tests.calibrate.records import noise_run
 
 FS = 1024.0
 SENSORS = ["sensor_gain", "sensor_offset", "sensor_delay", "sensor_lowpass"]
@@ -48,23 +49,14 @@ def lab_runs(out, sensors, seeds=(1, 2, 3), seconds=3.0) -> list[str]:
     measured through ``sensors`` (seeded)."""
     import mjcf
     from sim.effects import build_model
-    from sim.loop.simulation import Simulation
-    from sim.runs.build import build_runfile
     from sim.runs.measure import measure_run
     from sim.runs.runfile import write_run
-    from sim.scenario import motions as M
-    from sim.scenario.reference import reference_from_motions
 
     tm = build_model(mjcf.load_table("lab"))
     paths = []
     for s in seeds:
-        mo = M.white_noise(
-            duration_s=seconds, sample_rate_hz=FS, band_hz=(1.0, 30.0), seed=(s, 0), rms_acceleration=1.5
-        )
-        ref = reference_from_motions({"x": mo}, FS, seconds)
-        res = Simulation(tm).run(reference=ref)
-        assert res.incomplete_reason is None
-        run = measure_run(build_runfile(res, tm, reference=ref), sensors, seed=s)
+        _res, run = noise_run(tm, (s, 0), seconds, fs=FS)
+        run = measure_run(run, sensors, seed=s)
         assert "measurement" not in run.meta and "force_lag_s" not in run.meta  # a recorder's meta only
         paths.append(str(write_run(out / f"lab_{s}.run.npz", run)))
     return paths

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from sim.calibrate import search as S
+from tests.calibrate.records import noise_run
 
 # the block and its truth (60 % of it on a 6 Hz, 5 % mode) of the replay-path mode tests
 from tests.calibrate.test_payload_mode_paths import BLOCK, FLEXIBLE
@@ -60,23 +61,13 @@ def block_runs(out, seeds=(1, 2, 3), seconds=3.0, measure=True, truth=FLEXIBLE) 
     import mjcf
     from mjcf.description import parse_payload
     from sim.effects import build_model
-    from sim.loop.simulation import Simulation
-    from sim.runs.build import build_runfile
     from sim.runs.measure import measure_run
     from sim.runs.runfile import write_run
-    from sim.scenario import motions as M
-    from sim.scenario.reference import reference_from_motions
 
     tm = build_model(mjcf.load_table("lab"), parse_payload(tomllib.loads(truth), src="<truth>"))
     runs = []
     for s in seeds:
-        mo = M.white_noise(
-            duration_s=seconds, sample_rate_hz=FS, band_hz=(1.0, 30.0), seed=(s, 0), rms_acceleration=1.5
-        )
-        ref = reference_from_motions({"x": mo}, FS, seconds)
-        res = Simulation(tm).run(reference=ref)
-        assert res.incomplete_reason is None
-        run = build_runfile(res, tm, source="simulated", reference=ref)
+        res, run = noise_run(tm, (s, 0), seconds, fs=FS)
         rigid = truth == BLOCK
         run.specimen_acceleration = (
             res.channels["table_acceleration"][:, :1] if rigid else block_reading(res, tm)[:, None]

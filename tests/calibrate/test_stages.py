@@ -15,6 +15,7 @@ from sim.calibrate import search as S
 from sim.calibrate import stages as G
 from sim.calibrate.paths import holds_total
 from sim.calibrate.residuals import CalibrationError, supported_paths
+from tests.calibrate.records import noise_run
 
 #: the lab table's planted truth: 600 N bearing friction (a mechanical effect) and a
 #: servovalve delay of 4 physics steps at 1024 Hz, 3.906 ms (hydraulic: the force-motion
@@ -77,12 +78,8 @@ def _lab_runs(folder, effects, seeds=(1, 2, 3)) -> list[str]:
     import mjcf
     from mjcf.description import parse_table
     from sim.effects import build_model
-    from sim.loop.simulation import Simulation
-    from sim.runs.build import build_runfile
     from sim.runs.measure import load_sensors, measure_run
     from sim.runs.runfile import write_run
-    from sim.scenario import motions as M
-    from sim.scenario.reference import reference_from_motions
 
     base = mjcf.load_table("lab")
     raw = dict(base.raw)
@@ -90,15 +87,7 @@ def _lab_runs(folder, effects, seeds=(1, 2, 3)) -> list[str]:
     tm = build_model(parse_table(raw, src=base.source))
     paths = []
     for seed in seeds:
-        mo = {
-            "x": M.white_noise(
-                duration_s=SECONDS, sample_rate_hz=1024.0, band_hz=(1.0, 25.0), seed=seed, rms_acceleration=2.0
-            )
-        }
-        ref = reference_from_motions(mo, 1024.0, SECONDS)
-        res = Simulation(tm).run(reference=ref)
-        assert res.incomplete_reason is None
-        run = build_runfile(res, tm, source="simulated", reference=ref)
+        _res, run = noise_run(tm, seed, SECONDS, band_hz=(1.0, 25.0), rms=2.0)
         run.meta.pop("table_description", None)  # a recorder writes the table's name, not the truth
         run.meta.pop("table_sha256", None)
         paths.append(str(write_run(folder / f"lab_{seed}.run.npz", measure_run(run, load_sensors(), seed=seed))))

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from sim.calibrate import search as S
+from tests.calibrate.records import noise_run
 
 FS = 1024.0
 #: the artifacts of every run here (docs/sensors.md keys; sizes as the built-in recorder's noise)
@@ -47,23 +48,14 @@ def measured_runs(out, sensors, seeds=(1, 2, 3), seconds=6.0):
     """ucsd runs under white noise, through ``sensors`` (a SENSORS.toml as a dict)."""
     from mjcf import load_table
     from sim.effects import build_model
-    from sim.loop.simulation import Simulation
-    from sim.runs.build import build_runfile
     from sim.runs.measure import measure_run
     from sim.runs.runfile import write_run
-    from sim.scenario import motions as M
-    from sim.scenario.reference import reference_from_motions
 
     tm = build_model(load_table("ucsd"))
     paths = []
     for s in seeds:
-        mo = M.white_noise(
-            duration_s=seconds, sample_rate_hz=FS, band_hz=(0.5, 20.0), seed=(s, 0), rms_acceleration=1.0
-        )
-        ref = reference_from_motions({"x": mo}, FS, seconds)
-        res = Simulation(tm).run(reference=ref)
-        assert res.incomplete_reason is None
-        run = measure_run(build_runfile(res, tm, reference=ref), sensors, seed=s)
+        _res, run = noise_run(tm, (s, 0), seconds, fs=FS, band_hz=(0.5, 20.0), rms=1.0)
+        run = measure_run(run, sensors, seed=s)
         assert "measurement" not in run.meta and "force_lag_s" not in run.meta  # a recorder's meta only
         paths.append(str(write_run(out / f"ucsd_{s}.run.npz", run)))
     return paths

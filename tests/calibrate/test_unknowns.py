@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from sim.cli import main
+from tests.calibrate.records import noise_run
 
 ROOT = Path(__file__).resolve().parents[2]
 TRUE_BETA = 1.5e9  #: the truth: inside [0.5, 1.8] GPa, 58 % above the nominal 0.949 GPa
@@ -34,12 +35,8 @@ def _runs(table: Path, folder: Path, seeds=(1, 2, 3)) -> list[str]:
     import mjcf
     from mjcf.description import parse_table
     from sim.effects import build_model
-    from sim.loop.simulation import Simulation
-    from sim.runs.build import build_runfile
     from sim.runs.measure import load_sensors, measure_run
     from sim.runs.runfile import write_run
-    from sim.scenario import motions as M
-    from sim.scenario.reference import reference_from_motions
 
     desc = mjcf.load_table(table)
     raw = dict(desc.raw)
@@ -47,15 +44,7 @@ def _runs(table: Path, folder: Path, seeds=(1, 2, 3)) -> list[str]:
     tm = build_model(parse_table(raw, src=str(table)))
     paths = []
     for seed in seeds:
-        mo = {
-            "x": M.white_noise(
-                duration_s=SECONDS, sample_rate_hz=1024.0, band_hz=(1.0, 30.0), seed=seed, rms_acceleration=1.5
-            )
-        }
-        ref = reference_from_motions(mo, 1024.0, SECONDS)
-        res = Simulation(tm).run(reference=ref)
-        assert res.incomplete_reason is None
-        run = build_runfile(res, tm, source="simulated", reference=ref)
+        _res, run = noise_run(tm, seed, SECONDS)
         run.meta["table"] = str(table)
         paths.append(str(write_run(folder / f"labu_{seed}.run.npz", measure_run(run, load_sensors(), seed=seed))))
     return paths
