@@ -24,6 +24,7 @@ import numpy as np
 from sim.loop.batch import BatchRunner
 from sim.loop.callback import control_callback, run_callback
 from sim.loop.simulation import Simulation
+from sim.parallel import usable_cores
 
 
 def bare_rate(model, seconds: float = 1.0) -> float:
@@ -137,7 +138,7 @@ def callback_vs_bare(tm, ref, forces, repeats: int = REPEATS) -> dict:
 
 
 def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads: int | None = None) -> dict:
-    threads = threads or os.cpu_count() or 1
+    threads = threads or usable_cores()
     control_callback()  # compile / load outside the timings
     sim = Simulation(tm)
     sim.reset()
@@ -202,7 +203,7 @@ def main(tm, ref, *, batch_seconds: float = 0.5, sizes=(1, 8, 32, 128), threads:
     out["load_after"] = os.getloadavg()[0]
     print(
         f"load average (1 min) {out['load_before']:.1f} before, {out['load_after']:.1f} after, on "
-        f"{os.cpu_count()} cores (a load above the cores: other processes share them with the batch's threads)"
+        f"{usable_cores()} cores (a load above the cores: other processes share them with the batch's threads)"
     )
     big = max(n for n in sizes if n >= 32) if any(n >= 32 for n in sizes) else max(sizes)
     out["summary_n"] = big

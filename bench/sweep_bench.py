@@ -23,6 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from sim.parallel import usable_cores
 from sim.scenario.files import SCENARIOS_DIR
 
 SWEEP = SCENARIOS_DIR / "sweeps" / "mc_elcentro_20t.toml"
@@ -76,7 +77,14 @@ def _spin(n: int) -> int:
     return x
 
 
-def machine_efficiency(p: int, n: int = 3_000_000) -> float:
+#: the plain job's steps: about a second on one core here (0.5 s per 3 million on the
+#: loaded 2-core machine), long beside forking the workers from the bench's large parent
+#: (with 3 million, 0.3 s on the 16-core machine, it read 0.51 at 4 workers while the
+#: sweep's own workers were busy 0.97: it measured the forks, not the cores)
+SPIN_STEPS = 8_000_000
+
+
+def machine_efficiency(p: int, n: int = SPIN_STEPS) -> float:
     """What this machine gives ``p`` processes now: ``p`` worker processes doing the
     same CPU work as one process (forked from this one, as the sweep's pool), its wall
     time over theirs (1.0: ``p`` cores to ourselves; about 1/p when the scheduler keeps
@@ -119,7 +127,7 @@ def dask_rate(sw, out: Path, workers: int) -> tuple[float, float]:
 
 
 def main(n_cases: int = 64, duration_s: float = 4.0, *, with_dask: bool = True, cores: int | None = None) -> dict:
-    cores = cores or os.cpu_count() or 1
+    cores = cores or usable_cores()
     sw = bench_sweep(n_cases, duration_s)
     load0 = os.getloadavg()[0]
     print(

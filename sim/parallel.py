@@ -50,9 +50,20 @@ def _call(task):  # pragma: no cover - runs in the worker processes
     return i, fn(job)
 
 
+def usable_cores() -> int:
+    """The CPUs this process may run on: its affinity mask where the platform has one
+    (``taskset``, a container's CPU set, a batch scheduler's allocation), else every CPU
+    of the machine. ``os.cpu_count()`` counts the machine's CPUs whatever the mask, so a
+    job pinned to 2 of 16 CPUs would start 16 workers on 2 CPUs."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # macOS and Windows have no affinity call
+        return os.cpu_count() or 1
+
+
 def default_workers(n_jobs: int) -> int:
-    """As many workers as CPUs, never more than jobs (at least 1)."""
-    return max(1, min(n_jobs, os.cpu_count() or 1))
+    """As many workers as usable CPUs, never more than jobs (at least 1)."""
+    return max(1, min(n_jobs, usable_cores()))
 
 
 def map_jobs(
@@ -107,4 +118,4 @@ def iter_jobs(fn: Callable, jobs: Iterable, *, workers: int | None = None, conte
         raise
 
 
-__all__ = ["default_workers", "iter_jobs", "map_jobs"]
+__all__ = ["default_workers", "iter_jobs", "map_jobs", "usable_cores"]

@@ -24,6 +24,7 @@ import numpy as np
 
 from mjcf.description import DOFS6
 from sim.errors import UserError
+from sim.parallel import usable_cores
 
 #: Built-in records: name -> what it is. Aliases map to the same record.
 BUILTIN_RECORDS = {"elcentro1940": "1940 Imperial Valley, El Centro Array #9 (PEER RSN6), 3 components"}
@@ -437,12 +438,11 @@ def max_scale(
 def _round_size(prep: Prepared, s0: float, nthread: int) -> int:
     """How many simulations a round runs together: ``nthread`` (0: all cores) where the
     case's runs go on the batch, else 1 (e.g. drive iterations)."""
-    import os
 
     from sim.assess.many import batchable
 
     _, plan0 = stage(prep, s0, simulate=True)
-    return max(1, int(nthread or os.cpu_count() or 1)) if batchable(plan0) else 1
+    return max(1, int(nthread or usable_cores())) if batchable(plan0) else 1
 
 
 def _with_max(result: dict, search: "_ScaleSearch", lo, limiting, above, at=None, upper=...) -> dict:
@@ -645,7 +645,6 @@ def suite(
     split. Processes first, as for sweeps (:mod:`sim.sweep.split`): preparing and
     settling a case is Python, one case at a time per process."""
     import math
-    import os
     from functools import partial
 
     from sim.parallel import iter_jobs
@@ -656,7 +655,7 @@ def suite(
         Case(table=table, motion=rec, payload=pay, scale=s, window_s=window_s, iterations=iterations)
         for rec, pay, s in keys
     ]
-    cores = os.cpu_count() or 1
+    cores = usable_cores()
     procs = max(1, min(processes or cores, len(cases)))
     per = max(1, math.ceil(len(cases) / (4 * procs)))
     tasks = [list(range(i, min(i + per, len(cases)))) for i in range(0, len(cases), per)]

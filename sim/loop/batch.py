@@ -21,7 +21,6 @@ the loop does (``tests/loop/test_batch.py``).
 
 from __future__ import annotations
 
-import os
 import time
 
 import mujoco
@@ -30,6 +29,7 @@ from mujoco import batch as mjbatch
 
 from sim.errors import ScenarioError
 from sim.loop import callback as CB
+from sim.parallel import usable_cores
 
 _INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 
@@ -48,7 +48,7 @@ class BatchRunner:
                 raise ScenarioError(f"a simulation of this batch cannot run on the callback: {why}")
         self.open_loop = open_loop
         self.sims = list(sims)
-        self.nthread = nthread or os.cpu_count() or 1
+        self.nthread = nthread or usable_cores()
         compiled = {}  # one model per table model (simulations of one TableModel share it)
         self.models = [
             compiled.setdefault(id(s.tm), CB.callback_model(s)) if id(s.tm) not in compiled else compiled[id(s.tm)]

@@ -215,7 +215,9 @@ def _kw(sweep, out):
 
 
 def _tasks(todo: list, split) -> list:
-    return [todo[i : i + split.task] for i in range(0, len(todo), split.task)]
+    from sim.sweep.split import deal
+
+    return deal(todo, split)
 
 
 def _local(sweep, todo, out, split, done_cb):

@@ -20,23 +20,26 @@ batches hold at least as many cases as threads.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 
 from sim.errors import UserError
+from sim.parallel import usable_cores
 
 #: tasks per process: the processes finish within about a quarter of a process's share
 #: of the sweep of each other (the last tasks are what one process runs while another idles)
 TASKS_PER_PROCESS = 4
 #: the most cases in one task by default: at most this many are redone after an interruption
 MAX_TASK = 32
+#: the tasks shrink once fewer cases are left than this many tasks per process would hold
+#: (guided self-scheduling: each task about 1/(TAIL_TASKS x processes) of what is left)
+TAIL_TASKS = 2
 
 
 @dataclass(frozen=True)
 class Split:
     processes: int  #: worker processes (the local pool, or the Dask LocalCluster's workers)
     threads: int  #: threads of each MuJoCo batch
-    task: int  #: cases dealt to a worker at once (planned, simulated and assessed there)
+    task: int  #: the most cases dealt to a worker at once (planned, simulated and assessed there; :func:`deal`)
     batch: int  #: cases simulated together on one batch (at most ``task``)
 
     def describe(self) -> str:
@@ -44,6 +47,25 @@ class Split:
             f"{self.processes} process{'es' if self.processes > 1 else ''} x {self.threads} "
             f"thread{'s' if self.threads > 1 else ''}, tasks of {self.task} cases, batches of {self.batch}"
         )
+
+
+def deal(cases: list, split: Split) -> list[list]:
+    """The cases in tasks, in order: tasks of ``split.task`` cases while many are left,
+    then smaller ones, each about ``1 / (TAIL_TASKS x processes)`` of the cases left and
+    never fewer than ``split.threads`` (a batch of fewer cases leaves threads idle).
+
+    Why: the workers take tasks as they free up, so the sweep ends when the last task
+    ends; with equal tasks the last ones start while the other workers run out of work,
+    and on 16 workers of 4-case tasks the workers were busy only 0.83 of an 11 s sweep
+    (docs/batch.md). Shrinking tasks leave at most a case or two for the others to
+    wait on. Which case runs where does not change any case's result."""
+    tasks, i, n = [], 0, len(cases)
+    while i < n:
+        guided = math.ceil((n - i) / (TAIL_TASKS * split.processes))
+        size = min(split.task, max(split.threads, guided))
+        tasks.append(cases[i : i + size])
+        i += size
+    return tasks
 
 
 def _positive(value, name: str):
@@ -74,7 +96,7 @@ def choose_split(
         _positive(value, name)
     _positive(task, "task (cases per task)")
     _positive(batch, "batch (cases per batch)")
-    cores = cores or os.cpu_count() or 1
+    cores = cores or usable_cores()
     n = max(int(n_cases), 1)
     if threads is None:
         threads = 1 if processes is None else max(1, cores // processes)
@@ -87,4 +109,4 @@ def choose_split(
     return Split(processes=processes, threads=threads, task=task, batch=batch)
 
 
-__all__ = ["MAX_TASK", "TASKS_PER_PROCESS", "Split", "choose_split"]
+__all__ = ["MAX_TASK", "TAIL_TASKS", "TASKS_PER_PROCESS", "Split", "choose_split", "deal"]

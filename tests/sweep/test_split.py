@@ -2,14 +2,17 @@
 case count, the user's overrides, the sweep file's keys, and rows (and run files) that
 do not depend on the split, case for case."""
 
+import os
+
 import numpy as np
 import pytest
 
 from sim.cli import main
 from sim.errors import UserError
+from sim.parallel import usable_cores
 from sim.sweep.run import run_sweep
 from sim.sweep.spec import SweepError, load_sweep
-from sim.sweep.split import choose_split
+from sim.sweep.split import choose_split, deal
 from tests.sweep.test_sweep import SCENARIO, SWEEP
 
 #: columns that time the run (wall clock): the only ones the split may change
@@ -34,6 +37,30 @@ def test_the_split_puts_processes_first_and_deals_about_four_tasks_each():
     assert choose_split(100_000, cores=4).task == 32  # at most 32 cases redone after an interruption
     assert choose_split(3, cores=16).processes == 3  # never more processes than cases
     assert choose_split(0, cores=4).processes == 1  # a resumed sweep with nothing left
+
+
+def test_tasks_shrink_at_the_end_so_no_worker_waits_on_a_long_last_task():
+    s = choose_split(256, cores=16)
+    tasks = deal(list(range(256)), s)
+    assert [c for t in tasks for c in t] == list(range(256))  # every case once, in order
+    sizes = [len(t) for t in tasks]
+    assert max(sizes) == s.task and sizes == sorted(sizes, reverse=True)
+    assert sizes[-s.processes :] == [1] * s.processes  # the last round: one case each
+    threaded = choose_split(64, cores=16, threads=4)
+    assert min(len(t) for t in deal(list(range(64)), threaded)) == 4  # a batch still fills its threads
+
+
+def test_the_default_cores_are_the_ones_this_process_may_run_on():
+    if not hasattr(os, "sched_getaffinity"):
+        pytest.skip("no affinity mask on this platform")
+    assert usable_cores() == len(os.sched_getaffinity(0))
+    one = next(iter(os.sched_getaffinity(0)))
+    every = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {one})  # as `taskset -c N` would start it
+    try:
+        assert choose_split(64).processes == 1
+    finally:
+        os.sched_setaffinity(0, every)
 
 
 def test_the_user_overrides_any_part_of_the_split():
