@@ -10,7 +10,7 @@ parent only deals tasks and writes the rows that come back.
 Why processes first (one thread per batch by default): planning and assessing a case is
 Python, so within one process it runs one case at a time; on the 7 s El Centro case of
 ``scenarios/sweeps/mc_elcentro_20t.toml`` it is about half of a case's CPU time (1.75 s
-of CPU per case, ~0.8 s of it the 14 340 physics steps; docs/batch.md), and with the
+of CPU per case, ~0.8 s of it the 14 340 physics steps; docs/batch-validation.md), and with the
 batch's threads alone a 16-core machine ran that sweep at 4.5 x one core (issue #25's
 measurement). Processes run all of it in parallel. More than one thread per batch
 pays only where processes cannot be had (memory, one Dask worker per machine) and the

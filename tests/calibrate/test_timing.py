@@ -228,7 +228,7 @@ def test_conditioner_at_a_low_record_rate_is_the_recorders():
     """A 4-pole 50 Hz conditioner applied to a 204.8 Hz record (calibration's model of it)
     is the one a recorder applied at the simulation's 1024 Hz, then kept every fifth sample
     (`run --measure`): 0.05 % RMS apart. Filtered at the record's own rate it was 6 % apart,
-    its band warped into a 51 Hz conditioner's (docs/lab-example.md step 8)."""
+    its band warped into a 51 Hz conditioner's (docs/lab-example-validation.md, step 8)."""
     import scipy.signal as sig
 
     from sim.calibrate.conditioning import Conditioner, analog_response

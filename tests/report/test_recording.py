@@ -95,8 +95,9 @@ def _names(path, ent):
 def test_recording_verifies(made):
     _, _, rrd = made
     exe = _rerun_exe()
-    if exe is None:
-        pytest.skip("rerun CLI not installed")
+    # rerun-sdk is a dependency (pyproject.toml) and installs the CLI beside Python: a
+    # missing CLI is a broken install, which this test reports rather than skips
+    assert exe is not None, "the rerun CLI (installed by rerun-sdk) is missing"
     r = subprocess.run([exe, "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr[-2000:]
 

@@ -551,7 +551,7 @@ def _with_offsets_and_drift(path, seed: int):
 
 
 def test_clean_light_lab_records_add_no_sensor_timing(tmp_path):
-    """docs/lab-example.md step 8, shortened: the light table's records with the pressure on
+    """docs/lab-example-validation.md step 8, shortened: the light table's records with the pressure on
     time (no skew), quiet lead-ins, per-record offsets and drift, and the declared 50 Hz
     conditioner the recorder really has. Calibration adds the friction and the modes and no
     sensor timing: the conditioner candidate's interval holds the declared 50 Hz (the model
