@@ -29,9 +29,12 @@ Open loop (a context built with ``valve_command``, scalar ``S_OPEN`` = 1): the f
 step of tick ``k`` records, holds the recorded command ``VC[k]`` and runs the pre-step
 (:func:`sim.loop._kernels.tick_first_step_open`), as ``Simulation.run(valve_command=...)``
 does; the later steps are the same as closed loop. A bearing-guided platen (scalar
-``S_GUIDED``) runs open loop only: its acceleration is recorded from its slides' DOFs
-(``PSD``, plus a spring-mounted foundation's ``FND``) as the loop records it; closed
-loop its controller reads the slides in Python, which the compiled tick does not.
+``S_GUIDED``): its acceleration is recorded from its slides' DOFs (``PSD``, plus a
+spring-mounted foundation's ``FND``) as the loop records it, and closed loop its
+controller reads the slides' velocity (:func:`sim.loop._kernels.tick_first_step_guided`,
+DOF ``PDI[i]`` from ``qvel[PSD[i]]``) as the loop's Python tick does. A per-step power
+damping on one slide (``PWD``, ``PWK``; the UCSD table's) is added after the applied
+forces, with the effect's own formula (:func:`_power_damping`).
 
 ``mjData`` field addresses are read from the MjData struct (:func:`sim.loop.mjlayout.field_offsets`,
 found by matching the Python binding's array addresses, so no header layout is assumed);
@@ -462,10 +465,11 @@ def callback_model(sim) -> mujoco.MjModel:
 
 def accepts(sim, *, open_loop: bool = False) -> str | None:
     """Why ``sim`` cannot run on the callback (None: it can): the callback is the fused
-    loop, closed or open (free platen, or a bearing-guided one open loop; no per-step
-    effects, no valve delay, no stop at the stroke ends, two or more physics steps per
-    controller tick, the recorder sampling every tick). ``open_loop``: the run replays
-    valve commands (the controller does not run)."""
+    loop, closed or open, on a free or a bearing-guided platen (a controller with a
+    compiled tick and no stop at the stroke ends; no per-step effects but a power damping
+    on one slide, no fault hooks, no valve delay, two or more physics steps per controller
+    tick, the recorder sampling every tick). ``open_loop``: the run replays valve
+    commands (the controller does not run)."""
     tm, hs = sim.tm, sim.hs
     if getattr(sim.controller, "stroke_limit_m", None) is not None:
         return "the controller stops the run at the stroke ends (the loop's check)"
