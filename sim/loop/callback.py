@@ -265,78 +265,23 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud, wn):
     elif j == 0 and C[S_GUIDED] > 0:  # a bearing-guided platen's controller reads its slides
         _tick_guided(k, C, qpos, qvel, ctrl, qfa, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr)
     elif j == 0:
+        # fmt: off
         _tick(
-            k,
-            C,
-            qpos,
-            qvel,
-            XMP,
-            ctrl,
-            qfa,
-            qa,
-            da,
-            ids,
-            pd,
-            pb,
-            cmd2,
-            x2,
-            v2,
-            X,
-            Y,
-            IC,
-            ICS,
-            buf,
-            P,
-            G,
-            frd,
-            frfc,
-            zfr,
-            zss,
-            dt,
-            aq,
-            ad,
-            af0,
-            ac,
-            an,
+            k, C, qpos, qvel, XMP, ctrl, qfa, qa, da, ids, pd, pb, cmd2, x2, v2, X,
+            Y, IC, ICS, buf, P, G, frd, frfc, zfr, zss, dt, aq, ad, af0, ac, an,
         )
+        # fmt: on
     else:
         kk = k if j == 1 else -1
         if kk >= 0 and C[S_GUIDED] > 0:  # a bearing-guided platen: its slides' acceleration, as the loop records it
             _record_guided(k, C, qacc)
             kk = -1
+        # fmt: off
         FL.later_step(
-            kk,
-            qpos,
-            qvel,
-            qacc,
-            ctrl,
-            qfa,
-            _f2(C, A_ACC),
-            pd,
-            qa,
-            da,
-            ids,
-            cmd2,
-            x2,
-            v2,
-            X,
-            Y,
-            IC,
-            ICS,
-            buf,
-            P,
-            G,
-            frd,
-            frfc,
-            zfr,
-            zss,
-            dt,
-            aq,
-            ad,
-            af0,
-            ac,
-            an,
+            kk, qpos, qvel, qacc, ctrl, qfa, _f2(C, A_ACC), pd, qa, da, ids, cmd2, x2, v2, X, Y,
+            IC, ICS, buf, P, G, frd, frfc, zfr, zss, dt, aq, ad, af0, ac, an,
         )
+        # fmt: on
     _power_damping(C, qvel, qfa, frd.shape[0] > 0 or aq.shape[0] > 0)
     if j == spt - 1 and (k % np.int64(C[S_GAP_EVERY]) == 0 or k == n - 1):  # as the loop: also the last tick
         gap = FL.loop_gap(xpos, xmat, _i1(C, A_GB1), _i1(C, A_GB2), _f2(C, A_GA1), _f2(C, A_GA2))
