@@ -171,7 +171,6 @@ LONG_FUNCTIONS = {
     "hydraulics/_kernel.py::step_loops": "compiled kernel: numba keeps the ~40 per-actuator scalars of the "
     "valve, supply and chamber steps in one loop body; the same steps are named functions in the numpy "
     "backend (hydraulics/_numpy_step.py), which test_backends_agree holds it to",
-    "sim/loop/callback.py::coupled_step": "compiled kernel: the numba control callback, one body per physics step",
 }
 
 

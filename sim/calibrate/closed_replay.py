@@ -36,6 +36,7 @@ class ClosedLoopOutcome:
     record_tracking: dict
     residual_nrmse: dict = field(default_factory=dict)  #: model against record, per channel and column
     notes: list = field(default_factory=list)
+    engine: str = "loop"  #: which ran it: the compiled callback route or the Python loop (the same run)
 
     @property
     def complete(self) -> bool:
@@ -44,6 +45,7 @@ class ClosedLoopOutcome:
     def summary(self) -> dict:
         return {
             "closed_loop_of": self.source,
+            "engine": self.engine,
             "record_rate_hz": self.run.sample_rate_hz,
             "complete": self.complete,
             "incomplete_reason": self.result.incomplete_reason,
@@ -80,12 +82,16 @@ def tracking_of(t, reference, dofs, displacement, acceleration) -> dict:
     return tracking(t, ref, ref_a, d, a)
 
 
-def closed_loop_replay(source, *, table: str | None = None, payload: str | None = None, progress: bool = False):
+def closed_loop_replay(
+    source, *, table: str | None = None, payload: str | None = None, progress: bool = False, engine: str = "callback"
+):
     """Run ``source``'s (a run-file path or :class:`~sim.runs.runfile.RunFile`) reference
     closed loop through the model (its carried or given table and payload); a
     :class:`ClosedLoopOutcome`. The model's channels are compared with the record's, and
     its tracking figured, through the chain the record declares
-    (:func:`sim.calibrate.replay.comparison`)."""
+    (:func:`sim.calibrate.replay.comparison`). ``engine``: ``"callback"`` runs it on the
+    compiled callback route where the model allows it (:func:`sim.loop.callback.accepts`;
+    the same result as the loop, bit for bit), ``"loop"`` on ``Simulation.run``."""
     from sim.calibrate.paths import _closed_loop_setup
     from sim.calibrate.replay import comparison, model_run, read_record, record_channels, record_model
 
@@ -93,7 +99,7 @@ def closed_loop_replay(source, *, table: str | None = None, payload: str | None 
     rec = record_model(name, src, table, payload, check_actuators=False)
     t = rec.t
     sim, ref = _closed_loop_setup(rec.tm, t, _pose6(src.reference, src.dofs, len(t)))
-    res = sim.run(reference=ref, progress=progress)
+    res, engine = _run_closed(sim, ref, progress, engine)
     chans, extras, n = record_channels(res, rec.tm, t, src.dofs, sim.gains.rate_hz)
     notes = []
     meta = {"closed_loop_of": name, "model_tick_hz": sim.gains.rate_hz}
@@ -116,7 +122,18 @@ def closed_loop_replay(source, *, table: str | None = None, payload: str | None 
         record_tracking=tracking_of(tn, ref_n, src.dofs, rec_d, rec_a),
         residual_nrmse=resid,
         notes=notes,
+        engine=engine,
     )
+
+
+def _run_closed(sim, ref, progress: bool, engine: str):
+    """(the closed-loop result, the engine that ran it): the callback route when asked
+    and accepted, else the Python loop."""
+    from sim.loop.callback import accepts, run_callback
+
+    if engine == "callback" and accepts(sim) is None:
+        return run_callback(sim, ref, progress=progress), "callback"
+    return sim.run(reference=ref, progress=progress), "loop"
 
 
 __all__ = ["ClosedLoopOutcome", "closed_loop_replay", "tracking_of"]

@@ -29,7 +29,7 @@ def _engine(args) -> str:
 
     from sim.errors import UserError
 
-    if args.engine:
+    if getattr(args, "engine", None):  # replay has no --engine: the variable only
         return args.engine
     env = os.environ.get(ENGINE_ENV, "").strip()
     if env and env not in ("callback", "loop"):
@@ -153,7 +153,8 @@ def cmd_replay_closed_loop(args) -> int:
 
     prog = _progress(args)
     prog.stage(f"running {args.run}'s reference closed loop")
-    rep = closed_loop_replay(args.run, table=args.table, payload=args.payload, progress=prog.enabled and prog.tty)
+    bar = prog.enabled and prog.tty
+    rep = closed_loop_replay(args.run, table=args.table, payload=args.payload, progress=bar, engine=_engine(args))
     out = out_dir(args.out)  # after the run: a run or description it refuses leaves nothing behind
     stem = Path(args.run).name[: -len(".run.npz")] if args.run.endswith(".run.npz") else Path(args.run).stem
     path = out / f"{stem}.closedloop.run.npz"

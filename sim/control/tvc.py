@@ -516,5 +516,29 @@ if _nb is not None:
             out,
         )
         return out
+
+    # fmt: off
+    @_nb.njit(cache=True)
+    def _tick_guided(
+        k, s_ref_all, v_ref_all, vff_all, qpos, qvel, qa, slide_d, dof_i, force, ps_now, consts, J, Jp, N, gains, state,
+        pl_hp, pl_prev, out,
+    ):
+        """:func:`_tick_state` of a bearing-guided platen: the DOF velocity is its slides'
+        (``qvel[slide_d[i]]`` at DOF ``dof_i[i]``, the others 0), as :meth:`TableController.tick`
+        builds it (mode 0) before :meth:`~TableController.command_fast`; same values, same
+        compiled :func:`_tick`, so the same commands bit for bit."""
+        n = qa.shape[0]
+        x = np.empty(n)
+        for i in range(n):
+            x[i] = qpos[qa[i]]
+        v6 = np.zeros(6)
+        for i in range(slide_d.shape[0]):
+            v6[dof_i[i]] = qvel[slide_d[i]]
+        _tick(
+            s_ref_all[k], v_ref_all[k], vff_all[k], x, v6, force, ps_now, J, Jp, N, consts, gains, state, pl_hp, pl_prev,
+            out,
+        )
+        return out
+    # fmt: on
 else:  # pragma: no cover
-    _tick = _tick_state = None
+    _tick = _tick_state = _tick_guided = None

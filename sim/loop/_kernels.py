@@ -14,6 +14,7 @@ import numpy as np
 
 from hydraulics import _layout as L
 from hydraulics.system import _numba_kernel
+from sim.control.tvc import _tick_guided as _ctrl_tick_guided
 from sim.control.tvc import _tick_state as _ctrl_tick
 
 _hyd = _numba_kernel()
@@ -220,6 +221,33 @@ def tick_first_step(
         applied_forces(qpos, qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an)
 
 
+# fmt: off
+@numba.njit(**_OPTS)
+def tick_first_step_guided(
+    k, qpos, qvel, ctrl, qfa, Q, V, H_spool, H_force, H_pa, H_pb, H_cmd, E_ps, E_gas, s_ref_all, v_ref_all, vff_all,
+    qa, da, ids, slide_d, dof_i, consts, J, Jp, N, gains, cstate, pl_hp, pl_prev, cmd2, x2, v2, X, Y, IC, ICS, buf, P,
+    G, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an,
+):
+    """:func:`tick_first_step` of a bearing-guided platen: the controller reads the
+    platen's velocity from its slides (``qvel[slide_d]`` at DOFs ``dof_i``,
+    :func:`sim.control.tvc._tick_guided`) where a free platen's is read from its free
+    joint and ``xmat``. The loop's stepwise tick on such a table (record, the controller's
+    mode-0 tick, the pre-step and the applied forces) in its order, so the results are identical."""
+    record(
+        k, qpos, qvel, Q, V, X, Y, L.SPOOL, L.FORCE, L.PA, L.PB, H_spool, H_force, H_pa, H_pb, L.PS, L.GASV, E_ps, E_gas
+    )
+    cmd = cmd2[0]
+    _ctrl_tick_guided(
+        k, s_ref_all, v_ref_all, vff_all, qpos, qvel, qa, slide_d, dof_i, X[L.FORCE, 0], Y[L.PS, 0], consts, J, Jp, N,
+        gains, cstate, pl_hp, pl_prev, cmd,
+    )
+    H_cmd[k, :] = cmd
+    pre_step(qpos, qvel, ctrl, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, 0, P, G)
+    if fr_dofs.shape[0] or aq.shape[0]:
+        applied_forces(qpos, qvel, qfa, fr_dofs, fr_fc, zfr, zss, dt, aq, ad, aF0, ac, an)
+# fmt: on
+
+
 @numba.njit(**_OPTS)
 def tick_first_step_open(
     k,
@@ -331,6 +359,7 @@ __all__ = [
     "all_finite",
     "tick_first_step",
     "tick_first_step_open",
+    "tick_first_step_guided",
     "later_step",
 ]
 

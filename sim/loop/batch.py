@@ -36,8 +36,7 @@ _INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 
 class BatchRunner:
     """N simulations of one table on one ``mujoco.batch.Batch`` of ``nthread`` threads (0:
-    all cores); ``open_loop``: for valve-command replays only (a bearing-guided platen
-    runs on the callback open loop, not closed)."""
+    all cores); ``open_loop``: for valve-command replays only."""
 
     def __init__(self, sims: list, *, nthread: int = 0, open_loop: bool = False):
         if not sims:
@@ -210,8 +209,7 @@ def run_many(
     candidates): simulations the callback can run (:func:`sim.loop.callback.accepts`)
     go to :class:`BatchRunner` in batches of up to ``group`` simulations that share a
     layout, on ``nthread`` threads (0: all cores); the others (the Rice table's analog
-    loop, per-step effects, a valve delay, a bearing-guided platen closed loop) run their
-    own ``run``. Every result equals
+    loop, per-step effects, a valve delay) run their own ``run``. Every result equals
     the simulation's own ``Simulation.run`` bit for bit (``tests/loop/test_batch.py``,
     ``tests/loop/test_batch_open.py``). A simulation that diverges ends early with
     ``incomplete_reason`` set, as in ``Simulation.run``; the others are not affected.

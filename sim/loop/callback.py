@@ -29,9 +29,12 @@ Open loop (a context built with ``valve_command``, scalar ``S_OPEN`` = 1): the f
 step of tick ``k`` records, holds the recorded command ``VC[k]`` and runs the pre-step
 (:func:`sim.loop._kernels.tick_first_step_open`), as ``Simulation.run(valve_command=...)``
 does; the later steps are the same as closed loop. A bearing-guided platen (scalar
-``S_GUIDED``) runs open loop only: its acceleration is recorded from its slides' DOFs
-(``PSD``, plus a spring-mounted foundation's ``FND``) as the loop records it; closed
-loop its controller reads the slides in Python, which the compiled tick does not.
+``S_GUIDED``): its acceleration is recorded from its slides' DOFs (``PSD``, plus a
+spring-mounted foundation's ``FND``) as the loop records it, and closed loop its
+controller reads the slides' velocity (:func:`sim.loop._kernels.tick_first_step_guided`,
+DOF ``PDI[i]`` from ``qvel[PSD[i]]``) as the loop's Python tick does. A per-step power
+damping on one slide (``PWD``, ``PWK``; the UCSD table's) is added after the applied
+forces, with the effect's own formula (:func:`_power_damping`).
 
 ``mjData`` field addresses are read from the MjData struct (:func:`sim.loop.mjlayout.field_offsets`,
 found by matching the Python binding's array addresses, so no header layout is assumed);
@@ -42,6 +45,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import math
 import sys
 import threading
 import time
@@ -69,7 +73,7 @@ NS = 26
 ARRAYS = ("Q", "V", "ACC", "HSP", "HF", "HPA", "HPB", "HCMD", "EPS", "EGAS", "GAP",
           "SREF", "VREF", "VFF", "QA", "DA", "IDS", "CONSTS", "J", "JP", "NN", "GAINS", "CSTATE", "PLHP", "PLPREV",
           "CMD2", "X2", "V2", "X", "Y", "IC", "ICS", "BUF", "P", "G", "FRD", "FRFC", "ZFR", "AQ", "AD", "AF0",
-          "XMP", "GB1", "GB2", "GA1", "GA2", "VC", "W0", "PSD", "FND")
+          "XMP", "GB1", "GB2", "GA1", "GA2", "VC", "W0", "PSD", "FND", "PDI", "PWD", "PWK")
 # fmt: on
 A = {name: i for i, name in enumerate(ARRAYS)}
 NCTX = NS + 4 * len(ARRAYS)
@@ -166,7 +170,36 @@ def _tick_open(k, C, qpos, qvel, ctrl, qfa, qa, da, ids, cmd2, x2, v2, X, Y, IC,
         _f2(C, A_HCMD), _f1(C, A_EPS), _f1(C, A_EGAS), _f2(C, A_VC), qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P,
         G, frd, frfc, zfr, C[S_ZSS], C[S_DT], _i1(C, A_AQ), _i1(C, A_AD), _f1(C, A_AF0), C[S_AC], C[S_AN],
     )
+
+
+@numba.njit(**_J)
+def _tick_guided(k, C, qpos, qvel, ctrl, qfa, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr):
+    FL.tick_first_step_guided(
+        k, qpos, qvel, ctrl, qfa, _f2(C, A_Q), _f2(C, A_V), _f2(C, A_HSP), _f2(C, A_HF), _f2(C, A_HPA), _f2(C, A_HPB),
+        _f2(C, A_HCMD), _f1(C, A_EPS), _f1(C, A_EGAS), _f2(C, A_SREF), _f2(C, A_VREF), _f2(C, A_VFF), qa, da, ids,
+        _i1(C, A_PSD), _i1(C, A_PDI), _f2(C, A_CONSTS), _f2(C, A_J), _f2(C, A_JP), _f2(C, A_NN), _f1(C, A_GAINS),
+        _f1(C, A_CSTATE), _f1(C, A_PLHP), _f1(C, A_PLPREV), cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr,
+        C[S_ZSS], C[S_DT], _i1(C, A_AQ), _i1(C, A_AD), _f1(C, A_AF0), C[S_AC], C[S_AN],
+    )
 # fmt: on
+
+
+@numba.njit(**_J)
+def _power_damping(C, qvel, qfa, cleared):
+    """The per-step power dampers on one slide each (``PWD``: DOF, ``PWK``: C, alpha, v0,
+    slope C v0^alpha / v0), as :meth:`sim.effects.mechanical.PowerDamping.apply` adds them
+    after the loop's own forces (``qfrc_applied`` zeroed first unless the pre-step did)."""
+    pwd = _i1(C, A_PWD)
+    if pwd.shape[0] == 0:
+        return
+    if not cleared:
+        qfa[:] = 0.0
+    pwk = _f2(C, A_PWK)
+    for i in range(pwd.shape[0]):
+        c, a, v0, slope = pwk[i, 0], pwk[i, 1], pwk[i, 2], pwk[i, 3]
+        v = qvel[pwd[i]]
+        av = abs(v)
+        qfa[pwd[i]] -= c * av**a * math.copysign(1.0, v) if av >= v0 else slope * v
 
 
 @numba.njit(**_J)
@@ -229,79 +262,27 @@ def coupled_step(C, qpos, qvel, qacc, ctrl, qfa, xpos, xmat, ud, wn):
     zss, dt, ac, an = C[S_ZSS], C[S_DT], C[S_AC], C[S_AN]
     if j == 0 and C[S_OPEN] > 0:
         _tick_open(k, C, qpos, qvel, ctrl, qfa, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr)
+    elif j == 0 and C[S_GUIDED] > 0:  # a bearing-guided platen's controller reads its slides
+        _tick_guided(k, C, qpos, qvel, ctrl, qfa, qa, da, ids, cmd2, x2, v2, X, Y, IC, ICS, buf, P, G, frd, frfc, zfr)
     elif j == 0:
+        # fmt: off
         _tick(
-            k,
-            C,
-            qpos,
-            qvel,
-            XMP,
-            ctrl,
-            qfa,
-            qa,
-            da,
-            ids,
-            pd,
-            pb,
-            cmd2,
-            x2,
-            v2,
-            X,
-            Y,
-            IC,
-            ICS,
-            buf,
-            P,
-            G,
-            frd,
-            frfc,
-            zfr,
-            zss,
-            dt,
-            aq,
-            ad,
-            af0,
-            ac,
-            an,
+            k, C, qpos, qvel, XMP, ctrl, qfa, qa, da, ids, pd, pb, cmd2, x2, v2, X,
+            Y, IC, ICS, buf, P, G, frd, frfc, zfr, zss, dt, aq, ad, af0, ac, an,
         )
+        # fmt: on
     else:
         kk = k if j == 1 else -1
         if kk >= 0 and C[S_GUIDED] > 0:  # a bearing-guided platen: its slides' acceleration, as the loop records it
             _record_guided(k, C, qacc)
             kk = -1
+        # fmt: off
         FL.later_step(
-            kk,
-            qpos,
-            qvel,
-            qacc,
-            ctrl,
-            qfa,
-            _f2(C, A_ACC),
-            pd,
-            qa,
-            da,
-            ids,
-            cmd2,
-            x2,
-            v2,
-            X,
-            Y,
-            IC,
-            ICS,
-            buf,
-            P,
-            G,
-            frd,
-            frfc,
-            zfr,
-            zss,
-            dt,
-            aq,
-            ad,
-            af0,
-            ac,
-            an,
+            kk, qpos, qvel, qacc, ctrl, qfa, _f2(C, A_ACC), pd, qa, da, ids, cmd2, x2, v2, X, Y,
+            IC, ICS, buf, P, G, frd, frfc, zfr, zss, dt, aq, ad, af0, ac, an,
         )
+        # fmt: on
+    _power_damping(C, qvel, qfa, frd.shape[0] > 0 or aq.shape[0] > 0)
     if j == spt - 1 and (k % np.int64(C[S_GAP_EVERY]) == 0 or k == n - 1):  # as the loop: also the last tick
         gap = FL.loop_gap(xpos, xmat, _i1(C, A_GB1), _i1(C, A_GB2), _f2(C, A_GA1), _f2(C, A_GA2))
         _f1(C, A_GAP)[k] = gap
@@ -332,9 +313,10 @@ A_Q, A_V, A_ACC, A_HSP, A_HF, A_HPA, A_HPB, A_HCMD, A_EPS, A_EGAS, A_GAP = range
     11, 25
 )
 A_CMD2, A_X2, A_V2, A_X, A_Y, A_IC, A_ICS, A_BUF, A_P, A_G, A_FRD, A_FRFC, A_ZFR, A_AQ, A_AD, A_AF0 = range(25, 41)
-A_XMP, A_GB1, A_GB2, A_GA1, A_GA2, A_VC, A_W0, A_PSD, A_FND = range(41, 50)
+A_XMP, A_GB1, A_GB2, A_GA1, A_GA2, A_VC, A_W0, A_PSD, A_FND, A_PDI, A_PWD, A_PWK = range(41, 53)
 assert (
-    A_FND == A["FND"]
+    A_PWK == A["PWK"]
+    and A_FND == A["FND"]
     and A_W0 == A["W0"]
     and A_VC == A["VC"]
     and A_GA2 == A["GA2"]
@@ -428,17 +410,18 @@ def callback_model(sim) -> mujoco.MjModel:
 
 def accepts(sim, *, open_loop: bool = False) -> str | None:
     """Why ``sim`` cannot run on the callback (None: it can): the callback is the fused
-    loop, closed or open (free platen, or a bearing-guided one open loop; no per-step
-    effects, no valve delay, no stop at the stroke ends, two or more physics steps per
-    controller tick, the recorder sampling every tick). ``open_loop``: the run replays
-    valve commands (the controller does not run)."""
+    loop, closed or open, on a free or a bearing-guided platen (a controller with a
+    compiled tick and no stop at the stroke ends; no per-step effects but a power damping
+    on one slide, no fault hooks, no valve delay, two or more physics steps per controller
+    tick, the recorder sampling every tick). ``open_loop``: the run replays valve
+    commands (the controller does not run)."""
     tm, hs = sim.tm, sim.hs
-    if not tm.platen_free and not open_loop:
-        return "the platen is not free (bearing-guided table): closed loop runs on the Python loop"
     if getattr(sim.controller, "stroke_limit_m", None) is not None:
         return "the controller stops the run at the stroke ends (the loop's check)"
-    if tm.step_effects:
-        return "the table has per-step effects"
+    if not hasattr(sim.controller, "kernel_args"):
+        return "the controller has no compiled tick"
+    if not all(_compiled_damper(e) for e in tm.step_effects):
+        return "the table has per-step effects (other than a power damping on one slide)"
     if any(getattr(e, "fault", False) for e in tm.effects):  # faults: their hooks run in the Python loop only
         return "the run has fault effects (valve_stuck, sensor_loss, interlock: controller-tick hooks)"
     if hs.delay_steps != 0 or hs.backend != "numba":
@@ -448,6 +431,23 @@ def accepts(sim, *, open_loop: bool = False) -> str | None:
     if sim.steps_per_sample != sim.steps_per_tick:
         return "the recorder samples every few controller ticks"
     return None
+
+
+def _compiled_damper(e) -> bool:
+    """Whether per-step effect ``e`` is a power damping on one slide (its scalar path),
+    which the callback computes itself (:func:`_power_damping`)."""
+    from sim.effects.mechanical import PowerDamping
+
+    return isinstance(e, PowerDamping) and type(e).apply is PowerDamping.apply and getattr(e, "_d0", None) is not None
+
+
+def _power_dampers(tm) -> tuple[np.ndarray, np.ndarray]:
+    """The table's per-step power dampers as the callback reads them: their DOFs (int64)
+    and (n, 4) [C, alpha, v0, C v0^alpha / v0] (the effect's own constants)."""
+    dampers = [e for e in tm.step_effects if _compiled_damper(e)]
+    dofs = np.array([e._d0 for e in dampers], dtype=np.int64)
+    k = np.array([[float(v) for v in e._k] for e in dampers], dtype=np.float64).reshape(len(dampers), 4)
+    return dofs, np.ascontiguousarray(k)
 
 
 class Context:
@@ -527,6 +527,8 @@ class Context:
         arr["GA1"], arr["GA2"] = np.ascontiguousarray(sim._g_a1), np.ascontiguousarray(sim._g_a2)
         arr["PSD"] = np.asarray(tm.platen_slide_dadr, dtype=np.int64)
         arr["FND"] = np.asarray(sim._fnd_d if sim._fnd_d is not None else np.zeros(0), dtype=np.int64)
+        arr["PDI"] = np.asarray(tm.platen_dof_index, dtype=np.int64)
+        arr["PWD"], arr["PWK"] = _power_dampers(tm)
         C = np.zeros(NCTX)
         C[S_N], C[S_SPT], C[S_GAP_EVERY] = n, sim.steps_per_tick, gap_every
         C[S_RELIEF] = sim.hp.relief_pressure_pa * (1 + 1e-9)  # the bounds of Simulation._check
@@ -536,13 +538,12 @@ class Context:
         C[S_DONE] = -1
         C[S_OPEN] = 0.0 if valve_command is None else 1.0
         C[S_GUIDED] = 0.0 if tm.platen_free else 1.0
-        if not tm.platen_free and valve_command is None:
-            raise ValueError("a bearing-guided platen runs closed loop on the Python loop, not the callback")
         C[S_NQ], C[S_NV], C[S_NA], C[S_NBODY] = m.nq, m.nv, m.nu, m.nbody
         for name, a in arr.items():
             want = (
                 np.int64
-                if name in ("QA", "DA", "IDS", "IC", "ICS", "FRD", "AQ", "AD", "GB1", "GB2", "W0", "PSD", "FND")
+                if name
+                in ("QA", "DA", "IDS", "IC", "ICS", "FRD", "AQ", "AD", "GB1", "GB2", "W0", "PSD", "FND", "PDI", "PWD")
                 else np.float64
             )
             if a.dtype != want or not a.flags.c_contiguous:

@@ -36,7 +36,7 @@ def lab_run(tmp_path_factory):
     return write_run(tmp_path_factory.mktemp("cl") / "lab_noise.run.npz", run)
 
 
-def test_closed_loop_replay_writes_a_run_with_both_trackings(lab_run, tmp_path, capsys):
+def test_closed_loop_replay_writes_a_run_with_both_trackings(lab_run, tmp_path, capsys, monkeypatch):
     from sim.runs.runfile import read_run
 
     assert main(["replay", str(lab_run), "--closed-loop", "--out", str(tmp_path)]) == 0
@@ -56,6 +56,19 @@ def test_closed_loop_replay_writes_a_run_with_both_trackings(lab_run, tmp_path, 
     # ... and its motion is the record's
     assert summary["residual_nrmse"]["table_displacement"]["x"] < 0.01
     assert "tracking" in capsys.readouterr().out
+    # the bearing-guided table ran on the compiled callback route; the Python loop (the
+    # reference, SHAKETABLE_ENGINE=loop) writes the same run file, array for array
+    assert summary["engine"] == "callback"
+    monkeypatch.setenv("SHAKETABLE_ENGINE", "loop")
+    assert main(["replay", str(lab_run), "--closed-loop", "--out", str(tmp_path / "loop")]) == 0
+    assert json.loads((tmp_path / "loop" / "replay_summary.json").read_text())["engine"] == "loop"
+    with (
+        np.load(tmp_path / "lab_noise.closedloop.run.npz") as a,
+        np.load(tmp_path / "loop" / "lab_noise.closedloop.run.npz") as b,
+    ):
+        assert sorted(a.files) == sorted(b.files)
+        for k in a.files:
+            assert np.array_equal(a[k], b[k], equal_nan=a[k].dtype.kind == "f"), k
 
 
 def test_closed_loop_replay_of_a_run_without_reference_is_one_line(lab_run, tmp_path, capsys):

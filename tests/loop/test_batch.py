@@ -1,6 +1,8 @@
 """The coupled step inside MuJoCo (sim.loop.callback) and the batch (sim.loop.batch)
 against the reference loop: the same runs, bit for bit."""
 
+from pathlib import Path
+
 import mujoco
 import numpy as np
 import pytest
@@ -230,3 +232,42 @@ def test_run_many_groups_batches_and_keeps_the_order(scenario):
     assert not np.array_equal(many[0].channels["actuator_force"], many[1].channels["actuator_force"])
     with pytest.raises(ValueError, match="group"):
         run_many([plans[0].sim], [plans[0].reference], group=0)
+
+
+#: the worked example's white noise on the bearing-guided ``lab`` table with its 2-storey frame
+LAB_NOISE = str(Path(__file__).resolve().parents[2] / "scenarios" / "lab_example" / "lab_noise.toml")
+
+
+def test_bearing_guided_tables_run_closed_loop_on_the_batch_bit_for_bit():
+    """Platens on slides (``lab`` with its frame, the UCSD LHPOST with its power damping):
+    the controller reads the slides' velocity (not a free joint's), the batch and run_many
+    take them closed loop, each result its own ``Simulation.run``."""
+    from sim.loop.batch import run_many
+    from sim.loop.callback import accepts
+
+    lab_ovs = [
+        {},
+        {"table.fluid.bulk_modulus_pa": 0.8e9, "payload.mass_kg": {"scale": 1.3}},
+        {"controller.kp_per_s": 20.0, "motion.x.rms_acceleration": {"scale": 1.3}},
+    ]
+    plans = [_plan(LAB_NOISE, o) for o in lab_ovs]
+    plans += [_plan("ucsd_s10"), _plan("ucsd_s10", {"table.fluid.bulk_modulus_pa": 0.7e9})]
+    singles = []
+    for p in plans:
+        assert not p.sim.tm.platen_free and accepts(p.sim) is None
+        p.sim.reset()
+        singles.append(p.sim.run(reference=p.reference))
+        p.sim.reset()
+    res = BatchRunner([p.sim for p in plans[:3]], nthread=2).run([p.reference for p in plans[:3]])
+    for a, b in zip(singles, res):
+        _same(a, b)
+    f = [r.channels["actuator_force"] for r in res]
+    assert np.abs(f[0]).max() > 300.0 and not np.array_equal(f[0], f[1]) and not np.array_equal(f[0], f[2])
+    for p in plans:
+        p.sim.reset()
+    counts: dict = {}
+    many = run_many([p.sim for p in plans], [p.reference for p in plans], nthread=2, group=2, counts=counts)
+    assert counts == {"batch": 5, "fallback": 0}
+    for a, b in zip(singles, many):
+        _same(a, b)
+    assert not np.array_equal(many[3].channels["actuator_force"], many[4].channels["actuator_force"])

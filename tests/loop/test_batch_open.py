@@ -165,14 +165,14 @@ def test_a_bearing_guided_table_replays_on_the_callback_bit_for_bit():
     """Calibration replays of the ``lab`` tables (platen on bearings) once all fell back
     from the batch route: the callback recorded the platen's acceleration as a free
     platen's six DOFs. Open loop it records the slides' (plus a spring-mounted
-    foundation's) as the loop does; closed loop stays on the loop."""
+    foundation's) as the loop does (closed loop too: tests/loop/test_batch.py)."""
     sims = [_lab_sim(), _lab_sim("lab_2storey"), _lab_sim(foundation="spring")]
     assert not sims[0].tm.platen_free and sims[2]._fnd_d is not None
     vcs = [_commands(30 + i, na=1) for i in range(3)]
     singles = []
     for s, vc in zip(sims, vcs):
         assert accepts(s, open_loop=True) is None
-        assert "bearing-guided" in accepts(s)  # closed loop: the Python loop
+        assert accepts(s) is None  # closed loop too (the controller reads the slides)
         s.reset()
         singles.append(s.run(valve_command=vc))
         s.reset()
@@ -188,3 +188,40 @@ def test_a_bearing_guided_table_replays_on_the_callback_bit_for_bit():
         _same(one, b)
     with pytest.raises(ValueError, match="valve_commands"):
         BatchRunner(sims[:1], open_loop=True).run([None])
+
+
+def test_a_bearing_guided_table_on_springs_runs_closed_loop_on_the_callback_bit_for_bit():
+    """Closed loop on the ``lab`` table with its frame and its foundation on springs: the
+    controller reads the platen's slide (relative to the foundation), the recorder the
+    absolute acceleration; the callback gives the loop's run."""
+    from sim.scenario import motions as M
+    from sim.scenario.reference import reference_from_motions
+
+    sim = _lab_sim("lab_2storey", foundation="spring")
+    mo = {"x": M.white_noise(duration_s=1.0, sample_rate_hz=1024.0, band_hz=(2.0, 20.0), seed=3, rms_acceleration=2.0)}
+    ref = reference_from_motions(mo, 1024.0, 1.0)
+    assert sim._fnd_d is not None and accepts(sim) is None
+    sim.reset()
+    loop = sim.run(reference=ref, duration_s=0.2)
+    assert np.abs(loop.channels["actuator_force"]).max() > 1e3  # a run that does something
+    sim.reset()
+    _same(loop, run_callback(sim, ref, duration_s=0.2))
+
+
+def test_a_per_step_power_damping_replays_on_the_callback_bit_for_bit():
+    """The UCSD LHPOST's ``platen_power_damping`` (a per-step effect on the platen's
+    slide) once sent its replays to the loop; the callback computes it with the effect's
+    own formula and constants, so the replay is the loop's, bit for bit."""
+    import mjcf
+    from sim.control.tvc import ControllerGains
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+
+    sim = Simulation(build_model(mjcf.load_table("ucsd")), gains=ControllerGains(rate_hz=1024.0))
+    assert [e.type for e in sim.tm.step_effects] == ["platen_power_damping"] and accepts(sim, open_loop=True) is None
+    vc = 5 * _commands(40, na=sim.tm.n_act)
+    sim.reset()
+    loop = sim.run(valve_command=vc)
+    assert np.abs(loop.channels["table_velocity"][:, 0]).max() > 0.01  # above the damping's 1 mm/s linear zone
+    sim.reset()
+    _same(loop, run_callback(sim, valve_command=vc))
