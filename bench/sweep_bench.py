@@ -79,8 +79,6 @@ def _spin(n: int) -> int:
 
 #: the plain job's steps: about a second on one core here (0.5 s per 3 million on the
 #: loaded 2-core machine), long beside forking the workers from the bench's large parent
-#: (with 3 million, 0.3 s on the 16-core machine, it read 0.51 at 4 workers while the
-#: sweep's own workers were busy 0.97: it measured the forks, not the cores)
 SPIN_STEPS = 8_000_000
 
 
