@@ -526,19 +526,30 @@ def channel_conditioning(mp: ImportMap) -> dict:
     return out
 
 
+#: the channels of accelerometers that go through the table's declared conditioner
+#: (``[sensors] accelerometer_bandwidth_hz``): the platen's (``table_acceleration``, the
+#: table's ``[[accelerometer]]`` as ``accelerometers``) and the specimen's (the same kind
+#: of sensor on the same recorder: a lab's conditioner setting is its accelerometers',
+#: and a map or sensor model that knows a channel's own chain declares it instead)
+TABLE_CONDITIONED = ("table_acceleration", "accelerometers", "specimen_acceleration")
+
+
 def table_conditioning(desc, fs: float, undeclared) -> dict:
     """The table's own accelerometer conditioner (``[sensors] accelerometer_bandwidth_hz``
-    and ``accelerometer_filter_order``) as the declared chain of ``table_acceleration``,
-    when the map declares none for it and the cut-off is below the recorder's Nyquist:
+    and ``accelerometer_filter_order``) as the declared chain of each accelerometer
+    channel (:data:`TABLE_CONDITIONED`) among ``undeclared`` (those the map declares
+    nothing for), when the cut-off is below the recorder's Nyquist frequency ``fs / 2``:
     the lab's accelerometers went through it, and every path of calibration and
     ``replay`` then compares the model's acceleration through it (the mechanical path
-    read the table's value already; the replay paths read only the run's)."""
+    read the table's value already; the replay paths read only the run's).
+    ``run --measure`` applies and declares the same (sim.runs.measure)."""
     bw = float(desc.accelerometer_bandwidth_hz or 0.0)
-    if "table_acceleration" not in undeclared or not 0.0 < bw < 0.5 * fs:
+    if not 0.0 < bw < 0.5 * fs:
         return {}
-    # 4 poles where the table gives no order, as calibration assumes (sim.calibrate.timing.TABLE_ORDER)
-    order = int(desc.raw.get("sensors", {}).get("accelerometer_filter_order", 4))
-    return {"table_acceleration": {"delay_s": 0.0, "lowpass_hz": bw, "lowpass_order": order}}
+    # 4 poles where the table gives no order (mjcf.description), as calibration assumes
+    # (sim.calibrate.timing.TABLE_ORDER)
+    spec = {"delay_s": 0.0, "lowpass_hz": bw, "lowpass_order": int(desc.accelerometer_filter_order)}
+    return {ch: dict(spec) for ch in TABLE_CONDITIONED if ch in undeclared}
 
 
 def _carried_descriptions(desc, payload) -> dict:
