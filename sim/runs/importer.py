@@ -526,12 +526,15 @@ def channel_conditioning(mp: ImportMap) -> dict:
     return out
 
 
-#: the channels of accelerometers that go through the table's declared conditioner
-#: (``[sensors] accelerometer_bandwidth_hz``): the platen's (``table_acceleration``, the
-#: table's ``[[accelerometer]]`` as ``accelerometers``) and the specimen's (the same kind
-#: of sensor on the same recorder: a lab's conditioner setting is its accelerometers',
-#: and a map or sensor model that knows a channel's own chain declares it instead)
-TABLE_CONDITIONED = ("table_acceleration", "accelerometers", "specimen_acceleration")
+#: the channels that go through the table's declared accelerometer conditioner
+#: (``[sensors] accelerometer_bandwidth_hz``): the platen's accelerometers, the table
+#: file's own (``table_acceleration`` and its ``[[accelerometer]]`` entries as
+#: ``accelerometers``). Not ``specimen_acceleration``: sensors on a specimen are the
+#: specimen's, of which the table file says nothing (the worked example's
+#: light_table.toml declares "the platen accelerometer's conditioner"; its floor
+#: sensors are recorded without it, scenarios/lab_example/make_quake_export.py); a map
+#: column or a sensor model states their own conditioner
+TABLE_CONDITIONED = ("table_acceleration", "accelerometers")
 
 
 def table_conditioning(desc, fs: float, undeclared) -> dict:

@@ -9,8 +9,9 @@ Butterworth of any order), timing skew (either sign), slow drift (ramp and seede
 random walk), white noise (RMS in the channel's units) and quantisation (bits over a
 +/- range); for the recorder: a quiet lead-in, an anti-alias low-pass (causal
 Butterworth) and the sample rate (an integer decimation of the run's rate). An
-accelerometer channel (``table_acceleration``, ``accelerometers``,
-``specimen_acceleration``) whose sensor file gives no ``lowpass_hz`` goes through the
+accelerometer channel of the platen (``table_acceleration``, ``accelerometers``; not
+``specimen_acceleration``, whose sensors are the specimen's) whose sensor file gives no
+``lowpass_hz`` goes through the
 table's declared conditioner (``[sensors] accelerometer_bandwidth_hz`` and
 ``accelerometer_filter_order`` of the table the run carries) when it is below the
 recorder's Nyquist frequency, and the measured run declares it in
@@ -371,8 +372,8 @@ def measure_run(run, sensors: dict, seed: int = 0):
     the module docstring and ``docs/sensors.md``): a new RunFile at the recorder's rate
     with ``meta["source"] = "measured"`` and only what a recorder writes in its meta (its
     own settings, ``recorder``, and the declared ``channel_conditioning``: the sensor
-    file's, else the table's accelerometer conditioner, which the acceleration channels
-    go through where the sensor file gives them no ``lowpass_hz``); the chain
+    file's, else the table's accelerometer conditioner, which the platen's acceleration
+    channels go through where the sensor file gives them no ``lowpass_hz``); the chain
     that made it is :func:`chain_record`'s, kept apart. The input run is not changed."""
     from sim.runs.runfile import CHANNELS, RunFile
 
