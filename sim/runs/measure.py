@@ -8,17 +8,17 @@
 Butterworth of any order), timing skew (either sign), slow drift (ramp and seeded
 random walk), white noise (RMS in the channel's units) and quantisation (bits over a
 +/- range); for the recorder: a quiet lead-in, an anti-alias low-pass (causal
-Butterworth) and the sample rate (an integer decimation of the run's rate). An
-accelerometer channel of the platen (``table_acceleration``, ``accelerometers``; not
-``specimen_acceleration``, whose sensors are the specimen's) whose sensor file gives no
-``lowpass_hz`` goes through the
-table's declared conditioner (``[sensors] accelerometer_bandwidth_hz`` and
-``accelerometer_filter_order`` of the table the run carries) when it is below the
-recorder's Nyquist frequency, and the measured run declares it in
-``meta.channel_conditioning`` unless the sensor file declares that channel: a record
-made by ``run --measure`` then says what an imported one says (``shaketable import``
-declares the table's conditioner the same way, sim.runs.importer.table_conditioning).
-The chain, in order:
+Butterworth) and the sample rate (an integer decimation of the run's rate).
+
+The platen's accelerometer channels (``table_acceleration``, ``accelerometers``; not
+``specimen_acceleration``, whose sensors are the specimen's) go through the table's
+declared conditioner (``[sensors] accelerometer_bandwidth_hz`` and
+``accelerometer_filter_order`` of the table the run carries) where the sensor file gives
+them no ``lowpass_hz`` and the cut-off is below the recorder's Nyquist frequency, and the
+measured run declares it in ``meta.channel_conditioning`` unless the sensor file
+declares that channel: a record made by ``run --measure`` says what an imported one
+says (``shaketable import`` declares the table's conditioner the same way,
+:func:`sim.runs.importer.table_conditioning`). The chain, in order:
 
     lead-in -> gain x signal + offset -> conditioner -> anti-alias (analog channels)
     -> skew -> sampled at the recorder rate -> + drift -> + noise -> quantised
