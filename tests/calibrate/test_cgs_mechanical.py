@@ -230,7 +230,7 @@ def test_clean_measured_runs_add_nothing(case, cases):
     assert res.effects_added == [], res.effects_added
     assert res.error_after == res.error_before
     assert res.unexplained is None, res.unexplained
-    assert res.error_before < 0.04, res.error_before  # the sensor-noise floor (2.05 % measured, 1.98 % with the 20 t block)
+    assert res.error_before < 0.04, res.error_before  # noise floor: 2.05 % measured (1.98 % with 20 t)
 
 
 @pytest.mark.slow
