@@ -526,19 +526,33 @@ def channel_conditioning(mp: ImportMap) -> dict:
     return out
 
 
+#: the channels that go through the table's declared accelerometer conditioner
+#: (``[sensors] accelerometer_bandwidth_hz``): the platen's accelerometers, the table
+#: file's own (``table_acceleration`` and its ``[[accelerometer]]`` entries as
+#: ``accelerometers``). Not ``specimen_acceleration``: sensors on a specimen are the
+#: specimen's, of which the table file says nothing (the worked example's
+#: light_table.toml declares "the platen accelerometer's conditioner"; its floor
+#: sensors are recorded without it, scenarios/lab_example/make_quake_export.py); a map
+#: column or a sensor model states their own conditioner
+TABLE_CONDITIONED = ("table_acceleration", "accelerometers")
+
+
 def table_conditioning(desc, fs: float, undeclared) -> dict:
     """The table's own accelerometer conditioner (``[sensors] accelerometer_bandwidth_hz``
-    and ``accelerometer_filter_order``) as the declared chain of ``table_acceleration``,
-    when the map declares none for it and the cut-off is below the recorder's Nyquist:
+    and ``accelerometer_filter_order``) as the declared chain of each accelerometer
+    channel (:data:`TABLE_CONDITIONED`) among ``undeclared`` (those the map declares
+    nothing for), when the cut-off is below the recorder's Nyquist frequency ``fs / 2``:
     the lab's accelerometers went through it, and every path of calibration and
     ``replay`` then compares the model's acceleration through it (the mechanical path
-    read the table's value already; the replay paths read only the run's)."""
+    read the table's value already; the replay paths read only the run's).
+    ``run --measure`` applies and declares the same (sim.runs.measure)."""
     bw = float(desc.accelerometer_bandwidth_hz or 0.0)
-    if "table_acceleration" not in undeclared or not 0.0 < bw < 0.5 * fs:
+    if not 0.0 < bw < 0.5 * fs:
         return {}
-    # 4 poles where the table gives no order, as calibration assumes (sim.calibrate.timing.TABLE_ORDER)
-    order = int(desc.raw.get("sensors", {}).get("accelerometer_filter_order", 4))
-    return {"table_acceleration": {"delay_s": 0.0, "lowpass_hz": bw, "lowpass_order": order}}
+    # 4 poles where the table gives no order (mjcf.description), as calibration assumes
+    # (sim.calibrate.timing.TABLE_ORDER)
+    spec = {"delay_s": 0.0, "lowpass_hz": bw, "lowpass_order": int(desc.accelerometer_filter_order)}
+    return {ch: dict(spec) for ch in TABLE_CONDITIONED if ch in undeclared}
 
 
 def _carried_descriptions(desc, payload) -> dict:

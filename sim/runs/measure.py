@@ -8,8 +8,17 @@
 Butterworth of any order), timing skew (either sign), slow drift (ramp and seeded
 random walk), white noise (RMS in the channel's units) and quantisation (bits over a
 +/- range); for the recorder: a quiet lead-in, an anti-alias low-pass (causal
-Butterworth) and the sample rate (an integer decimation of the run's rate). The chain,
-in order:
+Butterworth) and the sample rate (an integer decimation of the run's rate).
+
+The platen's accelerometer channels (``table_acceleration``, ``accelerometers``; not
+``specimen_acceleration``, whose sensors are the specimen's) go through the table's
+declared conditioner (``[sensors] accelerometer_bandwidth_hz`` and
+``accelerometer_filter_order`` of the table the run carries) where the sensor file gives
+them no ``lowpass_hz`` and the cut-off is below the recorder's Nyquist frequency, and the
+measured run declares it in ``meta.channel_conditioning`` unless the sensor file
+declares that channel: a record made by ``run --measure`` says what an imported one
+says (``shaketable import`` declares the table's conditioner the same way,
+:func:`sim.runs.importer.table_conditioning`). The chain, in order:
 
     lead-in -> gain x signal + offset -> conditioner -> anti-alias (analog channels)
     -> skew -> sampled at the recorder rate -> + drift -> + noise -> quantised
@@ -22,7 +31,8 @@ index, 1]`` for the per-record offset, ``[seed, index, 2]`` for the drift), so a
 one to a channel leaves the others' draws unchanged.
 
 The measured run's meta holds only what a recorder writes: its settings (``recorder``)
-and the conditioning the sensor file declares known (``channel_conditioning``). The
+and the conditioning the lab declares known (``channel_conditioning``: the sensor
+file's declarations, else the table's accelerometer conditioner). The
 chain that made it goes to a sidecar file (:func:`chain_record`), which calibration
 never reads.
 """
@@ -319,11 +329,51 @@ def declared_conditioning(sensors: dict, present=None) -> dict:
     return out
 
 
+def table_conditioner(run, rate_hz: float) -> dict:
+    """The table's declared accelerometer conditioner (``[sensors]
+    accelerometer_bandwidth_hz`` and ``accelerometer_filter_order`` of the table the run
+    carries, :func:`sim.runs.runfile.table_of`) per accelerometer channel ``run`` holds
+    (``{channel: {"delay_s", "lowpass_hz", "lowpass_order"}}``, as
+    :func:`sim.runs.importer.table_conditioning` declares it for an imported record);
+    {} when its cut-off is not below the recorder's Nyquist frequency ``rate_hz / 2``, or
+    the run neither carries its table nor names a stock one (a hand-made run: no table
+    declares its accelerometers' conditioner)."""
+    from mjcf.description import TABLES_DIR
+    from sim.runs.importer import TABLE_CONDITIONED, table_conditioning
+    from sim.runs.runfile import table_of
+
+    meta = run.meta or {}
+    if not meta.get("table_description") and not (TABLES_DIR / f"{meta.get('table')}.toml").is_file():
+        return {}
+    held = {ch for ch in TABLE_CONDITIONED if getattr(run, ch) is not None and np.shape(getattr(run, ch))[1] > 0}
+    if not held:
+        return {}
+    return table_conditioning(table_of(run), rate_hz, held)
+
+
+def with_table_conditioner(sensors: dict, table: dict) -> dict:
+    """``sensors`` with the table's conditioner (``table``, :func:`table_conditioner`) as
+    the analog conditioner of each of its channels whose sensor file gives none
+    (``lowpass_hz``): a sensor file's own ``lowpass_hz`` is the sensor's real conditioner
+    and replaces the table's (a conditioner left at 30 Hz where the table declares 100)."""
+    if not table:
+        return sensors
+    out = copy.deepcopy(sensors)
+    chans = out.setdefault("channel", {})
+    for ch, spec in table.items():
+        own = chans.setdefault(ch, {})
+        if "lowpass_hz" not in own:
+            own.update(lowpass_hz=spec["lowpass_hz"], lowpass_order=spec["lowpass_order"])
+    return out
+
+
 def measure_run(run, sensors: dict, seed: int = 0):
     """``run`` (a :class:`sim.runs.runfile.RunFile`) as measured through ``sensors`` (see
     the module docstring and ``docs/sensors.md``): a new RunFile at the recorder's rate
     with ``meta["source"] = "measured"`` and only what a recorder writes in its meta (its
-    own settings, ``recorder``, and the declared ``channel_conditioning``); the chain
+    own settings, ``recorder``, and the declared ``channel_conditioning``: the sensor
+    file's, else the table's accelerometer conditioner, which the platen's acceleration
+    channels go through where the sensor file gives them no ``lowpass_hz``); the chain
     that made it is :func:`chain_record`'s, kept apart. The input run is not changed."""
     from sim.runs.runfile import CHANNELS, RunFile
 
@@ -335,6 +385,8 @@ def measure_run(run, sensors: dict, seed: int = 0):
     step = decimation(sensors, fs)
     n_lead = int(round(float(rec.get("lead_in_s", 0.0)) * fs))
     retimed = _force_at_one_instant(run)
+    table = table_conditioner(run, fs / step)
+    sensors = with_table_conditioner(sensors, table)
     out = {}
     for ci, name in enumerate(CHANNELS):
         x = retimed.get(name, getattr(run, name))
@@ -350,14 +402,16 @@ def measure_run(run, sensors: dict, seed: int = 0):
         for k, v in run.extras.items()
     }
     t = float(run.t[0]) + np.arange(n + n_lead) / fs if n else np.asarray(run.t)
-    meta = _recorder_meta(run.meta, sensors, fs / step, present=set(out))
+    meta = _recorder_meta(run.meta, sensors, fs / step, present=set(out), table=table)
     return RunFile(t=t[::step].copy(), meta=meta, extras=extras, **out)
 
 
-def _recorder_meta(meta: dict, sensors: dict, rate: float, present=None) -> dict:
+def _recorder_meta(meta: dict, sensors: dict, rate: float, present=None, table=None) -> dict:
     """The measured run's meta: the simulated run's, less what only a simulator knows
     (``force_lag_s``, a ``measurement`` of an earlier measuring), plus the recorder's own
-    settings and the declared conditioning."""
+    settings and the declared conditioning: the sensor file's, else the table's
+    accelerometer conditioner (``table``, :func:`table_conditioner`) on the channels it
+    declares nothing for, as ``shaketable import`` writes it."""
     meta = copy.deepcopy(meta)
     for k in ("measurement", "force_lag_s", "recorder", "channel_conditioning"):
         meta.pop(k, None)
@@ -371,22 +425,26 @@ def _recorder_meta(meta: dict, sensors: dict, rate: float, present=None) -> dict
             "anti_alias_order": int(rec.get("anti_alias_order", 4)),
             "digital": list(rec.get("digital", ())),
         }
-    cond = declared_conditioning(sensors, present)
+    cond = {ch: dict(spec) for ch, spec in (table or {}).items() if present is None or ch in present}
+    cond.update(declared_conditioning(sensors, present))
     if cond:
         meta["channel_conditioning"] = cond
     return meta
 
 
-def chain_record(run_meta: dict, sensors: dict, seed: int, model_file=None) -> dict:
+def chain_record(run_meta: dict, sensors: dict, seed: int, model_file=None, table=None) -> dict:
     """The whole sensor chain of a measured run (the sidecar ``<stem>.measured.sensors.json``;
-    calibration never reads it: a real record carries nothing like it)."""
+    calibration never reads it: a real record carries nothing like it). ``table``: the
+    table's accelerometer conditioner (:func:`table_conditioner`), applied on the channels
+    whose sensor model gives no ``lowpass_hz``."""
     return {
         "of": run_meta.get("source"),
         "seed": int(seed),
         "model": copy.deepcopy(sensors),
         "model_file": str(model_file or DEFAULT_SENSORS),
-        "chain": "lead-in, gain, offset (fixed + per record), conditioner, anti-alias, skew, sampling, "
-        "drift, noise, quantisation",
+        "table_conditioner": copy.deepcopy(table or {}),
+        "chain": "lead-in, gain, offset (fixed + per record), conditioner (the sensor's own, else the table's "
+        "accelerometer conditioner), anti-alias, skew, sampling, drift, noise, quantisation",
     }
 
 
@@ -398,9 +456,10 @@ def write_measured(run, out, stem: str, sensors: dict, seed: int = 0, model_file
     from sim.runs.runfile import write_run
 
     meas = measure_run(run, sensors, seed)
+    table = table_conditioner(run, meas.sample_rate_hz)
     d = out_dir(out)
     path = write_run(d / f"{stem}.measured.run.npz", meas)
-    write_json_atomic(d / f"{stem}.measured{CHAIN_SUFFIX}", chain_record(run.meta, sensors, seed, model_file))
+    write_json_atomic(d / f"{stem}.measured{CHAIN_SUFFIX}", chain_record(run.meta, sensors, seed, model_file, table))
     return path
 
 
@@ -416,5 +475,7 @@ __all__ = [
     "decimation",
     "load_sensors",
     "measure_run",
+    "table_conditioner",
+    "with_table_conditioner",
     "write_measured",
 ]

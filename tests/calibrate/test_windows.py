@@ -110,7 +110,7 @@ def translational_cgs(tmp_path_factory):
     desc = mjcf.load_table("cgs")
     tm = build_model(desc)
     out = tmp_path_factory.mktemp("translational")
-    runs = []
+    runs, paths = [], []
     for seed in (7, 8):
         mo = {
             d: M.white_noise(
@@ -122,20 +122,24 @@ def translational_cgs(tmp_path_factory):
         res = Simulation(tm).run(reference=ref)
         assert res.incomplete_reason is None
         run = build_runfile(res, tm, source="simulated", reference=ref)
-        runs.append(read_run(write_run(out / f"cgs_{seed}.run.npz", measure_run(run, load_sensors(), seed=seed))))
-    return desc, runs
+        paths.append(str(write_run(out / f"cgs_{seed}.run.npz", measure_run(run, load_sensors(), seed=seed))))
+        runs.append(read_run(paths[-1]))
+    return desc, runs, paths
 
 
 def test_unexcited_rotation_left_out_of_the_pooled_mechanical_error(translational_cgs):
     """A clean translational CGS case: rz (moment 2 % of the largest force in actuator
     units) is reported as not excited and left out; the pooled error is that of the
-    excited DOFs (measured 13.6 %: translations 3 %, the moments about x and y 20 %, their
-    rotational acceleration's sensor noise), where pooling rz in gave 90 % (rz: 220 %)."""
+    excited DOFs (measured 12.8 %: translations 2.5-3.2 %, the moments about x and y
+    18-21 %, their rotational acceleration's sensor noise; 14.0 % when the records lacked
+    the table's conditioner and the model's acceleration was compared unfiltered), where
+    pooling rz in gave 90 % (rz: 220 %)."""
     from sim.calibrate import residuals as R
     from sim.calibrate.search import mechanical_errors
 
-    desc, runs = translational_cgs
-    mrs = R.mechanical_runs(runs, desc, accel_lowpass_hz=None)  # the recorder has no extra conditioner
+    desc, runs, _paths = translational_cgs
+    mrs = R.mechanical_runs(runs, desc)  # through the table's 300 Hz conditioner, which the runs declare
+    assert all(mr.prefilter is not None and mr.prefilter.cutoff_hz == 300.0 for mr in mrs)
     res = [mr.residual for mr in mrs]
     per, per_run, quiet = mechanical_errors(mrs, res, res)
     assert quiet == [f"cgs_{s}.run.npz:rz" for s in (7, 8)]
@@ -148,6 +152,40 @@ def test_unexcited_rotation_left_out_of_the_pooled_mechanical_error(translationa
     for mr in mrs:
         mr.excited = None  # the old normalisation: every DOF by its own force
     assert R.nrmse_runs(mrs, res) > 4 * pooled
+
+
+def test_clean_cgs_records_need_no_accelerometer_timing(translational_cgs):
+    """The measured runs went through the CGS table's declared accelerometer conditioner
+    (``[sensors] accelerometer_bandwidth_hz`` = 300 Hz, 4 poles) and declare it in
+    ``meta.channel_conditioning``, as an imported record does: calibrated with the
+    defaults on the mechanical path (its sensor-timing candidates only, to keep it short),
+    nothing is added.
+
+    Before ``run --measure`` applied the table's conditioner, the mechanical path put the
+    model's acceleration through it (the table's, no declaration in the run) and the record
+    had none: it "found" the acceleration -1.398 +/- 0.020 ms late (the conditioner's lag,
+    1 / (2 pi 300 Hz sin(pi / 8)) = 1.386 ms) and accepted it (held-out 0.248 -> 0.120,
+    measured on these runs). Measured now: -0.014 +/- 0.019 ms, refused; held-out 0.121."""
+    from sim.calibrate import search as S
+    from sim.calibrate.timing import TIMING_EFFECTS
+
+    _desc, runs, paths = translational_cgs
+    for r in runs:
+        assert r.meta["channel_conditioning"]["table_acceleration"] == {
+            "delay_s": 0.0,
+            "lowpass_hz": 300.0,
+            "lowpass_order": 4,
+        }
+    res = S.calibrate(paths, path="mechanical", effects=list(TIMING_EFFECTS))
+    assert res.effects_added == [], res.effects_added
+    rows = {(c["name"], c["where"]): c for c in res.candidates}
+    acc = rows[("sensor_delay", "channel:table_acceleration")]
+    d, u = acc["parameters"]["delay_s"], acc["uncertainty"]["delay_s"]
+    assert abs(d) <= u and u < 5e-5, (d, u)  # 0 inside its 95 % interval
+    assert abs(d) < 0.05 * 1.386e-3, d  # not the conditioner's lag (1 % of it measured)
+    lp = rows[("sensor_lowpass", "channel:table_acceleration")]
+    assert abs(lp["parameters"]["cutoff_hz"] - 300.0) <= lp["uncertainty"]["cutoff_hz"]  # 296.7 +/- 3.9 Hz
+    assert res.error_before < 0.15, res.error_before  # 0.121 measured (0.248 with the conditioner unmatched)
 
 
 # ------------------------------------------------------------------ the replay path

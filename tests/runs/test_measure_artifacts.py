@@ -128,6 +128,56 @@ def test_drift_is_a_seeded_random_walk_and_a_ramp():
     np.testing.assert_allclose(ramp.table_acceleration[:, 0], 0.2 * (run.t - run.t[0]), atol=1e-12)
 
 
+def _analog_phase_delay(f, fc, order):
+    """Phase delay (s) at ``f`` of an analog Butterworth low-pass of cut-off ``fc``."""
+    import scipy.signal as sig
+
+    b, a = sig.butter(order, 2 * np.pi * fc, analog=True)
+    _w, h = sig.freqs(b, a, worN=[2 * np.pi * f])
+    return -np.angle(h[0]) / (2 * np.pi * f)
+
+
+def test_acceleration_through_the_tables_declared_conditioner(tmp_path):
+    """A run on the ucsd table, whose ``[sensors]`` declares a 100 Hz accelerometer
+    conditioner (4 poles: no order given), measured through a sensor file that gives the
+    accelerometer none: its acceleration lags by that conditioner's delay (4.16 ms at low
+    frequency, 1 / (2 pi 100 Hz sin(pi / 8))) and the meta declares it, as ``shaketable
+    import`` does. A sensor file's own ``lowpass_hz`` is the sensor's real conditioner
+    (the meta still says what the lab believes: the table's); a declaration in the sensor
+    file wins; above the recorder's Nyquist frequency nothing is applied or declared."""
+    run = sine_run(f=8.0)
+    run.meta["table"] = "ucsd"
+    k = slice(2048, None)  # past the filters' start
+    t, x = run.t[k], run.table_acceleration[k, 0]
+    table = {"delay_s": 0.0, "lowpass_hz": 100.0, "lowpass_order": 4}
+    m = M.measure_run(run, {}, seed=0)
+    assert m.meta["channel_conditioning"] == {"table_acceleration": table}
+    delay = phase_delay(m.table_acceleration[k, 0], x, t, 8.0)
+    assert delay == pytest.approx(_analog_phase_delay(8.0, 100.0, 4), rel=2e-3)  # 4.17 ms at 8 Hz
+    assert delay == pytest.approx(1 / (2 * np.pi * 100.0 * math.sin(math.pi / 8)), rel=0.02)
+    np.testing.assert_array_equal(m.actuator_force[k], M.measure_run(sine_run(f=8.0), {}, 0).actuator_force[k])
+    # the sensor's own conditioner left at 30 Hz: the record lags by it, the meta says 100 Hz
+    own = {"channel": {"table_acceleration": {"lowpass_hz": 30.0, "lowpass_order": 4}}}
+    m30 = M.measure_run(run, own, seed=0)
+    assert phase_delay(m30.table_acceleration[k, 0], x, t, 8.0) == pytest.approx(
+        _analog_phase_delay(8.0, 30.0, 4), rel=2e-3
+    )
+    assert m30.meta["channel_conditioning"] == {"table_acceleration": table}
+    # declared by the sensor file: its own chain (the table's conditioner it went through), or what it says
+    decl = M.measure_run(run, {"channel": {"table_acceleration": {"declared": True, "skew_s": -1 / FS}}}, 0)
+    assert decl.meta["channel_conditioning"] == {"table_acceleration": dict(table, delay_s=1 / FS)}
+    says = M.measure_run(run, {"channel": {"table_acceleration": {"declared_lowpass_hz": 80.0}}}, 0)
+    assert says.meta["channel_conditioning"]["table_acceleration"]["lowpass_hz"] == 80.0
+    # a 128 Hz recorder (Nyquist 64 Hz): the 100 Hz conditioner is neither applied nor declared
+    slow = M.measure_run(run, {"recorder": {"rate_hz": 128.0}}, seed=0)
+    assert "channel_conditioning" not in slow.meta
+    np.testing.assert_array_equal(slow.table_acceleration, run.table_acceleration[::8])
+    # the sidecar names the table's conditioner
+    M.write_measured(run, tmp_path, "u", {}, seed=0)
+    side = json.loads((tmp_path / f"u.measured{M.CHAIN_SUFFIX}").read_text())
+    assert side["table_conditioner"] == {"table_acceleration": table}
+
+
 def test_meta_holds_only_what_a_recorder_writes(tmp_path):
     run = sine_run()
     sens = {
