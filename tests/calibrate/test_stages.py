@@ -209,33 +209,48 @@ def test_the_mechanical_paths_effects_stay_only_on_the_pooled_evidence(monkeypat
     assert res.baseline["holdout_error"] == pytest.approx(0.9)
 
 
-@pytest.mark.slow
-def test_cgs_valve_delay_found_with_the_default_paths(tmp_path):
-    """CGS runs with valve commands, forces and motion (3-axis noise, the 1024 Hz recorder
-    model), every vertical valve 6 physics steps of 1/2048 s late: with no path named, the mechanical
-    path adds nothing for it (a valve delay does not change the force-motion balance) and
-    the replay finds it at its class, its value (the 2.930 ms realised) inside its interval."""
-    from sim.runs.runfile import read_run, write_run
+#: the CGS cases' candidate types: the planted valve delay and its nearest confusers on both paths
+CGS_EFFECTS = ["coulomb_friction", "viscous_damping", "valve_flow_gain", "valve_delay", "bulk_modulus", "sensor_delay"]
+
+
+def _cgs_declared(out, planted):
+    """CGS runs (3-axis noise, the 1024 Hz recorder model) with ``planted``. The recorder
+    model puts the accelerometers through the table's declared 300 Hz conditioner and the
+    runs declare it (``meta.channel_conditioning``, as an imported record does), so every
+    path compares through it (before the recorder applied it, these runs had to declare
+    "no conditioner" by hand: the mechanical path stood viscous damping in for its lag)."""
     from tests.calibrate.test_calibrate_paths import _cgs_measured
 
+    return _cgs_measured(out, planted)
+
+
+@pytest.mark.slow
+def test_cgs_valve_delay_found_with_the_default_paths(tmp_path):
+    """CGS runs with valve commands, forces and motion, every valve 6 physics steps of
+    1/2048 s late (each class's own entry: the truth holds them as one description value
+    would): with no path named, the mechanical path adds nothing for them (a valve delay
+    does not change the force-motion balance) and the replay finds each class's, one a
+    round (vertical, lateral, longitudinal: the share of the residual each explains), its
+    value (the 2.930 ms realised) inside its interval, and nothing else."""
     truth = 6 / 2048
-    paths = _cgs_measured(tmp_path, [{"type": "valve_delay", "where": "class:vertical", "delay_s": truth}])
-    for p in paths:  # the recorder model's accelerometers have no conditioner (the table declares
-        # 300 Hz): as a recorder would, the runs say so; left unsaid, the mechanical path stood
-        # viscous damping in for the declared filter's lag (measured)
-        r = read_run(p)
-        r.meta["channel_conditioning"] = {"table_acceleration": {"delay_s": 0.0, "lowpass_hz": None}}
-        write_run(p, r)
-    effects = ["coulomb_friction", "viscous_damping", "valve_flow_gain", "valve_delay", "bulk_modulus", "sensor_delay"]
-    res = S.calibrate(paths, effects=effects, workers=2)
+    classes = ("vertical", "lateral", "longitudinal")
+    planted = [{"type": "valve_delay", "where": f"class:{c}", "delay_s": truth} for c in classes]
+    res = S.calibrate(_cgs_declared(tmp_path, planted), effects=CGS_EFFECTS, workers=2)
     assert res.residual_path == "mechanical + replay"
     found = [(e["name"], e["where"], e["path"]) for e in res.effects_added]
-    assert found[:1] == [("valve_delay", "class:vertical", "replay")], found
-    assert all(p == "replay" for *_, p in found), found
-    e = res.effects_added[0]
-    assert abs(e["parameters"]["delay_s"] - truth) <= e["uncertainty"]["delay_s"], e
+    assert sorted(found) == sorted(("valve_delay", f"class:{c}", "replay") for c in classes), found
+    for e in res.effects_added:
+        assert abs(e["parameters"]["delay_s"] - truth) <= e["uncertainty"]["delay_s"], e
     rep = res.paths["replay"]
     assert rep["error_after"] < (1 - S.HOLDOUT_MARGIN) * rep["error_before_declared"], rep
+
+
+def test_cgs_clean_runs_add_nothing_with_the_default_paths(tmp_path):
+    """The same runs without the delays: neither path adds anything (24 s at load 4-6)."""
+    res = S.calibrate(_cgs_declared(tmp_path, []), effects=CGS_EFFECTS, workers=2)
+    assert res.residual_path == "mechanical + replay"
+    assert res.effects_added == []
+    assert res.error_after == res.error_before
 
 
 def test_the_paths_keep_the_mechanical_effects_they_agree_on_one_by_one(monkeypatch):
