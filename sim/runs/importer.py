@@ -536,7 +536,7 @@ def table_conditioning(desc, fs: float, undeclared) -> dict:
     bw = float(desc.accelerometer_bandwidth_hz or 0.0)
     if "table_acceleration" not in undeclared or not 0.0 < bw < 0.5 * fs:
         return {}
-    # 4 poles where the table gives no order, as calibration assumes (sim.calibrate.timing.TABLE_ORDER)
+    # 4 poles where the table gives no order, as calibration assumes (sim.calibrate.conditioning.TABLE_ORDER)
     order = int(desc.raw.get("sensors", {}).get("accelerometer_filter_order", 4))
     return {"table_acceleration": {"delay_s": 0.0, "lowpass_hz": bw, "lowpass_order": order}}
 
