@@ -331,7 +331,7 @@ def _still_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.n
 def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None = None) -> list[MechRun]:
     """The mechanical-path records of ``runs`` against the declared ``desc`` (+ ``payload``)."""
     from mjcf.description import DOFS6 as DOF6
-    from sim.calibrate import conditioning as timing
+    from sim.calibrate import conditioning
     from sim.calibrate.laws import declared_forces
     from sim.control.tvc import dof_jacobian
     from sim.effects import build_model
@@ -357,8 +357,8 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         v = r.table_velocity[:, cols]
         a = r.table_acceleration[:, cols]
         f = _force_at_acceleration_instant(r)
-        known = timing.declared_state(r, accel_lowpass_hz, desc.accelerometer_filter_order)
-        pre = timing.prefilter_of(known, r)
+        known = conditioning.declared_state(r, accel_lowpass_hz, desc.accelerometer_filter_order)
+        pre = conditioning.prefilter_of(known, r)
         mr = MechRun(
             name=r.name,
             dt=r.dt,
@@ -378,7 +378,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         )
         mr.filter_delay_s = known["accel_delay_s"]
         mr.extra["force_at_instant"] = f  # before any declared or found force delay
-        f = timing.shift(f, -known["force_delay_s"], r.dt)
+        f = conditioning.shift(f, -known["force_delay_s"], r.dt)
         mr.force = mr.filt(f @ J)
         mr.extra["actuator_force"] = f
         other = joints.force(u, v, r.dt)
