@@ -1,5 +1,6 @@
 """The house rules of ``sim/`` (see docs/architecture.md): layers import downwards only,
-``mjcf`` and ``hydraulics`` import nothing from ``sim``, only ``sim/papers`` names a
+``mjcf`` and ``hydraulics`` import nothing from ``sim``, ``sim/calibrate`` has no import
+cycle, only ``sim/papers`` names a
 table, no module grows past 800 lines and no function past 100 (outside a short list,
 each entry with its reason), and sources are cited by the keys of docs/references.md."""
 
@@ -76,6 +77,52 @@ def test_imports_go_downwards_only():
             if other is not None and other > own:
                 bad.append(f"{path.relative_to(ROOT)}:{line} ({mod}, layer {own}) imports {imp} (layer {other})")
     assert not bad, "upward imports:\n" + "\n".join(bad)
+
+
+def _import_graph(pkg: str) -> dict:
+    """module -> the modules of ``pkg`` it imports (function-local imports too); ``from
+    a.b import c`` names the submodule ``a.b.c`` when there is one, else ``a.b``."""
+    mods = dict(_modules(pkg))
+    graph = {}
+    for mod, path in mods.items():
+        deps = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                deps |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                subs = {f"{node.module}.{a.name}" for a in node.names}
+                deps |= subs if subs <= mods.keys() else subs | {node.module}
+        graph[mod] = {d for d in deps if d in mods and d != mod}
+    return graph
+
+
+def _cycle(graph: dict) -> list:
+    """One import cycle of ``graph`` (a list of modules, the first repeated last), or []."""
+    state: dict = {}
+
+    def visit(m, trail):
+        state[m] = "open"
+        for d in sorted(graph[m]):
+            if state.get(d) == "open":
+                return trail[trail.index(d) :] + [d]
+            if d not in state and (found := visit(d, trail + [d])):
+                return found
+        state[m] = "done"
+        return []
+
+    for m in sorted(graph):
+        if m not in state and (found := visit(m, [m])):
+            return found
+    return []
+
+
+def test_the_calibration_modules_import_one_another_without_a_cycle():
+    """sim/calibrate is layered inside too: the search loop (engine), the paths' steps
+    (mechsearch, pathsearch), stages and search above the pieces they share."""
+    found = _cycle(_import_graph("sim/calibrate"))
+    assert not found, "import cycle: " + " -> ".join(found)
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _cycle({"a": {"b"}, "b": set()}) == []
 
 
 @pytest.mark.parametrize("pkg", ["mjcf", "hydraulics"])

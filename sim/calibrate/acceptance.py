@@ -28,6 +28,7 @@ import numpy as np
 #: coloured residual (a specimen's second mode under the first)
 LARGE_GAIN = 0.20
 Z95 = 1.96  #: the 95 % half-width in standard deviations
+HOLDOUT_MARGIN = 0.05  #: the held-out NRMSE must fall by at least 5 % of itself
 
 #: the word a refused candidate's reason starts with when the effect is implausible
 COMPENSATION = "compensation"
@@ -135,6 +136,53 @@ def accept_numbers(e_ho_cur, e_ho_new, bic_cur, bic_new, flat_cur, flat_new, mar
             f"and the held-out gain {100 * gain:.1f} % is below {100 * LARGE_GAIN:g} %"
         )
     return True, ""
+
+
+def param_report(term, values: dict, sigma: dict, limits: dict | None = None) -> tuple[bool, str, dict]:
+    """Are the parameters off their bounds (a scanned one: off its scan's limits,
+    ``limits``, default :func:`sim.calibrate.trace.scan_limits` without a record rate)
+    with a finite 95 % interval excluding zero?"""
+    law = term.law
+    unc = {name: Z95 * sigma.get(name, math.inf) for name in law.params}  # every one, also on a refusal
+    for name, (unit, lo, hi) in law.params.items():
+        v, s = values[name], sigma.get(name, math.inf)
+        if not math.isfinite(s):
+            return False, f"{name}: no finite confidence interval", unc
+        if bound_hit(v, lo, hi, 1e-3 * max(abs(v), 1e-12)):
+            return False, f"{name} = {v:.4g} {unit} at or beyond its bounds [{lo:g}, {hi:g}]", unc
+        if name in law.shape:
+            a, b = (limits or {}).get(name) or _limits(law, name)
+            if bound_hit(v, a, b, 1e-3 * max(abs(v), 1e-12)):
+                return False, f"{name} = {v:.4g} at the limit of its scan [{a:g}, {b:g}]", unc
+        elif abs(v) <= Z95 * s and len(law.linears) == 1:
+            return False, f"{name} = {v:.4g} {unit}: its 95 % interval +/-{Z95 * s:.3g} includes zero", unc
+        elif linear_holds_bound(law, name, v, s):
+            return False, f"{name} = {v:.4g} +/-{Z95 * s:.3g} {unit} holds its bound: the nested law without it", unc
+    lin = law.linears
+    if len(lin) > 1 and all(abs(values[k]) <= Z95 * sigma[k] for k in lin):
+        # the components of one vector (a CG offset): one of them must differ from zero
+        return False, f"{', '.join(lin)}: every 95 % interval includes zero", unc
+    for name, (at, simpler) in getattr(law, "nested", {}).items():
+        if abs(values[name] - at) <= Z95 * sigma.get(name, math.inf):
+            return False, f"{name} = {values[name]:.4g} +/-{unc[name]:.3g} holds {at:g}: that is {simpler}", unc
+    return True, "", unc
+
+
+def _limits(law, name) -> tuple[float, float]:
+    """A scanned parameter's limits without a record rate ("nyquist": unbounded)."""
+    grid = law.shape[name]
+    lo, hi = law.limits.get(name, (min(grid), max(grid)))
+    return float(lo), (math.inf if hi == "nyquist" else float(hi))
+
+
+def accept(cur, new, e_ho_cur, e_ho_new, flat_cur, flat_new, term, margin=HOLDOUT_MARGIN, limits=None):
+    """``(accepted, reason, uncertainty)`` of adding ``term`` (fit ``new`` vs ``cur``)."""
+    i = [t.key for t in new.terms].index(term.key)
+    ok, why, unc = param_report(new.terms[i], new.values[i], new.sigma[i], limits)
+    if not ok:
+        return False, why, unc
+    ok, why = accept_numbers(e_ho_cur, e_ho_new, cur.bic, new.bic, flat_cur, flat_new, margin)
+    return ok, why, unc
 
 
 def tie_break(passed: list, margin: float) -> int:
@@ -266,14 +314,18 @@ def implausible_candidate(cand, values: dict, scale: TableScale, peaks: dict) ->
 
 __all__ = [
     "COMPENSATION",
+    "HOLDOUT_MARGIN",
     "LARGE_GAIN",
     "TableScale",
+    "Z95",
+    "accept",
     "accept_numbers",
     "bound_hit",
     "force_peak_of_entry",
     "implausible",
     "implausible_candidate",
     "nested_at_bound",
+    "param_report",
     "table_scale",
     "tie_break",
 ]

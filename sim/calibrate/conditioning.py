@@ -17,11 +17,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.calibrate.residuals import CalibrationError
+from sim.calibrate.errors import CalibrationError
 
 #: a declared conditioner's order when the declaration gives none (assumed: 2 poles,
 #: as the sensor effects' default, ``sim.effects.sensors.SensorLowpass``)
 DEFAULT_ORDER = 2
+#: the analog conditioner's order when only a cut-off is declared (the table's
+#: ``accelerometer_bandwidth_hz`` or ``--accel-lowpass``): 4 poles, as
+#: :func:`sim.identify.least_squares.analog_lowpass` assumes
+TABLE_ORDER = 4
 
 
 def channel_conditioning(run) -> dict:
@@ -77,8 +81,6 @@ def force_at_record_instant(chans: dict, model_lag_s: float, known: dict | None,
     shift_s = model_lag_s - float((known or {}).get("force_lag_s", 0.0))
     if not shift_s:
         return chans
-    from sim.calibrate.timing import shift
-
     return {c: (shift(x, -shift_s, dt) if c in LAGGED else x) for c, x in chans.items()}
 
 
@@ -206,7 +208,63 @@ def noise_floor(x: np.ndarray, fs: float) -> np.ndarray:
     return np.sqrt(np.mean(P[top], axis=0) * 0.5 * fs)
 
 
+def shift(x: np.ndarray, delay_s: float, dt: float) -> np.ndarray:
+    """``x`` delayed by ``delay_s`` (either sign, any fraction of a sample): y(t) =
+    x(t - delay), by a cubic spline through the samples (linear interpolation loses
+    amplitude between samples), the end values held beyond the record."""
+    x = np.asarray(x, float)
+    if not delay_s or len(x) < 4:
+        return x
+    from scipy.interpolate import CubicSpline
+
+    n = len(x)
+    k = np.clip(np.arange(n) - delay_s / dt, 0.0, n - 1)
+    return CubicSpline(np.arange(n, dtype=float), x, axis=0)(k)
+
+
+def declared_state(run, accel_lowpass_hz, table_order: int = TABLE_ORDER) -> dict:
+    """What is known of ``run``'s force and acceleration timing: its
+    ``meta.channel_conditioning`` (:mod:`sim.calibrate.conditioning`), else
+    ``accel_lowpass_hz`` (the table's or ``--accel-lowpass``) as a conditioner of
+    ``table_order`` poles (the table's ``[sensors] accelerometer_filter_order``). A
+    declared conditioner too close to the record's Nyquist frequency to be filtered at its
+    rate counts as its low-frequency delay, 1 / (2 pi f_c sin(pi / 2n)) for n poles."""
+    cond = channel_conditioning(run)
+    acc = cond.get("table_acceleration", {})
+    fc = acc.get("lowpass_hz") if "table_acceleration" in cond else accel_lowpass_hz
+    order = int(acc.get("lowpass_order", table_order) if "table_acceleration" in cond else table_order)
+    delay = acc.get("delay_s", 0.0)
+    if fc and fc >= 0.45 / run.dt and "table_acceleration" in cond:
+        delay += 1.0 / (2 * math.pi * fc * math.sin(math.pi / (2 * order)))
+        fc = None
+    return {
+        "force_delay_s": cond.get("actuator_force", {}).get("delay_s", 0.0),
+        "accel_delay_s": delay,
+        "accel_lowpass_hz": fc or None,
+        "accel_lowpass_order": order,
+    }
+
+
+def prefilter_of(state: dict, run):
+    """The acceleration's analog conditioner in ``state`` at the run's rate
+    (:class:`sim.calibrate.conditioning.Conditioner`; one-line error when above the
+    Nyquist frequency)."""
+    fc = state["accel_lowpass_hz"]
+    if not fc:
+        return None
+    if fc >= 0.5 / run.dt:
+        raise CalibrationError(
+            f"{run.name}: the accelerometer low-pass {fc:g} Hz is above the Nyquist frequency "
+            f"{0.5 / run.dt:g} Hz; give --accel-lowpass none or declare a lower cut-off"
+        )
+    return Conditioner(float(fc), int(state["accel_lowpass_order"]), 1.0 / run.dt)
+
+
 __all__ = [
+    "TABLE_ORDER",
+    "declared_state",
+    "prefilter_of",
+    "shift",
     "LAGGED",
     "Conditioner",
     "analog_response",

@@ -161,7 +161,7 @@ class TomlText:
 
     def set_effect(self, entry: dict, *, comments: dict | None = None) -> str:
         """Add ``entry`` as an ``[[effect]]`` (after the last one, or at the end; a
-        ``foundation_mode`` before the first, :func:`sim.calibrate.sensitivity.build_order`), or rewrite
+        ``foundation_mode`` before the first, :func:`sim.calibrate.paths.build_order`), or rewrite
         the entry with the same ``type``, ``where`` and ``name`` in place (its comments kept).
         ``comments``: key -> source comment. Returns ``"added"`` or ``"replaced"``."""
         if "type" not in entry or "where" not in entry:

@@ -54,9 +54,8 @@ def term_force_peak(mruns, fit, i: int) -> tuple[str, float]:
 
 def _verdict(st: RoundState, cur, new):
     """``(ok, why, unc, e_new, f_new)`` of the last term of ``new`` against ``cur``."""
-    from sim.calibrate.acceptance import implausible
+    from sim.calibrate.acceptance import accept, implausible
     from sim.calibrate.residuals import nrmse_runs
-    from sim.calibrate.search import accept
     from sim.calibrate.trace import flatness, predict, scan_limits
 
     term, i = new.terms[-1], len(new.terms) - 1
@@ -158,19 +157,17 @@ def forward_round(st: RoundState, cur, scored: list, rnd, say) -> tuple[list, tu
     return rows, win[:3]
 
 
-def timed_first(st: RoundState, cur, scored: list, rnd, say) -> tuple[list, dict | None, list]:
-    """The round's order split at the first sensor-timing candidate that passes
-    (:mod:`sim.calibrate.timing`, fitted and judged on its own re-timed records): the law
-    candidates that explain more (judged first by :func:`forward_round`), that timing
-    candidate (None: none passed, or timing is off) and the rows of the timing candidates
-    judged up to it."""
-    if not st.timing_on:
-        return scored, None, []
+def split_at_timing(order: list, rnd, say) -> tuple[list, dict | None, list]:
+    """The round's order (the law candidates ``(explained, law, where, fit)`` and the
+    sensor-timing ones ``(explained, None, where, evaluation)``, :func:`sim.calibrate.timing.merged`)
+    split at the first timing candidate that passes (fitted and judged on its own re-timed
+    records, :mod:`sim.calibrate.timing`): the law candidates that explain more (judged
+    first by :func:`forward_round`), that timing candidate (None: none passed) and the
+    rows of the timing candidates judged up to it."""
     from sim.calibrate import timing
 
-    timed = timing.round_candidates(st.mfit, st.mho, cur, st.e_ho, st.flat, st.margin, st.effects, st.timed_added)
     ahead, rows = [], []
-    for expl, law, w, new in timing.merged(scored, timed):
+    for expl, law, w, new in order:
         if law is not None:
             ahead.append((expl, law, w, new))
             continue
@@ -182,49 +179,4 @@ def timed_first(st: RoundState, cur, scored: list, rnd, say) -> tuple[list, dict
     return ahead, None, rows
 
 
-def forward_search(st: RoundState, cur, cands: list, max_rounds: int, say) -> tuple:
-    """Rounds of the forward search from the fit ``cur`` over ``cands`` (``(law, where)``):
-    each round fits every candidate with the current terms, judges them best explained
-    first (:func:`forward_round`) and adds the chosen one; ``st`` follows the current
-    model. Returns ``(fit, rows, least-squares fits)``."""
-    from sim.calibrate import timing
-    from sim.calibrate.residuals import nrmse_runs
-    from sim.calibrate.trace import Term, fit_terms, flatness, predict
-
-    rows, n_fits = [], 0
-    rank = {"dof": 0, "class": 1, "actuator": 2}
-    for rnd in range(max_rounds):
-        scored = []
-        for law, w in cands:
-            # a law that repeats at a place (a specimen's modes) offers its next term there
-            # (a term held at a bound, a nested law, counts as its own law's: fixed_law's base)
-            n_have = sum(1 for t in cur.terms if ((t.law.base or t.law).type, t.where) == (law.type, w))
-            if n_have >= getattr(law, "repeats", 1):
-                continue
-            if any(
-                (t.law.name, t.where) == (law.name, w) and (t.law.base or t.law).type != law.type for t in cur.terms
-            ):
-                continue  # one entry of an effect per place: a variant of one already there is not added beside it
-            new = fit_terms(st.mfit, cur.terms + [Term(law, w, index=n_have)], refine="last")
-            n_fits += 1
-            scored.append((1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0, law, w, new))
-        scored.sort(key=lambda s: (-round(s[0], 6), rank.get(s[2].split(":")[0], 3)))
-        ahead, timed, trs = timed_first(st, cur, scored, rnd, say)
-        rs, win = forward_round(st, cur, ahead, rnd, say)
-        rows += rs + trs
-        if win is None and timed is None:
-            break
-        if win is None:  # a sensor's timing: the records re-timed, the model refitted on them
-            st.mfit, st.mho = timed["mfit"], timed["mho"]
-            st.timed_added.append(timing.added_entry(timed["row"]))
-            say(f"  ACCEPTED {timed['row']['name']} at {timed['row']['where']}")
-            win = (timed["fit"],)
-        elif timed is not None:
-            timed["row"]["accepted"] = False
-            timed["row"]["reason"] = "passed, not added: a candidate that explains more was added"
-        cur = fit_terms(st.mfit, win[0].terms)  # every shape parameter again, with the new term in
-        st.e_ho, st.flat = nrmse_runs(st.mho, predict(st.mho, cur)), flatness(st.mfit, cur.residuals)
-    return cur, rows, n_fits
-
-
-__all__ = ["RoundState", "forward_round", "forward_search", "judge", "term_force_peak", "timed_first"]
+__all__ = ["RoundState", "forward_round", "judge", "split_at_timing", "term_force_peak"]

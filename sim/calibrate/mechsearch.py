@@ -1,11 +1,14 @@
-"""The mechanical path as one stage of the search (:func:`sim.calibrate.search.calibrate`).
+"""The mechanical path on the search engine (:func:`sim.calibrate.engine.search`).
 
 The residual is the recorded generalised force minus the declared model's force for the
 recorded motion (:func:`sim.calibrate.residuals.mechanical_runs`); each candidate law is a
-least-squares term of it (:mod:`sim.calibrate.trace`). The stage runs the forward search
-(:func:`sim.calibrate.mechjudge.forward_search`: screen, refine, judge, with the sensor
-timing candidates), then two backward passes (:func:`backward_pass`,
-:func:`demote_nested`), and returns a :class:`sim.calibrate.search.CalibrationResult`
+least-squares term of it (:mod:`sim.calibrate.trace`). :class:`MechStage` gives the
+engine the path's steps: every candidate fitted with the current terms (its screening
+is its least-squares fit, shape parameters refined) beside the sensor timing
+candidates (:mod:`sim.calibrate.timing`), judged best explained first
+(:func:`sim.calibrate.mechjudge.forward_round`), and, after the last round, two
+backward passes (:func:`backward_pass`, :func:`demote_nested`).
+:func:`mechanical_stage` returns a :class:`sim.calibrate.search.CalibrationResult`
 without its baseline.
 """
 
@@ -13,22 +16,12 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-
-@dataclass
-class MechStage:
-    """What the stage works on: the fit and held-out runs on the mechanical path, the
-    acceptance margin and the log."""
-
-    mfit: list
-    mho: list
-    margin: float
-    say: object
-    n_fits: int = 0
+from sim.calibrate.residuals import CalibrationError
 
 
 def accel_lowpass(desc, accel_lowpass_hz, rate_hz: float):
@@ -38,11 +31,48 @@ def accel_lowpass(desc, accel_lowpass_hz, rate_hz: float):
     return None if lp and lp >= 0.5 * rate_hz else lp
 
 
+def check_effect_names(effects) -> None:
+    """One-line error for a name in ``--effects`` that is no effect type."""
+    from sim.calibrate.laws import LAWS
+    from sim.effects.base import EFFECTS
+
+    known = sorted(set(LAWS) | set(EFFECTS))
+    bad = [e for e in effects or [] if e not in known]
+    if bad:
+        import difflib
+
+        close = difflib.get_close_matches(bad[0], known, n=1)
+        raise CalibrationError(
+            f"--effects: unknown effect '{bad[0]}'"
+            + (f" (did you mean '{close[0]}'?)" if close else f"; known: {', '.join(known)}")
+        )
+
+
+def candidate_laws(effects=None) -> list:
+    """The laws to try: every law whose effect type is usable (see
+    :func:`sim.calibrate.laws.usable`), or those named in ``effects``."""
+    from sim.calibrate.laws import LAWS, NOT_ON_MECHANICAL, usable
+    from sim.calibrate.timing import TIMING_EFFECTS
+
+    if effects:
+        check_effect_names(effects)
+        nolaw = [e for e in effects if e not in LAWS and e not in TIMING_EFFECTS]
+        if nolaw and nolaw[0] in NOT_ON_MECHANICAL:
+            raise CalibrationError(
+                f"--effects: '{nolaw[0]}' is not identifiable on the mechanical path: " + NOT_ON_MECHANICAL[nolaw[0]]
+            )
+        if nolaw:
+            raise CalibrationError(
+                f"--effects: '{nolaw[0]}' has no force law for the mechanical path; "
+                f"the mechanical path can try {', '.join(sorted(LAWS))}"
+            )
+    # a name takes its variants too (coulomb_friction: also growing with the stroke or the load)
+    return [LAWS[k] for k in sorted(LAWS) if usable(LAWS[k]) and (not effects or {k, LAWS[k].name} & set(effects))]
+
+
 def stage_laws(effects, payload) -> list:
     """The candidate laws: ``effects`` or the library; the laws of a specimen that is there
     but not declared only with ``--payload none`` (or when named)."""
-    from sim.calibrate.search import candidate_laws
-
     laws = candidate_laws(effects)
     if not effects:
         laws = [w for w in laws if w.when == "always" or (w.when == "undeclared_specimen" and payload == "none")]
@@ -69,9 +99,10 @@ def mechanical_stage(runs, ho_given, desc, pl, *, effects, payload, accel_lowpas
     """The mechanical path's search on ``runs`` (held out: ``ho_given`` or a share of
     ``runs``); a :class:`~sim.calibrate.search.CalibrationResult` without its baseline."""
     from sim.calibrate.acceptance import table_scale
-    from sim.calibrate.mechjudge import RoundState, forward_search
+    from sim.calibrate.engine import MAX_ROUNDS, search
+    from sim.calibrate.holdout import split_holdout
+    from sim.calibrate.mechjudge import RoundState
     from sim.calibrate.residuals import mechanical_runs, nrmse_runs
-    from sim.calibrate.search import MAX_ROUNDS, split_holdout
     from sim.calibrate.trace import fit_terms, flatness, predict
 
     lp = accel_lowpass(desc, accel_lowpass_hz, runs[0].sample_rate_hz)
@@ -86,20 +117,150 @@ def mechanical_stage(runs, ho_given, desc, pl, *, effects, payload, accel_lowpas
     cands = stage_candidates(stage_laws(effects, payload), mfit, desc, pl)
     flat = flatness(mfit, cur.residuals)
     st = RoundState(mfit, mho, e_ho0, flat, margin, table_scale(desc, pl), effects=effects, timing_on=True)
-    cur, tried, n_fits = forward_search(st, cur, cands, MAX_ROUNDS, say)
-    ms = MechStage(st.mfit, st.mho, margin, say, n_fits)  # a sensor's timing found: the records re-timed
-    cur, e_ho = backward_pass(ms, cur, st.e_ho, tried)
-    cur, e_ho = demote_nested(ms, cur, e_ho, tried, desc, pl)
+    ms = MechStage(st, cur, cands, say, places=(desc, pl))
+    cur, tried, _ = search(ms, MAX_ROUNDS)  # a sensor's timing found: ms's records re-timed
     t3 = time.perf_counter()
     times = {"read_s": t1 - t0, "residuals_s": t2 - t1, "search_s": t3 - t2, "total_s": t3 - t0}
     return _result(ms, cur, tried, st.timed_added, (mfit, mho), (e_ho0, times, ho_note), desc, runs)
 
 
+def forward_search(st, cur, cands: list, max_rounds: int, say) -> tuple:
+    """The forward rounds alone (no backward pass) from the fit ``cur`` over ``cands``
+    (``(law, where)``) judged against ``st`` (a :class:`~sim.calibrate.mechjudge.RoundState`,
+    which follows the current model). Returns ``(fit, rows, least-squares fits)``."""
+    from sim.calibrate.engine import rounds
+
+    ms = MechStage(st, cur, cands, say)
+    rounds(ms, max_rounds)
+    return ms.outputs()
+
+
+@dataclass
+class MechStage:
+    """The mechanical path's steps of the search (:class:`sim.calibrate.engine.SearchPath`):
+    the judgement's state ``st`` (:class:`~sim.calibrate.mechjudge.RoundState`: the fit and
+    held-out runs, re-timed when a sensor's timing is accepted, the current held-out
+    error and flatness, the margin), the current fit ``cur``, the candidates ``(law,
+    where)``, the log, the least-squares fits run and the ``candidates`` rows.
+    ``places``: ``(desc, payload)``, where the revisit finds a simpler law's place (None:
+    no revisit)."""
+
+    st: object
+    cur: object
+    cands: list
+    say: object
+    places: tuple | None = None
+    n_fits: int = 0
+    tried: list = field(default_factory=list)
+    #: the mechanical path revisits once, after the last round
+    revisit_every_round = False
+
+    @property
+    def mfit(self) -> list:
+        return self.st.mfit
+
+    @property
+    def mho(self) -> list:
+        return self.st.mho
+
+    @property
+    def margin(self) -> float:
+        return self.st.margin
+
+    def screen(self, rnd) -> tuple[list, list | None]:
+        """Every candidate fitted with the current terms (its least-squares fit, shape
+        parameters scanned and refined: the screening and the refinement at once), best
+        explained first, and the sensor-timing candidates fitted and judged (None: off)."""
+        from sim.calibrate import timing
+        from sim.calibrate.trace import Term, fit_terms
+
+        cur, scored = self.cur, []
+        rank = {"dof": 0, "class": 1, "actuator": 2}
+        for law, w in self.cands:
+            # a law that repeats at a place (a specimen's modes) offers its next term there
+            # (a term held at a bound, a nested law, counts as its own law's: fixed_law's base)
+            n_have = sum(1 for t in cur.terms if ((t.law.base or t.law).type, t.where) == (law.type, w))
+            if n_have >= getattr(law, "repeats", 1):
+                continue
+            if any(
+                (t.law.name, t.where) == (law.name, w) and (t.law.base or t.law).type != law.type for t in cur.terms
+            ):
+                continue  # one entry of an effect per place: a variant of one already there is not added beside it
+            new = fit_terms(self.st.mfit, cur.terms + [Term(law, w, index=n_have)], refine="last")
+            self.n_fits += 1
+            scored.append((1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0, law, w, new))
+        scored.sort(key=lambda s: (-round(s[0], 6), rank.get(s[2].split(":")[0], 3)))
+        st = self.st
+        if not st.timing_on:
+            return scored, None
+        args = (st.mfit, st.mho, cur, st.e_ho, st.flat, st.margin, st.effects, st.timed_added)
+        return scored, timing.round_candidates(*args)
+
+    def choose(self, screened, rnd) -> list:
+        """Every candidate (a least-squares fit is cheap), the laws and the timing ones in
+        one order, most explained first (:func:`sim.calibrate.timing.merged`)."""
+        from sim.calibrate import timing
+
+        scored, timed = screened
+        return scored if timed is None else timing.merged(scored, timed)
+
+    def refine(self, chosen: list, rnd) -> list:
+        """Nothing more: each candidate's screening was its refined least-squares fit."""
+        return chosen
+
+    def judge(self, chosen: list, refined: list, rnd):
+        """The timing candidates up to the first that passes, the laws that explain more
+        than it judged with the tie-break (:func:`sim.calibrate.mechjudge.forward_round`);
+        ``(law winner or None, timing winner or None)``, or None when neither passes."""
+        from sim.calibrate.mechjudge import forward_round, split_at_timing
+
+        ahead, timed, trs = split_at_timing(refined, rnd, self.say)
+        rs, win = forward_round(self.st, self.cur, ahead, rnd, self.say)
+        self.tried += rs + trs
+        return None if win is None and timed is None else (win, timed)
+
+    def record(self, screened, chosen, refined, winner, rnd) -> None:
+        """Nothing: :meth:`judge` wrote the row of every candidate it saw."""
+
+    def take(self, winner, rnd) -> None:
+        """The winner in; a sensor's timing re-times the records and the terms are refitted
+        on them; every shape parameter refitted with the new term in."""
+        from sim.calibrate import timing
+        from sim.calibrate.residuals import nrmse_runs
+        from sim.calibrate.trace import fit_terms, flatness, predict
+
+        win, timed = winner
+        st = self.st
+        if win is None:  # a sensor's timing: the records re-timed, the model refitted on them
+            st.mfit, st.mho = timed["mfit"], timed["mho"]
+            st.timed_added.append(timing.added_entry(timed["row"]))
+            self.say(f"  ACCEPTED {timed['row']['name']} at {timed['row']['where']}")
+            win = (timed["fit"],)
+        elif timed is not None:
+            timed["row"]["accepted"] = False
+            timed["row"]["reason"] = "passed, not added: a candidate that explains more was added"
+        self.cur = fit_terms(st.mfit, win[0].terms)
+        st.e_ho, st.flat = nrmse_runs(st.mho, predict(st.mho, self.cur)), flatness(st.mfit, self.cur.residuals)
+
+    def revisit(self, rnd) -> None:
+        """After the last round: the terms a later one superseded dropped
+        (:func:`backward_pass`), those that ended at a simpler law's value demoted to it
+        (:func:`demote_nested`)."""
+        if self.places is None:
+            return
+        self.cur, e_ho = backward_pass(self, self.cur, self.st.e_ho, self.tried)
+        self.cur, _ = demote_nested(self, self.cur, e_ho, self.tried, *self.places)
+
+    def outputs(self) -> tuple:
+        """``(fit, candidates rows, least-squares fits)``."""
+        return self.cur, self.tried, self.n_fits
+
+
 def _result(ms, cur, tried, timed_added, declared, facts, desc, runs):
     """The stage's :class:`~sim.calibrate.search.CalibrationResult` (``declared``: the
     fit and held-out runs at the declared timing, the report's "before")."""
-    from sim.calibrate.residuals import nrmse_runs
-    from sim.calibrate.search import CalibrationResult, unexplained
+    from sim.calibrate.residuals import nrmse_runs, unexplained
+    from sim.calibrate.result import CalibrationResult
     from sim.calibrate.trace import predict
 
     (mfit0, mho0), (e_ho0, times, ho_note) = declared, facts
@@ -197,9 +358,9 @@ def demote_nested(ms: MechStage, cur, e_ho: float, tried: list, desc, pl):
 def _demoted(ms: MechStage, cur, i: int, name: str, at: float, simpler: str, desc, pl):
     """``(fit, held-out error, place)`` with term ``i`` replaced by ``simpler``, or None
     when its parameter ``name`` is off ``at`` or the simpler law has no place of its own."""
+    from sim.calibrate.acceptance import Z95
     from sim.calibrate.laws import LAWS
     from sim.calibrate.residuals import nrmse_runs, places
-    from sim.calibrate.search import Z95
     from sim.calibrate.trace import Term, fit_terms, predict
 
     t = cur.terms[i]
@@ -216,7 +377,7 @@ def _demoted(ms: MechStage, cur, i: int, name: str, at: float, simpler: str, des
 
 
 def _log_demotion(ms: MechStage, cur, i, name, at, simpler_at, fits, tried) -> None:
-    from sim.calibrate.search import Z95
+    from sim.calibrate.acceptance import Z95
     from sim.calibrate.trace import flatness
 
     (simpler, w2), (alt, e_ho, e_alt), t = simpler_at, fits, cur.terms[i]
@@ -232,7 +393,7 @@ def _log_demotion(ms: MechStage, cur, i, name, at, simpler_at, fits, tried) -> N
 
 def added_entries(cur) -> list:
     """The ``effects_added`` entries of the fit's terms."""
-    from sim.calibrate.search import param_report
+    from sim.calibrate.acceptance import param_report
 
     out = []
     for i, t in enumerate(cur.terms):
@@ -326,11 +487,14 @@ def _nrmse_col(mr, e, j) -> float:
 __all__ = [
     "MechStage",
     "accel_lowpass",
+    "candidate_laws",
+    "check_effect_names",
     "added_entries",
     "backward_pass",
     "backward_row",
     "demote_nested",
     "distinct_places",
+    "forward_search",
     "refit_subset",
     "mechanical_errors",
     "mechanical_stage",

@@ -338,8 +338,6 @@ def _setup(job):
 
     raw = copy.deepcopy(raw)
     if extra:
-        from sim.calibrate.sensitivity import build_order
-
         raw["effect"] = build_order(list(raw.get("effect", [])) + [dict(e) for e in extra])
     try:  # a candidate's value the model refuses (a supply drop below the return): no model
         desc = parse_table(raw, src=src)
@@ -675,7 +673,17 @@ def unexplained(prs, models, fraction: float) -> dict | None:
     return best
 
 
+def build_order(entries: list) -> list:
+    """``[[effect]]`` entries in the order they can be built: ``foundation_mode`` first
+    (it moves the bodies standing on the world onto a new foundation body, which it cannot
+    do once a DOF effect of a free platen has made a tendon), the others as given."""
+    return [e for e in entries if e.get("type") == "foundation_mode"] + [
+        e for e in entries if e.get("type") != "foundation_mode"
+    ]
+
+
 __all__ = [
+    "build_order",
     "FIT_CHANNELS",
     "QUIET_COLUMN",
     "PathRun",

@@ -1,22 +1,19 @@
-"""The effect search of ``shaketable calibrate`` on the replay and closed-loop paths.
+"""The replay and closed-loop paths' steps of the one search (:class:`PathState`, a
+:class:`sim.calibrate.engine.SearchPath` driven by :func:`sim.calibrate.engine.search`).
 
-Per round: the residual of the current model (the declared description plus the effects
-accepted so far) on the fit runs; every candidate of the library
-(:func:`sim.calibrate.sensitivity.candidates`) screened on short windows of the fit runs
-(where they hold the most excitation, never their first seconds: :func:`search_windows`;
-one replay per parameter, on the batch route of :func:`sim.calibrate.paths.simulate_many`);
-the best few refined by nonlinear least squares on longer windows; then, best first,
-each judged on the whole runs by the rules of the mechanical path
-(:func:`sim.calibrate.search.accept_numbers`: held-out error down by the margin, BIC
-down, parameters off their bounds with finite 95 % intervals that exclude the neutral
-value, residual whiter). A sensor candidate, which changes only its own channel or
-column of the model, is judged on those columns (:func:`judge_sensor`; pooled over the
-18 columns of a 6-DOF table a clear error on one column moves the held-out error by less
-than the margin). The first that passes is added; repeated while one passes. From the
-second acceptance on, the accepted effects are refitted jointly and each earlier one is
-dropped if the others do as well without it (:mod:`sim.calibrate.revisit`). A valve
-null offset found on the replay path is reported as the valve's whole null, the path's
-estimate plus the fitted correction (:func:`null_total`).
+Per round: every candidate of the library (:func:`sim.calibrate.sensitivity.candidates`)
+screened against the current model (the declared description plus the effects accepted
+so far) on short windows of the fit runs (where they hold the most excitation, never
+their first seconds: :func:`search_windows`; one replay per parameter, on the batch
+route of :func:`sim.calibrate.paths.simulate_many`); the best few chosen
+(:func:`to_refine`) and refined by nonlinear least squares on longer windows, each from a
+line search (:func:`line_search`); then judged best first on the whole runs
+(:mod:`sim.calibrate.pathjudge`: the rules of :mod:`sim.calibrate.acceptance`; a sensor
+candidate on the columns it acts on). The first that passes is added; from the second
+acceptance on, the accepted effects are refitted jointly and each earlier one is dropped
+if the others do as well without it (:mod:`sim.calibrate.revisit`). A valve null offset
+found on the replay path is reported as the valve's whole null, the path's estimate plus
+the fitted correction (:func:`null_total`).
 """
 
 from __future__ import annotations
@@ -102,26 +99,6 @@ def motion_rms(runs, desc, stat: str = "rms") -> dict:
         idx = [i for i, a_ in enumerate(desc.actuators) if a_.cls.name == c]
         out[f"class:{c}"] = tuple(float(np.max(x[idx]) if stat == "peak" else np.mean(x[idx])) for x in stroke)
     return out
-
-
-def _split(runs, ho_given):
-    """Fit and held-out runs; with one run, the held-out part is its last 30 % of the same
-    replay (a replay cannot start mid-record: the state there is unknown)."""
-    if ho_given:
-        return runs, ho_given, {}, "given with --holdout"
-    if len(runs) >= 2:
-        ho = [r for i, r in enumerate(runs) if i % 3 == 1]
-        fit = [r for i, r in enumerate(runs) if i % 3 != 1]
-        return fit, ho, {}, "held out (no --holdout): " + ", ".join(Path(r.name).name for r in ho)
-    from sim.calibrate.search import _slice_run
-
-    r = runs[0]
-    cut = int(0.7 * r.n_samples)
-    note = (
-        f"held out (one run, no --holdout): the last 30 % of {Path(r.name).name} (from t = {r.t[cut]:.2f} s; "
-        "replayed from the start, scored after the cut)"
-    )
-    return [_slice_run(r, 0, cut, "fit part")], [r], {r.name: cut}, note
 
 
 def _kind(where: str) -> str:
@@ -261,14 +238,12 @@ def window_seconds(pfit, wscr, wref) -> dict:
     }
 
 
-def _bic(rss, n, p) -> float:
-    return n * math.log(max(rss, 1e-300) / n) + p * math.log(n)
-
-
 @dataclass
 class PathState:
-    """The search's state on one path: the runs, the current model's channels and
-    errors, what was accepted and tried, and the replays' counts and times."""
+    """The replay or closed-loop path's steps of the search
+    (:class:`sim.calibrate.engine.SearchPath`) and its state: the runs and windows, the
+    current model's channels and errors, what was accepted and tried, the replays'
+    counts and times, and the declared model's held-out channels and error (the "before")."""
 
     path: str
     desc: object
@@ -297,6 +272,11 @@ class PathState:
     n_par: int = 0
     N: int = 0
     flat: float = math.nan
+    declared: tuple = ()  # (held-out channels, held-out NRMSE) of the declared model
+    timing: dict | None = None  # filled with tm and the replays' routes by outputs()
+    #: the accepted effects are revisited after every acceptance (from the second on)
+    revisit_every_round = True
+    max_nfev = MAX_NFEV
 
     @property
     def ctx(self) -> tuple:
@@ -317,29 +297,94 @@ class PathState:
             k += len(prs)
         return out
 
+    def screen(self, rnd: int) -> list:
+        """Every candidate not dropped, screened on the screening window (one replay per
+        parameter, :func:`sim.calibrate.sensitivity.screen`), best linearised score first."""
+        from sim.calibrate.sensitivity import candidates, screen
+
+        cands = candidates(self.desc, self.payload, self.wscr, self.accepted, self.mot, self.effects)
+        cands = [c for c in cands if c.key not in self.dropped]
+        t = time.perf_counter()
+        sc = screen(
+            cands, self.wscr, self.models["scr"], self.ctx, workers=self.workers, say=self.say, counts=self.routes
+        )
+        self.tm["screen_s"] += time.perf_counter() - t
+        self.tm["replays"] += sum(len(c.screened) * len(c.scan or (0,)) for c in cands if not c.sensor) * len(self.wscr)
+        sc.sort(key=lambda s: -s.score)
+        return sc
+
+    def choose(self, sc: list, rnd: int) -> list:
+        """The screened candidates to refine (:func:`to_refine`); none: the best few's rows."""
+        from sim.calibrate.pathjudge import path_row
+
+        top = to_refine(sc)
+        self.say(
+            "  best by sensitivity: " + ", ".join(f"{s.cand.type} {s.cand.where} {100 * s.score:.1f} %" for s in top)
+        )
+        if not top:
+            for s in sc[:5]:
+                self.tried.append(
+                    path_row(rnd, s, None, None, f"explains less than {100 * MIN_SCORE:g} % (linearised)")
+                )
+        return top
+
+    def refine(self, top: list, rnd: int) -> list:
+        """The line search and the least squares of each of ``top`` (:func:`_refine`)."""
+        return _refine(self, top) if top else []
+
+    def judge(self, top: list, refined: list, rnd: int):
+        """Best refined first on the whole runs (:func:`sim.calibrate.pathjudge.judge_best_first`);
+        the winner ``(refined, unc, mfit, mho, e_ho, rss, n_par, flat)`` or None."""
+        from sim.calibrate.pathjudge import judge_best_first
+
+        return judge_best_first(self, rnd, top, refined) if top else None
+
+    def record(self, sc: list, top: list, refined: list, winner, rnd: int) -> None:
+        """The rows of the refined candidates after the winner and of the next screened ones."""
+        from sim.calibrate.pathjudge import record_the_rest
+
+        if top:
+            record_the_rest(self, rnd, sc, top, refined, winner)
+
+    def take(self, winner, rnd: int) -> None:
+        """The winner added to the model (its whole-run channels and numbers are the model's)."""
+        rf, unc, mfit, mho, self.e_ho, self.rss, self.n_par, self.flat = winner
+        self.models.update(fit=mfit, ho=mho)
+        self.items.append({"cand": rf.cand, "theta": np.array(rf.theta, float), "unc": unc})
+
+    def revisit(self, rnd: int) -> None:
+        """From the second acceptance on, the accepted effects revisited (:func:`_revisit`);
+        then the current model's windows replayed for the next round."""
+        if len(self.items) >= 2:
+            _revisit(self, rnd)
+        self.accepted = [a["cand"].entry(a["theta"]) for a in self.items]
+        self.models["scr"], self.models["ref"] = self.simulate([self.wscr, self.wref], self.accepted)
+
+    def outputs(self) -> dict:
+        """The fields of a :class:`sim.calibrate.search.CalibrationResult` (:func:`_outputs`)."""
+        return _outputs(self, *self.declared, self.timing)
+
 
 def calibrate_path(
     runs, ho_given, desc, payload, path, *, effects=None, margin, max_rounds, workers=None, say=None, timing=None
 ):
-    """The search on ``path``; returns the fields of a
+    """The search on ``path`` (:func:`sim.calibrate.engine.search`); returns the fields of a
     :class:`sim.calibrate.search.CalibrationResult` as a dict."""
+    from sim.calibrate.engine import search
+
     st = _start(runs, ho_given, desc, payload, path, effects, margin, workers, say or (lambda *_: None))
-    mho0, e_ho0 = st.models["ho"], st.e_ho
-    for rnd in range(max_rounds):
-        winner = _round(st, rnd)
-        if winner is None:
-            break
-        _take(st, winner, rnd)
-    return _outputs(st, mho0, e_ho0, timing)
+    st.declared, st.timing = (st.models["ho"], st.e_ho), timing
+    return search(st, max_rounds)
 
 
 def _start(runs, ho_given, desc, payload, path, effects, margin, workers, say) -> PathState:
     """The runs on ``path``, their windows, and the declared model's channels and errors."""
     from sim.calibrate import paths as P
     from sim.calibrate.acceptance import table_scale
+    from sim.calibrate.holdout import split_for_replay
     from sim.calibrate.residuals import CalibrationError
 
-    fit_runs, ho_runs, score_from, ho_note = _split(runs, ho_given)
+    fit_runs, ho_runs, score_from, ho_note = split_for_replay(runs, ho_given)
     pfit = P.path_runs(fit_runs, desc, path, payload=payload)  # payload: its specimen sensors compared
     pho = P.path_runs(ho_runs, desc, path, score_from=score_from, payload=payload)
     wscr, wref = search_windows(pfit)
@@ -375,31 +420,6 @@ def _start(runs, ho_given, desc, payload, path, effects, margin, workers, say) -
     st.N, st.rss, st.flat = len(r), float(r @ r), P.flatness(pfit, mfit)
     say(f"{path} path: {len(pfit)} fit runs, {len(pho)} held out; held-out NRMSE {st.e_ho:.4f}")
     return st
-
-
-def _round(st: PathState, rnd: int):
-    """One round: screen every candidate, refine the best, judge them best first; the
-    winner (``(refined, unc, mfit, mho, e_ho, rss, n_par, flat)``) or None."""
-    from sim.calibrate.sensitivity import candidates, screen
-
-    cands = [
-        c for c in candidates(st.desc, st.payload, st.wscr, st.accepted, st.mot, st.effects) if c.key not in st.dropped
-    ]
-    t = time.perf_counter()
-    sc = screen(cands, st.wscr, st.models["scr"], st.ctx, workers=st.workers, say=st.say, counts=st.routes)
-    st.tm["screen_s"] += time.perf_counter() - t
-    st.tm["replays"] += sum(len(c.screened) * len(c.scan or (0,)) for c in cands if not c.sensor) * len(st.wscr)
-    sc.sort(key=lambda s: -s.score)
-    top = to_refine(sc)
-    st.say("  best by sensitivity: " + ", ".join(f"{s.cand.type} {s.cand.where} {100 * s.score:.1f} %" for s in top))
-    if not top:
-        for s in sc[:5]:
-            st.tried.append(_row(rnd, s, None, None, f"explains less than {100 * MIN_SCORE:g} % (linearised)"))
-        return None
-    refined = _refine(st, top)
-    winner = _judge_best_first(st, rnd, top, refined)
-    _record_the_rest(st, rnd, sc, top, refined, winner)
-    return winner
 
 
 def _refine(st: PathState, top) -> list:
@@ -438,119 +458,32 @@ def _refine(st: PathState, top) -> list:
     return refined
 
 
-def _judge_best_first(st: PathState, rnd: int, top, refined):
-    """Each refined candidate, best first, on the whole runs (a nested refit is judged
-    right after the one it comes from); the first that passes, or None."""
-    from sim.calibrate.acceptance import implausible_candidate
-
-    for rf in refined:
-        sc_of = next(s.score for s in top if s.cand.key == rf.cand.key)
-        if not rf.ok:
-            st.tried.append(_row(rnd, None, rf, None, rf.why, score=sc_of))
-            continue
-        bad = implausible_candidate(rf.cand, rf.cand.values(rf.theta), st.scale, st.peaks)
-        if bad:  # refused before its whole-run replay: it stands in for something else
-            st.tried.append({**_row(rnd, None, rf, None, bad, score=sc_of), "compensation": True})
-            st.say(f"  {rf.cand.type:20s} {rf.cand.where:26s} ({bad})")
-            continue
-        nested = refit_at_bound(rf, (st.wref, st.models["ref"], st.ctx))
-        if nested is not None:  # judged right after it: its parameter held at the bound
-            refined.insert(_index(refined, rf) + 1, nested)
-        winner = _judge_whole_runs(st, rnd, rf, sc_of)
-        if winner is not None:
-            return winner
-    return None
-
-
-def _judge_whole_runs(st: PathState, rnd: int, rf, sc_of):
-    """One refined candidate judged on the whole fit and held-out runs; the winner tuple
-    when it passes, else None (its row in ``st.tried`` either way)."""
-    from sim.calibrate import paths as P
-    from sim.calibrate.search import Z95, accept_numbers
-    from sim.calibrate.sensitivity import sensor_model
-
-    pfit, pho = st.pfit, st.pho
-    t = time.perf_counter()
-    if rf.cand.sensor:
-        ms = [sensor_model(rf.cand, rf.theta, p, m) for p, m in zip(pfit + pho, st.models["fit"] + st.models["ho"])]
-    else:
-        (ms,) = st.simulate([pfit + pho], st.accepted + [rf.cand.entry(rf.theta)])
-    st.tm["accept_s"] += time.perf_counter() - t
-    mf, mh = ms[: len(pfit)], ms[len(pfit) :]
-    rn = P.stacked(pfit, mf)
-    if rn is None or any(m is None for m in mh):
-        st.tried.append(_row(rnd, None, rf, None, "the whole-run replay diverged", score=sc_of))
-        return None
-    e_new, rss_new, p_new, f_new = P.nrmse(pho, mh), float(rn @ rn), st.n_par + len(rf.theta), P.flatness(pfit, mf)
-    okp, why, unc = param_check(rf, Z95)
-    bics = (_bic(st.rss, st.N, st.n_par), _bic(rss_new, st.N, p_new))
-    local = None
-    if not okp:
-        ok = False
-    elif rf.cand.sensor:  # judged on the columns it acts on
-        cur = (st.models["fit"], st.models["ho"])
-        ok, why, local = judge_sensor(rf.cand, pfit, pho, cur, (mf, mh), bics, st.margin)
-    else:
-        ok, why = accept_numbers(st.e_ho, e_new, *bics, st.flat, f_new, st.margin)
-    row = _row(rnd, None, rf, unc, why, score=sc_of)
-    if local is not None:
-        row["on_its_columns"] = local
-    row.update({"holdout_error": e_new, "bic_change": bics[1] - bics[0], "flatness": f_new, "accepted": ok})
-    st.tried.append(row)
-    st.say(
-        f"  {rf.cand.type:20s} {rf.cand.where:26s} explains {100 * rf.explained:6.2f} %  held-out {e_new:.4f}"
-        + ("  ACCEPTED" if ok else f"  ({why})")
-    )
-    return (rf, unc, mf, mh, e_new, rss_new, p_new, f_new) if ok else None
-
-
-def _record_the_rest(st: PathState, rnd: int, sc, top, refined, winner) -> None:
-    """The rows of the refined candidates after the winner and of the next screened ones,
-    for the record, with their linearised scores on their own columns."""
-    if winner is not None:
-        for rf in refined[_index(refined, winner[0]) + 1 :]:
-            sc_of = next(s.score for s in top if s.cand.key == rf.cand.key)
-            why = f"refined, not judged: {winner[0].cand.type} {winner[0].cand.where} explains more and passed"
-            st.tried.append(_row(rnd, None, rf, None, why if rf.ok else rf.why, score=sc_of))
-    for s in [s for s in sc if all(s is not x for x in top)][:10]:  # the next ones by score, for the record
-        st.tried.append(_row(rnd, s, None, None, "not refined (lower linearised score)"))
-    own_of = {s.cand.key: s.own for s in sc if s.own is not None}
-    for row in st.tried:
-        if row["round"] == rnd and (row["name"], row["where"]) in own_of:
-            row["linearised_score_own_columns"] = own_of[(row["name"], row["where"])]
-
-
-def _take(st: PathState, winner, rnd: int) -> None:
-    """The winner added to the model; from the second on, the accepted effects revisited
-    (joint refit, backward pass: :mod:`sim.calibrate.revisit`); the windows replayed."""
+def _revisit(st: PathState, rnd: int) -> None:
+    """The accepted effects refitted jointly and each earlier one dropped if the others do
+    as well without it (:func:`sim.calibrate.revisit.revisit_accepted`); a refit that takes
+    an effect where the table cannot have it is not kept."""
     from sim.calibrate.acceptance import implausible_candidate
     from sim.calibrate.revisit import revisit_accepted
 
-    rf, unc, mfit, mho, st.e_ho, st.rss, st.n_par, st.flat = winner
+    t = time.perf_counter()
+    keys = ("mfit", "mho", "e_ho", "rss", "n_par", "flat")
+    state = dict(zip(keys, (st.models["fit"], st.models["ho"], st.e_ho, st.rss, st.n_par, st.flat)))
+    ctx_r = (st.pfit, st.pho, st.wref, st.ctx[:3], st.N, st.margin, st.workers, st.routes)
+    plaus = lambda c, v: implausible_candidate(c, v, st.scale, st.peaks)  # noqa: E731
+    st.items, state, rows = revisit_accepted(st.items, state, ctx_r, rnd, st.say, implausible=plaus)
+    mfit, mho, st.e_ho, st.rss, st.n_par, st.flat = (state[k] for k in keys)
     st.models.update(fit=mfit, ho=mho)
-    st.items.append({"cand": rf.cand, "theta": np.array(rf.theta, float), "unc": unc})
-    if len(st.items) >= 2:
-        t = time.perf_counter()
-        keys = ("mfit", "mho", "e_ho", "rss", "n_par", "flat")
-        state = dict(zip(keys, (mfit, mho, st.e_ho, st.rss, st.n_par, st.flat)))
-        ctx_r = (st.pfit, st.pho, st.wref, st.ctx[:3], st.N, st.margin, st.workers, st.routes)
-        plaus = lambda c, v: implausible_candidate(c, v, st.scale, st.peaks)  # noqa: E731
-        st.items, state, rows = revisit_accepted(st.items, state, ctx_r, rnd, st.say, implausible=plaus)
-        mfit, mho, st.e_ho, st.rss, st.n_par, st.flat = (state[k] for k in keys)
-        st.models.update(fit=mfit, ho=mho)
-        st.tried.extend(rows)
-        st.dropped |= {(r["name"], r["where"]) for r in rows if r["revisited"] == "dropped"}
-        st.tm["revisit_s"] = st.tm.get("revisit_s", 0.0) + time.perf_counter() - t
-        st.tm["revisit_replays"] = st.tm.get("revisit_replays", 0) + state["replays"]
-        st.tm["replays"] += state["replays"]
-    st.accepted = [a["cand"].entry(a["theta"]) for a in st.items]
-    st.models["scr"], st.models["ref"] = st.simulate([st.wscr, st.wref], st.accepted)
+    st.tried.extend(rows)
+    st.dropped |= {(r["name"], r["where"]) for r in rows if r["revisited"] == "dropped"}
+    st.tm["revisit_s"] = st.tm.get("revisit_s", 0.0) + time.perf_counter() - t
+    st.tm["revisit_replays"] = st.tm.get("revisit_replays", 0) + state["replays"]
+    st.tm["replays"] += state["replays"]
 
 
 def _outputs(st: PathState, mho0, e_ho0, timing) -> dict:
     """The fields of a :class:`sim.calibrate.search.CalibrationResult`."""
     from sim.calibrate import paths as P
-    from sim.calibrate.search import UNEXPLAINED_FRACTION
+    from sim.calibrate.residuals import UNEXPLAINED_FRACTION
 
     per, per_run, quiet = path_errors(st.pho, mho0, st.models["ho"])
     if timing is not None:
@@ -619,7 +552,7 @@ def null_total(cand, theta, unc, pfit, desc) -> dict:
     fit runs and the place's actuators) plus that correction; its 95 % half-width adds the
     estimate's spread over the fit runs to the correction's in quadrature."""
     from hydraulics.params import HydraulicParams
-    from sim.calibrate.search import Z95
+    from sim.calibrate.acceptance import Z95
     from sim.calibrate.valve_null import declared_null
     from sim.effects.base import EFFECTS
     from sim.effects.hydraulic import actuator_indices
@@ -640,127 +573,4 @@ def null_total(cand, theta, unc, pfit, desc) -> dict:
     }
 
 
-def judge_sensor(cand, pfit, pho, cur, new, bics, margin) -> tuple[bool, str, dict | None]:
-    """``(accepted, reason, numbers)`` of a sensor candidate, judged on the columns it acts
-    on: a sensor effect changes only its own channel (or column) of the model, so pooled
-    over every compared column (18 on a 6-DOF table) a clear error on one column moves
-    the held-out error by less than the margin. Its columns' held-out NRMSE must fall by
-    ``margin`` of itself, the BIC (pooled) fall, its columns' fit residual get whiter
-    (flatness counting a constant bias, :func:`sim.calibrate.paths.flatness`), and the
-    other columns' held-out error not rise. ``cur``/``new``: (fit, held-out) model
-    channels without / with it."""
-    from sim.calibrate import paths as P
-    from sim.calibrate.search import accept_numbers
-    from sim.calibrate.sensitivity import acts_on
-
-    keep = acts_on(cand)
-    on_ho = [p.only(keep) for p in pho]
-    if any(not p.columns for p in on_ho):
-        return False, f"{cand.where} is not compared in every held-out run", None
-    on_fit = [p.only(keep) for p in pfit]
-    e0, e1 = P.nrmse(on_ho, cur[1]), P.nrmse(on_ho, new[1])
-    f0, f1 = P.flatness(on_fit, cur[0], bias=True), P.flatness(on_fit, new[0], bias=True)
-    nums = {"holdout_error": [e0, e1], "flatness": [f0, f1]}
-    ok, why = accept_numbers(e0, e1, *bics, f0, f1, margin)
-    if not ok:
-        return False, f"on {cand.where}: {why}", nums
-    off_ho = [p.only(lambda c, j: not keep(c, j)) for p in pho]
-    if all(p.columns for p in off_ho):
-        o0, o1 = P.nrmse(off_ho, cur[1]), P.nrmse(off_ho, new[1])
-        nums["other_columns_holdout_error"] = [o0, o1]
-        if o1 > o0 * (1 + 1e-9):
-            return False, f"the other columns' held-out error rises ({o0:.4f} -> {o1:.4f})", nums
-    return True, "", nums
-
-
-def param_check(rf, z95) -> tuple[bool, str, dict]:
-    """Off the bounds (:func:`sim.calibrate.acceptance.bound_hit`, the mechanical path's
-    test), a finite 95 % interval, the neutral value (no effect) outside it."""
-    from sim.calibrate.acceptance import bound_hit
-
-    c = rf.cand
-    sig = c.sigmas(rf.theta, rf.sigma)
-    vals = c.values(rf.theta)
-    unc = {k: z95 * s for k, s in sig.items()}
-    for i, k in enumerate(c.names):
-        th, s = float(rf.theta[i]), float(rf.sigma[i])
-        if not math.isfinite(s) or not math.isfinite(sig[k]):
-            return False, f"{k}: no finite confidence interval", unc
-        if bound_hit(th, c.lower[i], c.upper[i], 1e-3 * abs(c.step[i])):
-            return False, f"{k} = {vals[k]:.4g} {c.units[k]} at its bound", unc
-        if i in c.screened and abs(th - c.neutral[i]) <= z95 * s:
-            return False, f"{k} = {vals[k]:.4g} {c.units[k]}: its 95 % interval includes the no-effect value", unc
-    return True, "", unc
-
-
-def _index(items: list, x) -> int:
-    """Position of ``x`` itself in ``items`` (a dataclass's == compares arrays)."""
-    return next(i for i, y in enumerate(items) if y is x)
-
-
-def refit_at_bound(rf, windows):
-    """The nested candidate of a refined one with a parameter at its bound (beside others):
-    that parameter held there (:func:`fixed_candidate`), the rest refined again on the
-    refinement ``windows`` (``(prs, base models, ctx)``); None when no parameter is at a
-    bound or none would be left."""
-    from sim.calibrate.acceptance import bound_hit
-    from sim.calibrate.sensitivity import refine_job
-
-    c = rf.cand
-    for i in range(len(c.names)):
-        side = bound_hit(float(rf.theta[i]), c.lower[i], c.upper[i], 1e-3 * abs(c.step[i]))
-        c2 = fixed_candidate(c, i, float(c.lower[i] if side == "lower" else c.upper[i])) if side else None
-        if c2 is not None:
-            theta0 = np.delete(np.asarray(rf.theta, float), i)
-            return refine_job((c2, theta0, *windows[:2], windows[2], MAX_NFEV))
-    return None
-
-
-def fixed_candidate(c, i: int, value: float):
-    """Candidate ``c`` with its parameter ``i`` held at ``value`` (its entry then carries it
-    as a fixed key), or None where the rest cannot stand alone (one parameter; the
-    transformed first parameter of a sensor low-pass or a foundation mode; a payload mode)."""
-    import dataclasses
-
-    if len(c.names) < 2 or c.grid is not None or (i == 0 and c.type in ("sensor_lowpass", "foundation_mode")):
-        return None
-    if c.type == "payload_mode":  # transformed parameters (log f) and no mode without its mass
-        return None
-    keep = [j for j in range(len(c.names)) if j != i]
-    screened = tuple(keep.index(j) for j in c.screened if j != i)
-    if not screened:
-        return None
-    return dataclasses.replace(
-        c,
-        names=tuple(c.names[j] for j in keep),
-        neutral=c.neutral[keep],
-        step=c.step[keep],
-        lower=c.lower[keep],
-        upper=c.upper[keep],
-        screened=screened,
-        fixed={**c.fixed, c.names[i]: value},
-        line=None,
-    )
-
-
-def _row(rnd, s, rf, unc, why, score=None) -> dict:
-    c = (s or rf).cand
-    theta = rf.theta if rf is not None else s.theta
-    return {
-        "round": rnd,
-        "name": c.type,
-        "where": c.where,
-        "explained_fraction": rf.explained if rf is not None else s.score,
-        "linearised_score": score if score is not None else s.score,
-        "parameters": {**c.fixed, **c.values(theta)},
-        **({"fixed": dict(c.fixed)} if c.fixed else {}),
-        "uncertainty": unc or {},
-        "holdout_error": None,
-        "bic_change": None,
-        "flatness": None,
-        "accepted": False,
-        "reason": why,
-    }
-
-
-__all__ = ["calibrate_path", "judge_sensor", "motion_rms", "null_total", "param_check", "to_refine"]
+__all__ = ["PathState", "calibrate_path", "motion_rms", "null_total", "to_refine"]

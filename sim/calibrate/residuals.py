@@ -35,16 +35,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sim.errors import UserError
+from sim.calibrate.errors import CalibrationError
 
 MECH_CHANNELS = ("actuator_force", "table_displacement", "table_velocity", "table_acceleration")
 #: channels a replay or closed-loop residual can compare (a run needs one of them)
 FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_displacement")
 PATHS = ("mechanical", "replay", "closed_loop")
-
-
-class CalibrationError(UserError):
-    """Runs that cannot be calibrated together (one line: file, field, fix)."""
 
 
 #: bytes of the bases of laws with a shape (scanned: a mode's frequency and damping) a run
@@ -131,7 +127,7 @@ class MechRun:
 
             x = sig.lfilter(*self.prefilter, x, axis=0)
         if self.filter_delay_s:
-            from sim.calibrate.timing import shift
+            from sim.calibrate.conditioning import shift
 
             x = shift(x, self.filter_delay_s, self.dt)
         return x
@@ -335,7 +331,7 @@ def _still_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.n
 def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None = None) -> list[MechRun]:
     """The mechanical-path records of ``runs`` against the declared ``desc`` (+ ``payload``)."""
     from mjcf.description import DOFS6 as DOF6
-    from sim.calibrate import timing
+    from sim.calibrate import conditioning
     from sim.calibrate.laws import declared_forces
     from sim.control.tvc import dof_jacobian
     from sim.effects import build_model
@@ -361,8 +357,8 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         v = r.table_velocity[:, cols]
         a = r.table_acceleration[:, cols]
         f = _force_at_acceleration_instant(r)
-        known = timing.declared_state(r, accel_lowpass_hz, desc.accelerometer_filter_order)
-        pre = timing.prefilter_of(known, r)
+        known = conditioning.declared_state(r, accel_lowpass_hz, desc.accelerometer_filter_order)
+        pre = conditioning.prefilter_of(known, r)
         mr = MechRun(
             name=r.name,
             dt=r.dt,
@@ -382,7 +378,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         )
         mr.filter_delay_s = known["accel_delay_s"]
         mr.extra["force_at_instant"] = f  # before any declared or found force delay
-        f = timing.shift(f, -known["force_delay_s"], r.dt)
+        f = conditioning.shift(f, -known["force_delay_s"], r.dt)
         mr.force = mr.filt(f @ J)
         mr.extra["actuator_force"] = f
         other = joints.force(u, v, r.dt)
@@ -624,6 +620,48 @@ def spectral_flatness(x: np.ndarray, fs: float) -> float:
 
 
 # ------------------------------------------------------------------ replay / closed loop
+#: a spectral line is reported as unexplained when it holds this share of the residual
+UNEXPLAINED_FRACTION = 0.1
+
+
+def unexplained(mruns, residuals, kind: str = "mechanical") -> dict | None:
+    """The residual's strongest narrow spectral line (pooled over runs, per DOF): its
+    frequency, channel, place and share of the residual power; None if no line holds
+    :data:`UNEXPLAINED_FRACTION` of it."""
+    best = None
+    for j, d in enumerate(mruns[0].dofs):
+        Ps, cohs, f = [], [], None
+        for mr, e in zip(mruns, residuals):
+            x = e[:, j]
+            if not np.any(x) or (mr.excited is not None and not mr.excited[j]):  # noise over nothing
+                continue
+            s = spectra(x, 1.0 / mr.dt, {"u": mr.u[:, j], "v": mr.v[:, j], "a": mr.a[:, j]})
+            if f is not None and len(s["f"]) != len(f):
+                continue
+            f = s["f"]
+            Ps.append(s["psd"])
+            cohs.append(np.max([c for c in s["coherence"].values()], axis=0))
+        if not Ps:
+            continue
+        P = np.mean(Ps, axis=0)
+        C = np.mean(cohs, axis=0)
+        k = int(np.argmax(P[1:]) + 1)
+        w = slice(max(k - 2, 1), k + 3)
+        frac = float(P[w].sum() / P[1:].sum())
+        if best is None or frac > best["fraction_of_residual"]:
+            coh = float(C[k])
+            best = {
+                "peak_hz": float(f[k]),
+                "channel": "actuator_force",
+                "where": f"dof:{d}" if coh >= 0.5 else "channel:actuator_force",
+                "fraction_of_residual": frac,
+                "coherence_with_motion": coh,
+            }
+    if best is None or best["fraction_of_residual"] < UNEXPLAINED_FRACTION:
+        return None
+    return best
+
+
 __all__ = [
     "CalibrationError",
     "MechRun",
@@ -637,4 +675,6 @@ __all__ = [
     "places",
     "spectra",
     "spectral_flatness",
+    "UNEXPLAINED_FRACTION",
+    "unexplained",
 ]

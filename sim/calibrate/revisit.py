@@ -222,7 +222,7 @@ class _Revisit:
 
     def joint(self, its):
         """``its`` refitted together on the refinement windows, with their intervals."""
-        from sim.calibrate.search import Z95
+        from sim.calibrate.acceptance import Z95
 
         out = refit([(a["cand"], a["theta"]) for a in its], self.wref, self.base, self.workers, self.counts)
         self.st["replays"] += out["replays"]
@@ -303,7 +303,7 @@ class _Revisit:
     def without(self, items, i: int) -> list | None:
         """The items without item ``i`` when it is dropped, else None (its row written)."""
         from sim.calibrate import paths as P
-        from sim.calibrate.pathsearch import _bic
+        from sim.calibrate.pathjudge import bic
         from sim.calibrate.sensitivity import acts_on
 
         st, a = self.st, items[i]
@@ -313,7 +313,7 @@ class _Revisit:
             self.rows.append(self.row(a, "kept", "kept: the model without it diverged"))
             return None
         p_rest = st["n_par"] - len(a["theta"])
-        b_with, b_without = _bic(st["rss"], self.N, st["n_par"]), _bic(w["rss"], self.N, p_rest)
+        b_with, b_without = bic(st["rss"], self.N, st["n_par"]), bic(w["rss"], self.N, p_rest)
         if a["cand"].sensor:  # judged on the columns it acts on, as when it was added
             on = [p.only(acts_on(a["cand"])) for p in self.pho]
             e_with, e_without = P.nrmse(on, st["mho"]), P.nrmse(on, w["mho"])

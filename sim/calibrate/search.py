@@ -1,94 +1,30 @@
 """``shaketable calibrate``: find what the declared model lacks in measured runs, add
 it, prove it on held-out runs.
 
-1. Residuals (:mod:`sim.calibrate.residuals`), on the path every run supports.
-2. Trace (:mod:`sim.calibrate.trace`): every candidate (each effect law at each place
-   it can act on this table) scored by the share of the fit runs' residual it explains.
-3. Accept (:func:`accept`): the best-scoring candidate that passes every test: the
-   held-out error falls by at least :data:`HOLDOUT_MARGIN`, the BIC improves, every
-   parameter sits off its bounds with a finite 95 % confidence interval that excludes
-   zero, and the residual is closer to white (spectral flatness rises). Repeated while
-   one passes.
-4. What is left: the residual's strongest spectral line, with its frequency, channel,
-   place and share of the residual (:func:`unexplained`), reported, not papered over.
+:func:`calibrate` reads and checks the runs (one-line errors), identifies the
+description's unknown values first (:mod:`sim.calibrate.unknowns`), then searches every
+residual path the runs support (:mod:`sim.calibrate.stages`): each path is one
+:class:`sim.calibrate.engine.SearchPath` driven by the one search loop
+(:func:`sim.calibrate.engine.search`: screen, refine, judge by
+:mod:`sim.calibrate.acceptance`, take, revisit), the mechanical path in
+:mod:`sim.calibrate.mechsearch`, the replay and closed-loop paths in
+:mod:`sim.calibrate.pathsearch`. Each path's result gets the linear ARX baseline
+(:mod:`sim.calibrate.baseline`); :func:`write_outputs` writes ``calibration.json`` and
+the calibrated description. The names below from lower modules are kept here for the
+callers that import them from this module.
 """
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
-from sim.calibrate.acceptance import holdout_not_enough
-from sim.calibrate.residuals import CalibrationError
-
-HOLDOUT_MARGIN = 0.05  #: the held-out NRMSE must fall by at least 5 % of itself
-MAX_ROUNDS = 5
-#: a spectral line is reported as unexplained when it holds this share of the residual
-UNEXPLAINED_FRACTION = 0.1
-Z95 = 1.96
-
-
-@dataclass
-class CalibrationResult:
-    table: str
-    table_source: str
-    runs: list
-    holdout: list
-    holdout_note: str
-    residual_path: str
-    error_before: float
-    error_after: float
-    effects_added: list
-    candidates: list
-    unexplained: dict | None
-    per_channel: dict  # holdout NRMSE per run and DOF, before and after
-    timing: dict
-    #: held-out NRMSE per run (pooled over its excited columns), before and after
-    per_run: dict = field(default_factory=dict)
-    #: "<run>:<channel or DOF>" the held-out runs do not excite: left out of every error above
-    not_excited: list = field(default_factory=list)
-    #: the description's [unknown] values identified first (sim/calibrate/unknowns.py)
-    unknowns_identified: dict = field(default_factory=dict)
-    # arrays for the report (not in the JSON)
-    series: dict = field(default_factory=dict, repr=False)
-    #: the linear ARX baseline on the same fit and held-out runs (:mod:`sim.calibrate.baseline`)
-    baseline: dict | None = None
-    #: the calibrated model's held-out error is below the baseline's (None: no baseline)
-    beats_baseline: bool | None = None
-    #: each residual path's own figures (:func:`sim.calibrate.stages.summary`)
-    paths: dict = field(default_factory=dict)
-
-    def searched_paths(self) -> list[str]:
-        """The residual paths the search ran on (a path the records could not take is in
-        ``paths`` with the reason it was left out)."""
-        return [k for k, p in self.paths.items() if "skipped" not in p] or [self.residual_path]
-
-    def to_json(self) -> dict:
-        keys = (
-            "table",
-            "runs",
-            "holdout",
-            "holdout_note",
-            "residual_path",
-            "error_before",
-            "error_after",
-            "effects_added",
-            "candidates",
-            "unexplained",
-            "per_channel",
-            "per_run",
-            "not_excited",
-            "baseline",
-            "beats_baseline",
-            "timing",
-            "unknowns_identified",
-            "paths",
-        )
-        return {k: getattr(self, k) for k in keys}
+from sim.calibrate.acceptance import HOLDOUT_MARGIN, Z95, accept, holdout_not_enough, param_report
+from sim.calibrate.engine import MAX_ROUNDS
+from sim.calibrate.holdout import split_holdout
+from sim.calibrate.mechsearch import candidate_laws, check_effect_names, mechanical_errors
+from sim.calibrate.residuals import UNEXPLAINED_FRACTION, CalibrationError, unexplained
+from sim.calibrate.result import CalibrationResult, effect_entry
 
 
 # ------------------------------------------------------------------ inputs
@@ -128,45 +64,6 @@ def _check_names(paths, holdout):
         raise CalibrationError(f"{both[0]}: is both a fit run and a --holdout run; hold out runs that are not fitted")
 
 
-def check_effect_names(effects) -> None:
-    """One-line error for a name in ``--effects`` that is no effect type."""
-    from sim.calibrate.laws import LAWS
-    from sim.effects.base import EFFECTS
-
-    known = sorted(set(LAWS) | set(EFFECTS))
-    bad = [e for e in effects or [] if e not in known]
-    if bad:
-        import difflib
-
-        close = difflib.get_close_matches(bad[0], known, n=1)
-        raise CalibrationError(
-            f"--effects: unknown effect '{bad[0]}'"
-            + (f" (did you mean '{close[0]}'?)" if close else f"; known: {', '.join(known)}")
-        )
-
-
-def candidate_laws(effects=None) -> list:
-    """The laws to try: every law whose effect type is usable (see
-    :func:`sim.calibrate.laws.usable`), or those named in ``effects``."""
-    from sim.calibrate.laws import LAWS, NOT_ON_MECHANICAL, usable
-    from sim.calibrate.timing import TIMING_EFFECTS
-
-    if effects:
-        check_effect_names(effects)
-        nolaw = [e for e in effects if e not in LAWS and e not in TIMING_EFFECTS]
-        if nolaw and nolaw[0] in NOT_ON_MECHANICAL:
-            raise CalibrationError(
-                f"--effects: '{nolaw[0]}' is not identifiable on the mechanical path: " + NOT_ON_MECHANICAL[nolaw[0]]
-            )
-        if nolaw:
-            raise CalibrationError(
-                f"--effects: '{nolaw[0]}' has no force law for the mechanical path; "
-                f"the mechanical path can try {', '.join(sorted(LAWS))}"
-            )
-    # a name takes its variants too (coulomb_friction: also growing with the stroke or the load)
-    return [LAWS[k] for k in sorted(LAWS) if usable(LAWS[k]) and (not effects or {k, LAWS[k].name} & set(effects))]
-
-
 def load_effect_file(path) -> None:
     """Import a user's Python file that registers effects (``sim.effects.base.register``)."""
     import importlib.util
@@ -187,132 +84,12 @@ def load_effect_file(path) -> None:
         ) from None
 
 
-def split_holdout(runs, holdout_runs):
-    """Fit and held-out runs; with none given, every third run (from the second) is held
-    out (one run: its last 30 %)."""
-    if holdout_runs:
-        return runs, holdout_runs, "given with --holdout"
-    if len(runs) >= 2:
-        ho = [r for i, r in enumerate(runs) if i % 3 == 1]
-        fit = [r for i, r in enumerate(runs) if i % 3 != 1]
-        return fit, ho, "held out (no --holdout): " + ", ".join(Path(r.name).name for r in ho)
-    r = runs[0]
-    cut = int(0.7 * r.n_samples)
-    return (
-        [_slice_run(r, 0, cut, "fit part")],
-        [_slice_run(r, cut, r.n_samples, "held-out part")],
-        f"held out (one run, no --holdout): the last 30 % of {Path(r.name).name} (from t = {r.t[cut]:.2f} s)",
-    )
-
-
-def _slice_run(r, a: int, b: int, label: str):
-    """Samples [a, b) of a run, as a run of its own (named after the part)."""
-    import dataclasses
-
-    from sim.runs.runfile import CHANNELS
-
-    kw = {c: (getattr(r, c)[a:b].copy() if getattr(r, c) is not None else None) for c in CHANNELS}
-    out = dataclasses.replace(r, t=r.t[a:b].copy(), extras={}, **kw)
-    out.path = f"{r.name} ({label})"
-    return out
-
-
 # ------------------------------------------------------------------ acceptance
-def param_report(term, values: dict, sigma: dict, limits: dict | None = None) -> tuple[bool, str, dict]:
-    """Are the parameters off their bounds (a scanned one: off its scan's limits,
-    ``limits``, default :func:`sim.calibrate.trace.scan_limits` without a record rate)
-    with a finite 95 % interval excluding zero?"""
-    from sim.calibrate.acceptance import bound_hit, linear_holds_bound
-
-    law = term.law
-    unc = {name: Z95 * sigma.get(name, math.inf) for name in law.params}  # every one, also on a refusal
-    for name, (unit, lo, hi) in law.params.items():
-        v, s = values[name], sigma.get(name, math.inf)
-        if not math.isfinite(s):
-            return False, f"{name}: no finite confidence interval", unc
-        if bound_hit(v, lo, hi, 1e-3 * max(abs(v), 1e-12)):
-            return False, f"{name} = {v:.4g} {unit} at or beyond its bounds [{lo:g}, {hi:g}]", unc
-        if name in law.shape:
-            a, b = (limits or {}).get(name) or _limits(law, name)
-            if bound_hit(v, a, b, 1e-3 * max(abs(v), 1e-12)):
-                return False, f"{name} = {v:.4g} at the limit of its scan [{a:g}, {b:g}]", unc
-        elif abs(v) <= Z95 * s and len(law.linears) == 1:
-            return False, f"{name} = {v:.4g} {unit}: its 95 % interval +/-{Z95 * s:.3g} includes zero", unc
-        elif linear_holds_bound(law, name, v, s):
-            return False, f"{name} = {v:.4g} +/-{Z95 * s:.3g} {unit} holds its bound: the nested law without it", unc
-    lin = law.linears
-    if len(lin) > 1 and all(abs(values[k]) <= Z95 * sigma[k] for k in lin):
-        # the components of one vector (a CG offset): one of them must differ from zero
-        return False, f"{', '.join(lin)}: every 95 % interval includes zero", unc
-    for name, (at, simpler) in getattr(law, "nested", {}).items():
-        if abs(values[name] - at) <= Z95 * sigma.get(name, math.inf):
-            return False, f"{name} = {values[name]:.4g} +/-{unc[name]:.3g} holds {at:g}: that is {simpler}", unc
-    return True, "", unc
-
-
-def _limits(law, name) -> tuple[float, float]:
-    """A scanned parameter's limits without a record rate ("nyquist": unbounded)."""
-    grid = law.shape[name]
-    lo, hi = law.limits.get(name, (min(grid), max(grid)))
-    return float(lo), (math.inf if hi == "nyquist" else float(hi))
-
-
-def accept(cur, new, e_ho_cur, e_ho_new, flat_cur, flat_new, term, margin=HOLDOUT_MARGIN, limits=None):
-    """``(accepted, reason, uncertainty)`` of adding ``term`` (fit ``new`` vs ``cur``)."""
-    i = [t.key for t in new.terms].index(term.key)
-    ok, why, unc = param_report(new.terms[i], new.values[i], new.sigma[i], limits)
-    if not ok:
-        return False, why, unc
-    ok, why = accept_numbers(e_ho_cur, e_ho_new, cur.bic, new.bic, flat_cur, flat_new, margin)
-    return ok, why, unc
-
-
 def accept_numbers(e_ho_cur, e_ho_new, bic_cur, bic_new, flat_cur, flat_new, margin=HOLDOUT_MARGIN):
     """The numbers every path judges (:func:`sim.calibrate.acceptance.accept_numbers`)."""
     from sim.calibrate.acceptance import accept_numbers as judge
 
     return judge(e_ho_cur, e_ho_new, bic_cur, bic_new, flat_cur, flat_new, margin)
-
-
-# ------------------------------------------------------------------ what is left
-def unexplained(mruns, residuals, kind: str = "mechanical") -> dict | None:
-    """The residual's strongest narrow spectral line (pooled over runs, per DOF): its
-    frequency, channel, place and share of the residual power; None if no line holds
-    :data:`UNEXPLAINED_FRACTION` of it."""
-    from sim.calibrate.residuals import spectra
-
-    best = None
-    for j, d in enumerate(mruns[0].dofs):
-        Ps, cohs, f = [], [], None
-        for mr, e in zip(mruns, residuals):
-            x = e[:, j]
-            if not np.any(x) or (mr.excited is not None and not mr.excited[j]):  # noise over nothing
-                continue
-            s = spectra(x, 1.0 / mr.dt, {"u": mr.u[:, j], "v": mr.v[:, j], "a": mr.a[:, j]})
-            if f is not None and len(s["f"]) != len(f):
-                continue
-            f = s["f"]
-            Ps.append(s["psd"])
-            cohs.append(np.max([c for c in s["coherence"].values()], axis=0))
-        if not Ps:
-            continue
-        P = np.mean(Ps, axis=0)
-        C = np.mean(cohs, axis=0)
-        k = int(np.argmax(P[1:]) + 1)
-        w = slice(max(k - 2, 1), k + 3)
-        frac = float(P[w].sum() / P[1:].sum())
-        if best is None or frac > best["fraction_of_residual"]:
-            coh = float(C[k])
-            best = {
-                "peak_hz": float(f[k]),
-                "channel": "actuator_force",
-                "where": f"dof:{d}" if coh >= 0.5 else "channel:actuator_force",
-                "fraction_of_residual": frac,
-                "coherence_with_motion": coh,
-            }
-    if best is None or best["fraction_of_residual"] < UNEXPLAINED_FRACTION:
-        return None
-    return best
 
 
 # ------------------------------------------------------------------ the search
@@ -452,32 +229,7 @@ def _calibrate_path(runs, ho_given, desc, pl, path, effects, margin, workers, sa
     )
 
 
-# the mechanical stage's helpers, where they were before (sim.calibrate.mechsearch)
-def mechanical_errors(mho, before, after):
-    from sim.calibrate.mechsearch import mechanical_errors as errors
-
-    return errors(mho, before, after)
-
-
 # ------------------------------------------------------------------ outputs
-def effect_entry(e: dict, tag: str) -> tuple[dict, dict]:
-    """The description's ``[[effect]]`` entry of an ``effects_added`` item (sourced with
-    ``tag``) and the comments of its parameters' lines."""
-    opts = e.get("options", {})  # a variant of the effect (friction growing with the stroke)
-    entry = {"type": e["name"], "where": e["where"], **opts, **e["parameters"], "source": tag}
-    if "label" in e:  # one of several terms of a law at a place (a specimen's modes)
-        entry = {"type": e["name"], "where": e["where"], "name": e["label"], **e["parameters"], "source": tag}
-    comments = {
-        k: f"+/-{e['uncertainty'][k]:.3g} {e['units'][k]} (95 %)"
-        if k in e["uncertainty"]
-        else "fixed at its bound (the nested law), not fitted"
-        if k in e.get("fixed", {})
-        else "held at the description's value, not fitted"
-        for k in e["parameters"]
-    }
-    return entry, comments
-
-
 def write_outputs(result: CalibrationResult, out, run_names) -> dict:
     """``calibration.json`` and ``<table>_calibrated.toml`` (the original with every
     comment kept and the accepted ``[[effect]]`` entries, sourced) into ``out``."""
@@ -503,14 +255,20 @@ def write_outputs(result: CalibrationResult, out, run_names) -> dict:
 __all__ = [
     "CalibrationResult",
     "HOLDOUT_MARGIN",
+    "MAX_ROUNDS",
+    "UNEXPLAINED_FRACTION",
+    "Z95",
     "accept",
     "accept_numbers",
     "calibrate",
-    "check_effect_names",
     "candidate_laws",
-    "load_effect_file",
+    "check_effect_names",
+    "effect_entry",
     "holdout_not_enough",
+    "load_effect_file",
     "load_runs",
+    "mechanical_errors",
+    "param_report",
     "split_holdout",
     "unexplained",
     "write_outputs",

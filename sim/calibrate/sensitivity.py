@@ -201,6 +201,7 @@ def _table_of(desc, payload, accepted, effects) -> _Table:
     """The current model (the description with ``accepted`` in) as a :class:`_Table`."""
     from hydraulics.params import HydraulicParams
     from mjcf.description import parse_table
+    from sim.calibrate.paths import build_order
     from sim.effects import build_model
 
     raw = dict(desc.raw)
@@ -474,15 +475,6 @@ def _geometric(hi: float, lo: float, ratio: float) -> list:
     while out[-1] / ratio >= lo:
         out.append(out[-1] / ratio)
     return out
-
-
-def build_order(entries: list) -> list:
-    """``[[effect]]`` entries in the order they can be built: ``foundation_mode`` first
-    (it moves the bodies standing on the world onto a new foundation body, which it cannot
-    do once a DOF effect of a free platen has made a tendon), the others as given."""
-    return [e for e in entries if e.get("type") == "foundation_mode"] + [
-        e for e in entries if e.get("type") != "foundation_mode"
-    ]
 
 
 def internal_force_part(desc) -> np.ndarray:
@@ -778,7 +770,6 @@ __all__ = [
     "SENSOR",
     "Screen",
     "acts_on",
-    "build_order",
     "candidates",
     "mode_candidates",
     "foundation_candidate",

@@ -85,7 +85,7 @@ def first_stage(stages, effects):
 def with_effects(desc, entries):
     """``desc`` with the description entries ``entries`` added to its ``[[effect]]`` list."""
     from mjcf.description import parse_table
-    from sim.calibrate.sensitivity import build_order
+    from sim.calibrate.paths import build_order
 
     raw = copy.deepcopy(desc.raw)
     raw["effect"] = build_order(list(raw.get("effect", [])) + [dict(e) for e in entries])
@@ -94,7 +94,7 @@ def with_effects(desc, entries):
 
 def entries_of(res, tag: str = "calibrated") -> list:
     """The description entries of a result's ``effects_added``."""
-    from sim.calibrate.search import effect_entry
+    from sim.calibrate.result import effect_entry
 
     return [effect_entry(e, tag)[0] for e in res.effects_added]
 
@@ -103,9 +103,9 @@ def holdout_error(runs, ho_given, desc, payload, path, entries, workers) -> floa
     """The held-out NRMSE of ``path`` replayed through ``desc`` with ``entries`` added
     (the same held-out runs and scored samples as the stage's own search)."""
     from sim.calibrate import paths as P
-    from sim.calibrate.pathsearch import _split
+    from sim.calibrate.holdout import split_for_replay
 
-    _fit, ho_runs, score_from, _note = _split(runs, ho_given)
+    _fit, ho_runs, score_from, _note = split_for_replay(runs, ho_given)
     pho = P.path_runs(ho_runs, desc, path, score_from=score_from, payload=payload)
     ms = P.simulate_many([p.job(desc.raw, str(desc.source), payload, entries) for p in pho], workers=workers)
     return math.inf if any(m is None for m in ms) else P.nrmse(pho, ms)
@@ -143,9 +143,7 @@ def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, wo
 
 def _one_by_one(first, second, ev, ctx, say):
     """The paths disagree on stage 1's effects together: keep the subset of its terms
-    they agree on (:func:`sim.calibrate.stageprune.prune`), else refuse them all."""
-    from sim.calibrate.stageprune import prune
-
+    they agree on (:func:`prune`), else refuse them all."""
     pr = prune(first, second, ev, ctx) if first.series.get("terms") else None
     if pr is None:
         return _disagree(first, second, ev, say)
@@ -170,13 +168,50 @@ def _one_by_one(first, second, ev, ctx, say):
     return combine(first, second, ev_k)
 
 
+def prune(first, second, ev, ctx) -> tuple[list[int], dict] | None:
+    """Which of the mechanical path's effects the later path's evidence keeps, one by one
+    (when the paths disagree on them together). Greedy: the effect whose removal gives the
+    lowest pooled held-out error is taken out (the mechanical path's terms refitted without
+    it, :func:`sim.calibrate.mechsearch.refit_subset`; the later path replayed on its
+    held-out runs without it), until the paths agree (:func:`agree`). The sensor timing
+    found on the mechanical path is kept: it is judged on the channels it acts on, there.
+    Returns the indices of ``first.effects_added`` kept and the evidence with only them
+    (``ev``'s keys), or None when no subset with a term in it agrees.
+    ``ctx = (runs, ho_given, desc, payload, workers)``."""
+    n = len(first.series.get("terms", []))
+    keep = list(range(n))
+    while len(keep) > 1:
+        best = min((_prune_one(first, second, ev, keep, i, ctx) for i in keep), key=lambda b: b[0]["with"])
+        ev_k, keep = best
+        if agree(ev_k, ev_k["later_with"]):
+            return keep, ev_k
+    return None
+
+
+def _prune_one(first, second, ev, keep, i, ctx):
+    """The evidence with the terms ``keep`` less ``i`` refitted alone (and every timing
+    entry kept): ``(evidence, the indices kept)``; the evidence holds the refitted
+    entries under ``"added"``."""
+    from sim.calibrate.mechsearch import refit_subset
+    from sim.calibrate.result import effect_entry
+
+    runs, ho_given, desc, payload, workers = ctx
+    n = len(first.series["terms"])
+    rest = [j for j in keep if j != i]
+    e_mech, added = refit_subset(first, rest)
+    added += first.effects_added[n:]
+    kept = [effect_entry(e, "calibrated")[0] for e in added] + entries_of(second)
+    e_dyn = holdout_error(runs, ho_given, desc, payload, second.residual_path, kept, workers)
+    return {**ev, "with": pool([e_mech, e_dyn]), "mech_with": e_mech, "later_with": e_dyn, "added": added}, rest
+
+
 def agree(ev: dict, later_after: float) -> bool:
     """Whether the paths' evidence keeps stage 1's effects: the pooled held-out error is
     lower with them, and the later path's is not worse with them than without by more
     than the acceptance margin (an effect that is physically there does not make another
     path's replay worse: a mode found on the mechanical path of a frame the replay
     already models as flexible counts it twice, 55 % -> 74 % on the replay, measured)."""
-    from sim.calibrate.search import HOLDOUT_MARGIN
+    from sim.calibrate.acceptance import HOLDOUT_MARGIN
 
     return ev["with"] < ev["without"] and later_after <= (1 + HOLDOUT_MARGIN) * ev["without_first"]
 

@@ -23,7 +23,7 @@ candidate's parameter is fitted by a grid and a bounded scalar search of the for
 balance's residual sum of squares (the accepted terms refitted linearly at each point);
 its 95 % interval comes from the Jacobian of the residual in the parameter and the
 coefficients together with the residual's autocorrelation (:func:`sim.calibrate.hac.hac_sigma`).
-It is judged by the rules every candidate meets (:func:`sim.calibrate.search.accept_numbers`
+It is judged by the rules every candidate meets (:func:`sim.calibrate.acceptance.accept_numbers`
 plus: off its bounds, and the declared value outside its interval).
 """
 
@@ -35,10 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: the analog conditioner's order when only a cut-off is declared (the table's
-#: ``accelerometer_bandwidth_hz`` or ``--accel-lowpass``): 4 poles, as
-#: :func:`sim.identify.least_squares.analog_lowpass` assumes
-TABLE_ORDER = 4
+from sim.calibrate.conditioning import declared_state, prefilter_of, shift
+
 #: a delay is searched within this many seconds either way (assumed: 50 ms, ten times
 #: the largest conditioner delay of the tables here, 4.2 ms for 4 poles at 100 Hz)
 MAX_DELAY_S = 0.05
@@ -62,63 +60,6 @@ Z95 = 1.96
 COHERENT_SHARE = 0.5
 #: the effect types of these candidates (``--effects`` names them)
 TIMING_EFFECTS = ("sensor_delay", "sensor_lowpass")
-
-
-def shift(x: np.ndarray, delay_s: float, dt: float) -> np.ndarray:
-    """``x`` delayed by ``delay_s`` (either sign, any fraction of a sample): y(t) =
-    x(t - delay), by a cubic spline through the samples (linear interpolation loses
-    amplitude between samples), the end values held beyond the record."""
-    x = np.asarray(x, float)
-    if not delay_s or len(x) < 4:
-        return x
-    from scipy.interpolate import CubicSpline
-
-    n = len(x)
-    k = np.clip(np.arange(n) - delay_s / dt, 0.0, n - 1)
-    return CubicSpline(np.arange(n, dtype=float), x, axis=0)(k)
-
-
-def declared_state(run, accel_lowpass_hz, table_order: int = TABLE_ORDER) -> dict:
-    """What is known of ``run``'s force and acceleration timing: its
-    ``meta.channel_conditioning`` (:mod:`sim.calibrate.conditioning`), else
-    ``accel_lowpass_hz`` (the table's or ``--accel-lowpass``) as a conditioner of
-    ``table_order`` poles (the table's ``[sensors] accelerometer_filter_order``). A
-    declared conditioner too close to the record's Nyquist frequency to be filtered at its
-    rate counts as its low-frequency delay, 1 / (2 pi f_c sin(pi / 2n)) for n poles."""
-    from sim.calibrate.conditioning import channel_conditioning
-
-    cond = channel_conditioning(run)
-    acc = cond.get("table_acceleration", {})
-    fc = acc.get("lowpass_hz") if "table_acceleration" in cond else accel_lowpass_hz
-    order = int(acc.get("lowpass_order", table_order) if "table_acceleration" in cond else table_order)
-    delay = acc.get("delay_s", 0.0)
-    if fc and fc >= 0.45 / run.dt and "table_acceleration" in cond:
-        delay += 1.0 / (2 * math.pi * fc * math.sin(math.pi / (2 * order)))
-        fc = None
-    return {
-        "force_delay_s": cond.get("actuator_force", {}).get("delay_s", 0.0),
-        "accel_delay_s": delay,
-        "accel_lowpass_hz": fc or None,
-        "accel_lowpass_order": order,
-    }
-
-
-def prefilter_of(state: dict, run):
-    """The acceleration's analog conditioner in ``state`` at the run's rate
-    (:class:`sim.calibrate.conditioning.Conditioner`; one-line error when above the
-    Nyquist frequency)."""
-    from sim.calibrate.conditioning import Conditioner
-    from sim.calibrate.residuals import CalibrationError
-
-    fc = state["accel_lowpass_hz"]
-    if not fc:
-        return None
-    if fc >= 0.5 / run.dt:
-        raise CalibrationError(
-            f"{run.name}: the accelerometer low-pass {fc:g} Hz is above the Nyquist frequency "
-            f"{0.5 / run.dt:g} Hz; give --accel-lowpass none or declare a lower cut-off"
-        )
-    return Conditioner(float(fc), int(state["accel_lowpass_order"]), 1.0 / run.dt)
 
 
 def retime(mr, state: dict):
@@ -272,8 +213,8 @@ def sigma(mruns, terms, cand: Candidate, x: float) -> float:
 def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: float) -> dict:
     """The candidate fitted and judged: ``{"row": candidates row, "accepted": bool,
     "fit", "mfit", "mho"}`` (the retimed runs and the refit when accepted)."""
+    from sim.calibrate.acceptance import accept_numbers
     from sim.calibrate.residuals import nrmse_runs
-    from sim.calibrate.search import accept_numbers
     from sim.calibrate.trace import fit_terms, flatness, predict
 
     x = search(mfit, cur.terms, cand)

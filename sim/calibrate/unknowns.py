@@ -22,7 +22,7 @@ every oil column, ``"servovalve.tau_s"`` every valve's time constant,
   residual's autocorrelation within each compared column
   (:func:`sim.calibrate.hac.hac_sigma`), clipped to the range.
 * The identified values are kept when the held-out error falls (held-out runs as the
-  effect search splits them, :func:`sim.calibrate.pathsearch._split`); else the nominals
+  effect search splits them, :func:`sim.calibrate.holdout.split_for_replay`); else the nominals
   stay and the report says why.
 
 The values enter the calibrated description with ``calibrated:`` on their lines
@@ -196,7 +196,7 @@ def identify(runs, ho_given, desc, payload, *, workers=None, say=None):
     from mjcf.description import parse_table
     from sim.calibrate import paths as P
     from sim.calibrate.hac import hac_sigma
-    from sim.calibrate.pathsearch import _split
+    from sim.calibrate.holdout import split_for_replay
 
     say = say or (lambda *_: None)
     params = parameters(desc)
@@ -206,7 +206,7 @@ def identify(runs, ho_given, desc, payload, *, workers=None, say=None):
     if path is None:
         why = "not identified: the runs have neither valve commands nor a reference with a recorded output"
         return desc, {"path": None, "note": why, "values": {}}
-    fit_runs, ho_runs, score_from, _ = _split(list(runs), list(ho_given or []))
+    fit_runs, ho_runs, score_from, _ = split_for_replay(list(runs), list(ho_given or []))
     pfit = P.path_runs(fit_runs, desc, path)
     pho = P.path_runs(ho_runs, desc, path, score_from=score_from)
     fit = _Fit(pfit, desc, payload, params, workers)

@@ -550,7 +550,7 @@ def table_conditioning(desc, fs: float, undeclared) -> dict:
     if not 0.0 < bw < 0.5 * fs:
         return {}
     # 4 poles where the table gives no order (mjcf.description), as calibration assumes
-    # (sim.calibrate.timing.TABLE_ORDER)
+    # (sim.calibrate.conditioning.TABLE_ORDER)
     spec = {"delay_s": 0.0, "lowpass_hz": bw, "lowpass_order": int(desc.accelerometer_filter_order)}
     return {ch: dict(spec) for ch in TABLE_CONDITIONED if ch in undeclared}
 

@@ -20,7 +20,8 @@ import scipy.signal as sig
 
 from sim.calibrate.acceptance import COMPENSATION, LARGE_GAIN, TableScale, accept_numbers, implausible, tie_break
 from sim.calibrate.laws import LAWS
-from sim.calibrate.mechjudge import RoundState, forward_search
+from sim.calibrate.mechjudge import RoundState
+from sim.calibrate.mechsearch import forward_search
 from sim.calibrate.residuals import MechRun, nrmse_runs
 from sim.calibrate.search import Z95
 from sim.calibrate.trace import fit_terms, flatness, predict
@@ -125,7 +126,7 @@ def test_replay_bound_check_is_the_shared_one_and_its_nested_candidate_holds_the
     """The replay path's parameter check refuses a power-law exponent at its bound by the
     mechanical path's test (acceptance.bound_hit), and its nested candidate holds the
     exponent there with the coefficient left to refine."""
-    from sim.calibrate.pathsearch import fixed_candidate, param_check
+    from sim.calibrate.pathjudge import fixed_candidate, param_check
     from sim.calibrate.sensitivity import Candidate, Refined
 
     c = Candidate(
