@@ -261,3 +261,13 @@ def test_the_function_length_check_sees_methods_and_nested_functions(tmp_path):
         "class A:\n    def f(self):\n        def g():\n            pass\n        return 1\n\n\ndef h():\n    pass\n"
     )
     assert dict(_functions(src)) == {"A.f": 4, "A.f.g": 2, "h": 2}
+
+
+def test_test_files_have_unique_names():
+    """The tests folders are not packages, so pytest imports each test file by its base
+    name: two files of one name stop the whole run at collection ("import file
+    mismatch"; tests/loop/test_engine.py and a new tests/calibrate/test_engine.py did)."""
+    seen: dict[str, Path] = {}
+    for p in sorted((ROOT / "tests").rglob("test_*.py")):
+        assert p.name not in seen, f"{p.relative_to(ROOT)} and {seen[p.name].relative_to(ROOT)} share a name"
+        seen[p.name] = p
