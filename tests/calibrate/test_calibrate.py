@@ -327,13 +327,16 @@ def test_writer_keeps_comments_rewrites_in_place_and_replaces_effects(tmp_path):
 
 
 # ------------------------------------------------------------------ CGS (6-DOF, 1024 Hz)
-def _cgs_runs(out, raw, seeds=(3, 4, 5), seconds=4.0, noise=0.005):
+def _cgs_runs(out, raw, seeds=(3, 4, 5), seconds=4.0):
     """6-DOF band-limited white noise (0.5-30 Hz) on the CGS model described by ``raw``,
-    with 0.5 % RMS sensor noise on force and motion (seeded)."""
+    measured through the built-in recorder model (seeded): the table's 300 Hz
+    accelerometer conditioner, anti-alias filter, noise and quantisation, and only the
+    meta a recorder writes (the table's name, not the truth's description)."""
     from mjcf.description import parse_table
     from sim.effects import build_model
     from sim.loop.simulation import Simulation
     from sim.runs.build import build_runfile
+    from sim.runs.measure import load_sensors, measure_run
     from sim.scenario import motions as M
     from sim.scenario.reference import reference_from_motions
 
@@ -350,20 +353,20 @@ def _cgs_runs(out, raw, seeds=(3, 4, 5), seconds=4.0, noise=0.005):
         ref = reference_from_motions(mo, 1024.0, seconds)
         res = Simulation(tm).run(reference=ref)
         assert res.incomplete_reason is None
-        run = build_runfile(res, tm, source="measured", reference=ref)
-        rng = np.random.default_rng(seed)
-        for ch in ("actuator_force", "table_acceleration", "table_displacement", "table_velocity"):
-            arr = getattr(run, ch)
-            arr += rng.normal(0, noise, arr.shape) * np.sqrt(np.mean(arr**2, axis=0))
-        paths.append(str(write_run(out / f"cgs_{seed}.run.npz", run)))
+        run = build_runfile(res, tm, source="simulated", reference=ref)
+        run.meta.pop("table_description", None)  # a recorder writes the table's name
+        run.meta.pop("table_sha256", None)
+        paths.append(str(write_run(out / f"cgs_{seed}.run.npz", measure_run(run, load_sensors(), seed=seed))))
     return paths
 
 
 @pytest.mark.slow
 def test_cgs_lateral_seal_friction_found_and_clean_runs_add_nothing(tmp_path):
-    """CGS at 1024 Hz: the lateral actuators' seal friction doubled (a per-class dry
-    friction the description lacks) is found at class:lateral within 10 %, the held-out
-    error comes to within 1.3 x the clean runs' floor; the clean runs add nothing."""
+    """CGS at 1024 Hz, runs through the recorder model, calibrated with defaults: the
+    lateral actuators' seal friction doubled (a per-class dry friction the description
+    lacks) is found at class:lateral with the truth inside its interval (measured:
+    5388.7 +/- 25.7 N), the held-out error falls by the margin (measured: 8.96 % -> 3.72 %,
+    the clean runs' 3.74 %); the clean runs add nothing."""
     import copy
 
     import mjcf
@@ -372,11 +375,11 @@ def test_cgs_lateral_seal_friction_found_and_clean_runs_add_nothing(tmp_path):
     seal = raw["actuator_class"]["lateral"]["seal_friction_n"]
     (tmp_path / "clean").mkdir()
     (tmp_path / "lat").mkdir()
-    clean = S.calibrate(_cgs_runs(tmp_path / "clean", raw), accel_lowpass_hz=None, path="mechanical")
+    clean = S.calibrate(_cgs_runs(tmp_path / "clean", raw), path="mechanical")
     assert clean.effects_added == []
     raw["actuator_class"]["lateral"]["seal_friction_n"] = 2 * seal
-    res = S.calibrate(_cgs_runs(tmp_path / "lat", raw), accel_lowpass_hz=None, path="mechanical")
+    res = S.calibrate(_cgs_runs(tmp_path / "lat", raw), path="mechanical")
     (e,) = res.effects_added
     assert (e["name"], e["where"]) == ("coulomb_friction", "class:lateral")
-    assert e["parameters"]["force_n"] == pytest.approx(seal, rel=0.10)
-    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * clean.error_before
+    assert abs(e["parameters"]["force_n"] - seal) <= e["uncertainty"]["force_n"], e
+    assert res.error_after < (1 - S.HOLDOUT_MARGIN) * res.error_before
