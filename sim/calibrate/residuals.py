@@ -332,6 +332,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
     """The mechanical-path records of ``runs`` against the declared ``desc`` (+ ``payload``)."""
     from mjcf.description import DOFS6 as DOF6
     from sim.calibrate import conditioning
+    from sim.calibrate.flexible import flexible_parts
     from sim.calibrate.laws import declared_forces
     from sim.control.tvc import dof_jacobian
     from sim.effects import build_model
@@ -347,6 +348,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
     for i, a in enumerate(desc.actuators):
         classes.setdefault(a.cls.name, []).append(i)
     joints = joint_terms(tm, k_of)
+    parts = flexible_parts(tm, k_of)  # what stands on its own joints: not rigid (sim.calibrate.flexible)
     pay = payload_inertial(tm, desc.gravity_m_s2)
     declared = [d for d in (declared_forces(e) for e in desc.effects) if d is not None]
     out = []
@@ -386,8 +388,9 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             other = other + sum(vals[k] * Q for k, Q in zip(law.linears, _raw_columns(mr, law, where, vals)))
             if law.second_order is not None:
                 other = other + mr.second(law, where, vals, vals)
-        mr.model = a @ Me.T + mr.filt(other)
-        mr.extra.update(inertial=a @ Me.T, other=other, timing=known, basis=BasisCache())
+        inertial = a @ Me.T if parts is None else a @ Me.T + parts.force(a, r.dt)
+        mr.model = inertial + mr.filt(other)
+        mr.extra.update(inertial=inertial, other=other, timing=known, basis=BasisCache())
         mr.rows = _still_rows(v, pre, r.dt)
         mr.excited = excited_dofs(mr, J6)
         out.append(mr)
