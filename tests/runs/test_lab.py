@@ -576,3 +576,32 @@ def test_clean_light_lab_records_add_no_sensor_timing(tmp_path):
     mech = js["paths"]["mechanical"]  # where the friction, the modes and the sensors are judged
     assert mech["error_after"] < 0.1 * mech["error_before"], mech
     assert js["error_after"] < js["error_before"]  # pooled over the mechanical and replay paths
+
+
+def test_the_declared_frame_is_modelled_alike_on_both_paths(tmp_path):
+    """docs/lab-example-validation.md "Declaring the frame instead", shortened, the pressure
+    on time: with the frame declared (no --payload none) the mechanical path models its
+    floors on their storeys as the replay does (sim.calibrate.flexible), so it adds no
+    mode of the frame's size (measured: 11.9 +/- 5.5 kg at 7.34 Hz beside the frame's
+    857 kg at 7.5 Hz, not planted; the record's first mode, fitted alone with --payload
+    none, sits at 7.489 Hz, 0.15 % below the description's: where the small mode comes from
+    was not proven), finds the friction with the truth inside its interval, the paths
+    agree (nothing refused on the pooled evidence), and the result beats the ARX. Before,
+    the frame held rigid on the mechanical path put its first mode in a second time
+    (702 kg), the replay refused it, and the friction refitted alone came out 13 % low."""
+    mod = _quake_example()
+    csvs = mod.make_export(tmp_path / "ex", durations={"elcentro": 10.0, "corralitos": 8.0}, pressure_lead_s=0.0)
+    runs = tmp_path / "runs"
+    assert main(["import", *map(str, csvs.values()), "--map", str(LIGHT_MAP), "--out", str(runs)]) == 0
+    cal = tmp_path / "cal"
+    args = ["calibrate", str(runs / "elcentro.run.npz"), "--holdout", str(runs / "corralitos.run.npz")]
+    assert main([*args, "--out", str(cal)]) == 0
+    js = json.loads((cal / "calibration.json").read_text())
+    added = {e["name"]: e for e in js["effects_added"]}
+    frame_mass = sum(mjcf.load_payload("lab_2storey_heavy").mass_kg)
+    modes = [e["parameters"]["mass_kg"] for e in js["effects_added"] if e["name"] == "payload_mode"]
+    assert sum(modes) < 0.02 * frame_mass, js["effects_added"]
+    fr = added["coulomb_friction"]
+    assert abs(fr["parameters"]["force_n"] - mod.FRICTION_N) <= 2 * fr["uncertainty"]["force_n"], fr
+    assert not [c for c in js["candidates"] if c["round"] == "pooled"], "the paths disagreed"
+    assert js["beats_baseline"] and js["error_after"] < 0.5 * js["error_before"], js["error_after"]
