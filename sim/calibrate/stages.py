@@ -137,16 +137,25 @@ def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, wo
         f"{ev['with']:.4f}; without the mechanical path's {ev['without']:.4f}"
     )
     if kept and not agree(ev, second.error_after):
-        return _one_by_one(first, second, ev, (runs, ho_given, desc, pl, workers), say)
+
+        def redo(entries):  # the later path searched again on what stage 1 keeps
+            say(f"{path} path searched again, with only the mechanical path's effects kept")
+            return search_one(path, with_effects(desc, entries), later)
+
+        return _one_by_one(first, second, ev, (runs, ho_given, desc, pl, workers), say, redo)
     return combine(first, second, ev)
 
 
-def _one_by_one(first, second, ev, ctx, say):
+def _one_by_one(first, second, ev, ctx, say, redo=None):
     """The paths disagree on stage 1's effects together: keep the subset of its terms
-    they agree on (:func:`prune`), else refuse them all."""
+    they agree on (:func:`prune`), else refuse them all. ``redo(entries)``: the later
+    path's search again on the declared model with ``entries`` (what stage 1 keeps): its
+    effects were fitted with the refused ones in the model, and their values (and which
+    of them pass) are not the final model's; None keeps them as found (the later path's
+    held-out error then measured without the refused ones)."""
     pr = prune(first, second, ev, ctx) if first.series.get("terms") else None
     if pr is None:
-        return _disagree(first, second, ev, say)
+        return _disagree(first, second, ev, say, redo)
     keep, ev_k = pr
     n = len(first.series["terms"])
     why = (
@@ -164,7 +173,13 @@ def _one_by_one(first, second, ev, ctx, say):
     added = ev_k["added"]  # the terms kept, refitted without the others, and the timing
     first = replace(first, effects_added=added, error_after=ev_k["mech_with"], candidates=first.candidates + rows)
     first.per_channel, first.per_run = {}, {}  # measured with every term: not this model's
-    second = replace(second, error_after=ev_k["later_with"], per_channel={}, per_run={})
+    if redo is None:
+        second = replace(second, error_after=ev_k["later_with"], per_channel={}, per_run={})
+    else:
+        from sim.calibrate.result import effect_entry
+
+        second = redo([effect_entry(e, "calibrated")[0] for e in added])
+        ev_k = {**ev_k, "later_with": second.error_after, "with": pool([ev_k["mech_with"], second.error_after])}
     return combine(first, second, ev_k)
 
 
@@ -262,7 +277,7 @@ def combine(first, second, ev, first_kept: bool = True):
     if not first_kept:
         s1.update(error_after=first.error_before, effects_added=[], refused="the paths disagree (pooled evidence)")
     s2 = {**summary(second), "error_before_declared": ev["declared"]}
-    if not first_kept:  # the later path's effects on the declared model alone (measured)
+    if not first_kept and not ev.get("redone"):  # the later path's effects on the declared model alone (measured)
         s2.update(error_after=ev["without_first"], per_channel={}, per_run={})
     out = replace(
         second,
@@ -283,9 +298,10 @@ def combine(first, second, ev, first_kept: bool = True):
     return out
 
 
-def _disagree(first, second, ev, say):
+def _disagree(first, second, ev, say, redo=None):
     """Stage 1's effects refused on the pooled evidence: the final model is stage 2's
-    effects on the declared model (its held-out error measured, ``ev["without_first"]``)."""
+    effects on the declared model (its held-out error measured, ``ev["without_first"]``),
+    searched again there by ``redo`` when given."""
     why = (
         f"refused on the pooled evidence (the paths disagree): pooled {ev['with']:.4f} with, {ev['without']:.4f} "
         f"without; the {second.residual_path} path {second.error_after:.4f} with, {ev['without_first']:.4f} without"
@@ -295,6 +311,9 @@ def _disagree(first, second, ev, say):
         row = {"round": "pooled", "name": e["name"], "where": e["where"], "explained_fraction": 0.0}
         row.update(parameters=e["parameters"], uncertainty=e["uncertainty"], holdout_error=ev["without_first"])
         first.candidates.append({**row, "accepted": False, "reason": why})
+    if redo is not None:
+        second = redo([])
+        ev = {**ev, "without_first": second.error_after, "redone": True}
     return combine(first, second, ev, first_kept=False)
 
 

@@ -186,11 +186,17 @@ def test_the_mechanical_paths_effects_stay_only_on_the_pooled_evidence(monkeypat
     from it, ends at ``after``, and at ``without`` when replayed without the friction."""
     first = _result("mechanical", 0.40, 0.20, ["coulomb_friction"])
     second = _result("replay", 0.50, after, ["valve_delay"])
+    # searched again on the declared model once the friction is refused: a valve delay again,
+    # its value and error its own (not those fitted with the friction in the model)
+    again = _result("replay", 0.6, 0.045, ["valve_delay"])
+    again.effects_added[0]["parameters"] = {"delay_s": 0.003}
     monkeypatch.setattr(G, "holdout_error", lambda *a: 0.6 if not a[5] else without)
-    monkeypatch.setattr(G, "with_effects", lambda desc, entries: desc)
+    monkeypatch.setattr(G, "with_effects", lambda desc, entries: len(entries))
+    calls = []
 
     def search_one(path, desc, effects):
-        return first if path == "mechanical" else second
+        calls.append((path, desc))
+        return first if path == "mechanical" else (second if desc else again)
 
     kw = {"effects": None, "search_one": search_one, "say": lambda *_: None, "workers": 1}
     res = G.run_stages([], [], None, None, ["mechanical", "replay"], **kw)
@@ -202,8 +208,10 @@ def test_the_mechanical_paths_effects_stay_only_on_the_pooled_evidence(monkeypat
         assert names == ["coulomb_friction", "valve_delay"]
         assert res.error_after == pytest.approx(G.pool([0.20, after]))
     else:
-        assert names == ["valve_delay"]
-        assert res.error_after == pytest.approx(G.pool([0.40, without]))
+        assert names == ["valve_delay"] and res.effects_added[0]["parameters"] == {"delay_s": 0.003}
+        assert calls[-1] == ("replay", 0)  # the replay searched again without the friction
+        assert res.error_after == pytest.approx(G.pool([0.40, 0.045]))
+        assert res.paths["replay"]["error_after"] == 0.045
         assert res.paths["mechanical"]["refused"]
         assert any(c["round"] == "pooled" and not c["accepted"] for c in res.candidates)
     assert res.baseline["holdout_error"] == pytest.approx(0.9)
@@ -278,3 +286,35 @@ def test_the_paths_keep_the_mechanical_effects_they_agree_on_one_by_one(monkeypa
     assert res.paths["mechanical"]["error_after"] == 0.6 and res.paths["replay"]["error_after"] == 0.18
     assert res.error_after == pytest.approx(G.pool([0.6, 0.18]))
     assert [c["name"] for c in res.candidates if c["round"] == "pooled"] == ["payload_mode"]
+
+
+def test_the_later_path_is_searched_again_on_what_the_mechanical_path_keeps(monkeypatch):
+    """As above, with the later path searched again once the mode is refused: it runs on the
+    declared model with the refitted friction only, and its result (effects, error) is the
+    final one, not the first search's made with the mode in the model."""
+    from sim.calibrate import mechsearch
+
+    first = _result("mechanical", 0.80, 0.20, ["coulomb_friction", "payload_mode"])
+    first.series = {"terms": ["friction term", "mode term"]}
+    second = _result("replay", 0.55, 0.75, ["valve_bandwidth"])
+    ev = {"with": G.pool([0.20, 0.75]), "without": G.pool([0.80, 0.55]), "without_first": 0.55, "declared": 0.55}
+    ev["before"] = ev["without"]
+
+    def refit(res, keep):
+        name = ["coulomb_friction", "payload_mode"][keep[0]]
+        e = {"name": name, "where": "dof:x", "parameters": {"force_n": 1040.0}, "uncertainty": {}, "units": {}}
+        return (0.6 if keep == [0] else 0.7), [e]
+
+    monkeypatch.setattr(mechsearch, "refit_subset", refit)
+    monkeypatch.setattr(G, "holdout_error", lambda *a: 0.18 if a[5][0]["type"] == "coulomb_friction" else 0.9)
+    seen = []
+
+    def redo(entries):
+        seen.append(entries)
+        return _result("replay", 0.55, 0.15, ["valve_delay"])
+
+    res = G._one_by_one(first, second, ev, ([], [], None, None, 1), lambda *_: None, redo)
+    assert [[e["type"] for e in s] for s in seen] == [["coulomb_friction"]]
+    assert [e["name"] for e in res.effects_added] == ["coulomb_friction", "valve_delay"]
+    assert res.paths["replay"]["error_after"] == 0.15
+    assert res.error_after == pytest.approx(G.pool([0.6, 0.15]))
