@@ -206,6 +206,7 @@ class TableScale:
     mass_kg: dict  # place -> kg
     rated_flow_m3_s: float
     supply_pa: float
+    payload_kg: float = 0.0  # the declared payload's mass (0: none)
 
 
 def table_scale(desc, payload=None) -> TableScale:
@@ -237,7 +238,8 @@ def table_scale(desc, payload=None) -> TableScale:
         idx = [i for i, a in enumerate(desc.actuators) if a.cls.name == c]
         force[f"class:{c}"] = float(np.min(stall[idx]))  # the effect acts on each actuator of it
         mass[f"class:{c}"] = float(np.min([mass[f"actuator:{desc.actuator_names[i]}"] for i in idx]))
-    return TableScale(force, mass, float(hp.rated_flow_m3_s), float(hp.supply_pressure_pa))
+    payload_kg = float(np.sum(getattr(payload, "mass_kg", 0.0))) if payload is not None else 0.0
+    return TableScale(force, mass, float(hp.rated_flow_m3_s), float(hp.supply_pressure_pa), payload_kg)
 
 
 def implausible(name: str, where: str, params: dict, scale: TableScale, force: tuple | None = None) -> str:
@@ -251,6 +253,9 @@ def implausible(name: str, where: str, params: dict, scale: TableScale, force: t
                 f"{COMPENSATION}: its force reaches {peak / 1e3:.3g} kN at the recorded motion, more than "
                 f"the actuators deliver along {at} ({cap / 1e3:.3g} kN: piston area x supply pressure)"
             )
+    taken = params.get("taken_from_payload_kg", 0.0)  # the modes' share of the declared payload
+    if name == "payload_mode" and params.get("from_payload") and taken > scale.payload_kg:
+        return f"{COMPENSATION}: the modes take {taken:.4g} kg out of a declared payload of {scale.payload_kg:.4g} kg"
     m0 = scale.mass_kg.get(where)
     if name == "added_mass" and m0 and abs(params.get("mass_kg", 0.0)) > MASS_RATIO * m0:
         return (

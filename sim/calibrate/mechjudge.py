@@ -64,7 +64,12 @@ def _verdict(st: RoundState, cur, new):
     limits = {k: scan_limits(term.law, k, st.mfit) for k in term.law.shape}
     ok, why, unc = accept(cur, new, st.e_ho, e_new, st.flat, f_new, term, st.margin, limits)
     if st.scale is not None and all(np.isfinite(v) for v in new.values[i].values()):
-        bad = implausible(term.law.name, term.where, new.values[i], st.scale, term_force_peak(st.mfit, new, i))
+        params = {**term.law.options, **new.values[i]}
+        if params.get("from_payload"):  # every mode of the payload's own mass together
+            params["taken_from_payload_kg"] = sum(
+                v["mass_kg"] for t, v in zip(new.terms, new.values) if t.law.options.get("from_payload")
+            )
+        bad = implausible(term.law.name, term.where, params, st.scale, term_force_peak(st.mfit, new, i))
         if bad:
             ok, why = False, bad
     return ok, why, unc, e_new, f_new

@@ -70,12 +70,18 @@ def candidate_laws(effects=None) -> list:
     return [LAWS[k] for k in sorted(LAWS) if usable(LAWS[k]) and (not effects or {k, LAWS[k].name} & set(effects))]
 
 
-def stage_laws(effects, payload) -> list:
+def stage_laws(effects, payload, pl=None) -> list:
     """The candidate laws: ``effects`` or the library; the laws of a specimen that is there
-    but not declared only with ``--payload none`` (or when named)."""
+    but not declared only with ``--payload none`` (or when named); the modes of a declared
+    payload's own mass (``payload_mode`` with ``from_payload``) only where the declared
+    payload ``pl`` is rigid (a frame's or a cantilever's modes are in its model already)."""
+    from mjcf.description import RigidPayload
+
     laws = candidate_laws(effects)
+    rigid = isinstance(pl, RigidPayload)
+    laws = [w for w in laws if w.when != "declared_rigid_specimen" or rigid]
     if not effects:
-        laws = [w for w in laws if w.when == "always" or (w.when == "undeclared_specimen" and payload == "none")]
+        laws = [w for w in laws if w.when != "undeclared_specimen" or payload == "none"]
     return laws
 
 
@@ -114,7 +120,7 @@ def mechanical_stage(runs, ho_given, desc, pl, *, effects, payload, accel_lowpas
     cur = fit_terms(mfit, [])
     e_ho0 = nrmse_runs(mho, predict(mho, cur))
     say(f"mechanical path: {len(fit_runs)} fit runs, {len(ho_runs)} held out; held-out NRMSE {e_ho0:.4f}")
-    cands = stage_candidates(stage_laws(effects, payload), mfit, desc, pl)
+    cands = stage_candidates(stage_laws(effects, payload, pl), mfit, desc, pl)
     flat = flatness(mfit, cur.residuals)
     st = RoundState(mfit, mho, e_ho0, flat, margin, table_scale(desc, pl), effects=effects, timing_on=True)
     ms = MechStage(st, cur, cands, say, places=(desc, pl))

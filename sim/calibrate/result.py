@@ -71,7 +71,7 @@ def effect_entry(e: dict, tag: str) -> tuple[dict, dict]:
     opts = e.get("options", {})  # a variant of the effect (friction growing with the stroke)
     entry = {"type": e["name"], "where": e["where"], **opts, **e["parameters"], "source": tag}
     if "label" in e:  # one of several terms of a law at a place (a specimen's modes)
-        entry = {"type": e["name"], "where": e["where"], "name": e["label"], **e["parameters"], "source": tag}
+        entry = {"type": e["name"], "where": e["where"], "name": e["label"], **opts, **e["parameters"], "source": tag}
     comments = {
         k: f"+/-{e['uncertainty'][k]:.3g} {e['units'][k]} (95 %)"
         if k in e["uncertainty"]

@@ -232,9 +232,10 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None) -> list[C
     out = _hydraulic_candidates(tb) + _mechanical_candidates(tb, motion_rms)
     if tb.offered("foundation_mode") and ("foundation_mode", "table") not in tb.have:
         out.append(foundation_candidate(tb.cur, tb.dt))
-    if "payload_mode" in EFFECTS and ((tb.want and "payload_mode" in tb.want) or _rigid(payload)):
+    if "payload_mode" in EFFECTS and ("payload_mode" in tb.want if tb.want else _rigid(payload)):
         # offered where a specimen may be flexible: a declared rigid payload, or when asked for
-        # (an undeclared specimen, --payload none): not in every bare table's default search
+        # (an undeclared specimen, --payload none): not in every bare table's default search,
+        # nor after the mechanical path, which looks for it (the stage's types leave it out)
         out += mode_candidates(tb.cur, payload, accepted, motion_rms, tb.Fs, 1.0 / prs[0].dt)
     return out + _sensor_candidates(tb, prs)
 
@@ -439,14 +440,16 @@ def mode_candidates(desc, payload, accepted, motion_rms, force_step: float, fs: 
     from mjcf.description import RigidPayload
 
     rigid = isinstance(payload, RigidPayload)
-    taken = sum(float(e["mass_kg"]) for e in accepted if e["type"] == "payload_mode" and e.get("from_payload"))
+    # the current model's modes: those accepted here and those of an earlier path (in ``desc``)
+    modes = [e for e in desc.raw.get("effect", []) if e.get("type") == "payload_mode"]
+    taken = sum(float(e["mass_kg"]) for e in modes if e.get("from_payload"))
     m_max = float(payload.mass_kg) - taken if rigid else math.inf
     f_hi = min(MODE_MAX_HZ, MODE_MAX_SHARE * fs)
     freqs = _geometric(f_hi, MODE_MIN_HZ, MODE_LINE_RATIO)
     out = []
     for d in ("x", "y", "z"):
         w = f"dof:{d}"
-        n_have = sum(1 for e in accepted if e["type"] == "payload_mode" and e["where"] == w)
+        n_have = sum(1 for e in modes if e.get("where") == w)
         if d not in desc.dofs or w not in motion_rms or n_have >= MODE_REPEATS or m_max <= 0:
             continue
         a = motion_rms[w][2]
