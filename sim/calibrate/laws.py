@@ -353,6 +353,9 @@ add_law(
         inertial=True,
         what="a mode of what stands on the platen: modal mass m, frequency f, damping z (m H(s) a)",
         repeats=3,  # a specimen's modes: up to three at one place
+        # with a rigid payload declared, its own mass on a mode is the hypothesis (the law
+        # below), not a second, undeclared mass on a spring (named with --effects: both)
+        when="not_with_rigid_payload",
     )
 )
 

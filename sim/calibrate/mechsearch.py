@@ -74,7 +74,8 @@ def stage_laws(effects, payload, pl=None) -> list:
     """The candidate laws: ``effects`` or the library; the laws of a specimen that is there
     but not declared only with ``--payload none`` (or when named); the modes of a declared
     payload's own mass (``payload_mode`` with ``from_payload``) only where the declared
-    payload ``pl`` is rigid (a frame's or a cantilever's modes are in its model already)."""
+    payload ``pl`` is rigid (a frame's or a cantilever's modes are in its model already),
+    and then not an added modal mass besides it unless named."""
     from mjcf.description import RigidPayload
 
     laws = candidate_laws(effects)
@@ -82,6 +83,7 @@ def stage_laws(effects, payload, pl=None) -> list:
     laws = [w for w in laws if w.when != "declared_rigid_specimen" or rigid]
     if not effects:
         laws = [w for w in laws if w.when != "undeclared_specimen" or payload == "none"]
+        laws = [w for w in laws if w.when != "not_with_rigid_payload" or not rigid]
     return laws
 
 
