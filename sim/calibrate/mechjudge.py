@@ -66,9 +66,10 @@ def _verdict(st: RoundState, cur, new):
     if st.scale is not None and all(np.isfinite(v) for v in new.values[i].values()):
         params = {**term.law.options, **new.values[i]}
         if params.get("from_payload"):  # every mode of the payload's own mass together
-            params["taken_from_payload_kg"] = sum(
-                v["mass_kg"] for t, v in zip(new.terms, new.values) if t.law.options.get("from_payload")
-            )
+            from sim.effects.specimen import payload_taken
+
+            own = [(t.where, v["mass_kg"]) for t, v in zip(new.terms, new.values) if t.law.options.get("from_payload")]
+            params["taken_from_payload_kg"] = payload_taken(own)
         bad = implausible(term.law.name, term.where, params, st.scale, term_force_peak(st.mfit, new, i))
         if bad:
             ok, why = False, bad

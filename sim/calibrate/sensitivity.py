@@ -429,7 +429,7 @@ def mode_candidates(desc, payload, accepted, motion_rms, force_step: float, fs: 
 
     * A declared rigid payload (:class:`mjcf.description.RigidPayload`) that is flexible:
       the modal mass is taken out of it (``from_payload``: the table carries the same
-      weight, :class:`sim.effects.mechanical.PayloadMode`), from 0 up to what is left of
+      weight, :class:`sim.effects.specimen.PayloadMode`), from 0 up to what is left of
       its mass after the modes already accepted; the mode at its centre of gravity.
     * Otherwise (no payload, or one declared flexible): an added modal mass from 0,
       unbounded (a specimen's modal mass may exceed the platen's: no plausibility bound).
@@ -442,14 +442,14 @@ def mode_candidates(desc, payload, accepted, motion_rms, force_step: float, fs: 
     rigid = isinstance(payload, RigidPayload)
     # the current model's modes: those accepted here and those of an earlier path (in ``desc``)
     modes = [e for e in desc.raw.get("effect", []) if e.get("type") == "payload_mode"]
-    taken = sum(float(e["mass_kg"]) for e in modes if e.get("from_payload"))
-    m_max = float(payload.mass_kg) - taken if rigid else math.inf
+    own = [(e["where"], float(e["mass_kg"])) for e in modes if e.get("from_payload")]
     f_hi = min(MODE_MAX_HZ, MODE_MAX_SHARE * fs)
     freqs = _geometric(f_hi, MODE_MIN_HZ, MODE_LINE_RATIO)
     out = []
     for d in ("x", "y", "z"):
         w = f"dof:{d}"
         n_have = sum(1 for e in modes if e.get("where") == w)
+        m_max = _mass_left(float(payload.mass_kg), own, w) if rigid else math.inf
         if d not in desc.dofs or w not in motion_rms or n_have >= MODE_REPEATS or m_max <= 0:
             continue
         a = motion_rms[w][2]
@@ -471,6 +471,23 @@ def mode_candidates(desc, payload, accepted, motion_rms, force_step: float, fs: 
             )
         )
     return out
+
+
+def _mass_left(total: float, own: list, where: str) -> float:
+    """The largest modal mass a new mode at ``where`` may take from a payload of ``total``
+    kg whose ``own`` modes (``[(where, kg)]``) already use some
+    (:func:`sim.effects.specimen.payload_taken`): the first mode at a DOF joins the part
+    the first modes share (only what the later modes took is gone), a later mode at a DOF
+    takes its own part."""
+    from sim.effects.specimen import payload_taken
+
+    if any(w == where for w, _ in own):
+        return total - payload_taken(own)
+    seen, later = set(), 0.0
+    for w, m in own:
+        later += m if w in seen else 0.0
+        seen.add(w)
+    return total - later
 
 
 def _geometric(hi: float, lo: float, ratio: float) -> list:

@@ -11,7 +11,7 @@ the model says it reads:
   (:func:`sim.runs.specimen.specimen_accelerations`); between floors, none;
 * on a rigid payload: the platen's acceleration at the sensor's point (a rigid specimen
   moves with the platen), plus the relative acceleration of every specimen mode of the
-  model (``payload_mode`` effects, :class:`sim.effects.mechanical.PayloadMode`) along
+  model (``payload_mode`` effects, :class:`sim.effects.specimen.PayloadMode`) along
   the sensor's direction;
 * with no payload declared (``--payload none``), or a cantilever: none above the platen.
   Where an undeclared specimen's sensor sits on its mode shape is not known: the
@@ -21,7 +21,7 @@ the model says it reads:
   sensors the truth is inside the interval.
 
 A ``payload_mode`` is a body of the modal mass on a slide with a spring-damper to the
-platen (:class:`sim.effects.mechanical.PayloadMode`): the model records its slide's
+platen (:class:`sim.effects.specimen.PayloadMode`): the model records its slide's
 position (:func:`watch_modes` adds it to the payload coordinates the loop keeps), and
 its accelerometer reads the force on it per kilogram, ``-(k y + c y') / m`` (as
 :mod:`sim.loop.specimen` reads a floor: exact in the model's own integration; an

@@ -12,7 +12,7 @@ effects (``mjcf`` itself knows none).
 
 from __future__ import annotations
 
-from sim.effects import faults, hydraulic, mechanical, sensors  # noqa: F401,E402  (register the built-in effects)
+from sim.effects import faults, hydraulic, mechanical, sensors, specimen  # noqa: F401,E402  (register the built-in effects)
 from sim.effects.base import EFFECTS, Effect, Parameter, create, register
 from sim.effects.registry import build_effects, catalogue, dahl_step, known, load_user_effect
 from sim.effects.table import table_parameters, with_parameter_values

@@ -524,73 +524,6 @@ class CgOffset(Effect):
 
 
 @register
-class PayloadMode(Effect):
-    """One flexible mode of what stands on the platen: a body of ``mass_kg`` (the modal
-    mass) on a slide along the DOF (``where = "dof:x|y|z"``) with a spring-damper to the
-    platen giving ``frequency_hz`` and ``damping_ratio`` on a fixed platen; at
-    ``position_m`` from the reference point. One entry per mode.
-
-    ``from_payload = true``: the modal mass is part of the declared payload's (a specimen
-    declared rigid that is flexible: ``mass_kg`` of it moves on the mode): the payload's
-    bodies keep ``1 - mass_kg / M`` of their mass and inertia (M their total), so the table
-    carries the same weight, and the mode sits at the payload's centre of gravity unless
-    ``position_m`` says otherwise. A payload of one body's mass M moving as one mode of
-    modal mass m and the rest rigid is this model exactly (the clamped block of
-    ``clamp_mass_fraction``, mjcf.builder)."""
-
-    type = "payload_mode"
-    places = ("dof",)
-    SPEC = {
-        "frequency_hz": ("Hz", 1e-3, INF, None),
-        "mass_kg": ("kg", 1e-9, INF, None),
-        "damping_ratio": ("1", 0.0, 10.0, None),
-    }
-    OPTIONS = {"position_m": None, "from_payload": False}
-
-    def edit_spec(self, spec, desc):
-        d = self.where.partition(":")[2]
-        if d not in ("x", "y", "z"):
-            raise ScenarioError(f"{self.source}: a payload_mode moves along x, y or z, not '{d}'{_hint(d, 'xyz')}")
-        v = self.values
-        m, w = v["mass_kg"], 2 * math.pi * v["frequency_hz"]
-        pos = _vector(self.options["position_m"], self, "position_m")
-        if self.options["from_payload"]:
-            cg = self._take_from_payload(spec, m)
-            pos = cg if self.options["position_m"] is None else pos
-        b = spec.body("platen").add_body(name=_unique(spec, f"payload_mode_{d}"), pos=pos.tolist())
-        b.explicitinertial = True
-        b.mass = m
-        b.ipos = [0, 0, 0]
-        b.inertia = [1e-6 * m] * 3  # assumed: a point mass (the inertia of a 1 mm radius keeps M regular)
-        axis = [0.0, 0.0, 0.0]
-        axis[("x", "y", "z").index(d)] = 1.0
-        j = b.add_joint(name=f"{b.name}_slide", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
-        j.stiffness = [m * w * w, 0, 0]
-        j.damping = [2 * v["damping_ratio"] * m * w, 0, 0]
-        if d == "z":  # home is the static equilibrium under gravity
-            j.springref = m * desc.gravity_m_s2 / (m * w * w)
-        self.joint = j.name
-
-    def _take_from_payload(self, spec, m: float) -> np.ndarray:
-        """Moves ``m`` kg out of the payload's bodies (each keeps the same share of its
-        mass and inertia); returns their centre of gravity in the platen frame."""
-        bodies = [b for b in _payload_bodies(spec) if float(b.mass) > 0]
-        total = sum(float(b.mass) for b in bodies)
-        if not bodies or m > total * (1.0 + 1e-9):
-            have = f"{total:.6g} kg" if bodies else "none is built"
-            raise ScenarioError(
-                f"{self.source}: a payload_mode with from_payload = true takes its mass_kg ({m:.6g}) from the "
-                f"payload, which must weigh more ({have}); lower mass_kg or drop from_payload"
-            )
-        cg = sum(float(b.mass) * (np.asarray(b.pos, float) + np.asarray(b.ipos, float)) for b in bodies) / total
-        keep = max(0.0, 1.0 - m / total)
-        for b in bodies:
-            b.mass = float(b.mass) * keep
-            b.inertia = (np.asarray(b.inertia, float) * keep).tolist()
-        return cg
-
-
-@register
 class FoundationMode(Effect):
     """The reaction mass on springs (``where = "table"``): ``mass_kg`` on a spring-damper
     per axis of ``frequency_hz`` and ``damping_ratio`` (x, y, z alike; ``frequency_z_hz``
@@ -782,7 +715,6 @@ __all__ = [
     "CgOffset",
     "CoulombFriction",
     "FoundationMode",
-    "PayloadMode",
     "Place",
     "PowerDamping",
     "Spring",

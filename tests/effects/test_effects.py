@@ -257,9 +257,9 @@ def test_payload_mode_from_payload_is_the_clamped_block():
     tm = build_model(_with_effects(lab, [{**mode, "mass_kg": 900.0, "damping_ratio": 0.02}]), rigid)
     ref = build_model(lab, clamp)
     assert sum(tm.model.body_mass) == pytest.approx(sum(ref.model.body_mass), rel=1e-12)
-    j, jr = tm.model.joint("payload_mode_x1_slide"), ref.model.joint("payload_clamp_x")
+    j, jr = tm.model.joint("payload_mode_shared1_x"), ref.model.joint("payload_clamp_x")
     assert tm.model.jnt_stiffness[j.id] == pytest.approx(ref.model.jnt_stiffness[jr.id], rel=1e-12)
-    assert tm.model.body_pos[tm.model.body("payload_mode_x1").id][2] == pytest.approx(0.3)
+    assert tm.model.body_pos[tm.model.body("payload_mode_shared1").id][2] == pytest.approx(0.3)
 
     def mass_x(m, d_mode):
         d = mujoco.MjData(m)
@@ -272,6 +272,59 @@ def test_payload_mode_from_payload_is_the_clamped_block():
     assert mass_x(tm.model, j.dofadr[0]) == pytest.approx(mass_x(ref.model, jr.dofadr[0]), rel=1e-9)
     with pytest.raises(ScenarioError, match="from_payload"):
         build_model(_with_effects(lab, [{**mode, "mass_kg": 1600.0, "damping_ratio": 0.02}]), rigid)
+
+
+def _mass_matrix(m) -> np.ndarray:
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    M = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, M)
+    return M
+
+
+def test_a_payloads_modes_along_x_y_and_z_share_its_mass():
+    """``from_payload`` modes along x, y and z of 900 kg each (60 % of a 1.5 t block on the
+    CGS table): one part of the payload on three slides, exactly mjcf.builder's block on its
+    clamp (``clamp_mass_fraction`` 0.6): the same total mass and the same mass matrix over
+    the platen's and the modes' coordinates. Separate bodies would have taken 2.7 t from
+    1.5 t. Unequal modal masses (x 900, y 600 kg) take the larger from the payload and
+    move 900 kg along x, 600 kg along y."""
+    from mjcf.description import parse_payload
+    from sim.effects.specimen import payload_taken
+
+    block = {"type": "rigid", "name": "b", "mass_kg": 1500.0, "com_m": [0.0, 0.0, 0.3]}
+    block.update(inertia_kg_m2=[200.0, 200.0, 300.0], footprint_m=[1.0, 1.0], height_m=0.6)
+    cgs = mjcf.load_table("cgs")
+    rigid = parse_payload({"payload": block})
+    clamp = parse_payload({"payload": {**block, "clamp_frequency_hz": 6.0, "clamp_mass_fraction": 0.6}})
+    modes = [
+        {"type": "payload_mode", "where": f"dof:{d}", "from_payload": True, "frequency_hz": 6.0, "damping_ratio": 0.02}
+        for d in "xyz"
+    ]
+    tm = build_model(_with_effects(cgs, [{**e, "mass_kg": 900.0} for e in modes]), rigid)
+    ref = build_model(cgs, clamp)
+    assert sum(tm.model.body_mass) == pytest.approx(sum(ref.model.body_mass), rel=1e-12)
+    ours = list(range(tm.platen_dadr, tm.platen_dadr + 6)) + [
+        tm.model.joint(f"payload_mode_shared3_{d}").dofadr[0] for d in "xyz"
+    ]
+    theirs = list(range(ref.platen_dadr, ref.platen_dadr + 6)) + [
+        ref.model.joint(f"payload_clamp_{d}").dofadr[0] for d in "xyz"
+    ]
+    Mt, Mr = _mass_matrix(tm.model), _mass_matrix(ref.model)
+    assert Mt[np.ix_(ours, ours)] == pytest.approx(Mr[np.ix_(theirs, theirs)], rel=1e-9, abs=1e-6)
+    two = [{**modes[0], "mass_kg": 900.0}, {**modes[1], "mass_kg": 600.0}]
+    tm2 = build_model(_with_effects(cgs, two), rigid)
+    assert sum(tm2.model.body_mass) == pytest.approx(sum(tm.model.body_mass), rel=1e-12)
+    M2 = _mass_matrix(tm2.model)
+    for d, moving in (("x", 900.0), ("y", 600.0)):
+        dofs = [j.dofadr[0] for j in (tm2.model.joint(n) for n in _slides(tm2.model, d))]
+        assert sum(M2[k, k] for k in dofs) == pytest.approx(moving, rel=1e-9)
+    assert payload_taken([("x", 900.0), ("y", 600.0), ("x", 100.0)]) == 1000.0
+
+
+def _slides(m, d: str) -> list[str]:
+    names = [m.joint(j).name for j in range(m.njnt)]
+    return [n for n in names if n.startswith("payload_mode_shared") and n.endswith(f"_{d}")]
 
 
 def test_cg_offset_moves_the_support_loads(cgs):
