@@ -101,6 +101,10 @@ class Law:
     #: (:func:`fixed_law`): dry friction growing with the stroke with no constant part
     fixed: dict = field(default_factory=dict)
     base: object = None
+    #: the law acts at the declared payload's centre of gravity along its place's DOF: its
+    #: basis gets every DOF's motion and returns a wrench in DOF space (a mode of the
+    #: payload's own mass: :func:`_mode_of_payload`)
+    at_payload_cg: bool = False
 
     @property
     def name(self) -> str:
@@ -366,8 +370,25 @@ def _mode_of_payload(u, v, a, s):
     the effective mass already holds, ``m (H - 1) a`` (:func:`_mode` less the place's
     acceleration). Held rigid and given ``m H a`` instead, a 6 Hz block's mode fitted a
     negative mass (-813 kg for 900, refused) on the lab table: the law has to move the mass,
-    not add it."""
-    return _mode(u, v, a, s) - np.asarray(a, float)
+    not add it.
+
+    With every DOF's motion (``s["_along"]``: the mode's DOF; the residual path passes them
+    for a law ``at_payload_cg``), the mode stands at the payload's centre of gravity ``r``:
+    it is shaken by that point's acceleration along its DOF, ``a + alpha x r`` (the
+    platen's rocking drives a mode above it), and its force acts there, with the moment
+    ``r x F``: a wrench in DOF space (n, k)."""
+    if "_along" not in s:
+        return _mode(u, v, a, s) - np.asarray(a, float)
+    dofs, r = list(s["_dofs"]), np.asarray(s["_payload"][1], float)
+    a6 = np.zeros((len(a), 6))
+    for j, d in enumerate(dofs):
+        a6[:, DOFS6.index(d)] = a[:, j]
+    e = np.zeros(3)
+    e[("x", "y", "z").index(s["_along"])] = 1.0
+    drive = a6[:, :3] @ e + np.cross(a6[:, 3:], r) @ e
+    f = _mode(None, None, drive, s) - drive
+    wrench = np.concatenate([e, np.cross(r, e)])
+    return np.outer(f, wrench[[DOFS6.index(d) for d in dofs]])
 
 
 add_law(
@@ -378,6 +399,7 @@ add_law(
         effect="payload_mode",
         options={"from_payload": True},
         when="declared_rigid_specimen",
+        at_payload_cg=True,
         what="a mode of the declared rigid payload: m of its mass on a mode of frequency f, damping z (m (H(s) - 1) a)",
     )
 )

@@ -156,6 +156,14 @@ class MechRun:
             + (" (payload: only with a declared payload)" if kind == "payload" else "")
         )
 
+    def law_motion(self, law, where: str):
+        """:meth:`place_motion` for ``law``; a law that acts at the declared payload's centre
+        of gravity along the place's DOF (``law.at_payload_cg``: a mode of the payload's own
+        mass) gets every DOF's motion and returns its force as a wrench in DOF space."""
+        if getattr(law, "at_payload_cg", False) and self.payload is not None:
+            return self.u, self.v, self.a, np.eye(len(self.dofs))
+        return self.place_motion(where)
+
     def place_load(self, where: str) -> np.ndarray:
         """The recorded force's magnitude (N) of the actuators of an ``actuator:`` (n,) or
         ``class:`` (n, m) place: the load a seal friction grows with."""
@@ -195,7 +203,7 @@ class MechRun:
             key += (self.extra.get("timing", {}).get("force_delay_s"),)
         cache = self.extra.setdefault("basis", BasisCache())
         bs = cache.get(key, lambda: _law_basis(self, law, where, shape))
-        return _to_dofs(bs, self.place_motion(where)[3])
+        return _to_dofs(bs, self.law_motion(law, where)[3])
 
     def columns(self, law, where: str, shape: dict) -> list:
         """One (n, k) generalised force per linear coefficient of ``law`` (unit value) at ``where``."""
@@ -438,13 +446,15 @@ def _law_args(mr, shape) -> dict:
 
 def _raw_columns(mr, law, where, shape) -> list:
     """The law's unfiltered DOF-space force per linear coefficient (list of (n, k))."""
-    return _to_dofs(_law_basis(mr, law, where, shape), mr.place_motion(where)[3])
+    return _to_dofs(_law_basis(mr, law, where, shape), mr.law_motion(law, where)[3])
 
 
 def _law_basis(mr, law, where, shape) -> list:
     """The law's force at its place per linear coefficient (list of (n,) or (n, m))."""
-    u, v, a, _m = mr.place_motion(where)
+    u, v, a, _m = mr.law_motion(law, where)
     s = _law_args(mr, shape)
+    if getattr(law, "at_payload_cg", False) and mr.payload is not None:
+        s["_along"] = where.partition(":")[2]
     if getattr(law, "load", False):
         s["_load"] = mr.place_load(where)
     b = np.asarray(law.basis(u, v, a, s), float)
