@@ -229,6 +229,9 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
     share = coherent_share(mfit, cur.residuals, new.residuals)
     if ok and share < COHERENT_SHARE:
         ok, why = False, f"what it takes out of the residual is {100 * share:.0f} % coherent with the motion"
+    kin = kinematic_check(cand, x, mfit, nf)
+    if ok and kin is not None and not kin["ok"]:
+        ok, why = False, kin["reason"]
     if ok:
         ok, why = accept_numbers(e_ho, e_new, cur.bic, bic_new, flat, f_new, margin)
     value, unc = cand.value(x), _uncertainty(cand, x, s)
@@ -243,10 +246,54 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
         "bic_change": bic_new - cur.bic,
         "flatness": f_new,
         "coherent_share": share,
+        **({"kinematics": {k: v for k, v in kin.items() if k != "reason"}} if kin is not None else {}),
         "accepted": ok,
         "reason": why,
     }
     return {"row": row, "accepted": ok, "fit": new, "mfit": nf, "mho": nh, "e_ho": e_new, "flat": f_new}
+
+
+def kinematic_check(cand: Candidate, x: float, before, after) -> dict | None:
+    """What the displacement says of a timing candidate (:mod:`sim.calibrate.anchor`):
+    the force balance sees only the skew between the force and the acceleration; the
+    displacement tells which of the two is off. The acceleration's delay against the
+    displacement at the current timing (``before``: the runs) and at the candidate's
+    (``after``: the runs re-timed to ``x``). A candidate of the acceleration's timing
+    passes when the displacement corroborates it (:func:`sim.calibrate.anchor.corroborates`);
+    one of the force's delay is refused when the same skew put on the acceleration would
+    be corroborated (the acceleration is late by about what the force would be early).
+    None for a candidate the anchor cannot judge (a run without coherent band)."""
+    import dataclasses as dc
+
+    from sim.calibrate import anchor
+
+    a0 = anchor.measure(before)
+    if cand.where == "channel:table_acceleration":
+        a1 = anchor.measure(after)
+        ok, why = anchor.corroborates(a0, a1)
+    elif cand.where == "channel:actuator_force" and a0.significant:
+        # the force read dx later is the acceleration read dx earlier
+        a1 = dc.replace(a0, delay_s=a0.delay_s + (x - cand.neutral))
+        ok = not anchor.corroborates(a0, a1)[0]
+        why = (
+            ""
+            if ok
+            else f"the displacement puts the acceleration {a0.text()} off its declared chain: the skew is there"
+        )
+    else:
+        return None
+
+    def num(v):
+        return float(v) if math.isfinite(v) else None
+
+    return {
+        "ok": ok,
+        "reason": why,
+        "delay_before_s": num(a0.delay_s),
+        "delay_after_s": num(a1.delay_s),
+        "uncertainty_s": num(anchor.Z95 * a0.sigma_s),
+        "band_hz": list(a0.band_hz),
+    }
 
 
 def coherent_share(mruns, before, after) -> float:
@@ -285,6 +332,36 @@ def _param_check(cand, x, s) -> tuple[bool, str]:
         what = "the declared conditioner" if cand.field == "accel_lowpass_hz" else f"{cand.neutral:g} s"
         return False, f"{cand.param}: its 95 % interval holds {what}"
     return True, ""
+
+
+def refit_accepted(mfit, mho, terms, done: list) -> tuple[list, list]:
+    """The accepted timing parameters (``done``: their ``effects_added`` entries, updated
+    in place) fitted again with ``terms``, one after the other, as the laws' coefficients
+    are refitted with every term added: a force delay accepted before a specimen's second
+    mode was in held part of that mode's phase. Returns the fit and held-out runs re-timed."""
+    for entry in done:
+        cand = next(
+            (c for c in candidates(mfit) if (c.name, c.where) == (entry["name"], entry["where"])),
+            None,
+        )
+        if cand is None:
+            continue
+        x = search(mfit, terms, cand)
+        s = sigma(mfit, terms, cand, x)
+        mfit = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mfit]
+        mho = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mho]
+        entry["parameters"], entry["uncertainty"] = cand.value(x), _uncertainty(cand, x, s)
+    return mfit, mho
+
+
+def settled(before: list, entries: list) -> bool:
+    """Whether every accepted timing parameter moved by less than a tenth of its 95 %
+    interval since ``before`` (their parameters at the last pass)."""
+    for old, e in zip(before, entries):
+        for k, v in e["parameters"].items():
+            if abs(v - old[k]) > 0.1 * e["uncertainty"].get(k, math.inf):
+                return False
+    return True
 
 
 def round_candidates(mfit, mho, cur, e_ho, flat, margin, effects, done) -> list:
@@ -337,10 +414,13 @@ __all__ = [
     "candidates",
     "coherent_share",
     "declared_state",
+    "kinematic_check",
     "evaluate",
     "prefilter_of",
+    "refit_accepted",
     "retime",
     "search",
+    "settled",
     "shift",
     "sigma",
 ]
