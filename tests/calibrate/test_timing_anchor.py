@@ -97,6 +97,11 @@ def test_no_coherent_band_says_so():
     assert not math.isfinite(a.delay_s) and not a.significant
     ok, why = anchor.corroborates(a, a)
     assert not ok and "cannot time" in why
+    # with no band to judge by, the balance alone decides (as before the anchor)
+    from sim.calibrate.timing import Candidate, kinematic_check
+
+    cand = Candidate("sensor_delay", "channel:table_acceleration", "delay_s", "accel_delay_s", -0.05, 0.05, 0.0)
+    assert kinematic_check(cand, 0.001, [r], [r]) is None
 
 
 # ------------------------------------------------------------------ the worked example's records
@@ -177,6 +182,28 @@ def test_accelerometer_lag_is_found_on_the_acceleration_only(lab):
     row = next(c for c in res.candidates if c["accepted"] and c["name"] == "sensor_delay")
     kin = row["kinematics"]
     assert abs(kin["delay_before_s"] - 0.002) < 0.1 * 0.002 and kin["delay_before_s"] > kin["uncertainty_s"], kin
+    assert res.error_after < 0.05 * res.error_before, (res.error_before, res.error_after)
+
+
+def test_pressure_early_and_accelerometer_late_at_once_each_on_its_channel(lab):
+    """Both skews of the real record in issue #23 (the pressure leading, the accelerometer's
+    conditioner lagging): the balance alone would put the whole 6.9 ms skew on one channel.
+    The displacement times the acceleration first (its value, from the displacement, not
+    the balance: +1.994 +/- 0.012 ms measured), then the balance the force (-4.878 +/-
+    0.038 ms measured)."""
+    mod = lab[0]
+    res = _calibrate(_records(lab, "both", pressure_lead_s=mod.PRESSURE_LEAD_S, accel_lag_s=0.002))
+    found = _timing(res)
+    assert sorted(found) == ["channel:actuator_force", "channel:table_acceleration"], found
+    acc, force = found["channel:table_acceleration"], found["channel:actuator_force"]
+    assert acc["name"] == "sensor_delay" and acc.get("timed_by") == "displacement", acc
+    for e, truth in ((acc, 0.002), (force, -mod.PRESSURE_LEAD_S)):
+        d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
+        assert abs(d - truth) <= u and u < 2e-4, (e["where"], d, u)
+    refused = [
+        c for c in res.candidates if c["where"] == "channel:actuator_force" and "its timing first" in c["reason"]
+    ]
+    assert refused  # the force's candidate waited for the acceleration's timing
     assert res.error_after < 0.05 * res.error_before, (res.error_before, res.error_after)
 
 
