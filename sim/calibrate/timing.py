@@ -257,16 +257,18 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
 def placed(mfit, terms, cand: Candidate, x: float) -> tuple[float, float, dict | None]:
     """The candidate's value, its standard deviation and what the displacement says of it
     (:func:`kinematic_check`): the balance's value and interval, or, for an acceleration
-    delay that the displacement does not corroborate while it puts the acceleration
-    measurably off its chain, the displacement's own value and interval (the balance
+    delay the balance finds (its interval leaving out the declared value) and the
+    displacement does not corroborate while it puts the acceleration measurably off its
+    chain, the displacement's own value and interval (the balance
     gave the acceleration a skew that is partly the force's: an accelerometer late and the
     pressure early at once)."""
 
     def check(xx):
-        return kinematic_check(cand, xx, mfit, [retime(mr, cand.state(mr.extra["timing"], xx)) for mr in mfit])
+        return kinematic_check(cand, xx, mfit, lambda: [retime(mr, cand.state(mr.extra["timing"], xx)) for mr in mfit])
 
-    kin = check(x)
-    if kin is not None and not kin["ok"] and kin["significant"] and cand.field == "accel_delay_s":
+    kin, s = check(x), sigma(mfit, terms, cand, x)
+    skew = abs(x - cand.neutral) > Z95 * s  # the balance sees the acceleration skewed
+    if kin is not None and not kin["ok"] and kin["significant"] and skew and cand.field == "accel_delay_s":
         x_kin = cand.neutral + kin["delay_before_s"]
         for _ in range(ANCHOR_PASSES):  # measured again aligned: a record's changing envelope
             k1 = check(x_kin)  # biases a phase read across a lag in proportion to the lag
@@ -275,7 +277,7 @@ def placed(mfit, terms, cand: Candidate, x: float) -> tuple[float, float, dict |
                 break
         kin = {**check(x_kin), "from_displacement": True}
         return x_kin, kin["sigma_s"], kin
-    return x, sigma(mfit, terms, cand, x), kin
+    return x, s, kin
 
 
 def kinematic_check(cand: Candidate, x: float, before, after) -> dict | None:
@@ -283,7 +285,7 @@ def kinematic_check(cand: Candidate, x: float, before, after) -> dict | None:
     the force balance sees only the skew between the force and the acceleration; the
     displacement tells which of the two is off. The acceleration's delay against the
     displacement at the current timing (``before``: the runs) and at the candidate's
-    (``after``: the runs re-timed to ``x``). A candidate of the acceleration's timing
+    (``after()``: the runs re-timed to ``x``, made only for a candidate of the acceleration). A candidate of the acceleration's timing
     passes when the displacement corroborates it (:func:`sim.calibrate.anchor.corroborates`);
     one of the force's delay is refused while the displacement puts the acceleration off
     its chain on the side of the same skew (the acceleration's timing is settled first).
@@ -297,7 +299,7 @@ def kinematic_check(cand: Candidate, x: float, before, after) -> dict | None:
     if not math.isfinite(a0.delay_s):  # no band where both hold the motion: the balance alone decides
         return None
     if cand.where == "channel:table_acceleration":
-        a1 = anchor.measure(after)
+        a1 = anchor.measure(after())
         ok, why = anchor.corroborates(a0, a1)
     elif cand.where == "channel:actuator_force":
         mirror = cand.neutral - x  # the force read dx later is the acceleration read dx earlier

@@ -101,7 +101,7 @@ def test_no_coherent_band_says_so():
     from sim.calibrate.timing import Candidate, kinematic_check
 
     cand = Candidate("sensor_delay", "channel:table_acceleration", "delay_s", "accel_delay_s", -0.05, 0.05, 0.0)
-    assert kinematic_check(cand, 0.001, [r], [r]) is None
+    assert kinematic_check(cand, 0.001, [r], lambda: [r]) is None
 
 
 # ------------------------------------------------------------------ the worked example's records
