@@ -25,6 +25,14 @@ its 95 % interval comes from the Jacobian of the residual in the parameter and t
 coefficients together with the residual's autocorrelation (:func:`sim.calibrate.hac.hac_sigma`).
 It is judged by the rules every candidate meets (:func:`sim.calibrate.acceptance.accept_numbers`
 plus: off its bounds, and the declared value outside its interval).
+
+The balance sees only the skew between the force and the acceleration; which of the two
+is late is told by the displacement (:mod:`sim.calibrate.anchor`, :func:`kinematic_check`):
+a candidate of the acceleration's timing must be corroborated by it, a force delay waits
+while it puts the acceleration off its chain on the same side, and an acceleration delay
+the balance finds but the displacement puts elsewhere is judged at the displacement's
+value (:func:`placed`). Accepted parameters are fitted again with every later term
+(:func:`refit_accepted`).
 """
 
 from __future__ import annotations
@@ -285,8 +293,9 @@ def kinematic_check(cand: Candidate, x: float, before, after) -> dict | None:
     the force balance sees only the skew between the force and the acceleration; the
     displacement tells which of the two is off. The acceleration's delay against the
     displacement at the current timing (``before``: the runs) and at the candidate's
-    (``after()``: the runs re-timed to ``x``, made only for a candidate of the acceleration). A candidate of the acceleration's timing
-    passes when the displacement corroborates it (:func:`sim.calibrate.anchor.corroborates`);
+    (``after()``: the runs re-timed to ``x``, made only for a candidate of the
+    acceleration). A candidate of the acceleration's timing passes when the displacement
+    corroborates it (:func:`sim.calibrate.anchor.corroborates`);
     one of the force's delay is refused while the displacement puts the acceleration off
     its chain on the side of the same skew (the acceleration's timing is settled first).
     None for a candidate the anchor cannot judge: no coherent band (a motion too small
