@@ -115,10 +115,19 @@ def simulate(folder: Path, name: str, duration_s: float | None = None):
     return plan_scenario(sc, motions=motions, duration_s=dur, start_s=0.0).run().run
 
 
-def lab_record(run, *, bias: float = 0.01, seed: int = SEED, pressure_lead_s: float = PRESSURE_LEAD_S):
+def lab_record(
+    run,
+    *,
+    bias: float = 0.01,
+    seed: int = SEED,
+    pressure_lead_s: float = PRESSURE_LEAD_S,
+    accel_lag_s: float = 0.0,
+):
     """What the lab's recorder holds: a uni-axial RunFile at 204.8 Hz (DOF x, actuator A,
     floor accelerometers 1F/2F, force from the differential pressure), the drive biased
-    by ``-bias``, the platen accelerometer through its conditioner, the pressure early."""
+    by ``-bias``, the platen accelerometer through its conditioner, the pressure early;
+    ``accel_lag_s``: the platen accelerometer's sample taken that much before its time
+    stamp (an undeclared lag in its chain; 0 in the example)."""
     import mjcf
     from sim.runs.runfile import FORMAT, RunFile
     from sim.runs.specimen import specimen_accelerations
@@ -161,7 +170,8 @@ def lab_record(run, *, bias: float = 0.01, seed: int = SEED, pressure_lead_s: fl
         valve_command=interpolate(t, run.valve_command, tr) - bias,
         reference=interpolate(t, run.reference[:, [x]], tr),
         table_displacement=interpolate(t, run.table_displacement[:, [x]], tr),
-        table_acceleration=interpolate(t, acc_t, tr) + ACC_NOISE_M_S2 * rng.standard_normal((n, 1)),
+        table_acceleration=interpolate(t, acc_t, np.maximum(tr - accel_lag_s, t[0]))
+        + ACC_NOISE_M_S2 * rng.standard_normal((n, 1)),
         specimen_acceleration=interpolate(t, floors, tr) + ACC_NOISE_M_S2 * rng.standard_normal((n, 2)),
         actuator_force=interpolate(t, run.actuator_force, np.minimum(force_at, t[-1])),
     )

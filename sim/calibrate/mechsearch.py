@@ -23,6 +23,11 @@ import numpy as np
 
 from sim.calibrate.residuals import CalibrationError
 
+#: passes at most of refitting the accepted sensor timing and the terms in turn after a
+#: term is added (a mode's frequency and the force's delay move together; 2-3 settle them
+#: on the worked example's records)
+TIMING_PASSES = 4
+
 
 def accel_lowpass(desc, accel_lowpass_hz, rate_hz: float):
     """The accelerometer conditioner the records went through: the table's (``"table"``)
@@ -248,6 +253,12 @@ class MechStage:
             timed["row"]["accepted"] = False
             timed["row"]["reason"] = "passed, not added: a candidate that explains more was added"
         self.cur = fit_terms(st.mfit, win[0].terms)
+        for _ in range(TIMING_PASSES if st.timed_added else 0):  # the timing found so far, with the new term in
+            before = [dict(e["parameters"]) for e in st.timed_added]
+            st.mfit, st.mho = timing.refit_accepted(st.mfit, st.mho, self.cur.terms, st.timed_added)
+            self.cur = fit_terms(st.mfit, self.cur.terms)
+            if timing.settled(before, st.timed_added):
+                break
         st.e_ho, st.flat = nrmse_runs(st.mho, predict(st.mho, self.cur)), flatness(st.mfit, self.cur.residuals)
 
     def revisit(self, rnd) -> None:

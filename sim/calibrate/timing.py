@@ -25,6 +25,14 @@ its 95 % interval comes from the Jacobian of the residual in the parameter and t
 coefficients together with the residual's autocorrelation (:func:`sim.calibrate.hac.hac_sigma`).
 It is judged by the rules every candidate meets (:func:`sim.calibrate.acceptance.accept_numbers`
 plus: off its bounds, and the declared value outside its interval).
+
+The balance sees only the skew between the force and the acceleration; which of the two
+is late is told by the displacement (:mod:`sim.calibrate.anchor`, :func:`kinematic_check`):
+a candidate of the acceleration's timing must be corroborated by it, a force delay waits
+while it puts the acceleration off its chain on the same side, and an acceleration delay
+the balance finds but the displacement puts elsewhere is judged at the displacement's
+value (:func:`placed`). Accepted parameters are fitted again with every later term
+(:func:`refit_accepted`).
 """
 
 from __future__ import annotations
@@ -58,6 +66,9 @@ Z95 = 1.96
 #: "explains" a mains line picked up on the load cell (by filtering the force it is
 #: applied to) takes out something the motion did not make.
 COHERENT_SHARE = 0.5
+#: times at most the displacement's reading of the acceleration's delay is taken again with
+#: the acceleration aligned by the last (assumed: 3; the second moves it by < 1 % of the first)
+ANCHOR_PASSES = 3
 #: the effect types of these candidates (``--effects`` names them)
 TIMING_EFFECTS = ("sensor_delay", "sensor_lowpass")
 
@@ -217,8 +228,7 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
     from sim.calibrate.residuals import nrmse_runs
     from sim.calibrate.trace import fit_terms, flatness, predict
 
-    x = search(mfit, cur.terms, cand)
-    s = sigma(mfit, cur.terms, cand, x)
+    x, s, kin = placed(mfit, cur.terms, cand, search(mfit, cur.terms, cand))
     nf = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mfit]
     nh = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mho]
     new = fit_terms(nf, cur.terms, refine="none")
@@ -229,6 +239,8 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
     share = coherent_share(mfit, cur.residuals, new.residuals)
     if ok and share < COHERENT_SHARE:
         ok, why = False, f"what it takes out of the residual is {100 * share:.0f} % coherent with the motion"
+    if ok and kin is not None and not kin["ok"]:
+        ok, why = False, kin["reason"]
     if ok:
         ok, why = accept_numbers(e_ho, e_new, cur.bic, bic_new, flat, f_new, margin)
     value, unc = cand.value(x), _uncertainty(cand, x, s)
@@ -243,10 +255,86 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
         "bic_change": bic_new - cur.bic,
         "flatness": f_new,
         "coherent_share": share,
+        **({"kinematics": {k: v for k, v in kin.items() if k not in ("reason", "sigma_s")}} if kin else {}),
         "accepted": ok,
         "reason": why,
     }
     return {"row": row, "accepted": ok, "fit": new, "mfit": nf, "mho": nh, "e_ho": e_new, "flat": f_new}
+
+
+def placed(mfit, terms, cand: Candidate, x: float) -> tuple[float, float, dict | None]:
+    """The candidate's value, its standard deviation and what the displacement says of it
+    (:func:`kinematic_check`): the balance's value and interval, or, for an acceleration
+    delay the balance finds (its interval leaving out the declared value) and the
+    displacement does not corroborate while it puts the acceleration measurably off its
+    chain, the displacement's own value and interval (the balance
+    gave the acceleration a skew that is partly the force's: an accelerometer late and the
+    pressure early at once)."""
+
+    def check(xx):
+        return kinematic_check(cand, xx, mfit, lambda: [retime(mr, cand.state(mr.extra["timing"], xx)) for mr in mfit])
+
+    kin, s = check(x), sigma(mfit, terms, cand, x)
+    skew = abs(x - cand.neutral) > Z95 * s  # the balance sees the acceleration skewed
+    if kin is not None and not kin["ok"] and kin["significant"] and skew and cand.field == "accel_delay_s":
+        x_kin = cand.neutral + kin["delay_before_s"]
+        for _ in range(ANCHOR_PASSES):  # measured again aligned: a record's changing envelope
+            k1 = check(x_kin)  # biases a phase read across a lag in proportion to the lag
+            x_kin += k1["delay_after_s"] or 0.0
+            if abs(k1["delay_after_s"] or 0.0) < 0.1 * k1["sigma_s"]:
+                break
+        kin = {**check(x_kin), "from_displacement": True}
+        return x_kin, kin["sigma_s"], kin
+    return x, s, kin
+
+
+def kinematic_check(cand: Candidate, x: float, before, after) -> dict | None:
+    """What the displacement says of a timing candidate (:mod:`sim.calibrate.anchor`):
+    the force balance sees only the skew between the force and the acceleration; the
+    displacement tells which of the two is off. The acceleration's delay against the
+    displacement at the current timing (``before``: the runs) and at the candidate's
+    (``after()``: the runs re-timed to ``x``, made only for a candidate of the
+    acceleration). A candidate of the acceleration's timing passes when the displacement
+    corroborates it (:func:`sim.calibrate.anchor.corroborates`);
+    one of the force's delay is refused while the displacement puts the acceleration off
+    its chain on the side of the same skew (the acceleration's timing is settled first).
+    None for a candidate the anchor cannot judge: no coherent band (a motion too small
+    for the displacement sensor), where the balance alone decides as before."""
+    import dataclasses as dc
+
+    from sim.calibrate import anchor
+
+    a0 = anchor.measure(before)
+    if not math.isfinite(a0.delay_s):  # no band where both hold the motion: the balance alone decides
+        return None
+    if cand.where == "channel:table_acceleration":
+        a1 = anchor.measure(after())
+        ok, why = anchor.corroborates(a0, a1)
+    elif cand.where == "channel:actuator_force":
+        mirror = cand.neutral - x  # the force read dx later is the acceleration read dx earlier
+        a1 = dc.replace(a0, delay_s=a0.delay_s - mirror)
+        ok = not (a0.significant and mirror * a0.delay_s > 0)
+        why = (
+            ""
+            if ok
+            else f"the displacement puts the acceleration {a0.text()} off its chain, on this skew's side: its timing first"
+        )
+    else:
+        return None
+
+    def num(v):
+        return float(v) if math.isfinite(v) else None
+
+    return {
+        "ok": ok,
+        "reason": why,
+        "significant": a0.significant,
+        "delay_before_s": num(a0.delay_s),
+        "delay_after_s": num(a1.delay_s),
+        "uncertainty_s": num(anchor.Z95 * a0.sigma_s),
+        "sigma_s": a0.sigma_s,
+        "band_hz": list(a0.band_hz),
+    }
 
 
 def coherent_share(mruns, before, after) -> float:
@@ -285,6 +373,36 @@ def _param_check(cand, x, s) -> tuple[bool, str]:
         what = "the declared conditioner" if cand.field == "accel_lowpass_hz" else f"{cand.neutral:g} s"
         return False, f"{cand.param}: its 95 % interval holds {what}"
     return True, ""
+
+
+def refit_accepted(mfit, mho, terms, done: list) -> tuple[list, list]:
+    """The accepted timing parameters (``done``: their ``effects_added`` entries, updated
+    in place) fitted again with ``terms``, one after the other, as the laws' coefficients
+    are refitted with every term added: a force delay accepted before a specimen's second
+    mode was in held part of that mode's phase. Returns the fit and held-out runs re-timed."""
+    for entry in done:
+        cand = next(
+            (c for c in candidates(mfit) if (c.name, c.where) == (entry["name"], entry["where"])),
+            None,
+        )
+        if cand is None or entry.get("timed_by") == "displacement":  # kinematics: the terms do not move it
+            continue
+        x = search(mfit, terms, cand)
+        s = sigma(mfit, terms, cand, x)
+        mfit = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mfit]
+        mho = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mho]
+        entry["parameters"], entry["uncertainty"] = cand.value(x), _uncertainty(cand, x, s)
+    return mfit, mho
+
+
+def settled(before: list, entries: list) -> bool:
+    """Whether every accepted timing parameter moved by less than a tenth of its 95 %
+    interval since ``before`` (their parameters at the last pass)."""
+    for old, e in zip(before, entries):
+        for k, v in e["parameters"].items():
+            if abs(v - old[k]) > 0.1 * e["uncertainty"].get(k, math.inf):
+                return False
+    return True
 
 
 def round_candidates(mfit, mho, cur, e_ho, flat, margin, effects, done) -> list:
@@ -327,6 +445,7 @@ def added_entry(row: dict) -> dict:
         "parameters": row["parameters"],
         "uncertainty": row["uncertainty"],
         "units": {k: units[k] for k in row["parameters"]},
+        **({"timed_by": "displacement"} if (row.get("kinematics") or {}).get("from_displacement") else {}),
     }
 
 
@@ -337,10 +456,14 @@ __all__ = [
     "candidates",
     "coherent_share",
     "declared_state",
+    "kinematic_check",
+    "placed",
     "evaluate",
     "prefilter_of",
+    "refit_accepted",
     "retime",
     "search",
+    "settled",
     "shift",
     "sigma",
 ]

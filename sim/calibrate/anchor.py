@@ -1,0 +1,134 @@
+"""The acceleration's timing against the displacement: an absolute anchor for the
+mechanical path's sensor timing.
+
+The force balance compares the recorded force with the force the model needs for the
+recorded motion, so it sees a skew between the force and the acceleration, not which of
+the two is off: a pressure recorded one sample early and an accelerometer one sample late
+leave the same residual. Kinematics settles it, whatever the table's dynamics (friction
+as large as inertia included): the acceleration is the second derivative of the
+displacement. The recorded displacement, put through the acceleration's declared chain
+(its conditioner and delay, :meth:`sim.calibrate.residuals.MechRun.filt`, as every other
+term of the balance), and the recorded acceleration have, where both are well above their
+noise, the transfer function -(2 pi f)^2 exp(-i 2 pi f tau): ``tau`` is how late the
+acceleration is beyond its declared chain, against the displacement sensor's clock.
+
+It is read from the cross-spectrum (Welch segments, each detrended: a displacement's
+offset and drift and the quantised LVDT's steps stay out of the band), so the
+displacement is never differentiated sample by sample; its phase is fitted by a line
+through the origin over the bins whose coherence says both signals hold the motion
+(weights from the phase variance (1 - g^2) / (2 n g^2) of n segments at coherence g^2:
+J. S. Bendat and A. G. Piersol, "Random Data: Analysis and Measurement Procedures", 4th
+ed. 2010, ch. 9). A causal conditioner left out of the chain shows as a positive slope;
+nothing here filters acausally.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Welch segment length, s (assumed: 1.25 s, 256 samples at 204.8 Hz: 0.8 Hz bins, about
+#: 14 segments on a 18 s record; the phase of a delay of a few ms is linear in any bin)
+SEGMENT_S = 1.25
+#: the coherence a bin needs (assumed: 0.9, both signals 10 dB over what they do not
+#: share: noise, the displacement's quantisation, the lead-in's nothing)
+MIN_COHERENCE = 0.9
+#: the band's top as a fraction of the sample rate (assumed: 0.4, below the recorder's
+#: anti-alias roll-off, where the record's own samples still hold the signal)
+TOP_FRACTION = 0.4
+#: bins a line needs before its slope counts (assumed: 5)
+MIN_BINS = 5
+Z95 = 1.96
+
+
+@dataclass(frozen=True)
+class Anchor:
+    """How late the acceleration is beyond ``state``'s chain, against the displacement:
+    ``delay_s`` +/- ``sigma_s`` (one standard deviation), from ``n_bins`` bins between
+    ``band_hz``; ``delay_s`` is NaN when no bin is coherent enough."""
+
+    delay_s: float
+    sigma_s: float
+    n_bins: int
+    band_hz: tuple
+
+    @property
+    def significant(self) -> bool:
+        """The 95 % interval leaves out 0 (the acceleration is not where its chain says)."""
+        return math.isfinite(self.delay_s) and abs(self.delay_s) > Z95 * self.sigma_s
+
+    def text(self) -> str:
+        if not math.isfinite(self.delay_s):
+            return "no band where the displacement and the acceleration are both above their noise"
+        lo, hi = self.band_hz
+        return (
+            f"{1e3 * self.delay_s:+.3f} +/- {1e3 * Z95 * self.sigma_s:.3f} ms "
+            f"({self.n_bins} bins, {lo:.1f}-{hi:.1f} Hz)"
+        )
+
+
+def phase_bins(mr, j: int) -> tuple:
+    """``(omega, phase, variance)`` of DOF ``j`` of a mechanical run: the coherent bins of
+    the recorded acceleration against the displacement through the run's chain (phase of
+    the transfer function over -(2 pi f)^2, which is -omega tau for a delay tau)."""
+    import scipy.signal as sig
+
+    fs = 1.0 / mr.dt
+    rows = np.flatnonzero(mr.rows)
+    if len(rows) < 16:
+        return (np.zeros(0),) * 3
+    span = slice(rows[0], rows[-1] + 1)  # the test: a quiet lead-in holds nothing coherent
+    u = mr.filt(mr.u)[span, j]
+    a = mr.a[span, j]
+    nper = min(len(u), max(32, int(round(SEGMENT_S * fs))))
+    f, Pua = sig.csd(u, a, fs=fs, nperseg=nper, detrend="linear")
+    _, Puu = sig.welch(u, fs=fs, nperseg=nper, detrend="linear")
+    _, Paa = sig.welch(a, fs=fs, nperseg=nper, detrend="linear")
+    den = Puu * Paa
+    coh = np.divide(np.abs(Pua) ** 2, den, out=np.zeros_like(Puu), where=den > 0)
+    n_seg = max(1.0, len(u) / nper)  # 50 % overlapped segments count as this many independent ones
+    keep = (f > 0) & (f <= TOP_FRACTION * fs) & (coh >= MIN_COHERENCE)
+    g2 = np.clip(coh[keep], MIN_COHERENCE, 1.0 - 1e-9)
+    var = (1.0 - g2) / (2.0 * n_seg * g2)
+    return 2 * np.pi * f[keep], np.angle(-Pua[keep]), var
+
+
+def measure(mruns) -> Anchor:
+    """The acceleration's delay beyond the runs' chain, pooled over runs and DOFs: the
+    weighted least-squares slope of phase = -omega tau, its standard deviation from the
+    weights, scaled up by the scatter about the line when that is larger (a conditioner of
+    another shape bends the phase: the line then fits it less well and says so)."""
+    bins = [phase_bins(mr, j) for mr in mruns for j in range(mr.u.shape[1])]
+    w = np.concatenate([b[0] for b in bins]) if bins else np.zeros(0)
+    if len(w) < MIN_BINS:
+        return Anchor(math.nan, math.inf, len(w), (0.0, 0.0))
+    ph = np.concatenate([b[1] for b in bins])
+    wt = 1.0 / np.concatenate([b[2] for b in bins])
+    sw2 = float(np.sum(wt * w**2))
+    tau = -float(np.sum(wt * w * ph)) / sw2
+    chi2 = float(np.sum(wt * (ph + w * tau) ** 2)) / max(len(w) - 1, 1)
+    sigma = math.sqrt(max(chi2, 1.0) / sw2)
+    f = w / (2 * np.pi)
+    return Anchor(tau, sigma, len(w), (float(f.min()), float(f.max())))
+
+
+def corroborates(before: Anchor, after: Anchor) -> tuple[bool, str]:
+    """Whether a timing candidate of the acceleration is what the displacement says: the
+    acceleration measurably off its declared chain (``before``: at the declared timing,
+    its interval leaving out 0), and the candidate bringing it nearer the displacement
+    (``after``: at the candidate's timing). ``(ok, reason when not)``."""
+    if not math.isfinite(before.delay_s):
+        return False, f"the displacement cannot time the acceleration: {before.text()}"
+    if not before.significant:
+        return False, f"the displacement puts the acceleration on its declared chain ({before.text()})"
+    if not abs(after.delay_s) < abs(before.delay_s):
+        return False, (
+            f"the displacement puts the acceleration {before.text()} off its declared chain; "
+            f"with this it is {1e3 * after.delay_s:+.3f} ms off: the skew is on another channel"
+        )
+    return True, ""
+
+
+__all__ = ["Anchor", "corroborates", "measure", "phase_bins"]
