@@ -100,14 +100,20 @@ def full_mass_matrix(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
     return M
 
 
+def at_home(model: mujoco.MjModel) -> mujoco.MjData:
+    """Data at the model's ``home`` keyframe (its reset state without one), forwarded."""
+    data = mujoco.MjData(model)
+    key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home")
+    if key >= 0:
+        mujoco.mj_resetDataKeyframe(model, data, key)
+    mujoco.mj_forward(model, data)
+    return data
+
+
 def effective_mass_matrix(model: mujoco.MjModel, data: mujoco.MjData | None = None) -> np.ndarray:
     """Effective mass of the platen DOF about the reference point (kg, kg m^2): 6x6 for a
     free platen, n x n for a platen on bearings with n translational DOF."""
-    if data is None:
-        data = mujoco.MjData(model)
-        key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home")
-        if key >= 0:
-            mujoco.mj_resetDataKeyframe(model, data, key)
+    data = at_home(model) if data is None else data
     mujoco.mj_forward(model, data)
     M = full_mass_matrix(model, data)
     T = projection(model, data)

@@ -114,16 +114,11 @@ def _passive_jacobians(model, data, dofs: list[int]) -> tuple[np.ndarray, np.nda
 def flexible_parts(tm, k_of) -> FlexibleParts | None:
     """The modes of ``tm``'s parts on their own joints, coupled to the platen DOFs
     ``k_of`` (indices into the model's platen DOFs); None when it has none."""
-    import mujoco
 
     from mjcf import analysis
 
     m = tm.model
-    d = mujoco.MjData(m)
-    key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home")
-    if key >= 0:
-        mujoco.mj_resetDataKeyframe(m, d, key)
-    mujoco.mj_forward(m, d)
+    d = analysis.at_home(m)
     T = analysis.projection(m, d)[:, k_of]
     q = internal_dofs(m, T)
     if not q:

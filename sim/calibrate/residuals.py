@@ -559,11 +559,7 @@ def joint_terms(tm, k_of) -> JointTerms:
     from mjcf import analysis
 
     m = tm.model
-    d = mujoco.MjData(m)
-    key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home")
-    if key >= 0:
-        mujoco.mj_resetDataKeyframe(m, d, key)
-    mujoco.mj_forward(m, d)
+    d = analysis.at_home(m)
     T = analysis.projection(m, d)[:, k_of]
     K = np.zeros(m.nv)
     for j in range(m.njnt):
