@@ -273,6 +273,7 @@ class PathState:
     N: int = 0
     flat: float = math.nan
     declared: tuple = ()  # (held-out channels, held-out NRMSE) of the declared model
+    undeclared: bool = False  # a specimen stands on the table undeclared (--payload none)
     timing: dict | None = None  # filled with tm and the replays' routes by outputs()
     #: the accepted effects are revisited after every acceptance (from the second on)
     revisit_every_round = True
@@ -302,7 +303,9 @@ class PathState:
         parameter, :func:`sim.calibrate.sensitivity.screen`), best linearised score first."""
         from sim.calibrate.sensitivity import candidates, screen
 
-        cands = candidates(self.desc, self.payload, self.wscr, self.accepted, self.mot, self.effects)
+        cands = candidates(
+            self.desc, self.payload, self.wscr, self.accepted, self.mot, self.effects, undeclared=self.undeclared
+        )
         cands = [c for c in cands if c.key not in self.dropped]
         t = time.perf_counter()
         sc = screen(
@@ -366,14 +369,27 @@ class PathState:
 
 
 def calibrate_path(
-    runs, ho_given, desc, payload, path, *, effects=None, margin, max_rounds, workers=None, say=None, timing=None
+    runs,
+    ho_given,
+    desc,
+    payload,
+    path,
+    *,
+    effects=None,
+    margin,
+    max_rounds,
+    workers=None,
+    say=None,
+    timing=None,
+    undeclared=False,
 ):
     """The search on ``path`` (:func:`sim.calibrate.engine.search`); returns the fields of a
-    :class:`sim.calibrate.search.CalibrationResult` as a dict."""
+    :class:`sim.calibrate.search.CalibrationResult` as a dict. ``undeclared``: a specimen
+    stands on the table undeclared (``--payload none``): its modes are candidates."""
     from sim.calibrate.engine import search
 
     st = _start(runs, ho_given, desc, payload, path, effects, margin, workers, say or (lambda *_: None))
-    st.declared, st.timing = (st.models["ho"], st.e_ho), timing
+    st.declared, st.timing, st.undeclared = (st.models["ho"], st.e_ho), timing, undeclared
     return search(st, max_rounds)
 
 

@@ -149,7 +149,7 @@ def calibrate(
             kw = {"payload": payload, "accel_lowpass_hz": accel_lowpass_hz}
             res = mechanical_stage(runs, ho_given, d, pl, effects=eff, margin=margin, say=say, t0=t_stage, **kw)
         else:
-            res = _calibrate_path(runs, ho_given, d, pl, p, eff, margin, workers, say, t_stage)
+            res = _calibrate_path(runs, ho_given, d, pl, p, eff, margin, workers, say, t_stage, payload == "none")
         return _with_baseline(res, say)
 
     kw = {"effects": effects, "search_one": search_one, "say": say, "workers": workers}
@@ -198,8 +198,9 @@ def _with_baseline(res: CalibrationResult, say) -> CalibrationResult:
     return res
 
 
-def _calibrate_path(runs, ho_given, desc, pl, path, effects, margin, workers, say, t0) -> CalibrationResult:
-    """The replay / closed-loop search (:mod:`sim.calibrate.pathsearch`) as a result."""
+def _calibrate_path(runs, ho_given, desc, pl, path, effects, margin, workers, say, t0, undeclared) -> CalibrationResult:
+    """The replay / closed-loop search (:mod:`sim.calibrate.pathsearch`) as a result;
+    ``undeclared``: ``--payload none`` (a specimen's modes are candidates there too)."""
     from sim.calibrate.pathsearch import calibrate_path
 
     t1 = time.perf_counter()
@@ -216,6 +217,7 @@ def _calibrate_path(runs, ho_given, desc, pl, path, effects, margin, workers, sa
         workers=workers,
         say=say,
         timing=timing,
+        undeclared=undeclared,
     )
     t2 = time.perf_counter()
     timing.update({"read_s": t1 - t0, "search_s": t2 - t1, "total_s": t2 - t0})

@@ -342,8 +342,8 @@ def test_a_wrong_effect_accepted_first_is_dropped(floor, tmp_path, monkeypatch):
 
     stock = SE.candidates
 
-    def sensors_first(desc, payload, prs, accepted, mot, effects=None):
-        out = stock(desc, payload, prs, accepted, mot, effects)
+    def sensors_first(desc, payload, prs, accepted, mot, effects=None, **kw):
+        out = stock(desc, payload, prs, accepted, mot, effects, **kw)
         return [c for c in out if c.sensor] if not accepted else out
 
     monkeypatch.setattr(SE, "candidates", sensors_first)

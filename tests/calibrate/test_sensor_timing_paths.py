@@ -18,6 +18,7 @@ from __future__ import annotations
 import copy
 import types
 
+import numpy as np
 import pytest
 
 from sim.calibrate import search as S
@@ -96,7 +97,12 @@ def test_delay_candidate_takes_either_sign():
     """The candidate's range on these paths: MAX_ADVANCE_SAMPLES samples early to MAX_DELAY_S late."""
     from sim.calibrate import sensitivity as SE
 
-    pr = types.SimpleNamespace(dt=1.0 / FS, columns={"actuator_force": [0]}, scale={"actuator_force": [1.0]})
+    pr = types.SimpleNamespace(
+        dt=1.0 / FS,
+        columns={"actuator_force": [0]},
+        scale={"actuator_force": [1.0]},
+        recorded={"actuator_force": np.zeros((4, 1))},
+    )
     (c,) = [
         c
         for c in SE.candidates(_lab(), None, [pr], [], {}, effects=["sensor_delay"])
