@@ -68,15 +68,21 @@ def test_nees_ucsd_friction_and_power_damping_found(ucsd_runs, tmp_path):
         ("coulomb_friction", "dof:x"),
         ("power_damping", "dof:x"),
     }
-    fr = _effect(res, "coulomb_friction")["parameters"]
-    pd = _effect(res, "power_damping")["parameters"]
-    assert fr["force_n"] == pytest.approx(F_MU, rel=0.10) and fr["force_n"] == pytest.approx(26.5e3, rel=0.10)
-    assert pd["coefficient"] == pytest.approx(C_E, rel=0.10)
-    assert pd["exponent"] == pytest.approx(ALPHA, abs=0.05)
-    assert res.error_after <= 0.2 * res.error_before, (res.error_before, res.error_after)
-    for e in res.effects_added:  # finite, non-trivial 95 % intervals
+    fr, ufr = _effect(res, "coulomb_friction")["parameters"], _effect(res, "coulomb_friction")["uncertainty"]
+    pd, upd = _effect(res, "power_damping")["parameters"], _effect(res, "power_damping")["uncertainty"]
+    # measured: friction 26.89 +/- 0.58 kN (truth 26.65 kN, 0.9 % high, inside its interval)
+    assert fr["force_n"] == pytest.approx(F_MU, rel=0.02) and abs(fr["force_n"] - F_MU) <= ufr["force_n"]
+    # measured: exponent 0.5033 +/- 0.016 (0.5, inside its interval)
+    assert pd["exponent"] == pytest.approx(ALPHA, abs=0.01) and abs(pd["exponent"] - ALPHA) <= upd["exponent"]
+    # measured: coefficient 45.26e3 +/- 0.51e3 (45.9e3): 1.4 % low, OUTSIDE its interval by
+    # 1.27 x its half width (a bias the residual's colour does not show; docs/calibration-validation.md)
+    assert pd["coefficient"] == pytest.approx(C_E, rel=0.03)
+    # measured: held out 57.7 % -> 2.58 %, the clean runs' floor 2.58 %
+    assert res.error_after < 0.1 * res.error_before, (res.error_before, res.error_after)
+    assert res.error_after <= 1.1 * _clean_floor(ucsd_runs), (res.error_after, _clean_floor(ucsd_runs))
+    for e in res.effects_added:  # finite, non-trivial 95 % intervals: 1.1-3.2 % of the value measured
         for k, v in e["parameters"].items():
-            assert 0 < e["uncertainty"][k] < 0.1 * abs(v)
+            assert 0 < e["uncertainty"][k] < 0.05 * abs(v)
     assert res.unexplained is None
 
 
@@ -84,8 +90,11 @@ def test_missing_hold_down_spring_found(ucsd_runs, tmp_path):
     res = S.calibrate(ucsd_runs, table=declared(tmp_path, ("platen_spring",)), path="mechanical")
     (e,) = res.effects_added
     assert (e["name"], e["where"]) == ("spring", "dof:x")
-    assert e["parameters"]["stiffness_n_m"] == pytest.approx(K_E, rel=0.10)
-    assert res.error_after <= 0.2 * res.error_before
+    k, u = e["parameters"]["stiffness_n_m"], e["uncertainty"]["stiffness_n_m"]
+    # measured: 1.263255e6 +/- 967 N/m (1.263e6, inside its interval); held out 126 % -> 2.58 %
+    assert k == pytest.approx(K_E, rel=0.002) and abs(k - K_E) <= u and 0 < u < 0.005 * k
+    assert res.error_after < 0.05 * res.error_before, (res.error_before, res.error_after)
+    assert res.error_after <= 1.1 * _clean_floor(ucsd_runs), (res.error_after, _clean_floor(ucsd_runs))
 
 
 def test_missing_mass_found(ucsd_runs, tmp_path):
@@ -97,19 +106,24 @@ def test_missing_mass_found(ucsd_runs, tmp_path):
     res = S.calibrate(ucsd_runs, table=declared(tmp_path, edit=lighter), path="mechanical")
     (e,) = res.effects_added
     assert (e["name"], e["where"]) == ("added_mass", "dof:x")
-    assert e["parameters"]["mass_kg"] == pytest.approx(10000.0, rel=0.10)
-    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * _clean_floor(ucsd_runs)
+    m, u = e["parameters"]["mass_kg"], e["uncertainty"]["mass_kg"]
+    # measured: 9986 +/- 77 kg (10 t, inside its interval); held out 6.54 % -> 2.58 %, the clean floor
+    assert m == pytest.approx(10000.0, rel=0.005) and abs(m - 10000.0) <= u and 0 < u < 0.02 * m
+    assert res.error_after < res.error_before, (res.error_before, res.error_after)
+    assert res.error_after <= 1.1 * _clean_floor(ucsd_runs), (res.error_after, _clean_floor(ucsd_runs))
 
 
 #: effects planted in the full ucsd model (absent from ucsd.toml), calibrated against ucsd.toml:
-#: case -> (entries, the parameters checked within 10 %, the --payload given). Values
+#: case -> (entries, {parameter checked: its relative tolerance, about 2-3 x the error
+#: measured}, the --payload given). Values
 #: assumed, of the order of the table's own terms (F_mu 26.7 kN, C_e 45.9 kN (s/m)^0.5):
 #: a linear damper (issue #13: `identify` folded one into the Coulomb and power-law terms),
 #: friction growing with the stroke, a specimen's mode. (Friction growing with an
 #: actuator's force is not tried here: these runs record the total force, not each
 #: actuator's; test_load_law_needs_each_actuators_force)
 UCSD_PLANTED = {
-    "viscous": ([{"type": "viscous_damping", "where": "dof:x", "damping_n_s_m": 40e3}], ("damping_n_s_m",), None),
+    # measured 39.30 +/- 0.41 kN s/m: 1.75 % low, OUTSIDE its interval (UCSD_OUTSIDE)
+    "viscous": ([{"type": "viscous_damping", "where": "dof:x", "damping_n_s_m": 40e3}], {"damping_n_s_m": 0.04}, None),
     "coulomb_grows_displacement": (
         [
             {
@@ -120,21 +134,27 @@ UCSD_PLANTED = {
                 "coefficient": 5e4,
             }
         ],
-        ("force_n", "coefficient"),
+        # measured: 3006 +/- 124 N, 49.33e3 +/- 0.78e3 N/m (both inside their intervals)
+        {"force_n": 0.01, "coefficient": 0.03},
         None,
     ),
     "payload_mode": (
         [{"type": "payload_mode", "where": "dof:x", "mass_kg": 10e3, "frequency_hz": 6.0, "damping_ratio": 0.05}],
-        ("mass_kg", "frequency_hz", "damping_ratio"),
+        # measured: 10043 +/- 61 kg, 6.0021 +/- 0.0043 Hz, 0.0507 +/- 0.0007 (all inside)
+        {"mass_kg": 0.01, "frequency_hz": 0.001, "damping_ratio": 0.03},
         "none",
     ),
 }
+#: (case, parameter) whose truth falls outside the 95 % interval found (measured above):
+#: a bias of a few per cent the residual's colour does not show (docs/calibration.md, Limits)
+UCSD_OUTSIDE = {("viscous", "damping_n_s_m")}
 
 
 @pytest.mark.parametrize("case", UCSD_PLANTED)
 def test_ucsd_planted_effect_found(case, ucsd_runs, tmp_path):
-    """Each effect planted in the truth: named at its place, its parameters within 10 %,
-    the held-out error to <= 0.2 x before or 1.3 x the clean floor; nothing else."""
+    """Each effect planted in the truth: named at its place, its parameters within a few
+    times the error measured and the truth inside their 95 % intervals (but UCSD_OUTSIDE),
+    the held-out error to below half of before and within 10 % of the clean floor; nothing else."""
     from sim.papers.uniaxial import ucsd_programme
 
     planted, keys, payload = UCSD_PLANTED[case]
@@ -144,10 +164,14 @@ def test_ucsd_planted_effect_found(case, ucsd_runs, tmp_path):
     p = planted[0]
     assert (e["name"], e["where"]) == (p["type"], p["where"]), res.effects_added
     assert e.get("options", {}) == ({"grows_with": p["grows_with"]} if "grows_with" in p else {})
-    for k in keys:
-        assert e["parameters"][k] == pytest.approx(p[k], rel=0.10), (k, e["parameters"])
-        assert 0 < e["uncertainty"][k] < 0.1 * abs(e["parameters"][k])
-    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * _clean_floor(ucsd_runs)
+    for k, rel in keys.items():
+        v, u = e["parameters"][k], e["uncertainty"][k]
+        assert v == pytest.approx(p[k], rel=rel), (k, e["parameters"], e["uncertainty"])
+        assert 0 < u < 0.05 * abs(v), (k, u)  # 0.07-4.1 % of the value measured
+        assert (case, k) in UCSD_OUTSIDE or abs(v - p[k]) <= u, (k, v, u, p[k])
+    # measured: held out 6.8-8.5 % -> 2.37-2.59 %, the clean floor 2.58 %
+    assert res.error_after < 0.5 * res.error_before, (res.error_before, res.error_after)
+    assert res.error_after <= 1.1 * _clean_floor(ucsd_runs), (res.error_after, _clean_floor(ucsd_runs))
 
 
 def test_load_law_needs_each_actuators_force(ucsd_runs):

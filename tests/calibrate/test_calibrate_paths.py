@@ -2,8 +2,9 @@
 table with a hydraulic or sensor effect the description lacks (3-axis random motion,
 measured through the built-in 1024 Hz recorder model of `run --measure`: anti-alias
 filter, noise, quantisation), calibrated against the description without it, name the
-effect at its place, recover its parameter within 10 % and bring the held-out error
-down; clean runs add nothing.
+effect at its place, recover its parameter within a few times the error measured (each
+test says what it measured), with the truth inside its 95 % interval where it is, and
+bring the held-out error down to the clean runs' floor; clean runs add nothing.
 
 The candidate list is cut to a few effect types per test (``EFFECTS``; every place of
 each) to keep the runtime down on a shared 2-core machine; the whole library on a 60 s
@@ -81,17 +82,21 @@ def floor(clean_paths):
     return P.nrmse([pr], [P.simulate_job(pr.job(desc.raw, str(desc.source), None, []))])
 
 
-def _check(res, floor, name, where, key, truth):
+def _check(res, floor, name, where, key, truth, *, rel, inside=True, fall=1.0, near_floor=1.02):
+    """The planted effect first, at its place; its value within ``rel`` of the truth (set
+    from the error measured); the truth inside its 95 % interval (``inside`` False where it
+    was measured outside: the test says by how much); the held-out error fallen below
+    ``fall`` x before, to within ``near_floor`` x the clean held-out run's (the floor:
+    measured 4.51 %)."""
     assert res.residual_path == "replay"
     assert [(e["name"], e["where"]) for e in res.effects_added][:1] == [(name, where)], res.effects_added
     e = res.effects_added[0]
-    assert e["parameters"][key] == pytest.approx(truth, rel=0.10)
-    assert 0 < e["uncertainty"][key] < abs(e["parameters"][key])
-    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor, (
-        res.error_before,
-        res.error_after,
-        floor,
-    )
+    v, u = e["parameters"][key], e["uncertainty"][key]
+    assert v == pytest.approx(truth, rel=rel), (key, v, u, truth)
+    assert 0 < u < 0.1 * abs(v), (key, v, u)
+    assert not inside or abs(v - truth) <= u, (key, v, u, truth)
+    assert res.error_after < fall * res.error_before, (res.error_before, res.error_after)
+    assert res.error_after <= near_floor * floor, (res.error_before, res.error_after, floor)
 
 
 def test_clean_runs_add_nothing(clean_paths):
@@ -106,7 +111,9 @@ def test_clean_runs_add_nothing(clean_paths):
 def test_flow_gain_of_one_actuator_found(floor, tmp_path):
     paths = _cgs_measured(tmp_path, [{"type": "valve_flow_gain", "where": "actuator:X1", "factor": 0.8}])
     res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
-    _check(res, floor, "valve_flow_gain", "actuator:X1", "factor", 0.8)
+    # measured: 0.80019 +/- 0.00014, 0.024 % high: the truth OUTSIDE its interval (by 1.35 x
+    # its half width); held out 52.1 % -> 4.58 % (1.015 x the floor)
+    _check(res, floor, "valve_flow_gain", "actuator:X1", "factor", 0.8, rel=0.001, inside=False, near_floor=1.05)
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +129,8 @@ def sensor_runs(tmp_path_factory):
 
 def test_sensor_gain_of_one_load_cell_found(sensor_runs, floor):
     res = S.calibrate(sensor_runs, path="replay", effects=SENSORS, workers=2)
-    _check(res, floor, "sensor_gain", "channel:actuator_force[4]", "gain", 1.2)
+    # measured: 1.19997 +/- 0.00156; held out 5.94 % -> 4.45 % (floor 4.51 %)
+    _check(res, floor, "sensor_gain", "channel:actuator_force[4]", "gain", 1.2, rel=0.002)
     assert len(res.effects_added) == 1
 
 
@@ -132,7 +140,8 @@ def test_sensor_delay_of_one_accelerometer_found(floor, tmp_path):
         tmp_path, [{"type": "sensor_delay", "where": "channel:table_acceleration[1]", "delay_s": 3e-3}]
     )
     res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
-    _check(res, floor, "sensor_delay", "channel:table_acceleration[1]", "delay_s", 3e-3)
+    # measured: 2.9989 +/- 0.0045 ms; held out 11.6 % -> 4.51 %, the floor
+    _check(res, floor, "sensor_delay", "channel:table_acceleration[1]", "delay_s", 3e-3, rel=0.002)
 
 
 def test_sensor_offset_of_one_accelerometer_found(floor, tmp_path):
@@ -143,7 +152,8 @@ def test_sensor_offset_of_one_accelerometer_found(floor, tmp_path):
         tmp_path, [{"type": "sensor_offset", "where": "channel:table_acceleration[2]", "offset": 0.15}]
     )
     res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
-    _check(res, floor, "sensor_offset", "channel:table_acceleration[2]", "offset", 0.15)
+    # measured: 0.14937 +/- 0.00091 m/s^2; held out 5.19 % -> 4.51 %, the floor
+    _check(res, floor, "sensor_offset", "channel:table_acceleration[2]", "offset", 0.15, rel=0.01)
     assert len(res.effects_added) == 1
     # the load cells' offsets are screened with the rest; ``candidates`` lists the first
     # dozen by score, where one of them ranked 11th on main and below the dozen once the measured
@@ -158,7 +168,8 @@ def test_load_cell_offset_of_one_actuator_found(floor, tmp_path):
     records start from rest, as the replay does, so its internal part is seen too)."""
     paths = _cgs_measured(tmp_path, [{"type": "sensor_offset", "where": "channel:actuator_force[0]", "offset": 2.0e3}])
     res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
-    _check(res, floor, "sensor_offset", "channel:actuator_force[0]", "offset", 2.0e3)
+    # measured: 2012.7 +/- 30.4 N; held out 5.17 % -> 4.51 %, the floor
+    _check(res, floor, "sensor_offset", "channel:actuator_force[0]", "offset", 2.0e3, rel=0.02)
     assert len(res.effects_added) == 1
 
 
@@ -169,7 +180,8 @@ def test_sensor_lowpass_of_one_accelerometer_found(floor, tmp_path):
         tmp_path, [{"type": "sensor_lowpass", "where": "channel:table_acceleration[0]", "cutoff_hz": 40.0}]
     )
     res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
-    _check(res, floor, "sensor_lowpass", "channel:table_acceleration[0]", "cutoff_hz", 40.0)
+    # measured: 40.006 +/- 0.023 Hz; held out 22.5 % -> 4.52 %, the floor
+    _check(res, floor, "sensor_lowpass", "channel:table_acceleration[0]", "cutoff_hz", 40.0, rel=0.001)
 
 
 @pytest.mark.slow
@@ -180,7 +192,9 @@ def test_valve_bandwidth_of_a_class_found(floor, tmp_path):
     res = S.calibrate(
         paths, path="replay", effects=["valve_bandwidth", "valve_delay", "valve_flow_gain", "bulk_modulus"], workers=2
     )
-    _check(res, floor, "valve_bandwidth", "class:vertical", "bandwidth_hz", 25.0)
+    # measured: 24.9971 +/- 0.0017 Hz, 0.012 % low: the truth OUTSIDE its interval (by 1.7 x
+    # its half width); held out 81.0 % -> 0.79 %
+    _check(res, floor, "valve_bandwidth", "class:vertical", "bandwidth_hz", 25.0, rel=0.001, inside=False)
 
 
 @pytest.mark.slow
@@ -189,7 +203,9 @@ def test_valve_bandwidth_of_one_actuator_found(floor, tmp_path):
     valve (3.9 ms explains 83 % against the bandwidth's 97 % on the refinement windows)."""
     paths = _cgs_measured(tmp_path, [{"type": "valve_bandwidth", "where": "actuator:Y2", "bandwidth_hz": 25.0}])
     res = S.calibrate(paths, path="replay", effects=["valve_bandwidth", "valve_delay", "valve_flow_gain"], workers=2)
-    _check(res, floor, "valve_bandwidth", "actuator:Y2", "bandwidth_hz", 25.0)
+    # measured: 24.997 +/- 0.033 Hz; held out 54.0 % -> 8.15 %, 1.8 x the clean floor with the
+    # truth inside its interval (not explained here)
+    _check(res, floor, "valve_bandwidth", "actuator:Y2", "bandwidth_hz", 25.0, rel=0.002, fall=0.2, near_floor=2.0)
 
 
 @pytest.mark.slow
@@ -199,7 +215,8 @@ def test_supply_pressure_drop_found(floor, tmp_path):
     of every class (the valve flow goes as sqrt(p_s - p_L))."""
     paths = _cgs_measured(tmp_path, [{"type": "supply_pressure_drop", "where": "supply", "drop_pa": 3.0e6}])
     res = S.calibrate(paths, path="replay", effects=["supply_pressure_drop", "valve_flow_gain"], workers=2)
-    _check(res, floor, "supply_pressure_drop", "supply", "drop_pa", 3.0e6)
+    # measured: 2.9977 +/- 0.0106 MPa; held out 9.77 % -> 4.75 % (1.05 x the floor)
+    _check(res, floor, "supply_pressure_drop", "supply", "drop_pa", 3.0e6, rel=0.003, near_floor=1.1)
 
 
 @pytest.mark.slow
@@ -208,7 +225,8 @@ def test_leakage_of_a_class_found(floor, tmp_path):
     (1.2 l/min at 1 MPa across the piston) where the description says 1e-12."""
     paths = _cgs_measured(tmp_path, [{"type": "leakage", "where": "class:lateral", "coefficient_m3_s_pa": 2e-11}])
     res = S.calibrate(paths, path="replay", effects=["leakage", "bulk_modulus", "valve_flow_gain"], workers=2)
-    _check(res, floor, "leakage", "class:lateral", "coefficient_m3_s_pa", 2e-11)
+    # measured: (2.0076 +/- 0.0173)e-11; held out 7.90 % -> 4.60 % (1.02 x the floor)
+    _check(res, floor, "leakage", "class:lateral", "coefficient_m3_s_pa", 2e-11, rel=0.01, near_floor=1.05)
 
 
 @pytest.mark.slow
@@ -220,7 +238,12 @@ def test_valve_null_offset_of_one_actuator_found(floor, tmp_path):
     reported offset is the whole null (estimate + correction, pathsearch.null_total)."""
     paths = _cgs_measured(tmp_path, [{"type": "valve_null_offset", "where": "actuator:X1", "offset": 0.01}])
     res = S.calibrate(paths, path="replay", effects=["valve_null_offset", "valve_flow_gain"], workers=2)
-    _check(res, floor, "valve_null_offset", "actuator:X1", "offset", 0.01)
+    # measured: 0.01049 +/- 0.00039, 4.9 % high: the truth OUTSIDE its interval (by 1.25 x its
+    # half width; with a compensating -0.00052 +/- 0.00019 at X3); held out 43.8 % -> 6.86 %,
+    # 1.5 x the floor
+    _check(
+        res, floor, "valve_null_offset", "actuator:X1", "offset", 0.01, rel=0.10, inside=False, fall=0.2, near_floor=2.0
+    )
     (row,) = [c for c in res.candidates if c["accepted"] and c["name"] == "valve_null_offset"][:1]
     assert 0 < row["parameters"]["offset"] < 0.5 * res.effects_added[0]["parameters"]["offset"]  # the correction
 
@@ -230,7 +253,8 @@ def test_valve_delay_of_a_class_found(floor, tmp_path):
     """The vertical valves 4 ms late (realised as 8 physics steps of 1/2048 s: 3.9 ms)."""
     paths = _cgs_measured(tmp_path, [{"type": "valve_delay", "where": "class:vertical", "delay_s": 4e-3}])
     res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
-    _check(res, floor, "valve_delay", "class:vertical", "delay_s", 4e-3)
+    # measured: 3.90625 ms, the 8 steps realised (4 ms planted); held out 73.4 % -> 0.56 %
+    _check(res, floor, "valve_delay", "class:vertical", "delay_s", 8 / 2048, rel=0.001)
 
 
 @pytest.mark.slow
@@ -238,7 +262,8 @@ def test_bulk_modulus_of_a_class_found(floor, tmp_path):
     """Aerated oil in the lateral actuators: 0.7 GPa where the description says 1.0 GPa."""
     paths = _cgs_measured(tmp_path, [{"type": "bulk_modulus", "where": "class:lateral", "bulk_modulus_pa": 0.7e9}])
     res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
-    _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.7e9)
+    # measured: 0.700026 +/- 0.000232 GPa; held out 92.4 % -> 5.01 % (1.11 x the floor)
+    _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.7e9, rel=0.001, near_floor=1.2)
 
 
 @pytest.mark.slow
@@ -255,7 +280,8 @@ def test_bulk_modulus_far_from_the_model_found(floor, tmp_path, monkeypatch):
 
     paths = _cgs_measured(tmp_path, [{"type": "bulk_modulus", "where": "class:lateral", "bulk_modulus_pa": 0.6e9}])
     res = S.calibrate(paths, path="replay", effects=EFFECTS, workers=2)
-    _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.6e9)
+    # measured: 0.600000 +/- 0.000137 GPa; held out 145.5 % -> 5.32 % (1.18 x the floor)
+    _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.6e9, rel=0.001, near_floor=1.25)
     assert res.error_before > 1.0  # far from the model
 
     stock = SE.candidates
@@ -272,7 +298,8 @@ def test_bulk_modulus_far_from_the_model_found(floor, tmp_path, monkeypatch):
     first = [c for c in res.candidates if c["round"] == 0]
     best_screened = max(first, key=lambda c: c["linearised_score"])
     assert best_screened["name"] == "valve_flow_gain", best_screened  # the linearisation ranks the wrong type first
-    _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.6e9)
+    # measured: 0.600023 +/- 0.000202 GPa; held out 145.5 % -> 5.32 %
+    _check(res, floor, "bulk_modulus", "class:lateral", "bulk_modulus_pa", 0.6e9, rel=0.001, near_floor=1.25)
 
 
 def test_the_best_of_each_type_is_refined():
@@ -324,9 +351,14 @@ def test_two_effects_at_once_hydraulic_and_mechanical(floor, tmp_path):
     )
     found = {(e["name"], e["where"]): e["parameters"] for e in res.effects_added}
     assert set(found) == {("valve_flow_gain", "actuator:X1"), ("coulomb_friction", "class:lateral")}, found
-    assert found[("valve_flow_gain", "actuator:X1")]["factor"] == pytest.approx(0.8, rel=0.10)
-    assert found[("coulomb_friction", "class:lateral")]["force_n"] == pytest.approx(5000.0, rel=0.10)
-    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor
+    sd = {(e["name"], e["where"]): e["uncertainty"] for e in res.effects_added}
+    # measured: 0.80020 +/- 0.00015, 0.025 % high: the truth OUTSIDE its interval (by 1.3 x its
+    # half width, as when planted alone)
+    assert found[("valve_flow_gain", "actuator:X1")]["factor"] == pytest.approx(0.8, rel=0.001)
+    f, u = found[("coulomb_friction", "class:lateral")]["force_n"], sd[("coulomb_friction", "class:lateral")]["force_n"]
+    assert f == pytest.approx(5000.0, rel=0.002) and abs(f - 5000.0) <= u, (f, u)  # measured: 4998.9 +/- 15.7 N
+    # measured: held out 52.8 % -> 4.54 % (1.005 x the floor)
+    assert res.error_after < res.error_before and res.error_after <= 1.02 * floor, (res.error_after, floor)
 
 
 @pytest.mark.slow
@@ -355,7 +387,8 @@ def test_a_wrong_effect_accepted_first_is_dropped(floor, tmp_path, monkeypatch):
     assert [(c["name"], c["where"]) for c in gone] == [("sensor_gain", "channel:table_velocity[1]")], gone
     assert gone[0]["parameters"]["gain"] == pytest.approx(1.0, abs=0.02)  # refitted to no effect first
     assert len(res.effects_added) == 1
-    _check(res, floor, "valve_flow_gain", "class:lateral", "factor", 0.8)
+    # measured: 0.80010 +/- 0.00050; held out 15.1 % -> 4.72 % (1.045 x the floor)
+    _check(res, floor, "valve_flow_gain", "class:lateral", "factor", 0.8, rel=0.001, near_floor=1.1)
     assert res.timing["revisit_replays"] > 0
 
 
@@ -434,8 +467,11 @@ def test_closed_loop_path_finds_an_accelerometer_gain(sensor_runs, tmp_path):
     assert res.residual_path == "closed_loop"
     assert [(e["name"], e["where"]) for e in res.effects_added] == [("sensor_gain", "channel:table_acceleration[0]")]
     e = res.effects_added[0]
-    assert abs(e["parameters"]["gain"] - 0.85) < e["uncertainty"]["gain"]  # inside its 95 % interval
-    assert res.error_after <= 0.2 * res.error_before or res.error_after < 0.08
+    # measured: 0.85027 +/- 0.00082, inside its 95 % interval
+    assert abs(e["parameters"]["gain"] - 0.85) < e["uncertainty"]["gain"]
+    assert e["parameters"]["gain"] == pytest.approx(0.85, rel=0.002)
+    # measured: held out 7.41 % -> 1.71 % (the clean runs' closed-loop floor: 1.64 %)
+    assert res.error_after < 0.3 * res.error_before and res.error_after < 0.02, (res.error_before, res.error_after)
 
 
 def test_closed_loop_clean_runs_add_nothing(clean_paths, tmp_path):
@@ -466,21 +502,24 @@ def small_sensor_runs(tmp_path_factory):
 
 
 def _deviation(res, where):
+    """A found sensor gain's error (gain - 1) at ``where``, and its 95 % half width."""
     (e,) = [e for e in res.effects_added if e["where"] == where]
     assert e["name"] == "sensor_gain"
-    return e["parameters"]["gain"] - 1.0
+    return e["parameters"]["gain"] - 1.0, e["uncertainty"]["gain"]
 
 
 def test_small_sensor_gains_found_on_their_own_columns(small_sensor_runs):
-    """Replay path: both found, each error (gain - 1) within 10 % of the planted one,
-    and nothing else (sensor candidates screened also by the share of their own columns'
-    residual, pathsearch.to_refine)."""
+    """Replay path: both found, each error (gain - 1) within a few times the error
+    measured and the truth inside its interval, and nothing else (sensor candidates
+    screened also by the share of their own columns' residual, pathsearch.to_refine)."""
     res = S.calibrate(small_sensor_runs, path="replay", effects=SENSORS, workers=2)
     assert res.residual_path == "replay"
     assert len(res.effects_added) == 2, res.effects_added
-    assert _deviation(res, "channel:actuator_force[4]") == pytest.approx(0.05, rel=0.10)
-    assert _deviation(res, "channel:table_acceleration[0]") == pytest.approx(-0.03, rel=0.10)
-    assert res.error_after < res.error_before
+    d, u = _deviation(res, "channel:actuator_force[4]")  # measured: 0.04996 +/- 0.00156
+    assert d == pytest.approx(0.05, rel=0.01) and abs(d - 0.05) <= u, (d, u)
+    d, u = _deviation(res, "channel:table_acceleration[0]")  # measured: -0.02975 +/- 0.00055
+    assert d == pytest.approx(-0.03, rel=0.02) and abs(d + 0.03) <= u, (d, u)
+    assert res.error_after < res.error_before  # measured: 4.69 % -> 4.50 % (the floor 4.51 %)
 
 
 def test_closed_loop_path_finds_a_small_accelerometer_gain(small_sensor_runs, tmp_path):
@@ -490,7 +529,9 @@ def test_closed_loop_path_finds_a_small_accelerometer_gain(small_sensor_runs, tm
     res = S.calibrate(_reference_only(small_sensor_runs, tmp_path / "ref"), effects=SENSORS, workers=2)
     assert res.residual_path == "closed_loop"
     assert [e["where"] for e in res.effects_added] == ["channel:table_acceleration[0]"], res.effects_added
-    assert _deviation(res, "channel:table_acceleration[0]") == pytest.approx(-0.03, rel=0.10)
+    d, u = _deviation(res, "channel:table_acceleration[0]")  # measured: -0.02974 +/- 0.00055
+    assert d == pytest.approx(-0.03, rel=0.02) and abs(d + 0.03) <= u, (d, u)
+    assert res.error_after < res.error_before  # measured: 2.08 % -> 1.65 %
 
 
 def test_sensor_candidates_refined_by_their_own_columns():

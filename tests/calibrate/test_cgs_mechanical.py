@@ -145,23 +145,61 @@ PAYLOAD = {"clean_payload": "rigid_20t", "cg_offset_payload": "rigid_20t"}
 CLEAN = ("clean", "clean_payload")
 #: what else a case must add: a payload_mode is a body on a slide along its DOF, rigid
 #: with the platen along the others, so its modal mass is also found as added_mass at
-#: dof:y and dof:z (physically right, within 10 % of the 5 t)
+#: dof:y and dof:z (physically right: 4976 and 4937 kg of the 5 t measured)
 ALSO = {
     "payload_mode_x": [
         {"type": "added_mass", "where": "dof:y", "mass_kg": 5000.0},
         {"type": "added_mass", "where": "dof:z", "mass_kg": 5000.0},
     ]
 }
-#: the parameter checked (within 10 %) per effect type
-MAIN = {
-    "added_mass": "mass_kg",
-    "coulomb_friction": "force_n",
-    "viscous_damping": "damping_n_s_m",
-    "power_damping": "coefficient",
-    "spring": "stiffness_n_m",
-    "payload_mode": "mass_kg",
-    "cg_offset": "dx_m",
+#: per case, (effect type, place, parameter) -> (tolerance, the truth inside its 95 %
+#: interval): the tolerance relative (absolute where the truth is 0), about 2-3 x the error
+#: measured (2026-11-27, one process; value +/- its 95 % half width in the comment);
+#: False where the interval was measured to miss the truth (by how much: the comment)
+CHECKS = {
+    "added_mass_x": {("added_mass", "dof:x", "mass_kg"): (0.005, True)},  # 6008.7 +/- 99.4 kg
+    # 14864 +/- 126 N: 0.9 % low, OUTSIDE its interval by 1.08 x its half width
+    "coulomb_dof_y": {("coulomb_friction", "dof:y", "force_n"): (0.02, False)},
+    "coulomb_class_vertical": {("coulomb_friction", "class:vertical", "force_n"): (0.002, True)},  # 8000.2 +/- 46.3
+    "coulomb_actuator_X2": {("coulomb_friction", "actuator:X2", "force_n"): (0.01, True)},  # 11968 +/- 112 N
+    "viscous_dof_x": {("viscous_damping", "dof:x", "damping_n_s_m"): (0.02, True)},  # 1.9817e5 +/- 0.0348e5
+    "power_dof_y": {
+        ("power_damping", "dof:y", "coefficient"): (0.03, True),  # 99188 +/- 5877
+        ("power_damping", "dof:y", "exponent"): (0.02, True),  # 0.600 +/- 0.017
+    },
+    "spring_dof_z": {("spring", "dof:z", "stiffness_n_m"): (0.015, True)},  # 2.0130e7 +/- 0.0133e7
+    # 19141 +/- 653 kg m^2: 4.3 % low, OUTSIDE its interval by 1.31 x its half width
+    "added_inertia_rz": {("added_mass", "dof:rz", "mass_kg"): (0.08, False)},
+    "coulomb_grows_displacement_y": {
+        ("coulomb_friction", "dof:y", "force_n"): (0.03, True),  # 5918 +/- 165 N
+        ("coulomb_friction", "dof:y", "coefficient"): (0.03, True),  # 0.986e6 +/- 0.067e6 N/m
+    },
+    "coulomb_grows_load_X2": {
+        ("coulomb_friction", "actuator:X2", "force_n"): (0.05, True),  # 3901 +/- 152 N
+        ("coulomb_friction", "actuator:X2", "coefficient"): (0.03, True),  # 0.2019 +/- 0.0069
+    },
+    "payload_mode_x": {
+        ("payload_mode", "dof:x", "mass_kg"): (0.03, True),  # 5053.5 +/- 72.1 kg
+        ("payload_mode", "dof:x", "frequency_hz"): (0.002, True),  # 7.9968 +/- 0.0067 Hz
+        ("payload_mode", "dof:x", "damping_ratio"): (0.015, True),  # 0.05021 +/- 0.00108
+        ("added_mass", "dof:y", "mass_kg"): (0.015, True),  # 4975.5 +/- 85.4 kg
+        ("added_mass", "dof:z", "mass_kg"): (0.03, True),  # 4936.6 +/- 85.3 kg
+    },
+    "spring_and_coulomb": {
+        # 1.49397e7 +/- 0.00528e7: 0.4 % low, OUTSIDE its interval by 1.14 x its half width
+        ("spring", "dof:x", "stiffness_n_m"): (0.01, False),
+        ("coulomb_friction", "class:vertical", "force_n"): (0.002, True),  # 8001.1 +/- 46.4 N
+    },
+    "cg_offset_payload": {
+        ("cg_offset", "payload", "dx_m"): (0.03, True),  # 0.3034 +/- 0.0052 m
+        # 0.1915 +/- 0.0045 m: 4.3 % low, OUTSIDE its interval by 1.88 x its half width
+        ("cg_offset", "payload", "dy_m"): (0.08, False),
+        ("cg_offset", "payload", "dz_m"): (0.005, True),  # 0.0007 +/- 0.0040 m (truth 0: absolute)
+    },
 }
+#: per case, the held-out error after calibration within this factor of its clean floor
+#: (measured: 0.99-1.01 x; the springs' 1.18 x and 1.14 x)
+NEAR_FLOOR = {"spring_dof_z": 1.25, "spring_and_coulomb": 1.2}
 
 
 def calibrate_case(paths):
@@ -236,36 +274,30 @@ def test_clean_measured_runs_add_nothing(case, cases):
 @pytest.mark.slow
 @pytest.mark.parametrize("case", [c for c in CASES if c not in CLEAN])
 def test_planted_effect_recovered(case, cases):
-    """Right effect, right place, main parameter within 10 %, held-out error to
-    <= 0.2 x before or within 1.3 x the clean floor; nothing else added."""
+    """Right effect, right place, each parameter within a few times the error measured
+    and the truth inside its 95 % interval (CHECKS), the held-out error fallen to its
+    clean floor (NEAR_FLOOR); nothing else added."""
     res = cases[case]
     planted = CASES[case] + ALSO.get(case, [])
     got = {(e["name"], e["where"]): e for e in res.effects_added}
     assert set(got) == {(p["type"], p["where"]) for p in planted}, res.effects_added
+    truths = {(p["type"], p["where"], k): v for p in planted for k, v in p.items() if isinstance(v, float)}
+    assert set(CHECKS[case]) <= set(truths), CHECKS[case]
     for p in planted:
         e = got[(p["type"], p["where"])]
-        k = MAIN[p["type"]]
-        truth = p[k]
-        assert e["parameters"][k] == pytest.approx(truth, rel=0.10), (k, e["parameters"], truth)
-        assert 0 < e["uncertainty"][k] < 0.1 * abs(e["parameters"][k])
-        if p.get("grows_with"):  # the variant is named, and its growth within 10 %
-            assert e["options"] == {"grows_with": p["grows_with"]}, e
-            assert e["parameters"]["coefficient"] == pytest.approx(p["coefficient"], rel=0.10), e["parameters"]
-            assert 0 < e["uncertainty"]["coefficient"] < 0.1 * e["parameters"]["coefficient"]
-        if p["type"] == "power_damping":
-            assert e["parameters"]["exponent"] == pytest.approx(p["exponent"], abs=0.06)
-        if p["type"] == "cg_offset":  # the offset's other components: y within 10 %, z within 2 cm
-            assert e["parameters"]["dy_m"] == pytest.approx(p["dy_m"], rel=0.10)
-            assert abs(e["parameters"]["dz_m"] - p["dz_m"]) < 0.02, e["parameters"]
-        if p["type"] == "payload_mode":
-            assert e["parameters"]["frequency_hz"] == pytest.approx(p["frequency_hz"], rel=0.10)
-            assert e["parameters"]["damping_ratio"] == pytest.approx(p["damping_ratio"], rel=0.10)
+        assert e.get("options", {}) == ({"grows_with": p["grows_with"]} if p.get("grows_with") else {}), e
+    for (name, where, k), (tol, inside) in CHECKS[case].items():
+        truth, v, u = (
+            truths[(name, where, k)],
+            got[(name, where)]["parameters"][k],
+            got[(name, where)]["uncertainty"][k],
+        )
+        assert abs(v - truth) <= tol * (abs(truth) if truth else 1.0), (name, where, k, v, u, truth)
+        assert 0 < u < (0.1 * abs(truth) if truth else 0.01), (name, where, k, v, u)  # 0.3-6.7 % measured
+        assert not inside or abs(v - truth) <= u, (name, where, k, v, u, truth)
     floor = cases["clean_payload" if PAYLOAD.get(case) else "clean"].error_before
-    assert res.error_after <= 0.2 * res.error_before or res.error_after <= 1.3 * floor, (
-        res.error_before,
-        res.error_after,
-        floor,
-    )
+    assert res.error_after < res.error_before, (res.error_before, res.error_after)
+    assert res.error_after <= NEAR_FLOOR.get(case, 1.05) * floor, (res.error_before, res.error_after, floor)
     assert math.isfinite(res.error_after)
     assert res.unexplained is None, res.unexplained
 
