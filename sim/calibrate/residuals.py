@@ -671,6 +671,37 @@ def unexplained(mruns, residuals, kind: str = "mechanical") -> dict | None:
     return best
 
 
+def distinct_force_places(desc, wheres) -> list:
+    """The places of ``wheres`` whose force maps into the table's DOFs differently, the first
+    of each kept: a uni-axial table's class and actuator push along x as ``dof:x`` does,
+    and a friction found at both would be one friction split in two (measured on the lab
+    table's replay: 882 N at class:main beside 230 N at dof:x, for 1200 N)."""
+    from mjcf.description import DOFS6
+    from sim.control.tvc import dof_jacobian
+
+    cols = [DOFS6.index(d) for d in desc.dofs]  # the table's own DOFs (a uni-axial table: x)
+    J = dof_jacobian(desc)[:, cols]
+    classes = {}
+    for i, a in enumerate(desc.actuators):
+        classes.setdefault(a.cls.name, []).append(i)
+    names = list(desc.actuator_names)
+
+    def force_map(w):
+        kind, _, name = w.partition(":")
+        if kind == "dof":
+            return np.eye(len(cols))[[desc.dofs.index(name)]]
+        return J[[names.index(name)]] if kind == "actuator" else J[classes[name]]
+
+    out, maps = [], []
+    for w in wheres:
+        m = force_map(w)
+        m = m / (np.linalg.norm(m) or 1.0)
+        if not any(q.shape == m.shape and min(np.abs(q - m).max(), np.abs(q + m).max()) < 1e-6 for q in maps):
+            maps.append(m)
+            out.append(w)
+    return out
+
+
 __all__ = [
     "CalibrationError",
     "MechRun",
@@ -682,6 +713,7 @@ __all__ = [
     "excited_dofs",
     "nrmse_runs",
     "places",
+    "distinct_force_places",
     "spectra",
     "spectral_flatness",
     "UNEXPLAINED_FRACTION",

@@ -202,6 +202,7 @@ def _table_of(desc, payload, accepted, effects) -> _Table:
     from hydraulics.params import HydraulicParams
     from mjcf.description import parse_table
     from sim.calibrate.paths import build_order
+    from sim.calibrate.residuals import distinct_force_places
     from sim.effects import build_model
 
     raw = dict(desc.raw)
@@ -221,43 +222,11 @@ def _table_of(desc, payload, accepted, effects) -> _Table:
     return _Table(cur, hp, float(tm.model.opt.timestep), FORCE_STEP * cap, hyd_places, mech_places, want, have)
 
 
-def distinct_force_places(desc, wheres) -> list:
-    """The places of ``wheres`` whose force maps into the table's DOFs differently, the first
-    of each kept: a uni-axial table's class and actuator push along x as ``dof:x`` does,
-    and a friction found at both would be one friction split in two (measured on the lab
-    table's replay: 882 N at class:main beside 230 N at dof:x, for 1200 N)."""
-    from mjcf.description import DOFS6
-    from sim.control.tvc import dof_jacobian
-
-    cols = [DOFS6.index(d) for d in desc.dofs]  # the table's own DOFs (a uni-axial table: x)
-    J = dof_jacobian(desc)[:, cols]
-    classes = {}
-    for i, a in enumerate(desc.actuators):
-        classes.setdefault(a.cls.name, []).append(i)
-    names = list(desc.actuator_names)
-
-    def force_map(w):
-        kind, _, name = w.partition(":")
-        if kind == "dof":
-            return np.eye(len(cols))[[desc.dofs.index(name)]]
-        return J[[names.index(name)]] if kind == "actuator" else J[classes[name]]
-
-    out, maps = [], []
-    for w in wheres:
-        m = force_map(w)
-        m = m / (np.linalg.norm(m) or 1.0)
-        if not any(q.shape == m.shape and min(np.abs(q - m).max(), np.abs(q + m).max()) < 1e-6 for q in maps):
-            maps.append(m)
-            out.append(w)
-    return out
-
-
 def candidates(desc, payload, prs, accepted, motion_rms, effects=None, undeclared=False) -> list[Candidate]:
     """Every candidate of the library on this table for the compared channels of ``prs``;
     ``accepted``: entries already added (their parameters are the new neutral values);
     ``motion_rms``: place -> (u, v, a) RMS of the recorded motion (mechanical steps);
-    ``effects``: only these types (None: all); ``undeclared``: a specimen stands on the
-    table undeclared (``--payload none``), so its modes are candidates."""
+    ``effects``: only these types (None: all); ``undeclared``: ``--payload none``."""
     from sim.effects.base import EFFECTS
 
     tb = _table_of(desc, payload, accepted, effects)
@@ -265,10 +234,8 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None, undeclare
     if tb.offered("foundation_mode") and ("foundation_mode", "table") not in tb.have:
         out.append(foundation_candidate(tb.cur, tb.dt))
     if "payload_mode" in EFFECTS and ("payload_mode" in tb.want if tb.want else _rigid(payload) or undeclared):
-        # offered where a specimen may be flexible: a declared rigid payload, an undeclared
-        # specimen (--payload none, as on the mechanical path), or when named: not in every
-        # bare table's default search, nor after the mechanical path, which looks for it
-        # (the stage's types leave it out)
+        # where a specimen may be flexible (a declared rigid payload, --payload none) or when
+        # named: not on every bare table, nor after the mechanical path, which looks for it
         out += mode_candidates(tb.cur, payload, accepted, motion_rms, tb.Fs, 1.0 / prs[0].dt)
     return out + _sensor_candidates(tb, prs)
 
@@ -378,8 +345,7 @@ def _sensor_candidates(tb: _Table, prs) -> list[Candidate]:
         if not tb.offered(t):
             continue
         for ch, cols in prs[0].columns.items():
-            # a channel of one column: the channel stands for it (one candidate, not two alike)
-            one = np.shape(prs[0].recorded[ch])[1:] in ((), (1,))
+            one = np.shape(prs[0].recorded[ch])[1:] in ((), (1,))  # the channel is its column
             for w in [f"channel:{ch}"] + ([] if one else [f"channel:{ch}[{j}]" for j in cols]):
                 if (t, w) in have:
                     continue
