@@ -71,7 +71,8 @@ def judge_whole_runs(st, rnd: int, rf, sc_of):
         return None
     e_new, rss_new, p_new, f_new = P.nrmse(pho, mh), float(rn @ rn), st.n_par + len(rf.theta), P.flatness(pfit, mf)
     okp, why, unc = param_check(rf, Z95)
-    if okp and (why := same_mode(rf, unc, list(st.desc.raw.get("effect", [])) + list(st.accepted))):
+    in_model = list(st.desc.raw.get("effect", [])) + list(st.accepted)
+    if okp and (why := same_mode(rf, unc, in_model) or same_law(rf, unc, in_model)):
         okp = False
     bics = (bic(st.rss, st.N, st.n_par), bic(rss_new, st.N, p_new))
     local = None
@@ -179,6 +180,27 @@ def same_mode(rf, unc: dict, entries: list) -> str:
                 f"frequency_hz = {f:.4g} Hz: its 95 % interval holds the mode at {float(e['frequency_hz']):.4g} Hz "
                 "already in the model (one mode, not two)"
             )
+    return ""
+
+
+#: the power law's exponent at which it is another law of the library (F = c |v|^a sign v)
+NESTED_EXPONENTS = {"coulomb_friction": 0.0, "viscous_damping": 1.0}
+
+
+def same_law(rf, unc: dict, entries: list) -> str:
+    """Why a power-law damper (``power_damping``) is a law the model holds already at its
+    place: its exponent's 95 % interval holds 0 beside a Coulomb friction there, or 1
+    beside a viscous damper ('' when not). It would split one effect in two (measured on
+    the worked example's replay-only record, one 2 s window: 882 N of Coulomb friction,
+    then a power law of exponent 0.028 +/- 0.069 taking 204 N more, for 1200 N in all)."""
+    c = rf.cand
+    if c.type != "power_damping":
+        return ""
+    a, u = c.values(rf.theta)["exponent"], unc.get("exponent", 0.0)
+    for e in entries:
+        nested = NESTED_EXPONENTS.get(e.get("type"))
+        if nested is not None and e.get("where") == c.where and "grows_with" not in e and abs(a - nested) <= u:
+            return f"exponent = {a:.3g}: its 95 % interval holds {nested:g}, the {e['type']} already at {c.where}"
     return ""
 
 
