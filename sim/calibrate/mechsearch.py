@@ -452,31 +452,24 @@ def backward_row(t, values, unc, new, cur, e_new, explained, flat, why) -> dict:
 
 
 def _direction(mr, where) -> np.ndarray:
-    m = np.atleast_2d(mr.place_motion(where)[3]).astype(float)
-    return m / (np.linalg.norm(m) or 1.0)
-
-
-def _parallel(a: np.ndarray, b: np.ndarray) -> bool:
-    return a.shape == b.shape and min(np.abs(a - b).max(), np.abs(a + b).max()) < 1e-6
+    return mr.place_motion(where)[3]
 
 
 def same_place(mr, where, wheres) -> str | None:
     """The first of ``wheres`` whose force maps into DOF space as ``where``'s does (on a
     uni-axial table ``dof:x`` for ``actuator:E``), else None."""
+    from sim.calibrate.residuals import same_direction
+
     m0 = _direction(mr, where)
-    return next((w for w in wheres if _parallel(_direction(mr, w), m0)), None)
+    return next((w for w in wheres if same_direction(_direction(mr, w), m0)), None)
 
 
 def distinct_places(mr, wheres) -> list:
     """Places whose force maps into DOF space differently (a uni-axial table's actuators
     and classes all push along x: one place, ``dof:x``, stands for them)."""
-    out, maps = [], []
-    for w in wheres:
-        m = _direction(mr, w)
-        if not any(_parallel(q, m) for q in maps):
-            maps.append(m)
-            out.append(w)
-    return out
+    from sim.calibrate.residuals import first_of_each_direction
+
+    return first_of_each_direction(wheres, lambda w: _direction(mr, w))
 
 
 def mechanical_errors(mho, before, after) -> tuple[dict, dict, list]:

@@ -692,11 +692,23 @@ def distinct_force_places(desc, wheres) -> list:
             return np.eye(len(cols))[[desc.dofs.index(name)]]
         return J[[names.index(name)]] if kind == "actuator" else J[classes[name]]
 
+    return first_of_each_direction(wheres, force_map)
+
+
+def same_direction(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two places' force maps into DOF space are parallel (either sign)."""
+    a = np.atleast_2d(a) / (np.linalg.norm(a) or 1.0)
+    b = np.atleast_2d(b) / (np.linalg.norm(b) or 1.0)
+    return a.shape == b.shape and min(np.abs(a - b).max(), np.abs(a + b).max()) < 1e-6
+
+
+def first_of_each_direction(wheres, force_map) -> list:
+    """The places of ``wheres`` whose force maps (``force_map(where)``) differ, the first of
+    each direction kept."""
     out, maps = [], []
     for w in wheres:
         m = force_map(w)
-        m = m / (np.linalg.norm(m) or 1.0)
-        if not any(q.shape == m.shape and min(np.abs(q - m).max(), np.abs(q + m).max()) < 1e-6 for q in maps):
+        if not any(same_direction(q, m) for q in maps):
             maps.append(m)
             out.append(w)
     return out
