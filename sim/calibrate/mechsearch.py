@@ -130,11 +130,15 @@ def mechanical_stage(runs, ho_given, desc, pl, *, effects, payload, accel_lowpas
     cands = stage_candidates(stage_laws(effects, payload, pl), mfit, desc, pl)
     flat = flatness(mfit, cur.residuals)
     st = RoundState(mfit, mho, e_ho0, flat, margin, table_scale(desc, pl), effects=effects, timing_on=True)
-    ms = MechStage(st, cur, cands, say, places=(desc, pl))
+    ms = MechStage(st, cur, cands, say, places=(desc, pl), declared_timing=declared_timing(mfit + mho))
     cur, tried, _ = search(ms, MAX_ROUNDS)  # a sensor's timing found: ms's records re-timed
     t3 = time.perf_counter()
     times = {"read_s": t1 - t0, "residuals_s": t2 - t1, "search_s": t3 - t2, "total_s": t3 - t0}
     return _result(ms, cur, tried, st.timed_added, (mfit, mho), (e_ho0, times, ho_note), desc, runs)
+
+
+def declared_timing(mruns) -> dict:
+    return {mr.name: dict(mr.extra["timing"]) for mr in mruns}
 
 
 def forward_search(st, cur, cands: list, max_rounds: int, say) -> tuple:
@@ -163,6 +167,8 @@ class MechStage:
     cands: list
     say: object
     places: tuple | None = None
+    #: run name -> its sensor timing before any was accepted (what a dropped one returns to)
+    declared_timing: dict = field(default_factory=dict)
     n_fits: int = 0
     tried: list = field(default_factory=list)
     #: the mechanical path revisits once, after the last round
@@ -267,6 +273,7 @@ class MechStage:
         (:func:`demote_nested`)."""
         if self.places is None:
             return
+        self.cur, self.st.e_ho = timing_backward(self, self.cur, self.st.e_ho)
         self.cur, e_ho = backward_pass(self, self.cur, self.st.e_ho, self.tried)
         self.cur, _ = demote_nested(self, self.cur, e_ho, self.tried, *self.places)
 
@@ -350,6 +357,58 @@ def backward_pass(ms: MechStage, cur, e_ho: float, tried: list):
             cur, e_ho, dropped = rest, e_rest, True
             break
     return cur, e_ho
+
+
+def timing_backward(ms: MechStage, cur, e_ho: float):
+    """Put an accepted sensor timing back at its declared value when the held-out error
+    without it (the other timing and the terms refitted) stays within the acceptance
+    margin. An acceleration delay timed by the displacement is put back only when the
+    displacement puts it less than half a sample off its chain
+    (:data:`sim.calibrate.timing.DISPLACEMENT_SKEW_SAMPLES`): the displacement's own skew
+    may be that large, so below it the displacement cannot say which of the two is late (a load cell 4 ms early and a displacement 0.3 sample early gave the
+    acceleration +0.32 ms while the load cell's delay waited, and the load cell -3.68 ms).
+    ``(fit, error)``."""
+    from sim.calibrate import timing
+    from sim.calibrate.residuals import nrmse_runs
+    from sim.calibrate.trace import fit_terms, flatness, predict
+
+    st, dropped = ms.st, True
+    while dropped and st.timed_added:
+        dropped = False
+        for k, entry in enumerate(st.timed_added):
+            if not _may_drop(entry, st.mfit[0], ms.declared_timing):
+                continue
+            alt = timing.without(st.mfit, st.mho, cur.terms, st.timed_added, k, ms.declared_timing)
+            if alt is None:
+                continue
+            mfit, mho, rest = alt
+            fit = fit_terms(mfit, cur.terms)
+            ms.n_fits += 1
+            e_rest = nrmse_runs(mho, predict(mho, fit))
+            if e_rest > (1 + ms.margin) * e_ho:
+                continue
+            why = f"dropped: without it the held-out error is {e_ho:.4f} -> {e_rest:.4f} (within {100 * ms.margin:g} %)"
+            ms.say(f"  {entry['name']:18s} {entry['where']:14s} {why}")
+            expl = (fit.rss - cur.rss) / fit.rss if fit.rss > 0 else 0.0
+            row = {"round": "backward", "name": entry["name"], "where": entry["where"]}
+            row.update({k_: entry[k_] for k_ in ("options", "parameters", "uncertainty") if k_ in entry})
+            row.update(explained_fraction=expl, holdout_error=e_rest, bic_change=fit.bic - cur.bic)
+            row.update(flatness=flatness(mfit, fit.residuals), accepted=False, reason=why)
+            ms.tried.append(row)
+            st.mfit, st.mho, st.timed_added = mfit, mho, rest
+            cur, e_ho, dropped = fit, e_rest, True
+            break
+    return cur, e_ho
+
+
+def _may_drop(entry: dict, mr, declared: dict) -> bool:
+    """Whether the backward pass may put a timing entry back (:func:`timing_backward`)."""
+    from sim.calibrate.timing import DISPLACEMENT_SKEW_SAMPLES
+
+    if entry.get("timed_by") != "displacement":
+        return True
+    off = entry["parameters"]["delay_s"] - declared[mr.name]["accel_delay_s"]
+    return abs(off) < DISPLACEMENT_SKEW_SAMPLES * mr.dt
 
 
 def demote_nested(ms: MechStage, cur, e_ho: float, tried: list, desc, pl):

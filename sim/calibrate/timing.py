@@ -69,6 +69,10 @@ COHERENT_SHARE = 0.5
 #: times at most the displacement's reading of the acceleration's delay is taken again with
 #: the acceleration aligned by the last (assumed: 3; the second moves it by < 1 % of the first)
 ANCHOR_PASSES = 3
+#: how far the displacement's own timing may be off, in samples (assumed: half a sample, a
+#: multiplexed recorder's scan; the test records skew it 0.3 sample). Nearer than this the
+#: displacement cannot tell an acceleration's delay from the balance's own reading of it
+DISPLACEMENT_SKEW_SAMPLES = 0.5
 #: the effect types of these candidates (``--effects`` names them)
 TIMING_EFFECTS = ("sensor_delay", "sensor_lowpass")
 
@@ -265,9 +269,9 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
 def placed(mfit, terms, cand: Candidate, x: float) -> tuple[float, float, dict | None]:
     """The candidate's value, its standard deviation and what the displacement says of it
     (:func:`kinematic_check`): the balance's value and interval, or, for an acceleration
-    delay the balance finds (its interval leaving out the declared value) and the
-    displacement does not corroborate while it puts the acceleration measurably off its
-    chain, the displacement's own value and interval (the balance
+    delay the balance finds (its interval leaving out the declared value) while the
+    displacement puts the acceleration measurably off its chain and does not corroborate
+    it or reads another value (their intervals apart), the displacement's own value and interval (the balance
     gave the acceleration a skew that is partly the force's: an accelerometer late and the
     pressure early at once)."""
 
@@ -276,15 +280,21 @@ def placed(mfit, terms, cand: Candidate, x: float) -> tuple[float, float, dict |
 
     kin, s = check(x), sigma(mfit, terms, cand, x)
     skew = abs(x - cand.neutral) > Z95 * s  # the balance sees the acceleration skewed
-    if kin is not None and not kin["ok"] and kin["significant"] and skew and cand.field == "accel_delay_s":
+    if kin is not None and kin["significant"] and skew and cand.field == "accel_delay_s":
         x_kin = cand.neutral + kin["delay_before_s"]
+        if kin["ok"] and abs(x - x_kin) < DISPLACEMENT_SKEW_SAMPLES * mfit[0].dt:
+            return x, s, kin  # the balance and the displacement agree, as far as it can tell
+        # nearer the displacement is not enough: an accelerometer 2 samples late and a
+        # pressure 1 early put 14.5 ms on the acceleration, which the displacement read 9.8
         for _ in range(ANCHOR_PASSES):  # measured again aligned: a record's changing envelope
             k1 = check(x_kin)  # biases a phase read across a lag in proportion to the lag
             x_kin += k1["delay_after_s"] or 0.0
-            if abs(k1["delay_after_s"] or 0.0) < 0.1 * k1["sigma_s"]:
+            if abs(k1["delay_after_s"] or 0.0) < 0.1 * k1["sigma_after_s"]:
                 break
         kin = {**check(x_kin), "from_displacement": True}
-        return x_kin, kin["sigma_s"], kin
+        # its interval read aligned: unaligned, a lag of two samples wraps the phase of the
+        # top bins (+/-0.74 ms then for +/-0.02 aligned, 9.8 ms at 204.8 Hz)
+        return x_kin, kin["sigma_after_s"], kin
     return x, s, kin
 
 
@@ -333,6 +343,7 @@ def kinematic_check(cand: Candidate, x: float, before, after) -> dict | None:
         "delay_after_s": num(a1.delay_s),
         "uncertainty_s": num(anchor.Z95 * a0.sigma_s),
         "sigma_s": a0.sigma_s,
+        "sigma_after_s": a1.sigma_s,
         "band_hz": list(a0.band_hz),
     }
 
@@ -395,6 +406,34 @@ def refit_accepted(mfit, mho, terms, done: list) -> tuple[list, list]:
     return mfit, mho
 
 
+def candidate_of(mruns, entry: dict) -> Candidate | None:
+    """The timing candidate that made the ``effects_added`` entry ``entry``."""
+    order = (entry.get("options") or {}).get("order")
+    for c in candidates(mruns):
+        if (c.name, c.where) == (entry["name"], entry["where"]) and (c.order is None or c.order == order):
+            return c
+    return None
+
+
+def without(mfit, mho, terms, done: list, k: int, declared: dict):
+    """The runs with accepted timing entry ``k`` of ``done`` put back at its declared value
+    (``declared``: run name -> its timing state before any was accepted) and the others
+    refitted with ``terms``: ``(fit runs, held-out runs, the other entries)`` (copies), or
+    None when the entry has no candidate."""
+    cand = candidate_of(mfit, done[k])
+    if cand is None:
+        return None
+    keys = ("accel_lowpass_hz", "accel_lowpass_order") if cand.field == "accel_lowpass_hz" else (cand.field,)
+
+    def back(mr):
+        return retime(mr, {**mr.extra["timing"], **{key: declared[mr.name][key] for key in keys}})
+
+    rest = [dict(e, parameters=dict(e["parameters"])) for i, e in enumerate(done) if i != k]
+    mfit, mho = [back(mr) for mr in mfit], [back(mr) for mr in mho]
+    mfit, mho = refit_accepted(mfit, mho, terms, rest)
+    return mfit, mho, rest
+
+
 def settled(before: list, entries: list) -> bool:
     """Whether every accepted timing parameter moved by less than a tenth of its 95 %
     interval since ``before`` (their parameters at the last pass)."""
@@ -453,6 +492,7 @@ __all__ = [
     "TIMING_EFFECTS",
     "Candidate",
     "added_entry",
+    "candidate_of",
     "candidates",
     "coherent_share",
     "declared_state",
@@ -466,4 +506,5 @@ __all__ = [
     "settled",
     "shift",
     "sigma",
+    "without",
 ]
