@@ -238,6 +238,8 @@ def table_scale(desc, payload=None) -> TableScale:
         idx = [i for i, a in enumerate(desc.actuators) if a.cls.name == c]
         force[f"class:{c}"] = float(np.min(stall[idx]))  # the effect acts on each actuator of it
         mass[f"class:{c}"] = float(np.min([mass[f"actuator:{desc.actuator_names[i]}"] for i in idx]))
+    force["actuators"] = float(np.min(stall))
+    mass["actuators"] = float(np.min([mass[f"actuator:{n}"] for n in desc.actuator_names]))
     payload_kg = float(np.sum(getattr(payload, "mass_kg", 0.0))) if payload is not None else 0.0
     return TableScale(force, mass, float(hp.rated_flow_m3_s), float(hp.supply_pressure_pa), payload_kg)
 

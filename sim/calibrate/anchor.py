@@ -131,4 +131,58 @@ def corroborates(before: Anchor, after: Anchor) -> tuple[bool, str]:
     return True, ""
 
 
-__all__ = ["Anchor", "corroborates", "measure", "phase_bins"]
+#: the band where an accelerometer's gain is read against the velocity (assumed: up to
+#: 20 Hz, where a declared conditioner of 100 Hz and an anti-alias filter change the
+#: magnitude by under 1e-5)
+GAIN_TOP_HZ = 20.0
+
+
+def kinematic_gain(prs, columns) -> tuple[float, float]:
+    """The recorded acceleration's gain against the recorded velocity (the band-passed
+    displacement where the run has no velocity): ``(gain, sigma)`` of the magnitude of
+    their transfer function over ``i 2 pi f`` (``(2 pi f)^2`` from a displacement), from
+    the coherent bins up to :data:`GAIN_TOP_HZ` of ``columns`` (DOF indices) of the
+    replay/closed-loop runs ``prs``, pooled (weights from the log-magnitude's variance,
+    as the phase's); ``(nan, inf)`` without such bins. A sensor's gain is read against
+    another sensor of the same motion, as its timing is: the model's own amplitude
+    error is not in it."""
+    logs, wts = [], []
+    for pr in prs:
+        ref = "table_velocity" if "table_velocity" in pr.recorded else "table_displacement"
+        if "table_acceleration" not in pr.recorded or ref not in pr.recorded:
+            continue
+        order = 1 if ref == "table_velocity" else 2
+        for j in columns:
+            f, mag, var = _magnitude_bins(
+                pr.recorded[ref][pr.rows][:, j], pr.recorded["table_acceleration"][pr.rows][:, j], 1.0 / pr.dt, order
+            )
+            logs.append(np.log(mag))
+            wts.append(1.0 / var)
+    if not logs or sum(len(x) for x in logs) < MIN_BINS:
+        return math.nan, math.inf
+    lg, wt = np.concatenate(logs), np.concatenate(wts)
+    mean = float(np.sum(wt * lg) / np.sum(wt))
+    chi2 = float(np.sum(wt * (lg - mean) ** 2)) / max(len(lg) - 1, 1)
+    sigma = math.sqrt(max(chi2, 1.0) / float(np.sum(wt)))
+    return math.exp(mean), math.exp(mean) * sigma
+
+
+def _magnitude_bins(x, a, fs: float, order: int):
+    """``(f, |H|, var(log |H|))`` of the coherent bins of ``a`` against the ``order``-th
+    derivative of ``x`` (the velocity: 1; the displacement: 2) up to :data:`GAIN_TOP_HZ`."""
+    import scipy.signal as sig
+
+    nper = min(len(x), max(32, int(round(SEGMENT_S * fs))))
+    f, Pxa = sig.csd(x, a, fs=fs, nperseg=nper, detrend="linear")
+    _, Pxx = sig.welch(x, fs=fs, nperseg=nper, detrend="linear")
+    _, Paa = sig.welch(a, fs=fs, nperseg=nper, detrend="linear")
+    den = Pxx * Paa
+    coh = np.divide(np.abs(Pxa) ** 2, den, out=np.zeros_like(Pxx), where=den > 0)
+    keep = (f > 0) & (f <= GAIN_TOP_HZ) & (coh >= MIN_COHERENCE)
+    g2 = np.clip(coh[keep], MIN_COHERENCE, 1.0 - 1e-9)
+    n_seg = max(1.0, len(x) / nper)
+    mag = np.abs(Pxa[keep]) / Pxx[keep] / (2 * np.pi * f[keep]) ** order
+    return f[keep], mag, (1.0 - g2) / (2.0 * n_seg * g2)
+
+
+__all__ = ["Anchor", "corroborates", "kinematic_gain", "measure", "phase_bins"]

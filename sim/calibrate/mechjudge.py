@@ -36,6 +36,11 @@ class RoundState:
     timed_added: list = field(default_factory=list)
 
 
+#: a DOF is a term's own where its force's RMS is at least this share of its largest
+#: DOF's (assumed: 0.1, as a column the test excites: sim.calibrate.windows.QUIET_COLUMN)
+OWN_SHARE = 0.1
+
+
 def term_force_peak(mruns, fit, i: int) -> tuple[str, float]:
     """``("dof:<d>", N)``: the DOF along which term ``i`` of ``fit`` pushes hardest at the
     recorded motion relative to nothing but its own peak (the largest |force| over the fit
@@ -52,6 +57,43 @@ def term_force_peak(mruns, fit, i: int) -> tuple[str, float]:
     return best
 
 
+def own_dofs(mruns, fit, i: int) -> set | None:
+    """The excited DOFs where term ``i`` of ``fit`` pushes (its force's RMS at least
+    :data:`OWN_SHARE` of its largest DOF's), when they are fewer than the excited ones;
+    else None. A term is judged on their held-out error: pooled over every DOF, a 6 Hz
+    mode in z of a 20 t block on the CGS table (12049 kg, 5.9945 Hz, 5.0 % for 12000, 6,
+    5 %) lowered the held-out error by 2 %, under the 5 % margin, as the moments about x
+    and y hold the rotations' accelerometer noise (42-45 % each)."""
+    t = fit.terms[i]
+    coef = [fit.values[i][k] for k in t.law.linears]
+    rms, excited = 0.0, None
+    for mr in mruns:
+        F = sum(c * Q for c, Q in zip(coef, mr.columns(t.law, t.where, t.shape)))
+        rms = rms + np.mean(mr.demean(F)[mr.rows] ** 2, axis=0)
+        excited = mr.excited if mr.excited is not None else np.ones(len(mr.dofs), bool)
+    dofs = mruns[0].dofs
+    own = {d for j, d in enumerate(dofs) if excited[j] and np.sqrt(rms[j]) >= OWN_SHARE * np.sqrt(np.max(rms))}
+    return own if own and len(own) < int(np.sum(excited)) else None
+
+
+def _pushed_out(new) -> str:
+    """What a candidate (the last term of ``new``) pushes an earlier term to beyond its
+    bounds when they are refitted together ("" for nothing): a 91 Hz, 38 % mode of 87.8 t
+    beside an added mass of 7.9 t that went to -80.7 t on the NEES-UCSD table. A nesting
+    parameter is left to the revisit (:func:`sim.calibrate.mechsearch.demote_nested`: a
+    friction growing with the stroke whose growth the damping took is plain friction)."""
+    from sim.calibrate.acceptance import bound_hit
+
+    for t, vals in zip(new.terms[:-1], new.values[:-1]):
+        for name, (unit, lo, hi) in t.law.params.items():
+            if name in t.law.nested:
+                continue
+            v = vals.get(name)
+            if v is not None and np.isfinite(v) and bound_hit(v, lo, hi, 1e-3 * max(abs(v), 1e-12)):
+                return f"with it {t.law.name} at {t.where} goes to {name} = {v:.4g} {unit}, beyond its bounds [{lo:g}, {hi:g}]"
+    return ""
+
+
 def _verdict(st: RoundState, cur, new):
     """``(ok, why, unc, e_new, f_new)`` of the last term of ``new`` against ``cur``."""
     from sim.calibrate.acceptance import accept, implausible
@@ -59,10 +101,18 @@ def _verdict(st: RoundState, cur, new):
     from sim.calibrate.trace import flatness, predict, scan_limits
 
     term, i = new.terms[-1], len(new.terms) - 1
-    e_new = nrmse_runs(st.mho, predict(st.mho, new))
+    res_new = predict(st.mho, new)
+    e_new = nrmse_runs(st.mho, res_new)
     f_new = flatness(st.mfit, new.residuals)
     limits = {k: scan_limits(term.law, k, st.mfit) for k in term.law.shape}
-    ok, why, unc = accept(cur, new, st.e_ho, e_new, st.flat, f_new, term, st.margin, limits)
+    e_cur, e_cmp = st.e_ho, e_new
+    own = own_dofs(st.mfit, new, i)
+    if own and e_new < st.e_ho:  # judged where it pushes, the rest not worse (:func:`own_dofs`)
+        e_cur, e_cmp = nrmse_runs(st.mho, predict(st.mho, cur), own), nrmse_runs(st.mho, res_new, own)
+    ok, why, unc = accept(cur, new, e_cur, e_cmp, st.flat, f_new, term, st.margin, limits)
+    pushed = _pushed_out(new)
+    if ok and pushed:
+        ok, why = False, "compensation: " + pushed
     if st.scale is not None and all(np.isfinite(v) for v in new.values[i].values()):
         params = {**term.law.options, **new.values[i]}
         if params.get("from_payload"):  # every mode of the payload's own mass together

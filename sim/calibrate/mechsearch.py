@@ -347,7 +347,7 @@ def backward_pass(ms: MechStage, cur, e_ho: float, tried: list):
             rest = fit_terms(ms.mfit, cur.terms[:i] + cur.terms[i + 1 :])
             ms.n_fits += 1
             e_rest = nrmse_runs(ms.mho, predict(ms.mho, rest))
-            if e_rest > (1 + ms.margin) * e_ho:
+            if e_rest > (1 + ms.margin) * e_ho or _needed_where_it_pushes(ms, cur, rest, i):
                 continue
             why = f"dropped: without it the held-out error is {e_ho:.4f} -> {e_rest:.4f} (within {100 * ms.margin:g} %)"
             ms.say(f"  {t.law.type:18s} {t.where:14s} {why}")
@@ -409,6 +409,21 @@ def _may_drop(entry: dict, mr, declared: dict) -> bool:
         return True
     off = entry["parameters"]["delay_s"] - declared[mr.name]["accel_delay_s"]
     return abs(off) < DISPLACEMENT_SKEW_SAMPLES * mr.dt
+
+
+def _needed_where_it_pushes(ms: MechStage, cur, rest, i: int) -> bool:
+    """Whether term ``i`` of ``cur`` is needed on the DOFs it pushes on
+    (:func:`sim.calibrate.mechjudge.own_dofs`, as it was judged): their held-out error
+    without it (``rest``) above the margin."""
+    from sim.calibrate.mechjudge import own_dofs
+    from sim.calibrate.residuals import nrmse_runs
+    from sim.calibrate.trace import predict
+
+    own = own_dofs(ms.mfit, cur, i)
+    if not own:
+        return False
+    e_own = nrmse_runs(ms.mho, predict(ms.mho, cur), own)
+    return nrmse_runs(ms.mho, predict(ms.mho, rest), own) > (1 + ms.margin) * e_own
 
 
 def demote_nested(ms: MechStage, cur, e_ho: float, tried: list, desc, pl):

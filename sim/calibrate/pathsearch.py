@@ -503,10 +503,14 @@ def _revisit(st: PathState, rnd: int) -> None:
 
 def _outputs(st: PathState, mho0, e_ho0, timing) -> dict:
     """The fields of a :class:`sim.calibrate.search.CalibrationResult`."""
+    from sim.calibrate import offsets
     from sim.calibrate import paths as P
     from sim.calibrate.residuals import UNEXPLAINED_FRACTION
 
     per, per_run, quiet = path_errors(st.pho, mho0, st.models["ho"])
+    zeros, zero_rows = [], []
+    if st.effects is None or "sensor_offset" in st.effects:  # what the records' zeros share
+        zeros, zero_rows = offsets.judged(st.pfit, st.models["fit"], st.pho, st.models["ho"], st.margin)
     if timing is not None:
         timing.update(st.tm)
         timing["replays_batch"], timing["replays_fallback"] = st.routes["batch"], st.routes["fallback"]
@@ -515,8 +519,8 @@ def _outputs(st: PathState, mho0, e_ho0, timing) -> dict:
         "holdout_note": st.ho_note,
         "error_before": e_ho0,
         "error_after": st.e_ho,
-        "effects_added": [_found(a, st.path, st.pfit, st.desc) for a in st.items],
-        "candidates": st.tried,
+        "effects_added": [_found(a, st.path, st.pfit, st.desc) for a in st.items] + zeros,
+        "candidates": st.tried + zero_rows,
         "unexplained": P.unexplained(st.pfit, st.models["fit"], UNEXPLAINED_FRACTION),
         "per_channel": per,
         "per_run": per_run,

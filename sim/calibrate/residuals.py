@@ -588,13 +588,14 @@ def joint_terms(tm, k_of) -> JointTerms:
     )
 
 
-def nrmse_runs(mruns, residuals) -> float:
+def nrmse_runs(mruns, residuals, dofs=None) -> float:
     """Pooled NRMSE of ``residuals`` (list of (n, k)) against the recorded force, each run
-    and excited DOF (:func:`excited_dofs`) weighted alike (the paper's force weighting)."""
+    and excited DOF (:func:`excited_dofs`) weighted alike (the paper's force weighting);
+    ``dofs``: only these DOF names (None: every one)."""
     vals = []
     for mr, e in zip(mruns, residuals):
         for j in range(len(mr.dofs)):
-            if mr.excited is not None and not mr.excited[j]:
+            if (mr.excited is not None and not mr.excited[j]) or (dofs is not None and mr.dofs[j] not in dofs):
                 continue
             F = mr.demean(mr.force)[mr.rows, j]
             den = float(np.sum(F**2))

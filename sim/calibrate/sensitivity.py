@@ -215,8 +215,10 @@ def _table_of(desc, payload, accepted, effects) -> _Table:
     cap = float(np.mean(hp.area_a_m2)) * hp.supply_pressure_pa
     names = list(cur.actuator_names)
     classes = sorted({a.cls.name for a in cur.actuators})
-    hyd_places = [f"class:{c}" for c in classes] + ([f"actuator:{a}" for a in names] if len(names) > 1 else [])
-    mech_places = distinct_force_places(cur, [f"dof:{d}" for d in cur.dofs] + hyd_places)
+    own = [f"class:{c}" for c in classes] + ([f"actuator:{a}" for a in names] if len(names) > 1 else [])
+    # all at once (several classes): a description's number (oil, valve) wrong on every one
+    hyd_places = (["actuators"] if len(classes) > 1 else []) + own
+    mech_places = distinct_force_places(cur, [f"dof:{d}" for d in cur.dofs] + own)
     want = set(effects) if effects else None
     have = {(e["type"], e["where"]) for e in accepted}
     return _Table(cur, hp, float(tm.model.opt.timestep), FORCE_STEP * cap, hyd_places, mech_places, want, have)
@@ -339,22 +341,17 @@ def _mechanical_candidates(tb: _Table, motion_rms) -> list[Candidate]:
 
 
 def _sensor_candidates(tb: _Table, prs) -> list[Candidate]:
-    """The gain, offset, delay and low-pass of each compared channel and column."""
+    """The gain, delay and low-pass of each compared channel and column (an offset is each
+    record's own zero, :func:`paths.tared`; the zero they share: :mod:`sim.calibrate.offsets`)."""
     out, have, fs = [], tb.have, 1.0 / prs[0].dt
-    for t in SENSOR:
-        if not tb.offered(t):
-            continue
+    for t in (t for t in SENSOR if t != "sensor_offset" and tb.offered(t)):
         for ch, cols in prs[0].columns.items():
             one = np.shape(prs[0].recorded[ch])[1:] in ((), (1,))  # the channel is its column
             for w in [f"channel:{ch}"] + ([] if one else [f"channel:{ch}[{j}]" for j in cols]):
                 if (t, w) in have:
                     continue
-                jj = cols if w.endswith(ch) else [int(w.split("[")[1][:-1])]
-                sc = float(np.mean([prs[0].scale[ch][cols.index(j)] for j in jj]))
                 if t == "sensor_gain":
                     c = ("gain", 1.0, 0.01, -1e3, 1e3, "1")
-                elif t == "sensor_offset":
-                    c = ("offset", 0.0, 0.01 * sc, -1e12, 1e12, "channel units")
                 elif t == "sensor_delay":  # either sign: a channel may lead its motion (an advance)
                     c = ("delay_s", 0.0, 0.5 / fs, -MAX_ADVANCE_SAMPLES / fs, MAX_DELAY_S, "s")
                 else:  # internal 1/cutoff: the first step a filter at fs/4; the cutoff stays below Nyquist

@@ -2,7 +2,9 @@
 
 Each effect changes :class:`hydraulics.HydraulicParams` before the hydraulic system is
 built (``edit_hydraulics``); none acts per step. Valve effects act on one actuator
-(``where = "actuator:X1"``) or on every actuator of a class (``"class:longitudinal"``),
+(``where = "actuator:X1"``), on every actuator of a class (``"class:longitudinal"``) or on
+every actuator of the table (``"actuators"``: one number of the description, as the oil's
+bulk modulus or the valves' rated flow),
 the oil effects on a class (or one actuator), the supply drop at ``"supply"``::
 
     [[effect]]
@@ -35,8 +37,11 @@ from sim.errors import ScenarioError
 
 
 def actuator_indices(effect: Effect, params) -> np.ndarray:
-    """Indices of the actuators an effect at ``actuator:<name>`` / ``class:<name>`` acts on."""
+    """Indices of the actuators an effect at ``actuator:<name>`` / ``class:<name>`` /
+    ``actuators`` acts on."""
     kind, name = effect.where.partition(":")[::2]
+    if kind == "actuators":
+        return np.arange(len(params.names))
     if kind == "actuator":
         if name not in params.names:
             raise ScenarioError(
@@ -54,7 +59,7 @@ def actuator_indices(effect: Effect, params) -> np.ndarray:
 class _PerActuator(Effect):
     """An effect that sets one per-actuator hydraulic quantity."""
 
-    places = ("actuator", "class")
+    places = ("actuator", "class", "actuators")
 
     def set_values(self, params, idx) -> None:
         raise NotImplementedError

@@ -286,6 +286,25 @@ def _unknowns_md(rep: dict | None) -> list[str]:
     return L + [""]
 
 
+def _candidates_md(rows: list) -> list[str]:
+    """The candidates table; with the path of each row where several paths were searched."""
+    paths = any("path" in c for c in rows)
+    head = (
+        "| round | "
+        + ("path | " if paths else "")
+        + "effect | where | explains | held-out NRMSE | accepted | why not |"
+    )
+    L = [head, "|" + "---|" * (head.count("|") - 1)]
+    for c in rows:
+        L.append(
+            f"| {c['round']} | "
+            + (f"{c.get('path', '')} | " if paths else "")
+            + f"{c['name']} | {c['where']} | {100 * c['explained_fraction']:.2f} % | "
+            f"{_pct(c['holdout_error'])} | {'yes' if c['accepted'] else 'no'} | {c['reason']} |"
+        )
+    return L
+
+
 def _compensation(res) -> list[str]:
     """The candidates refused as compensation: effects the table cannot have (a force
     above its actuators', a mass several times its moving mass, a valve flow or bandwidth
@@ -348,14 +367,8 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
         "",
         "## Candidates",
         "",
-        "| round | effect | where | explains | held-out NRMSE | accepted | why not |",
-        "|---|---|---|---|---|---|---|",
     ]
-    for c in res.candidates:
-        L.append(
-            f"| {c['round']} | {c['name']} | {c['where']} | {100 * c['explained_fraction']:.2f} % | "
-            f"{_pct(c['holdout_error'])} | {'yes' if c['accepted'] else 'no'} | {c['reason']} |"
-        )
+    L += _candidates_md(res.candidates)
     L += _compensation(res)
     L += ["", "## Unexplained", ""]
     u = res.unexplained

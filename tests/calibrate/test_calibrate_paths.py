@@ -144,33 +144,40 @@ def test_sensor_delay_of_one_accelerometer_found(floor, tmp_path):
     _check(res, floor, "sensor_delay", "channel:table_acceleration[1]", "delay_s", 3e-3, rel=0.002)
 
 
+def _shared_zero(res, floor, where, truth, rel, *, inside=True):
+    """The one effect found is the offset at ``where`` (the zero every record shares,
+    sim.calibrate.offsets), its value within ``rel`` of the truth and the truth inside its
+    interval; each record being compared about its own zero (paths.tared), the held-out
+    error is the clean floor before and after."""
+    assert [(e["name"], e["where"]) for e in res.effects_added] == [("sensor_offset", where)], res.effects_added
+    e = res.effects_added[0]
+    v, u = e["parameters"]["offset"], e["uncertainty"]["offset"]
+    assert v == pytest.approx(truth, rel=rel) and u < 0.1 * abs(v), (v, u, truth)
+    assert not inside or abs(v - truth) <= u, (v, u, truth)
+    assert res.error_after == res.error_before <= 1.02 * floor, (res.error_before, floor)
+
+
 def test_sensor_offset_of_one_accelerometer_found(floor, tmp_path):
-    """The z accelerometer's zero 0.15 m/s^2 off (15 mg, a DC accelerometer's zero after a
-    temperature change). One column of 18: judged on its own column (pathsearch.judge_sensor);
-    the load cells' offsets are among the candidates and none is taken."""
+    """The z accelerometer's zero 0.15 m/s^2 off in every record (15 mg, a DC
+    accelerometer's zero after a temperature change). One column of 18."""
     paths = _cgs_measured(
         tmp_path, [{"type": "sensor_offset", "where": "channel:table_acceleration[2]", "offset": 0.15}]
     )
     res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
-    # measured: 0.14937 +/- 0.00091 m/s^2; held out 5.19 % -> 4.51 %, the floor
-    _check(res, floor, "sensor_offset", "channel:table_acceleration[2]", "offset", 0.15, rel=0.01)
-    assert len(res.effects_added) == 1
-    # the load cells' offsets are screened with the rest; ``candidates`` lists the first
-    # dozen by score, where one of them ranked 11th on main and below the dozen once the measured
-    # force is sampled at the motion's instant (held-out error the same to 1e-6): none is taken
-    assert not any(c["accepted"] and "actuator_force" in c["where"] for c in res.candidates)
+    # measured: 0.14957 +/- 0.00383 m/s^2 (0.14937 +/- 0.00091 as a candidate of the search
+    # before each record's zero was its own: held out 5.19 % -> 4.51 %)
+    _shared_zero(res, floor, "channel:table_acceleration[2]", 0.15, rel=0.005)
 
 
 def test_load_cell_offset_of_one_actuator_found(floor, tmp_path):
-    """X1's load cell reading 2 kN high (a zero not set before the test; the cells' noise is
-    1 kN RMS). Offered on this over-actuated table since the null estimate no longer drives
-    an internal force in the replay (issue #13; sensitivity.internal_force_part: these
-    records start from rest, as the replay does, so its internal part is seen too)."""
+    """X1's load cell reading 2 kN high in every record (a zero not set before the tests;
+    the cells' noise is 1 kN RMS)."""
     paths = _cgs_measured(tmp_path, [{"type": "sensor_offset", "where": "channel:actuator_force[0]", "offset": 2.0e3}])
     res = S.calibrate(paths, path="replay", effects=SENSORS, workers=2)
-    # measured: 2012.7 +/- 30.4 N; held out 5.17 % -> 4.51 %, the floor
-    _check(res, floor, "sensor_offset", "channel:actuator_force[0]", "offset", 2.0e3, rel=0.02)
-    assert len(res.effects_added) == 1
+    # measured: 2007.6 +/- 5.2 N, the truth outside: the clean runs share a zero of 7.6 +/-
+    # 5.0 N at X1 (the model's own, under 5 % of the column's 17 kN RMS, not named there).
+    # 2012.7 +/- 30.4 N as a candidate of the search before (held out 5.17 % -> 4.51 %)
+    _shared_zero(res, floor, "channel:actuator_force[0]", 2.0e3, rel=0.005, inside=False)
 
 
 def test_sensor_lowpass_of_one_accelerometer_found(floor, tmp_path):
