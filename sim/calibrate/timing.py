@@ -477,10 +477,12 @@ def log_line(row: dict) -> str:
 def added_entry(row: dict) -> dict:
     """The ``effects_added`` entry of an accepted timing candidate."""
     units = {"delay_s": "s", "cutoff_hz": "Hz"}
+    # the channel's whole delay or conditioner, as the balance fits it: in place of the
+    # declared one when the later path compares the record (sim.calibrate.paths)
     return {
         "name": row["name"],
         "where": row["where"],
-        **({"options": row["options"]} if "options" in row else {}),
+        "options": {**row.get("options", {}), "replaces_declared": True},
         "parameters": row["parameters"],
         "uncertainty": row["uncertainty"],
         "units": {k: units[k] for k in row["parameters"]},

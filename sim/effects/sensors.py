@@ -125,6 +125,10 @@ class SensorOffset(_Sensor):
 class SensorDelay(_Sensor):
     type = "sensor_delay"
     SPEC = {"delay_s": ("s", -10.0, 10.0, None)}  # either sign: a channel may lead (calibrate finds both)
+    #: true: this is the channel's whole delay, in place of what a record declares of it
+    #: (calibrate's mechanical path writes it so); compared with a record, the declared
+    #: delay is then not applied on top (sim.calibrate.paths)
+    OPTIONS = {"replaces_declared": False}
 
     def transform(self, t, x):
         return sensing.fractional_delay(x, self.values["delay_s"], _dt(t))
@@ -134,7 +138,9 @@ class SensorDelay(_Sensor):
 class SensorLowpass(_Sensor):
     type = "sensor_lowpass"
     SPEC = {"cutoff_hz": ("Hz", 1e-6, 1e9, None)}
-    OPTIONS = {"order": 2}
+    #: ``replaces_declared``: this is the channel's conditioner, in place of the one a
+    #: record declares (as :class:`SensorDelay`'s)
+    OPTIONS = {"order": 2, "replaces_declared": False}
 
     def transform(self, t, x):
         order = self.options["order"]
