@@ -98,7 +98,11 @@ def test_accelerometer_conditioner_mismatch_found(clean, tmp_path):
     acc.update(lowpass_hz=30.0, declared_lowpass_hz=100.0, declared_lowpass_order=4)
     res = S.calibrate(measured_runs(tmp_path, sensors), path="mechanical")
     (e,) = res.effects_added
-    assert (e["name"], e["where"], e["options"]) == ("sensor_lowpass", "channel:table_acceleration", {"order": 4, "replaces_declared": True})
+    assert (e["name"], e["where"], e["options"]) == (
+        "sensor_lowpass",
+        "channel:table_acceleration",
+        {"order": 4, "replaces_declared": True},
+    )
     fc, u = e["parameters"]["cutoff_hz"], e["uncertainty"]["cutoff_hz"]
     assert abs(fc - 30.0) <= u  # 29.989 +/- 0.012 Hz measured
     assert abs(fc - 30.0) < 0.05 and 0 < u < 0.1
