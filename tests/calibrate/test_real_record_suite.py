@@ -1,0 +1,119 @@
+"""NEES-UCSD records made like real ones (docs/calibration-validation-blind.md), calibrated
+with defaults: one planted effect a case, motion and force channels only, every run
+through ``scenarios/sensors/real_record_1024hz.toml`` (a 5 s quiet lead-in, the
+accelerometer's declared 100 Hz conditioner and lag, the displacement 0.3 sample early
+and undeclared, zeros that change from record to record, drift, noise, 16 bits)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from sim.calibrate import search as S
+
+ROOT = Path(__file__).resolve().parents[2]
+SENSORS = ROOT / "scenarios" / "sensors" / "real_record_1024hz.toml"
+UCSD = ROOT / "scenarios" / "tables" / "ucsd.toml"
+#: (name, motion, seconds): three fit runs, two held out
+MOTIONS = [
+    (
+        "wn1",
+        '[motion.x]\ntype = "white_noise"\nband_hz = [0.3, 15.0]\nseed = 11\nrms_acceleration = 2.0\ntaper_s = 1.0\n',
+        12.0,
+    ),
+    ("ec100", '[motion]\ntype = "el_centro_1940"\namplitude_factor = 1.0\nmapping = { x = "180" }\n', 12.0),
+    (
+        "wn2",
+        '[motion.x]\ntype = "white_noise"\nband_hz = [0.5, 20.0]\nseed = 12\nrms_acceleration = 3.0\ntaper_s = 1.0\n',
+        10.0,
+    ),
+    ("ec200", '[motion]\ntype = "el_centro_1940"\namplitude_factor = 2.0\nmapping = { x = "180" }\n', 12.0),
+    (
+        "wn3",
+        '[motion.x]\ntype = "white_noise"\nband_hz = [0.3, 10.0]\nseed = 13\nrms_acceleration = 1.5\ntaper_s = 1.0\n',
+        10.0,
+    ),
+]
+#: what a recorder of motion and force does not hold
+DROPPED = ("valve_command", "spool_position", "pressure_a", "pressure_b")
+
+
+def _sensors(folder: Path, channel: dict) -> Path:
+    """The real-record sensor file with ``channel``'s keys added at the end of each
+    channel's section (a TOML key may be given once: these are not in the file)."""
+    text = SENSORS.read_text()
+    for ch, keys in channel.items():
+        head = f"[channel.{ch}]\n"
+        lines = "".join(f"{k} = {json.dumps(v)}\n" for k, v in keys.items())
+        text = text.replace(head, head + lines)
+    p = folder / "sensors.toml"
+    p.write_text(text)
+    return p
+
+
+def _runs(folder: Path, effects=(), channel=None) -> list[str]:
+    from sim.cli import main
+    from sim.runs.runfile import read_run, write_run
+
+    sensors = _sensors(folder, channel or {})
+    out = []
+    for i, (name, motion, seconds) in enumerate(MOTIONS):
+        text = f'[scenario]\nname = "{name}"\ntable = "ucsd"\nduration_s = {seconds}\n' + motion
+        for e in effects:
+            text += "[[effect]]\n" + "".join(f"{k} = {json.dumps(v)}\n" for k, v in e.items())
+        (folder / f"{name}.toml").write_text(text)
+        argv = ["run", str(folder / f"{name}.toml"), "--out", str(folder / "sim"), "--duration", str(seconds)]
+        assert main(argv + ["--measure", str(sensors), "--measure-seed", str(100 + i)]) == 0
+        run = read_run(folder / "sim" / f"{name}.measured.run.npz")
+        for c in DROPPED:
+            setattr(run, c, None)
+        run.extras = {}
+        for k in ("table_description", "table_sha256"):
+            run.meta.pop(k, None)
+        out.append(str(write_run(folder / f"{name}.run.npz", run)))
+    return out
+
+
+def _calibrate(paths):
+    return S.calibrate(paths[:3], holdout=paths[3:], table=str(UCSD), workers=2, log=lambda *a: None)
+
+
+@pytest.mark.slow
+def test_a_load_cell_early_is_the_load_cells_alone(tmp_path):
+    """The load cell 4 ms early (its sample 4 ms after its time stamp), the displacement
+    0.3 sample early as in every case: the force's delay alone, -4.000 +/- 0.003 ms
+    measured (it was -3.68 ms beside +0.32 ms on the accelerometer, the displacement's
+    own skew read as the accelerometer's); held out 13.6 % -> 1.53 %, the clean floor."""
+    res = _calibrate(_runs(tmp_path, channel={"actuator_force": {"skew_s": 0.004}}))
+    assert [(e["name"], e["where"]) for e in res.effects_added] == [("sensor_delay", "channel:actuator_force")]
+    d, u = (res.effects_added[0][k]["delay_s"] for k in ("parameters", "uncertainty"))
+    assert abs(d + 0.004) <= u < 1e-5, (d, u)
+    assert res.error_after < 0.2 * res.error_before, (res.error_before, res.error_after)
+
+
+@pytest.mark.slow
+def test_an_added_mass_takes_no_compensating_mode(tmp_path):
+    """8 t added at dof:x: the added mass alone, 7 927 +/- 43 kg measured (0.9 % low,
+    outside its interval); a 91 Hz, 38 % mode of 87.8 t that took the mass to -80.7 t
+    is refused as compensation. Held out 5.93 % -> 1.51 %."""
+    res = _calibrate(_runs(tmp_path, effects=[{"type": "added_mass", "where": "dof:x", "mass_kg": 8000.0}]))
+    assert [(e["name"], e["where"]) for e in res.effects_added] == [("added_mass", "dof:x")]
+    m = res.effects_added[0]["parameters"]["mass_kg"]
+    assert m == pytest.approx(8000.0, rel=0.015), m
+    assert res.error_after < 0.3 * res.error_before, (res.error_before, res.error_after)
+
+
+@pytest.mark.slow
+def test_an_accelerometer_reading_high_is_its_gain(tmp_path):
+    """The accelerometer reads 4 % high: its gain on the closed loop, 1.03949 +/- 0.00040
+    measured (the truth 1.3 intervals out); the velocity reads it so. No offset is taken
+    from the records' own zeros (0.022 m/s^2 was, before each record's zero was its own)."""
+    res = _calibrate(_runs(tmp_path, channel={"table_acceleration": {"gain": 1.04}}))
+    assert [(e["name"], e["where"], e["path"]) for e in res.effects_added] == [
+        ("sensor_gain", "channel:table_acceleration", "closed_loop")
+    ]
+    g = res.effects_added[0]["parameters"]["gain"]
+    assert g == pytest.approx(1.04, abs=0.002), g
+    assert res.error_after < res.error_before, (res.error_before, res.error_after)
