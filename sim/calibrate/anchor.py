@@ -152,10 +152,14 @@ def kinematic_gain(prs, columns) -> tuple[float, float]:
         if "table_acceleration" not in pr.recorded or ref not in pr.recorded:
             continue
         order = 1 if ref == "table_velocity" else 2
+        central = order == 1 and bool((getattr(pr, "conditioning", None) or {}).get("velocity_from_displacement"))
         for j in columns:
             f, mag, var = _magnitude_bins(
                 pr.recorded[ref][pr.rows][:, j], pr.recorded["table_acceleration"][pr.rows][:, j], 1.0 / pr.dt, order
             )
+            if central:  # a central difference's response, sin(w T) / T, not w
+                w, dt = 2 * np.pi * f, pr.dt
+                mag = mag * np.sin(w * dt) / (w * dt)
             logs.append(np.log(mag))
             wts.append(1.0 / var)
     if not logs or sum(len(x) for x in logs) < MIN_BINS:

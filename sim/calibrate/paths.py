@@ -384,6 +384,8 @@ def _setup(job):
             chans[SPECIMEN] = _specimen_at(res, tm, payload, specimen, modes, t[:n])
         lag = float(getattr(res, "force_lag_s", 0.0) or 0.0)
         chans = conditioning.force_at_record_instant(chans, lag, cond, float(t[1] - t[0]))
+        if (cond or {}).get("velocity_from_displacement") and "table_displacement" in chans:
+            chans["table_velocity"] = np.gradient(chans["table_displacement"], float(t[1] - t[0]), axis=0)
         if total and "actuator_force" in chans:  # the record's one column holds the total
             f = chans["actuator_force"]
             chans["actuator_force"] = np.repeat(f.sum(axis=1, keepdims=True), f.shape[1], axis=1)
