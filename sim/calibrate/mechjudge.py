@@ -41,16 +41,21 @@ class RoundState:
 OWN_SHARE = 0.1
 
 
+def term_force(mr, fit, i: int) -> np.ndarray:
+    """Term ``i`` of ``fit``'s force per DOF over the fit rows of run ``mr``, its static
+    part removed (its linear coefficients times their columns)."""
+    t = fit.terms[i]
+    coef = [fit.values[i][k] for k in t.law.linears]
+    return mr.demean(sum(c * Q for c, Q in zip(coef, mr.columns(t.law, t.where, t.shape))))[mr.rows]
+
+
 def term_force_peak(mruns, fit, i: int) -> tuple[str, float]:
     """``("dof:<d>", N)``: the DOF along which term ``i`` of ``fit`` pushes hardest at the
     recorded motion relative to nothing but its own peak (the largest |force| over the fit
     rows of every run)."""
-    t = fit.terms[i]
-    coef = [fit.values[i][k] for k in t.law.linears]
     best = ("", 0.0)
     for mr in mruns:
-        F = sum(c * Q for c, Q in zip(coef, mr.columns(t.law, t.where, t.shape)))
-        peak = np.max(np.abs(mr.demean(F)[mr.rows]), axis=0)
+        peak = np.max(np.abs(term_force(mr, fit, i)), axis=0)
         j = int(np.argmax(peak))
         if peak[j] > best[1]:
             best = (f"dof:{mr.dofs[j]}", float(peak[j]))
@@ -64,12 +69,9 @@ def own_dofs(mruns, fit, i: int) -> set | None:
     mode in z of a 20 t block on the CGS table (12049 kg, 5.9945 Hz, 5.0 % for 12000, 6,
     5 %) lowered the held-out error by 2 %, under the 5 % margin, as the moments about x
     and y hold the rotations' accelerometer noise (42-45 % each)."""
-    t = fit.terms[i]
-    coef = [fit.values[i][k] for k in t.law.linears]
     rms, excited = 0.0, None
     for mr in mruns:
-        F = sum(c * Q for c, Q in zip(coef, mr.columns(t.law, t.where, t.shape)))
-        rms = rms + np.mean(mr.demean(F)[mr.rows] ** 2, axis=0)
+        rms = rms + np.mean(term_force(mr, fit, i) ** 2, axis=0)
         excited = mr.excited if mr.excited is not None else np.ones(len(mr.dofs), bool)
     dofs = mruns[0].dofs
     own = {d for j, d in enumerate(dofs) if excited[j] and np.sqrt(rms[j]) >= OWN_SHARE * np.sqrt(np.max(rms))}
