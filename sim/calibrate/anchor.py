@@ -73,26 +73,32 @@ def phase_bins(mr, j: int) -> tuple:
     """``(omega, phase, variance)`` of DOF ``j`` of a mechanical run: the coherent bins of
     the recorded acceleration against the displacement through the run's chain (phase of
     the transfer function over -(2 pi f)^2, which is -omega tau for a delay tau)."""
-    import scipy.signal as sig
 
     fs = 1.0 / mr.dt
     rows = np.flatnonzero(mr.rows)
     if len(rows) < 16:
         return (np.zeros(0),) * 3
     span = slice(rows[0], rows[-1] + 1)  # the test: a quiet lead-in holds nothing coherent
-    u = mr.filt(mr.u)[span, j]
-    a = mr.a[span, j]
-    nper = min(len(u), max(32, int(round(SEGMENT_S * fs))))
-    f, Pua = sig.csd(u, a, fs=fs, nperseg=nper, detrend="linear")
-    _, Puu = sig.welch(u, fs=fs, nperseg=nper, detrend="linear")
+    f, Pua, _Puu, var = _coherent_bins(mr.filt(mr.u)[span, j], mr.a[span, j], fs, TOP_FRACTION * fs)
+    return 2 * np.pi * f, np.angle(-Pua), var
+
+
+def _coherent_bins(x, a, fs: float, top_hz: float) -> tuple:
+    """``(f, Pxa, Pxx, var)`` of the bins up to ``top_hz`` where ``x`` and ``a`` are
+    coherent (:data:`MIN_COHERENCE`): Welch segments of :data:`SEGMENT_S`, detrended; the
+    variance (1 - g^2) / (2 n g^2) of the phase (and of the log-magnitude) of n segments."""
+    import scipy.signal as sig
+
+    nper = min(len(x), max(32, int(round(SEGMENT_S * fs))))
+    f, Pxa = sig.csd(x, a, fs=fs, nperseg=nper, detrend="linear")
+    _, Pxx = sig.welch(x, fs=fs, nperseg=nper, detrend="linear")
     _, Paa = sig.welch(a, fs=fs, nperseg=nper, detrend="linear")
-    den = Puu * Paa
-    coh = np.divide(np.abs(Pua) ** 2, den, out=np.zeros_like(Puu), where=den > 0)
-    n_seg = max(1.0, len(u) / nper)  # 50 % overlapped segments count as this many independent ones
-    keep = (f > 0) & (f <= TOP_FRACTION * fs) & (coh >= MIN_COHERENCE)
+    den = Pxx * Paa
+    coh = np.divide(np.abs(Pxa) ** 2, den, out=np.zeros_like(Pxx), where=den > 0)
+    n_seg = max(1.0, len(x) / nper)  # 50 % overlapped segments count as this many independent ones
+    keep = (f > 0) & (f <= top_hz) & (coh >= MIN_COHERENCE)
     g2 = np.clip(coh[keep], MIN_COHERENCE, 1.0 - 1e-9)
-    var = (1.0 - g2) / (2.0 * n_seg * g2)
-    return 2 * np.pi * f[keep], np.angle(-Pua[keep]), var
+    return f[keep], Pxa[keep], Pxx[keep], (1.0 - g2) / (2.0 * n_seg * g2)
 
 
 def measure(mruns) -> Anchor:
@@ -174,19 +180,8 @@ def kinematic_gain(prs, columns) -> tuple[float, float]:
 def _magnitude_bins(x, a, fs: float, order: int):
     """``(f, |H|, var(log |H|))`` of the coherent bins of ``a`` against the ``order``-th
     derivative of ``x`` (the velocity: 1; the displacement: 2) up to :data:`GAIN_TOP_HZ`."""
-    import scipy.signal as sig
-
-    nper = min(len(x), max(32, int(round(SEGMENT_S * fs))))
-    f, Pxa = sig.csd(x, a, fs=fs, nperseg=nper, detrend="linear")
-    _, Pxx = sig.welch(x, fs=fs, nperseg=nper, detrend="linear")
-    _, Paa = sig.welch(a, fs=fs, nperseg=nper, detrend="linear")
-    den = Pxx * Paa
-    coh = np.divide(np.abs(Pxa) ** 2, den, out=np.zeros_like(Pxx), where=den > 0)
-    keep = (f > 0) & (f <= GAIN_TOP_HZ) & (coh >= MIN_COHERENCE)
-    g2 = np.clip(coh[keep], MIN_COHERENCE, 1.0 - 1e-9)
-    n_seg = max(1.0, len(x) / nper)
-    mag = np.abs(Pxa[keep]) / Pxx[keep] / (2 * np.pi * f[keep]) ** order
-    return f[keep], mag, (1.0 - g2) / (2.0 * n_seg * g2)
+    f, Pxa, Pxx, var = _coherent_bins(x, a, fs, GAIN_TOP_HZ)
+    return f, np.abs(Pxa) / Pxx / (2 * np.pi * f) ** order, var
 
 
 __all__ = ["Anchor", "corroborates", "kinematic_gain", "measure", "phase_bins"]
