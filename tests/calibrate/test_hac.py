@@ -75,14 +75,29 @@ def test_ar1_coverage_mildly_correlated():
 
 
 def test_white_residual_matches_textbook():
-    """Independent samples of one variance: the HAC value is the textbook s^2 (X^T X)^-1."""
+    """Independent samples of one variance: the Bartlett sum is the textbook s^2 (X^T X)^-1
+    (within 10 %), and the reported value (the larger of it and the spectral variance) is
+    never below it and on average within a few per cent of the textbook (1.027 measured
+    over 200 seeds: the larger of two estimates of one value is a little above either)."""
+    from sim.calibrate.hac import bartlett_bandwidth
+
     X = _design()
-    rng = np.random.default_rng(7)
-    y = X @ np.array([0.3, 1.7]) + rng.standard_normal(len(X))
-    theta, *_ = np.linalg.lstsq(X, y, rcond=None)
-    r = y - X @ theta
-    h, n = hac_sigma(X, r, blocks([T] * RUNS)), naive_sigma(X, r)
-    assert np.allclose(h, n, rtol=0.1), (h, n)
+    segs = blocks([T] * RUNS)
+    ratio = []
+    for seed in range(7, 47):
+        rng = np.random.default_rng(seed)
+        y = X @ np.array([0.3, 1.7]) + rng.standard_normal(len(X))
+        theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+        r = y - X @ theta
+        h, n = hac_sigma(X, r, segs), naive_sigma(X, r)
+        u = (X @ np.linalg.inv(X.T @ X))[:, 1] * r
+        parts = [u[s] for s in segs]
+        b = math.sqrt(long_run_sum(parts, bartlett_bandwidth(parts, T)) * len(y) / (len(y) - 2))
+        if seed == 7:
+            assert b == pytest.approx(n[1], rel=0.1), (b, n)
+        assert h[1] >= b * (1 - 1e-12), (h, b)
+        ratio.append(h[1] / n[1])
+    assert 1.0 <= float(np.mean(ratio)) < 1.06, np.mean(ratio)
 
 
 def test_holes_count_as_zeros():
@@ -119,3 +134,52 @@ def test_mechanical_segments_follow_the_stacked_layout():
     b = SimpleNamespace(rows=np.ones(2, bool), force=np.zeros((2, 2)))
     segs = [s.tolist() for s in _segments([a, b])]
     assert segs == [[0, 2, -1, 4], [1, 3, -1, 5], [6, 8], [7, 9]]
+
+
+SLOW_RHO = 0.995  #: a slow part (a transducer's drift) beside white noise
+
+
+def _white_plus_slow(rng, slow_var):
+    w = rng.standard_normal(RUNS * T)
+    e = rng.standard_normal((RUNS, T + 2000)) * math.sqrt(slow_var * (1 - SLOW_RHO**2))
+    for i in range(1, e.shape[1]):
+        e[:, i] += SLOW_RHO * e[:, i - 1]
+    return w + e[:, 2000:].reshape(-1)
+
+
+def _mixture_true_sd(X, slow_var):
+    lag = np.abs(np.subtract.outer(np.arange(T), np.arange(T)))
+    S = np.eye(T) + slow_var * SLOW_RHO**lag
+    Ainv = np.linalg.inv(X.T @ X)
+    Om = sum(X[k * T : (k + 1) * T].T @ S @ X[k * T : (k + 1) * T] for k in range(RUNS))
+    return np.sqrt(np.diag(Ainv @ Om @ Ainv))
+
+
+def test_a_slow_part_under_white_noise_is_covered():
+    """White noise with a slow part of a fifth of its variance (AR(1), rho = 0.995): the
+    residual's first lag is ~0.2, so the Bartlett bandwidth is a few samples and its
+    interval covers the truth in about half the cases (0.52 measured, its standard
+    deviation 0.37 of the true one); the spectral variance beside it (hac_sigma reports
+    the larger) brings the coverage to 0.95 (0.99 of the true standard deviation)."""
+    from sim.calibrate.hac import bartlett_bandwidth
+
+    X = _design()
+    truth = np.array([0.3, 1.7])
+    true_sd = _mixture_true_sd(X, 0.2)[1]
+    segs = blocks([T] * RUNS)
+    hits, hits_bartlett, ratio = 0, 0, []
+    for seed in range(200):
+        y = X @ truth + _white_plus_slow(np.random.default_rng(seed), 0.2)
+        theta, *_ = np.linalg.lstsq(X, y, rcond=None)
+        r = y - X @ theta
+        sd = hac_sigma(X, r, segs)[1]
+        u = (X @ np.linalg.inv(X.T @ X))[:, 1] * r
+        parts = [u[s] for s in segs]
+        sb = math.sqrt(long_run_sum(parts, bartlett_bandwidth(parts, T)) * len(y) / (len(y) - 2))
+        err = abs(theta[1] - truth[1])
+        hits += err <= 1.96 * sd
+        hits_bartlett += err <= 1.96 * sb
+        ratio.append(sd / true_sd)
+    assert hits_bartlett / 200 < 0.7, hits_bartlett
+    assert 0.9 <= hits / 200 <= 0.99, hits
+    assert 0.85 < float(np.mean(ratio)) < 1.15, np.mean(ratio)
