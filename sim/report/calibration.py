@@ -217,9 +217,16 @@ def _where_error_sits(res) -> list[str]:
         L += [f"| `{k}` | {_pct(v['before'])} | {_pct(v['after'])} |" for k, v in per_run.items()]
         L.append("")
     if res.per_channel:
-        L += ["| run: channel or DOF | before | after |", "|---|---|---|"]
-        L += [f"| `{k}` | {_pct(v['before'])} | {_pct(v['after'])} |" for k, v in res.per_channel.items()]
-        L.append("")
+        L += _per_channel_table(res.per_channel, "run: channel or DOF")
+    floors = [v.get("floor") for v in res.per_channel.values() if v.get("floor") is not None]
+    if floors:
+        L += [
+            "Accelerometer floor (mechanical path): the error a perfect model would still leave there, "
+            "the recorded acceleration's white noise (its level in the top of the band) times the "
+            "declared moving mass, over the DOF's recorded force. An error near its floor is the "
+            "sensors', not the model's.",
+            "",
+        ]
     quiet = getattr(res, "not_excited", []) or []
     if quiet:
         from sim.calibrate.windows import QUIET_COLUMN
@@ -257,8 +264,20 @@ def _paths_md(res) -> list[str]:
             f"| {name} | {_pct(before)} | {_pct(p['error_after'])} | {_pct(p.get('baseline_error'))} | {found}{refused} |"
         )
     per_ch = {f"{name}: {k}": v for name, p in res.paths.items() for k, v in p.get("per_channel", {}).items()}
-    L += ["", "| path: run: channel or DOF | before | after |", "|---|---|---|"]
-    L += [f"| `{k}` | {_pct(v['before'])} | {_pct(v['after'])} |" for k, v in per_ch.items()]
+    return L + [""] + _per_channel_table(per_ch, "path: run: channel or DOF")
+
+
+def _per_channel_table(per: dict, head: str) -> list[str]:
+    """The held-out error per column before and after, with the accelerometer floor
+    (:func:`sim.calibrate.mechsearch.accelerometer_floor`) where a column has one."""
+    floor = any(v.get("floor") is not None for v in per.values())
+    L = [
+        f"| {head} | before | after |" + (" accelerometer floor |" if floor else ""),
+        "|---|---|---|" + ("---|" if floor else ""),
+    ]
+    for k, v in per.items():
+        row = f"| `{k}` | {_pct(v['before'])} | {_pct(v['after'])} |"
+        L.append(row + (f" {_pct(v.get('floor'))} |" if floor else ""))
     return L + [""]
 
 
