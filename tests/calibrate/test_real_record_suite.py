@@ -91,6 +91,10 @@ def test_a_load_cell_early_is_the_load_cells_alone(tmp_path):
     d, u = (res.effects_added[0][k]["delay_s"] for k in ("parameters", "uncertainty"))
     assert abs(d + 0.004) <= u < 1e-5, (d, u)
     assert res.error_after < 0.2 * res.error_before, (res.error_before, res.error_after)
+    # the mechanical path's held-out error per DOF is at the accelerometers' floor (the
+    # error a perfect model would leave: their noise times the moving mass)
+    for k, v in res.paths["mechanical"]["per_channel"].items():
+        assert v["after"] <= 1.1 * v["floor"], (k, v)
 
 
 @pytest.mark.slow
