@@ -30,6 +30,8 @@ K_SIGMA = 3.0 / 1.96  #: a 95 % half-width to three standard deviations
 
 
 def _runs(folder: Path, payload_text: str) -> list[str]:
+    from test_real_record_suite import as_recorded
+
     import mjcf
     from mjcf.description import parse_payload
     from sim.effects import build_model
@@ -53,11 +55,7 @@ def _runs(folder: Path, payload_text: str) -> list[str]:
         res = Simulation(tm).run(reference=ref)
         assert res.incomplete_reason is None
         run = measure_run(build_runfile(res, tm, source="simulated", reference=ref), sensors, seed=100 + seed)
-        for c in DROPPED:
-            setattr(run, c, None)
-        run.extras = {}
-        for k in ("table_description", "table_sha256"):
-            run.meta.pop(k, None)
+        run = as_recorded(run, DROPPED)
         paths.append(str(write_run(folder / f"lab_{seed}.run.npz", run)))
     return paths
 

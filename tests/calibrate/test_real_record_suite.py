@@ -66,14 +66,20 @@ def _runs(folder: Path, effects=(), channel=None) -> list[str]:
         (folder / f"{name}.toml").write_text(text)
         argv = ["run", str(folder / f"{name}.toml"), "--out", str(folder / "sim"), "--duration", str(seconds)]
         assert main(argv + ["--measure", str(sensors), "--measure-seed", str(100 + i)]) == 0
-        run = read_run(folder / "sim" / f"{name}.measured.run.npz")
-        for c in DROPPED:
-            setattr(run, c, None)
-        run.extras = {}
-        for k in ("table_description", "table_sha256"):
-            run.meta.pop(k, None)
+        run = as_recorded(read_run(folder / "sim" / f"{name}.measured.run.npz"), DROPPED)
         out.append(str(write_run(folder / f"{name}.run.npz", run)))
     return out
+
+
+def as_recorded(run, dropped):
+    """``run`` as its recorder writes it: the channels ``dropped`` gone, no extras, no
+    table description (a real record carries none)."""
+    for c in dropped:
+        setattr(run, c, None)
+    run.extras = {}
+    for k in ("table_description", "table_sha256"):
+        run.meta.pop(k, None)
+    return run
 
 
 def _calibrate(paths):
