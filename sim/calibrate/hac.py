@@ -108,7 +108,8 @@ def hac_sigma(J: np.ndarray, r: np.ndarray, segments) -> np.ndarray:
         segs.append(idx)
         covered[idx[idx >= 0]] = True
     length = int(np.median([s.size for s in segs])) if segs else 1
-    v_spec = spectral_variance([np.where(s[:, None] >= 0, C[np.maximum(s, 0)], 0.0) for s in segs], r, segs)
+    weights = [np.where(s[:, None] >= 0, C[np.maximum(s, 0)], 0.0) for s in segs]
+    v_spec = spectral_variance(weights, r, segs) if segs else np.zeros(p)
     out = np.empty(p)
     for a in range(p):
         ua = U[:, a]

@@ -183,3 +183,14 @@ def test_a_slow_part_under_white_noise_is_covered():
     assert hits_bartlett / 200 < 0.7, hits_bartlett
     assert 0.9 <= hits / 200 <= 0.99, hits
     assert 0.85 < float(np.mean(ratio)) < 1.15, np.mean(ratio)
+
+
+def test_no_segments_is_the_white_variance():
+    """Samples in no segment are each their own: the heteroskedasticity-robust (White)
+    variance, with no spectral term to add."""
+    rng = np.random.default_rng(11)
+    X = _design()
+    r = rng.standard_normal(len(X))
+    C = X @ np.linalg.inv(X.T @ X)
+    want = np.sqrt(np.sum((C * r[:, None]) ** 2, axis=0) * len(X) / (len(X) - 2))
+    assert np.allclose(hac_sigma(X, r, []), want, rtol=1e-12)
