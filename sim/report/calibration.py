@@ -218,8 +218,7 @@ def _where_error_sits(res) -> list[str]:
         L.append("")
     if res.per_channel:
         L += _per_channel_table(res.per_channel, "run: channel or DOF")
-    floors = [v.get("floor") for v in res.per_channel.values() if v.get("floor") is not None]
-    if floors:
+    if _has_floor(res.per_channel):
         L += [
             "Accelerometer floor (mechanical path): the error a perfect model would still leave there, "
             "the recorded acceleration's white noise (its level in the top of the band) times the "
@@ -267,10 +266,15 @@ def _paths_md(res) -> list[str]:
     return L + [""] + _per_channel_table(per_ch, "path: run: channel or DOF")
 
 
+def _has_floor(per: dict) -> bool:
+    """Whether any column of ``per`` carries the mechanical path's accelerometer floor."""
+    return any(v.get("floor") is not None for v in per.values())
+
+
 def _per_channel_table(per: dict, head: str) -> list[str]:
     """The held-out error per column before and after, with the accelerometer floor
     (:func:`sim.calibrate.mechsearch.accelerometer_floor`) where a column has one."""
-    floor = any(v.get("floor") is not None for v in per.values())
+    floor = _has_floor(per)
     L = [
         f"| {head} | before | after |" + (" accelerometer floor |" if floor else ""),
         "|---|---|---|" + ("---|" if floor else ""),
