@@ -199,6 +199,7 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None, payload=
     ``score_from``: run name -> first scored sample (the held-out part of one run);
     ``payload``: the model's payload (None: a bare table); given, a run's
     ``specimen_acceleration`` is compared where the model reads it (:func:`specimen_columns`)."""
+    from sim.calibrate.replay import command_hold
     from sim.calibrate.valve_null import declared_null
     from sim.control.tvc import dof_jacobian
 
@@ -234,7 +235,7 @@ def path_runs(runs, desc, path: str, *, score_from: dict | None = None, payload=
                 bandpass=bands,
                 not_excited=quiet,
                 force_total=holds_total(r.actuator_force),
-                hold=str(r.meta.get("command_hold") or "zoh"),
+                hold=command_hold(r, desc),
                 specimen=sensors_of(r) if SPECIMEN in cols else [],
             )
         )
@@ -348,7 +349,7 @@ def _setup(job):
     :func:`simulate_job`'s answer), or None when the model refuses the candidate."""
     raw, src, payload, extra, path, t, drive, dofs, columns, cond, bands, total, specimen, hold = job
     from mjcf.description import parse_table
-    from sim.effects import build_model
+    from sim.loop.simulation import table_model
 
     raw = copy.deepcopy(raw)
     if extra:
@@ -356,7 +357,7 @@ def _setup(job):
     cond = without_replaced(cond, raw.get("effect", []))
     try:  # a candidate's value the model refuses (a supply drop below the return): no model
         desc = parse_table(raw, src=src)
-        tm = build_model(desc, payload)
+        tm = table_model(desc, payload)
         modes = watch_modes(tm) if SPECIMEN in columns else []  # their slides recorded
         if path == "replay":
             from sim.calibrate.replay import record_channels, replay_setup
@@ -524,14 +525,14 @@ def simulate_many(jobs, *, workers: int | None = None, counts: dict | None = Non
 def _closed_loop_setup(tm, t, pose6):
     """The simulation of the closed-loop path and its reference (the recorded 6-DOF pose
     at ``t`` on the controller's ticks)."""
+    from sim.calibrate.replay import ticks_covering
     from sim.loop.simulation import Simulation
     from sim.scenario.reference import Reference
     from sim.signals.resample import interpolate
 
     sim = Simulation(tm)
     rate = sim.gains.rate_hz
-    n_tick = int(np.floor(t[-1] * rate + 1e-6)) + 1
-    tt = np.arange(n_tick) / rate
+    tt = ticks_covering(t, rate)
     d = interpolate(t, pose6, tt) if len(tt) != len(t) or not np.allclose(tt, t) else np.asarray(pose6, float)
     v, a = reference_derivatives(d, 1.0 / rate)
     return sim, Reference(t=tt, d=d, v=v, a=a)

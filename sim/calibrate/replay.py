@@ -2,11 +2,14 @@
 first step of closing the loop with measured data (the residual is what the model
 lacks).
 
-The record keeps its own time. The model keeps its physics step (1/2048 s) and ticks at
-a rate that divides it; the recorded command is held onto those ticks (zero-order hold,
-as the lab's DAC held it; ``hold="linear"`` interpolates instead) and the model's
-channels are sampled back at the record's instants, where the comparison is made. A
-record at 1024 Hz (or any rate dividing 2048 Hz) is replayed on its own samples.
+The record keeps its own time. The model keeps the physics step ``shaketable run`` gives
+its table (1/2048 s; 1/8000 s for the Rice table's analog controller,
+:func:`sim.loop.simulation.table_model`) and ticks at a rate that divides it; the
+recorded command is held onto those ticks (zero-order hold, as the lab's DAC held it) or,
+where the table's controller ticks faster than the record, interpolated onto the
+controller's ticks (:func:`command_hold`), and the model's channels are sampled back at
+the record's instants, where the comparison is made. A record at 1024 Hz (or any rate
+dividing the physics rate) is replayed on its own samples.
 
 Before anything is compared the valve null bias (and its drift) is estimated from the
 recorded motion (:mod:`sim.calibrate.valve_null`) and added to the command, so that an
@@ -75,14 +78,53 @@ class ReplayOutcome:
         }
 
 
-def tick_rate(record_hz: float, hold: str = "zoh") -> float:
-    """The model's tick for a record at ``record_hz``: the record's own rate when it
-    divides the physics rate (a held command changes only there), else :data:`TICK_HZ`;
-    an interpolated command (``hold="linear"``) ticks at least at :data:`TICK_HZ`."""
-    if hold == "linear" and record_hz < TICK_HZ:
-        return TICK_HZ
-    r = PHYSICS_HZ / record_hz
-    return float(record_hz) if abs(r - round(r)) < 1e-9 and round(r) >= 1 else TICK_HZ
+def tick_rate(
+    record_hz: float, hold: str = "zoh", physics_hz: float = PHYSICS_HZ, controller_hz: float = TICK_HZ
+) -> float:
+    """The model's tick for a record at ``record_hz`` on a model stepping at ``physics_hz``.
+    A held command (``"zoh"``) ticks at the record's own rate when it divides the physics
+    rate (the command changes only there), else at the whole fraction of the physics rate
+    nearest :data:`TICK_HZ` (1024 Hz at 2048 Hz; 1000 Hz at the Rice table's 8000 Hz).
+    An interpolated one (``"linear"``) ticks at the table controller's own rate
+    ``controller_hz`` (the record's where that is faster and divides the physics rate):
+    what the controller did between the record's samples."""
+    r = physics_hz / record_hz
+    own = abs(r - round(r)) < 1e-9 and round(r) >= 1
+    if hold == "linear":
+        fast = physics_hz / max(1, round(physics_hz / controller_hz))
+        return max(fast, float(record_hz)) if own else fast
+    return float(record_hz) if own else physics_hz / max(1, round(physics_hz / TICK_HZ))
+
+
+def model_rates(tm) -> tuple[float, float]:
+    """``(physics, controller)`` rates of the model ``tm`` in Hz (the controller's: its
+    table's ``[controller]``)."""
+    from sim.control.base import controller_settings
+
+    return 1.0 / float(tm.model.opt.timestep), float(controller_settings(tm.desc).controller_rate_hz)
+
+
+def command_hold(src, desc) -> str:
+    """How a record's valve command goes onto the model's ticks: the record's
+    ``meta.command_hold`` where it says; else held (``"zoh"``) when the table's
+    controller ticks no faster than the record, interpolated (``"linear"``) when it ticks
+    faster. A slower recorder's samples of a faster controller's command, held, lag it by
+    half a record step (docs/import.md): on the Rice table's 4000 Hz records of its
+    analog controller (8000 Hz), a 12 ms valve delay came out one physics step short."""
+    from sim.control.base import controller_settings
+
+    said = src.meta.get("command_hold")
+    if said:
+        return str(said)
+    return "linear" if controller_settings(desc).controller_rate_hz > src.sample_rate_hz * (1 + 1e-9) else "zoh"
+
+
+def ticks_covering(t_rec, rate: float) -> np.ndarray:
+    """The model's ticks at ``rate`` from 0 through the record's last instant (one tick
+    past it when the two grids differ): a model sampled back at every recorded instant
+    (a 4000 Hz record's last instant lies after the last 1000 Hz tick before it)."""
+    n_tick = int(np.ceil(float(t_rec[-1]) * rate - 1e-6)) + 1
+    return np.arange(n_tick) / rate
 
 
 def _columns(src, ch: str, run, model: dict | None = None) -> np.ndarray | None:
@@ -199,11 +241,11 @@ def record_model(name: str, src, table: str | None, payload: str | None, *, chec
     columns the table's (one-line errors)."""
     from mjcf.description import DOFS6
     from sim.calibrate.conditioning import channel_conditioning
-    from sim.effects import build_model
+    from sim.loop.simulation import description_as_run, table_model
     from sim.runs.runfile import payload_of, table_of
 
     channel_conditioning(src)  # a declaration the comparison cannot read: said before the run
-    desc = table_of(src, table)
+    desc = description_as_run(table_of(src, table))  # as `run` simulates it (the Rice table's parameter set)
     if check_actuators and list(src.actuators) != list(desc.actuator_names):
         raise RunFileError(
             f"{name}: actuators {src.actuators} do not match table '{desc.name}' "
@@ -214,7 +256,7 @@ def record_model(name: str, src, table: str | None, payload: str | None, *, chec
         raise RunFileError(f"{name}: DOF column(s) {missing} are not DOF names ({', '.join(DOFS6)}); fix meta.dofs")
     pl = payload_of(src, payload)
     t = np.asarray(src.t, float) - float(src.t[0])
-    return RecordModel(name=name, src=src, desc=desc, payload=pl, tm=build_model(desc, pl), t=t)
+    return RecordModel(name=name, src=src, desc=desc, payload=pl, tm=table_model(desc, pl), t=t)
 
 
 def model_run(rec: RecordModel, res, chans: dict, extras: dict, n: int, description: str, meta: dict, notes: list):
@@ -317,18 +359,18 @@ def replay(
     ``"zoh"`` or ``"linear"`` (command onto the model's ticks).
     """
     name, src = read_record(source, "valve_command")
-    hold = hold or src.meta.get("command_hold", "zoh")
+    rec = record_model(name, src, table, payload, check_actuators=True)
+    hold = hold or command_hold(src, rec.desc)
     if hold not in ("zoh", "linear"):
         raise RunFileError(
             f"{name}: command hold must be 'zoh' or 'linear' (got {hold!r}); fix meta.command_hold or --hold"
         )
-    rec = record_model(name, src, table, payload, check_actuators=True)
     desc = rec.desc
     notes = []
     if bias is None:
         bias = "estimate" if src.source == "measured" else "none"
     u, vn = _with_valve_null(src, desc, bias, drift, notes)
-    rate = tick_rate(src.sample_rate_hz, hold)
+    rate = tick_rate(src.sample_rate_hz, hold, *model_rates(rec.tm))
     if rate != src.sample_rate_hz:
         notes.append(
             f"record at {src.sample_rate_hz:g} Hz: command "
@@ -447,9 +489,8 @@ def replay_setup(tm, t_rec, valve_command, *, hold: str = "zoh"):
 
     t_rec = np.asarray(t_rec, float)
     fs = 1.0 / float(t_rec[1] - t_rec[0])
-    rate = tick_rate(fs, hold)
-    n_tick = int(np.floor(t_rec[-1] * rate + 1e-6)) + 1
-    t_tick = np.arange(n_tick) / rate
+    rate = tick_rate(fs, hold, *model_rates(tm))
+    t_tick = ticks_covering(t_rec, rate)
     cmd = zoh(t_rec, valve_command, t_tick) if hold == "zoh" else interpolate(t_rec, valve_command, t_tick)
     return Simulation(tm, gains=ControllerGains(rate_hz=rate)), cmd
 
@@ -485,6 +526,7 @@ __all__ = [
     "RecordModel",
     "ReplayOutcome",
     "comparison",
+    "model_rates",
     "model_run",
     "read_record",
     "record_channels",
@@ -494,5 +536,7 @@ __all__ = [
     "residuals",
     "run_at_record",
     "through_declared_chain",
+    "command_hold",
     "tick_rate",
+    "ticks_covering",
 ]

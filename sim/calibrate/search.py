@@ -101,6 +101,7 @@ def declared_model(run, table: str | None, payload: str | None):
     description is the simulator's truth, effects planted in it included, not a
     declaration: calibrating against it would find nothing to add."""
     import mjcf
+    from sim.loop.simulation import description_as_run
     from sim.runs.runfile import payload_of, table_of
 
     imported = "imported_from" in run.meta or "table_path" in run.meta
@@ -108,6 +109,7 @@ def declared_model(run, table: str | None, payload: str | None):
         desc = table_of(run, table)
     else:
         desc = mjcf.load_table(run.meta["table"])
+    desc = description_as_run(desc)  # the Rice table's parameter set, as `run` applies it
     if payload is not None or imported:
         return desc, payload_of(run, payload)
     name = run.meta.get("payload")

@@ -203,12 +203,12 @@ def _table_of(desc, payload, accepted, effects) -> _Table:
     from mjcf.description import parse_table
     from sim.calibrate.paths import build_order
     from sim.calibrate.residuals import distinct_force_places
-    from sim.effects import build_model
+    from sim.loop.simulation import table_model
 
     raw = dict(desc.raw)
     raw["effect"] = build_order(list(raw.get("effect", [])) + [dict(e) for e in accepted])
     cur = parse_table(raw, src=desc.source)
-    tm = build_model(cur, payload)
+    tm = table_model(cur, payload)  # at the physics step of the replays (a valve delay's grid)
     hp = HydraulicParams.from_table(cur.raw)
     for e in tm.effects:
         hp = e.edit_hydraulics(hp)

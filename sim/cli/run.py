@@ -291,7 +291,8 @@ def add_parsers(sub) -> None:
         default=None,
         help="command onto the model's ticks: zero-order hold (the record is the controller's DAC "
         "rate) or linear (a slower recorder sampled the drive); default the run's "
-        "meta.command_hold, else zoh",
+        "meta.command_hold, else zoh where the table's controller ticks at the record's rate, "
+        "linear where it ticks faster",
     )
     p.add_argument(
         "--closed-loop",

@@ -98,6 +98,30 @@ class RunResult:
         return self.sim_s / self.wall_s if self.wall_s > 0 else float("inf")
 
 
+def description_as_run(desc, gains=None):
+    """``desc`` as its controller runs it (``gains.table``, default the table's
+    controller's: the Rice analog controller's parameter set written into the bulk
+    modulus, leakage and valve delay), under its own source name: the declared model a
+    record of the table is compared with, as ``shaketable run`` simulates it."""
+    from mjcf.description import parse_table
+
+    ran = (gains or controller_settings(desc)).table(desc)
+    return desc if ran is desc else parse_table(ran.raw, src=desc.source)
+
+
+def table_model(desc, payload=None, gains=None) -> TableModel:
+    """The model of ``desc`` (+ ``payload``) at the physics step its controller acts on
+    (``gains.timestep_s``, default the table's controller's; None: the builder's 1/2048 s).
+    A replay or a calibration of a table's records builds this one: the analog controller
+    of the Rice table acts every 1/8000 s, and its 4000 Hz records are the model's samples
+    there only."""
+    from mjcf.builder import BuildOptions
+    from sim.effects import build_model
+
+    dt = (gains or controller_settings(desc)).timestep_s
+    return build_model(desc, payload) if dt is None else build_model(desc, payload, BuildOptions(timestep_s=dt))
+
+
 class Simulation:
     """One table simulation (one MjData, one hydraulic system, one controller).
 
@@ -151,14 +175,9 @@ class Simulation:
         needs: ``gains`` (default: the table's, by ``[controller] type``) edit the
         description (``gains.table``, e.g. the analog controller's parameter set) and set
         the physics step (``gains.timestep_s``, None: the table's)."""
-        from mjcf.builder import BuildOptions
-        from sim.effects import build_model
-
         gains = gains or controller_settings(desc)
         desc = gains.table(desc)
-        dt = gains.timestep_s
-        tm = build_model(desc, payload) if dt is None else build_model(desc, payload, BuildOptions(timestep_s=dt))
-        return cls(tm, backend=backend, gains=gains)
+        return cls(table_model(desc, payload, gains), backend=backend, gains=gains)
 
     # ------------------------------------------------------------------ state
     def reset(self, pose=None, forces=None):
@@ -610,4 +629,4 @@ class Simulation:
         return None
 
 
-__all__ = ["Reference", "RunResult", "Simulation", "reference_from_motions"]
+__all__ = ["Reference", "RunResult", "Simulation", "description_as_run", "reference_from_motions", "table_model"]
