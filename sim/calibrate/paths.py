@@ -637,6 +637,20 @@ def column_errors(pr: PathRun, model: dict) -> dict:
     return out
 
 
+def column_floors(pr: PathRun) -> dict:
+    """The NRMSE a perfect model would still leave per compared column (keys as
+    :func:`column_errors`): the record's own white noise (its level in the top of the
+    band, :func:`sim.calibrate.conditioning.noise_floor`) over the column's scale. A
+    model's channels carry none; a light table's 3 kN forces under a 1 kN load-cell noise
+    leave a third of their RMS whatever the model."""
+    out = {}
+    for ch, cols in pr.columns.items():
+        noise = conditioning.noise_floor(np.asarray(pr.recorded[ch][pr.rows], float)[:, cols], 1.0 / pr.dt)
+        for k, j in enumerate(cols):
+            out[f"{ch}[{_place(pr, ch, j)}]"] = float(noise[k] / pr.scale[ch][k])
+    return out
+
+
 def _place(pr, ch, j) -> str:
     if ch == SPECIMEN:
         return str(pr.specimen[j].get("name", f"s{j}"))

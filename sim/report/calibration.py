@@ -220,9 +220,10 @@ def _where_error_sits(res) -> list[str]:
         L += _per_channel_table(res.per_channel, "run: channel or DOF")
     if _has_floor(res.per_channel):
         L += [
-            "Accelerometer floor (mechanical path): the error a perfect model would still leave there, "
+            "Noise floor: the error a perfect model would still leave there. On the mechanical path, "
             "the recorded acceleration's white noise (its level in the top of the band) times the "
-            "declared moving mass, over the DOF's recorded force. An error near its floor is the "
+            "declared moving mass, over the DOF's recorded force; on the replay and closed-loop "
+            "paths, the channel's own white noise over its RMS. An error near its floor is the "
             "sensors', not the model's.",
             "",
         ]
@@ -267,16 +268,18 @@ def _paths_md(res) -> list[str]:
 
 
 def _has_floor(per: dict) -> bool:
-    """Whether any column of ``per`` carries the mechanical path's accelerometer floor."""
+    """Whether any column of ``per`` carries a noise floor (the mechanical path's
+    accelerometer floor, the replay and closed-loop paths' channel noise)."""
     return any(v.get("floor") is not None for v in per.values())
 
 
 def _per_channel_table(per: dict, head: str) -> list[str]:
-    """The held-out error per column before and after, with the accelerometer floor
-    (:func:`sim.calibrate.mechsearch.accelerometer_floor`) where a column has one."""
+    """The held-out error per column before and after, with the noise floor where a column
+    has one (:func:`sim.calibrate.mechsearch.accelerometer_floor`,
+    :func:`sim.calibrate.paths.column_floors`)."""
     floor = _has_floor(per)
     L = [
-        f"| {head} | before | after |" + (" accelerometer floor |" if floor else ""),
+        f"| {head} | before | after |" + (" noise floor |" if floor else ""),
         "|---|---|---|" + ("---|" if floor else ""),
     ]
     for k, v in per.items():

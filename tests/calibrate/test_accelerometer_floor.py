@@ -58,3 +58,25 @@ def test_no_inertial_term_no_floor():
     r = _run()
     r.extra = {}
     assert np.isnan(accelerometer_floor(r)[0])
+
+
+def test_a_replay_column_floor_is_its_own_noise_over_its_rms():
+    """The replay and closed-loop paths' floor (sim.calibrate.paths.column_floors): a 3 kN
+    RMS force under 1 kN of white load-cell noise leaves 1 / sqrt(9 + 1) = 31.6 % whatever
+    the model; measured within 3 %."""
+    from sim.calibrate.paths import column_floors
+
+    n = int(20 * FS)
+    t = np.arange(n) / FS
+    rng = np.random.default_rng(7)
+    force = 3.0e3 * np.sqrt(2.0) * np.sin(2 * np.pi * 3.0 * t) + 1.0e3 * rng.standard_normal(n)
+    pr = SimpleNamespace(
+        columns={"actuator_force": [0]},
+        recorded={"actuator_force": force[:, None]},
+        rows=slice(0, None),
+        dt=1.0 / FS,
+        scale={"actuator_force": np.array([np.std(force)])},
+        actuators=["A"],
+        dofs=["x"],
+    )
+    assert column_floors(pr)["actuator_force[A]"] == pytest.approx(1.0 / np.sqrt(10.0), rel=0.03)

@@ -1,0 +1,89 @@
+"""The Rice uni-axial table (Trombetti and Conte 2002) on records made like real ones,
+calibrated with defaults: 4000 Hz records of its analog controller (which acts every
+1/8000 s), through ``scenarios/sensors/real_record_1024hz.toml`` at the table's 4000 Hz
+(a 5 s quiet lead-in, the accelerometer's declared conditioner and lag, the displacement
+early and undeclared, zeros, drift, noise), pressures and spool dropped. The paper
+identifies the valve's pure delay per test series (12.0-14.0 ms, its Table 1); the
+description declares set d18's 13.5 ms."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from sim.calibrate import search as S
+
+ROOT = Path(__file__).resolve().parents[2]
+SENSORS = ROOT / "scenarios" / "sensors" / "real_record_1024hz.toml"
+RICE = ROOT / "scenarios" / "tables" / "rice.toml"
+
+#: (seed, band top Hz, RMS m/s^2): three fit runs, one held out (8 s white noise, 22-41 % of the stroke)
+MOTIONS = [(91, 20.0, 2.0), (92, 25.0, 3.0), (93, 30.0, 4.0), (94, 35.0, 5.0)]
+DROPPED = ("spool_position", "pressure_a", "pressure_b")
+
+
+def _sensors_4000(folder: Path) -> Path:
+    """The real-record sensor file at the Rice recorder's 4000 Hz (Sec. 4 of Trombetti and
+    Conte 2002), its anti-alias at a quarter of that as in the file."""
+    text = SENSORS.read_text()
+    text = text.replace("rate_hz = 1024.0 ", "rate_hz = 4000.0 ").replace(
+        "anti_alias_hz = 256.0 ", "anti_alias_hz = 1000.0"
+    )
+    assert "rate_hz = 4000.0" in text and "anti_alias_hz = 1000.0" in text
+    p = folder / "sensors_4000.toml"
+    p.write_text(text)
+    return p
+
+
+def _runs(folder: Path, effects=()) -> list[str]:
+    from test_real_record_suite import as_recorded
+
+    from sim.cli import main
+    from sim.runs.runfile import read_run, write_run
+
+    sensors = _sensors_4000(folder)
+    out = []
+    for i, (seed, top, rms) in enumerate(MOTIONS):
+        name = f"wn{i + 1}"
+        text = (
+            f'[scenario]\nname = "{name}"\ntable = "rice"\nduration_s = 8.0\n'
+            f'[motion.x]\ntype = "white_noise"\nband_hz = [1.0, {top}]\nseed = {seed}\n'
+            f"rms_acceleration = {rms}\ntaper_s = 1.0\n[output]\nsample_rate_hz = 4000.0\n"
+        )
+        for e in effects:
+            text += "[[effect]]\n" + "".join(f"{k} = {json.dumps(v)}\n" for k, v in e.items())
+        (folder / f"{name}.toml").write_text(text)
+        argv = ["run", str(folder / f"{name}.toml"), "--out", str(folder / "sim")]
+        assert main(argv + ["--measure", str(sensors), "--measure-seed", str(900 + i)]) == 0
+        run = as_recorded(read_run(folder / "sim" / f"{name}.measured.run.npz"), DROPPED)
+        out.append(str(write_run(folder / f"{name}.run.npz", run)))
+    return out
+
+
+def _calibrate(paths):
+    return S.calibrate(paths[:3], holdout=paths[3:], table=str(RICE), workers=2, log=lambda *a: None)
+
+
+@pytest.mark.slow
+def test_a_shorter_valve_delay_is_found_on_the_rice_table(tmp_path):
+    """The valve's delay 12.0 ms (the paper's set d0) where 13.5 ms is declared: the
+    replay path finds 12.000 +/- 0.004 ms (2026-11-27; before the model stepped as the
+    table's controller does, this path stopped with an error; with the command held, not
+    interpolated, it read 11.875 ms). Held out 18.5 % -> 14.9 %, the linear baseline 41 %
+    (the floor is the 1 kN load-cell noise on this table's 3 kN forces)."""
+    res = _calibrate(_runs(tmp_path, effects=[{"type": "valve_delay", "where": "actuators", "delay_s": 0.012}]))
+    assert [e["name"] for e in res.effects_added] == ["valve_delay"], res.effects_added
+    d, u = (res.effects_added[0][k]["delay_s"] for k in ("parameters", "uncertainty"))
+    assert abs(d - 0.012) <= 3 * u + 1e-9 and u < 2e-5, (d, u)
+    assert res.error_after < 0.9 * res.error_before, (res.error_before, res.error_after)
+    assert res.error_after < res.baseline["holdout_error"], (res.error_after, res.baseline)
+
+
+@pytest.mark.slow
+def test_clean_rice_records_add_nothing(tmp_path):
+    """The same records with the declared delay: nothing added (2026-11-27: the replay
+    path's best, a 13.4 ms delay, did not lower the held-out error)."""
+    res = _calibrate(_runs(tmp_path))
+    assert res.effects_added == [], res.effects_added
