@@ -122,7 +122,8 @@ class ImportMap:
     skip_rows: int
     payload: str | None
     description: str
-    command_hold: str = "zoh"
+    #: None: not said; replay and calibrate choose by the table's controller rate
+    command_hold: str | None = None
     derive_velocity: bool = False
 
 
@@ -175,8 +176,8 @@ def load_map(path, table: str | None = None) -> ImportMap:
     for i, c in enumerate(cols_raw, start=1):
         cols.append(_column(c, f"{p} [[column]] #{i}", desc, seen))
     delim = src.get("delimiter")
-    hold = src.get("command_hold", "zoh")
-    if hold not in ("zoh", "linear"):
+    hold = src.get("command_hold")
+    if hold is not None and hold not in ("zoh", "linear"):
         raise _err(
             str(p),
             f"[source] command_hold {hold!r} is not known",
@@ -485,9 +486,10 @@ def import_file(path, mp: ImportMap) -> Imported:
         "imported_from": str(path),
         "import_map": mp.path,
         "time_origin_s": t0,
-        "command_hold": mp.command_hold,
         "derived_channels": derived,
     }
+    if mp.command_hold:  # not said: replay and calibrate choose (sim.calibrate.replay.command_hold)
+        meta["command_hold"] = mp.command_hold
     if specs:  # docs/run-file.md: one entry per specimen_acceleration column, in order
         meta["specimen_sensors"] = [{"name": c.target, "height_m": c.height_m, "direction": c.direction} for c in specs]
     cond = channel_conditioning(mp)

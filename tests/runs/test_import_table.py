@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mjcf import load_table
 from sim.cli import main
 from sim.runs.importer import import_file, load_map
 from sim.runs.runfile import read_run
@@ -195,6 +196,24 @@ def test_a_bare_name_is_still_the_stock_table(tmp_path):
     run = import_file(lab / "export.csv", load_map(lab / "map.toml")).run
     assert run.meta["table"] == "lab"
     assert run.meta["table_path"] == str((ROOT / "scenarios/tables/lab.toml").resolve())
+
+
+def test_a_map_that_does_not_say_its_hold_leaves_it_to_the_controller_rate(tmp_path):
+    """No ``command_hold`` in the map: none in the run, and replay interpolates (the lab
+    table's controller ticks at 1024 Hz, faster than this export's rate); the map's
+    word wins where it gives one."""
+    from sim.calibrate.replay import command_hold
+
+    lab = lab_folder(tmp_path, duration_s=1.0)
+    (lab / "map.toml").write_text(
+        MAP.replace('table = "td3.toml"', 'table = "lab"').replace('command_hold = "linear"\n', "")
+    )
+    run = import_file(lab / "export.csv", load_map(lab / "map.toml")).run
+    assert "command_hold" not in run.meta and run.sample_rate_hz < 1024.0
+    assert command_hold(run, load_table("lab")) == "linear"
+    (lab / "zoh.toml").write_text(MAP.replace('table = "td3.toml"', 'table = "lab"').replace('"linear"', '"zoh"'))
+    said = import_file(lab / "export.csv", load_map(lab / "zoh.toml")).run
+    assert said.meta["command_hold"] == "zoh" and command_hold(said, load_table("lab")) == "zoh"
 
 
 def test_map_names_are_compared_stripped_of_spaces(tmp_path):
