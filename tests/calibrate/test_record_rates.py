@@ -91,3 +91,38 @@ def test_a_rice_record_replays_to_round_off(tmp_path):
     for ch in ("table_acceleration", "actuator_force"):
         err = [v for v in out.residual_nrmse[ch].values() if v is not None]
         assert err and max(err) < 1e-3, (ch, out.residual_nrmse[ch])
+
+
+def test_a_1000_hz_record_is_modelled_whole(tmp_path):
+    """A lab's 1000 Hz export of a table whose controller ticks at 1024 Hz: the model is
+    sampled back at every recorded instant. The last 1024 Hz tick fell before the
+    record's last instant, and `calibrate` refused every such record ('the declared
+    model's replay run diverged or stopped early')."""
+    from sim.calibrate import paths as P
+    from sim.calibrate import search as S
+    from sim.cli import main
+    from sim.runs.runfile import read_run, write_run
+    from sim.signals.resample import interpolate
+
+    scen = tmp_path / "wn.toml"
+    scen.write_text(
+        '[scenario]\nname = "wn"\ntable = "ucsd"\nduration_s = 2.0\n'
+        '[motion.x]\ntype = "white_noise"\nband_hz = [1.0, 15.0]\nseed = 4\nrms_acceleration = 2.0\ntaper_s = 0.25\n'
+    )
+    assert main(["run", str(scen), "--out", str(tmp_path)]) == 0
+    run = read_run(tmp_path / "wn.run.npz")
+    t = np.asarray(run.t) - run.t[0]
+    t1000 = np.arange(int(t[-1] * 1000.0)) / 1000.0  # to 1.999 s
+    assert t1000[-1] * 1024.0 % 1.0 > 0  # the record's last instant is not on a tick
+    for ch in ("valve_command", "reference", "actuator_displacement", "actuator_force", "table_displacement"):
+        setattr(run, ch, interpolate(t, np.asarray(getattr(run, ch), float), t1000))
+    for ch in ("table_velocity", "table_acceleration", "accelerometers", "spool_position", "pressure_a", "pressure_b"):
+        setattr(run, ch, None)
+    run.t, run.extras = t1000, {}
+    run.meta["sample_rate_hz"] = 1000.0
+    path = write_run(tmp_path / "wn1000.run.npz", run)
+    runs, _, desc, pl = S._inputs([str(path)], None, "ucsd", None, None, None, None)
+    prs = P.path_runs(runs, desc, "replay", payload=pl)
+    models = P.simulate_many([p.job(desc.raw, str(desc.source), pl, []) for p in prs], workers=1)
+    assert all(m is not None for m in models)
+    assert P.nrmse(prs, models) < 0.05, P.nrmse(prs, models)
