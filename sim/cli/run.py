@@ -287,12 +287,12 @@ def add_parsers(sub) -> None:
     )
     p.add_argument(
         "--hold",
-        choices=["zoh", "linear"],
+        choices=["zoh", "linear", "cubic"],
         default=None,
         help="command onto the model's ticks: zero-order hold (the record is the controller's DAC "
-        "rate) or linear (a slower recorder sampled the drive); default the run's "
-        "meta.command_hold, else zoh where the table's controller ticks at the record's rate, "
-        "linear where it ticks faster",
+        "rate), or a cubic spline or linear interpolation (a slower recorder sampled the drive); "
+        "default the run's meta.command_hold, else zoh where the table's controller ticks at the "
+        "record's rate, cubic where it ticks faster",
     )
     p.add_argument(
         "--closed-loop",

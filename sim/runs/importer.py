@@ -177,11 +177,11 @@ def load_map(path, table: str | None = None) -> ImportMap:
         cols.append(_column(c, f"{p} [[column]] #{i}", desc, seen))
     delim = src.get("delimiter")
     hold = src.get("command_hold")
-    if hold is not None and hold not in ("zoh", "linear"):
+    if hold is not None and hold not in ("zoh", "linear", "cubic"):
         raise _err(
             str(p),
             f"[source] command_hold {hold!r} is not known",
-            'use "zoh" (the record is the controller\'s own rate) or "linear" (a slower recorder sampled the drive)',
+            'use "zoh" (the record is the controller\'s own rate), or "cubic" or "linear" (a slower recorder sampled the drive)',
         )
     skip = src.get("skip_rows", 0)
     if not isinstance(skip, int) or skip < 0:

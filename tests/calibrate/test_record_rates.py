@@ -50,9 +50,9 @@ class _Record:
 
 def test_the_command_is_interpolated_where_the_controller_is_faster():
     rice, ucsd = mjcf.load_table("rice"), mjcf.load_table("ucsd")
-    assert command_hold(_Record(4000.0), rice) == "linear"  # analog controller, 8000 Hz
+    assert command_hold(_Record(4000.0), rice) == "cubic"  # analog controller, 8000 Hz
     assert command_hold(_Record(1024.0), ucsd) == "zoh"  # the controller's own rate
-    assert command_hold(_Record(256.0), ucsd) == "linear"  # a slower recorder
+    assert command_hold(_Record(256.0), ucsd) == "cubic"  # a slower recorder
     assert command_hold(_Record(4000.0, {"command_hold": "zoh"}), rice) == "zoh"  # the record says
 
 
@@ -87,7 +87,7 @@ def test_a_rice_record_replays_to_round_off(tmp_path):
     )
     assert main(["run", str(scen), "--out", str(tmp_path)]) == 0
     out = replay(str(tmp_path / "wn.run.npz"))
-    assert out.complete and out.tick_hz == 8000.0 and out.hold == "linear"
+    assert out.complete and out.tick_hz == 8000.0 and out.hold == "cubic"
     for ch in ("table_acceleration", "actuator_force"):
         err = [v for v in out.residual_nrmse[ch].values() if v is not None]
         assert err and max(err) < 1e-3, (ch, out.residual_nrmse[ch])

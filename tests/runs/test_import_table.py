@@ -210,7 +210,7 @@ def test_a_map_that_does_not_say_its_hold_leaves_it_to_the_controller_rate(tmp_p
     )
     run = import_file(lab / "export.csv", load_map(lab / "map.toml")).run
     assert "command_hold" not in run.meta and run.sample_rate_hz < 1024.0
-    assert command_hold(run, load_table("lab")) == "linear"
+    assert command_hold(run, load_table("lab")) == "cubic"
     (lab / "zoh.toml").write_text(MAP.replace('table = "td3.toml"', 'table = "lab"').replace('"linear"', '"zoh"'))
     said = import_file(lab / "export.csv", load_map(lab / "zoh.toml")).run
     assert said.meta["command_hold"] == "zoh" and command_hold(said, load_table("lab")) == "zoh"
