@@ -426,6 +426,25 @@ class Imported:
     report: dict
 
 
+def _mapped_channels(mp: ImportMap, raw: dict, n: int, places: dict) -> dict:
+    """Each mapped column in its channel's array, in SI units (``(x - offset) * factor``),
+    at its place's column (``places``: the table's actuators and DOFs, the mapped
+    accelerometers and specimen sensors); NaN where no column is mapped."""
+    chans = {}
+    for c in mp.columns:
+        if c.channel in ACTUATOR:
+            names = places["actuator"]
+        elif c.channel in DOF:
+            names = places["dof"]
+        elif c.channel == "specimen_acceleration":
+            names = [s.target for s in places["specimen"]]
+        else:
+            names = places["accelerometer"]
+        arr = chans.setdefault(c.channel, np.full((n, len(names)), np.nan))
+        arr[:, names.index(c.target)] = (raw[c.name] - c.offset) * c.factor
+    return chans
+
+
 def import_file(path, mp: ImportMap) -> Imported:
     """Convert one export (``.csv``/``.txt``, ``.mat`` or ``.tdms``) through the map ``mp``."""
     import mjcf
@@ -447,18 +466,7 @@ def import_file(path, mp: ImportMap) -> Imported:
     acts, dofs = list(desc.actuator_names), list(desc.dofs)
     accs = list(dict.fromkeys(c.target for c in mp.columns if c.channel == "accelerometers"))
     specs = [c for c in mp.columns if c.channel == "specimen_acceleration"]
-    chans = {}
-    for c in mp.columns:
-        if c.channel in ACTUATOR:
-            names = acts
-        elif c.channel in DOF:
-            names = dofs
-        elif c.channel == "specimen_acceleration":
-            names = [s.target for s in specs]
-        else:
-            names = accs
-        arr = chans.setdefault(c.channel, np.full((n, len(names)), np.nan))
-        arr[:, names.index(c.target)] = (raw[c.name] - c.offset) * c.factor
+    chans = _mapped_channels(mp, raw, n, {"actuator": acts, "dof": dofs, "accelerometer": accs, "specimen": specs})
     derived = {}
     if mp.derive_velocity and "table_velocity" not in chans:
         if "table_displacement" not in chans:
@@ -487,9 +495,9 @@ def import_file(path, mp: ImportMap) -> Imported:
         "import_map": mp.path,
         "time_origin_s": t0,
         "derived_channels": derived,
+        # not said: replay and calibrate choose by the controller's rate (sim.calibrate.replay.command_hold)
+        **({"command_hold": mp.command_hold} if mp.command_hold else {}),
     }
-    if mp.command_hold:  # not said: replay and calibrate choose (sim.calibrate.replay.command_hold)
-        meta["command_hold"] = mp.command_hold
     if specs:  # docs/run-file.md: one entry per specimen_acceleration column, in order
         meta["specimen_sensors"] = [{"name": c.target, "height_m": c.height_m, "direction": c.direction} for c in specs]
     cond = channel_conditioning(mp)
