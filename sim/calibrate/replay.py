@@ -33,11 +33,10 @@ from pathlib import Path
 import numpy as np
 
 from sim.errors import RunFileError
+from sim.runs.runfile import COMMAND_HOLDS
 
 PHYSICS_HZ = 2048.0  #: the model's physics rate (mjcf.builder default step 1/2048 s)
 TICK_HZ = 1024.0  #: replay tick for records whose rate does not divide the physics rate
-#: how a record's command goes onto the model's ticks (meta.command_hold, replay --hold)
-HOLDS = ("zoh", "linear", "cubic")
 INPUTS = ("valve_command", "reference")  #: what drives the replay: not compared
 DISPLACEMENT_BAND_HZ = (0.2, 50.0)  #: band of the displacement comparison (open-loop drift removed)
 
@@ -376,14 +375,14 @@ def replay(
     from the recorded motion), ``"none"``, or a number (the same offset, fraction of rated
     opening, on every valve); default ``"estimate"`` for a measured run, ``"none"`` for a
     simulated one (its valves had no hidden null: it replays to round-off). ``hold``:
-    ``"zoh"``, ``"linear"`` or ``"cubic"`` (command onto the model's ticks, :data:`HOLDS`).
+    ``"zoh"``, ``"linear"`` or ``"cubic"`` (command onto the model's ticks, :data:`sim.runs.runfile.COMMAND_HOLDS`).
     """
     name, src = read_record(source, "valve_command")
     rec = record_model(name, src, table, payload, check_actuators=True)
     hold = hold or command_hold(src, rec.desc)
-    if hold not in HOLDS:
+    if hold not in COMMAND_HOLDS:
         raise RunFileError(
-            f"{name}: command hold must be one of {', '.join(HOLDS)} (got {hold!r}); fix meta.command_hold or --hold"
+            f"{name}: command hold must be one of {', '.join(COMMAND_HOLDS)} (got {hold!r}); fix meta.command_hold or --hold"
         )
     desc = rec.desc
     notes = []
@@ -556,7 +555,6 @@ __all__ = [
     "through_declared_chain",
     "command_hold",
     "command_on_ticks",
-    "HOLDS",
     "tick_rate",
     "ticks_covering",
 ]

@@ -9,6 +9,7 @@ import numpy as np
 
 from sim.assess.run import SCHEMA
 from sim.runs.files import json_text, out_dir, write_json_atomic
+from sim.runs.runfile import COMMAND_HOLDS
 
 
 def _progress(args):
@@ -287,7 +288,7 @@ def add_parsers(sub) -> None:
     )
     p.add_argument(
         "--hold",
-        choices=["zoh", "linear", "cubic"],
+        choices=list(COMMAND_HOLDS),
         default=None,
         help="command onto the model's ticks: zero-order hold (the record is the controller's DAC "
         "rate), or a cubic spline or linear interpolation (a slower recorder sampled the drive); "

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from sim.runs.exports import _err, _read_csv, _read_mat, _read_tdms, uniform_time
+from sim.runs.runfile import COMMAND_HOLDS
 
 G = 9.80665  #: standard gravity, m/s^2 (unit "g")
 IN = 0.0254
@@ -177,7 +178,7 @@ def load_map(path, table: str | None = None) -> ImportMap:
         cols.append(_column(c, f"{p} [[column]] #{i}", desc, seen))
     delim = src.get("delimiter")
     hold = src.get("command_hold")
-    if hold is not None and hold not in ("zoh", "linear", "cubic"):
+    if hold is not None and hold not in COMMAND_HOLDS:
         raise _err(
             str(p),
             f"[source] command_hold {hold!r} is not known",

@@ -36,6 +36,9 @@ import numpy as np
 from sim.errors import RunFileError
 
 FORMAT = "shaketable-run/1"
+#: the values of ``meta.command_hold`` (docs/run-file.md): how a replay puts the recorded
+#: valve command onto the model's ticks (sim.calibrate.replay.command_on_ticks)
+COMMAND_HOLDS = ("zoh", "linear", "cubic")
 EXTRA_PREFIX = "x_"  #: project extension channels (supply pressure, loop gap, ...)
 SUFFIX = ".run.npz"
 SOURCES = ("measured", "simulated")
