@@ -109,12 +109,37 @@ def declared_model(run, table: str | None, payload: str | None):
         desc = table_of(run, table)
     else:
         desc = mjcf.load_table(run.meta["table"])
-    desc = description_as_run(desc)  # the Rice table's parameter set, as `run` applies it
+    desc = refuse_unknowns_run_sets(desc, description_as_run(desc))  # the Rice table's parameter set
     if payload is not None or imported:
         return desc, payload_of(run, payload)
     name = run.meta.get("payload")
     declared = isinstance(name, str) and name.strip().lower() not in ("", "none")
     return desc, mjcf.load_payload(name) if declared else None
+
+
+def refuse_unknowns_run_sets(desc, ran):
+    """``ran`` (``desc`` as its controller runs it), unless a value ``desc`` marks
+    ``[unknown]`` is one its controller sets: the Rice table's parameter set writes its
+    bulk modulus, leakage and valve delay over the file's, so a value identified there and
+    written into the calibrated file would be written over again by ``run``."""
+    import copy
+
+    from mjcf.description import parse_table
+    from mjcf.unknowns import set_value_at, value_at
+    from sim.loop.simulation import description_as_run
+
+    for key, (lo, hi) in getattr(desc, "unknowns", {}).items():
+        moved = copy.deepcopy(desc.raw)  # the value moved within its range: does `run` keep it?
+        probe = lo + 0.618 * (hi - lo)
+        set_value_at(moved, key, probe)
+        if value_at(description_as_run(parse_table(moved, src=desc.source)).raw, key) != probe:
+            c = desc.raw.get("controller", {})
+            raise CalibrationError(
+                f"{desc.source}: [unknown] '{key}' is set by controller.parameter_set "
+                f"'{c.get('parameter_set', '')}' whenever the table runs, whatever calibration finds; "
+                "drop it from [unknown] (a value the runs do not bear out is then found as an effect)"
+            )
+    return ran
 
 
 def calibrate(

@@ -134,3 +134,27 @@ def test_a_value_at_its_bound_stays_inside_the_declared_range():
     p = Parameter(("servovalve.tau_s",), 0.00106103, hi, 0.0029)
     assert math.exp(math.log(hi)) > hi  # the rounding this guards against
     assert p.to_v(p.bounds[1]) == hi and p.lo <= p.to_v(p.bounds[0]) <= hi
+
+
+def test_a_value_the_controller_sets_cannot_be_declared_unknown(tmp_path):
+    """The Rice table's parameter set writes the bulk modulus over the file's whenever the
+    table runs: identified under [unknown] and written into the calibrated file, the value
+    would be written over again. Calibration refuses it, naming the file and the key; a
+    value the controller leaves alone (the moving mass's dead volume) stays unknown."""
+    import mjcf
+    from sim.calibrate.residuals import CalibrationError
+    from sim.calibrate.search import refuse_unknowns_run_sets
+    from sim.loop.simulation import description_as_run
+
+    text = (ROOT / "scenarios/tables/rice.toml").read_text()
+    bad = tmp_path / "rice_bm.toml"
+    bad.write_text(text + '\n[unknown]\n"fluid.bulk_modulus_pa" = [3e8, 9e8]\n')
+    desc = mjcf.load_table(bad)
+    with pytest.raises(CalibrationError, match=r"rice_bm\.toml: \[unknown\] 'fluid\.bulk_modulus_pa' is set by"):
+        refuse_unknowns_run_sets(desc, description_as_run(desc))
+    ok = tmp_path / "rice_dv.toml"
+    dv = desc.raw["actuator_class"]["main"]["dead_volume_a_m3"]
+    ok.write_text(text + f'\n[unknown]\n"actuator_class.main.dead_volume_a_m3" = [{dv / 2}, {dv * 2}]\n')
+    desc = mjcf.load_table(ok)
+    ran = description_as_run(desc)
+    assert refuse_unknowns_run_sets(desc, ran) is ran
