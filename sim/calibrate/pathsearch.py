@@ -538,7 +538,8 @@ def _outputs(st: PathState, mho0, e_ho0, timing) -> dict:
 
 def path_errors(pho, before, after) -> tuple[dict, dict, list]:
     """Where the held-out error sits: per run and compared column (``"<run>:<channel>[<place>]"``
-    -> before/after and the record's noise floor, :func:`sim.calibrate.paths.column_floors`),
+    -> before/after, the record's noise floor, :func:`sim.calibrate.paths.column_floors`,
+    and the column's weight in the pooled error, :func:`sim.calibrate.paths.column_weights`),
     per run (pooled), and the ``"<run>:<channel>[<place>]"`` the runs do
     not excite (:attr:`sim.calibrate.paths.PathRun.not_excited`), left out of both."""
     from sim.calibrate import paths as P
@@ -547,9 +548,9 @@ def path_errors(pho, before, after) -> tuple[dict, dict, list]:
     for p, m0, m1 in zip(pho, before, after):
         run = Path(p.name).name
         per_run[run] = {"before": P.nrmse([p], [m0]), "after": P.nrmse([p], [m1])}
-        e0, e1, floor = P.column_errors(p, m0), P.column_errors(p, m1), P.column_floors(p)
+        e0, e1, floor, w = P.column_errors(p, m0), P.column_errors(p, m1), P.column_floors(p), P.column_weights(p)
         for k in e0:
-            per[f"{run}:{k}"] = {"before": e0[k], "after": e1[k], "floor": floor[k]}
+            per[f"{run}:{k}"] = {"before": e0[k], "after": e1[k], "floor": floor[k], "weight": w[k]}
         quiet += [f"{run}:{ch}[{place}]" for ch, places in p.not_excited.items() for place in places]
     return per, per_run, quiet
 

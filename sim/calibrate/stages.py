@@ -19,10 +19,10 @@ with them by more than the acceptance margin (:func:`agree`). ``--path`` narrows
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import replace
 
+from sim.calibrate.inherited import with_effects
 from sim.calibrate.sensitivity import HYDRAULIC
 from sim.errors import UserError
 
@@ -85,16 +85,6 @@ def first_stage(stages, effects):
     return (stages, mech) if mech else (stages[1:], effects)
 
 
-def with_effects(desc, entries):
-    """``desc`` with the description entries ``entries`` added to its ``[[effect]]`` list."""
-    from mjcf.description import parse_table
-    from sim.calibrate.paths import build_order
-
-    raw = copy.deepcopy(desc.raw)
-    raw["effect"] = build_order(list(raw.get("effect", [])) + [dict(e) for e in entries])
-    return parse_table(raw, src=desc.source)
-
-
 def entries_of(res, tag: str = "calibrated") -> list:
     """The description entries of a result's ``effects_added``."""
     from sim.calibrate.result import effect_entry
@@ -124,10 +114,11 @@ def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, wo
         return first
     path = stages[1]
     later = stage_effects(effects, after_mechanical=True)
-    kept = entries_of(first)
     say(f"{path} path, after the mechanical path: looking for {', '.join(later) or 'nothing'}")
     if not later:
         return first
+    first = refit_first(runs, ho_given, desc, pl, path, first, workers=workers, say=say)
+    kept = entries_of(first)
     try:
         second = search_one(path, with_effects(desc, kept), later)
     except UserError as e:  # the records do not replay through the model: say so, keep stage 1
@@ -147,6 +138,17 @@ def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, wo
 
         return _one_by_one(first, second, ev, (runs, ho_given, desc, pl, workers), say, redo)
     return combine(first, second, ev)
+
+
+def refit_first(runs, ho_given, desc, pl, path, first, *, workers, say):
+    """``first`` with its force laws and modes refitted on the later ``path``, where its
+    columns see them better (:func:`sim.calibrate.inherited.refit_inherited`)."""
+    from sim.calibrate.inherited import refit_inherited
+
+    if not first.effects_added:
+        return first
+    added = refit_inherited(runs, ho_given, desc, pl, path, first.effects_added, workers=workers, say=say)
+    return replace(first, effects_added=added)
 
 
 def _one_by_one(first, second, ev, ctx, say, redo=None):

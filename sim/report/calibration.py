@@ -276,15 +276,18 @@ def _has_floor(per: dict) -> bool:
 def _per_channel_table(per: dict, head: str) -> list[str]:
     """The held-out error per column before and after, with the noise floor where a column
     has one (:func:`sim.calibrate.mechsearch.accelerometer_floor`,
-    :func:`sim.calibrate.paths.column_floors`)."""
+    :func:`sim.calibrate.paths.column_floors`) and the column's weight in the pooled error
+    on the replay and closed-loop paths (:func:`sim.calibrate.paths.noise_weights`)."""
     floor = _has_floor(per)
+    weight = any("weight" in v for v in per.values())  # the replay and closed-loop paths'
     L = [
-        f"| {head} | before | after |" + (" noise floor |" if floor else ""),
-        "|---|---|---|" + ("---|" if floor else ""),
+        f"| {head} | before | after |" + (" noise floor |" if floor else "") + (" weight |" if weight else ""),
+        "|---|---|---|" + ("---|" if floor else "") + ("---|" if weight else ""),
     ]
     for k, v in per.items():
         row = f"| `{k}` | {_pct(v['before'])} | {_pct(v['after'])} |"
-        L.append(row + (f" {_pct(v.get('floor'))} |" if floor else ""))
+        row += f" {_pct(v.get('floor'))} |" if floor else ""
+        L.append(row + (f" {v['weight']:.2f} |" if "weight" in v else " |" if weight else ""))
     return L + [""]
 
 
@@ -385,6 +388,12 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
                     else "held at the description's value"
                 )
                 L.append(f"| {e['name']} | {e['where']} | {p} | {v:.6g} {e['units'][p]} | {iv} |")
+        L += [
+            f"\n`{e['name']}` at {e['where']}: found on the {e.get('path', 'mechanical')} path, its values "
+            f"refitted on the {e['refined_on'].replace('_', '-')} path, where its columns pin it (the intervals there)."
+            for e in res.effects_added
+            if e.get("refined_on")
+        ]
     else:
         L.append("None: no candidate passed the acceptance tests.")
     L += [

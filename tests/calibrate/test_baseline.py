@@ -199,7 +199,10 @@ def test_replay_path_baseline_scored_like_the_replay(lab_runs):
     assert e < 0.01 < b["holdout_error"] and res.beats_baseline is True
     assert b["band"]["after"] < b["band"]["baseline"]
     assert B.flag(e, b) is None
-    assert b["holdout_error"] == pytest.approx(math.sqrt(np.mean([v**2 for v in b["per_channel"].values()])))
+    w = {f"{Path(pho[0].name).name}:{k}": v for k, v in P.column_weights(pho[0]).items()}  # as the replay weighs
+    assert set(w) == set(b["per_channel"]) and min(w.values()) < 0.999 * max(w.values())
+    pooled = sum(w[k] * v**2 for k, v in b["per_channel"].items()) / sum(w.values())
+    assert b["holdout_error"] == pytest.approx(math.sqrt(pooled))
 
 
 def test_calibrate_on_the_replay_path_reports_the_acceleration_band(lab_runs, tmp_path):

@@ -113,22 +113,29 @@ def test_undeclared_flexible_specimen_found_on_a_replay(tmp_path):
 def test_declared_rigid_specimen_that_is_flexible_found_on_the_mechanical_path(declared, tmp_path):
     """The same with the default paths: the mechanical path finds the mode with its mass
     taken from the declared block (``m (H - 1) a``: held rigid and given ``m H a``, the
-    mode fitted -813 kg and was refused, and the replay had to find it), the frequency and
-    damping inside their 95 % intervals, the modal mass inside twice its (measured:
-    890.75 +/- 7.94 kg for 900, 1.0 % low; the replay path alone finds 898.9 kg); the
-    replay, started from it, adds nothing; the written entry takes its mass from the
-    payload."""
+    mode fitted -813 kg and was refused, and the replay had to find it): 890.75 +/- 7.94
+    kg for 900, 1.0 % low. The replay refits it (sim.calibrate.inherited): 899.67 +/- 0.33
+    kg, 6.0028 +/- 0.0072 Hz, 5.030 +/- 0.055 % (2026-11-27); held at the mechanical
+    path's values, the replay's acceleration was 3.1 % off against a 1.1 % noise floor and
+    a 19 Hz foundation mode was accepted in its place. The replay adds nothing; the written
+    entry takes its mass from the payload."""
     paths = _runs(tmp_path, FLEXIBLE)
     res = S.calibrate(paths, table="lab", payload=declared, workers=2)
     assert [(e["name"], e["where"], e["path"]) for e in res.effects_added] == [("payload_mode", "dof:x", "mechanical")]
     e = res.effects_added[0]
-    assert e["options"] == {"from_payload": True}
+    assert e["options"] == {"from_payload": True} and e["refined_on"] == "replay"
     p, u = e["parameters"], e["uncertainty"]
+    assert u["mass_kg"] < 1.0, u  # the replay's interval, not the mechanical path's 7.94 kg
     for k, truth, k_u in (("frequency_hz", 6.0, 1), ("damping_ratio", 0.05, 1), ("mass_kg", 900.0, 2)):
         assert abs(p[k] - truth) <= k_u * u[k], (k, p[k], u[k])
     rep = res.paths["replay"]
     assert rep["error_before"] < 0.2 * rep["error_before_declared"], rep  # the mode is the replay's too
     assert res.error_after < 0.2 * res.error_before and res.beats_baseline
+    from sim.report.calibration import write_report
+
+    write_report(res, tmp_path, "lab_calibrated.toml")
+    text = (tmp_path / "report.md").read_text()
+    assert "`payload_mode` at dof:x: found on the mechanical path, its values refitted on the replay path" in text
 
 
 def test_rigid_specimen_adds_no_mode_with_the_default_paths(declared, tmp_path):

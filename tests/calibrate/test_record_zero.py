@@ -25,6 +25,7 @@ def _run(zero: float, seed: int, n: int = 2048):
         recorded={"actuator_force": rec[:, None]},
         rows=slice(0, None),
         scale={"actuator_force": np.array([np.std(rec)])},
+        weights=lambda ch: np.ones(1),  # one column: its weight cancels
         dt=1.0 / FS,
     )
     return pr, {"actuator_force": x[:, None]}

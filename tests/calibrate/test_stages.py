@@ -192,6 +192,7 @@ def test_the_mechanical_paths_effects_stay_only_on_the_pooled_evidence(monkeypat
     again.effects_added[0]["parameters"] = {"delay_s": 0.003}
     monkeypatch.setattr(G, "holdout_error", lambda *a: 0.6 if not a[5] else without)
     monkeypatch.setattr(G, "with_effects", lambda desc, entries: len(entries))
+    monkeypatch.setattr(G, "refit_first", lambda *a, **k: a[5])  # the refit on the replay: none here
     calls = []
 
     def search_one(path, desc, effects):
