@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import copy
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -113,7 +114,8 @@ def _items(runs, base, payload, wref, chosen) -> list:
         for c in cands:
             if c.key == (e["type"], e["where"]) and all(e.get(k) == v for k, v in c.fixed.items()):
                 th = theta_of(c, e)
-                if th is not None:
+                if th is not None:  # one of several terms at a place (a specimen's modes) keeps its name
+                    c = replace(c, fixed={**c.fixed, **({"name": e["name"]} if "name" in e else {})})
                     out.append((i, c, np.clip(th, c.lower, c.upper)))
                 break
     return out
