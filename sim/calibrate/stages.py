@@ -7,8 +7,10 @@ support (:func:`sim.calibrate.residuals.supported_paths`); the search runs them 
    specimen's modes and the force and acceleration sensors' timing are judged here,
    where the evidence is most direct and every fit is a least-squares solve;
 2. **replay** of the valve commands (else **closed loop** on the reference): started
-   from the model with stage 1's effects in, it looks for what stage 1 cannot see:
-   hydraulic and valve effects and the foundation (:data:`AFTER_MECHANICAL`). Without stage 1 it looks for everything.
+   from the model with stage 1's effects in (its force laws and modes refitted there
+   first, where that path sees them better: :func:`refit_first`), it looks for what
+   stage 1 cannot see: hydraulic and valve effects and the foundation
+   (:data:`AFTER_MECHANICAL`). Without stage 1 it looks for everything.
 
 The held-out judgement pools the paths' evidence (:func:`pool`, the RMS of the paths'
 held-out NRMSEs): stage 1's effects stay in only when the pooled held-out error with
