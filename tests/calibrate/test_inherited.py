@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from sim.calibrate.inherited import disagreement, theta_of
+from sim.calibrate.inherited import disagreement, sharper, theta_of
 from sim.calibrate.sensitivity import Candidate
 
 
@@ -52,3 +52,25 @@ def test_an_entry_values_are_its_candidate_internal_parameters():
     law = Candidate("coulomb_friction", "dof:x", ("force_n",), z[:1], z[:1], z[:1], z[:1], {})
     assert theta_of(law, {"force_n": 600.0}).tolist() == [600.0]
     assert theta_of(law, {"coefficient": 1.0}) is None
+
+
+def test_only_an_effect_the_later_path_pins_closer_takes_its_refit():
+    """A mode's mass +/-7.94 kg on the mechanical path, +/-0.33 refitted on the replay
+    (every interval narrower): taken. A frame's mode +/-0.13 kg there, +/-1.2 on the replay
+    (wider, and 2.6 % off where the mechanical path was 0.4 %): kept as it was. Without
+    an interval from the refit (its Jacobian failed), nothing is taken."""
+    mech = _effect(
+        "payload_mode", {"mass_kg": 890.75, "frequency_hz": 5.9955}, {"mass_kg": 7.94, "frequency_hz": 0.0078}
+    )
+    closer = {
+        **_effect(
+            "payload_mode", {"mass_kg": 899.67, "frequency_hz": 6.0028}, {"mass_kg": 0.33, "frequency_hz": 0.0072}
+        ),
+        "refined_on": "replay",
+    }
+    assert sharper(mech, closer)
+    frame = _effect("payload_mode", {"mass_kg": 15.90}, {"mass_kg": 0.13})
+    wider = {**_effect("payload_mode", {"mass_kg": 15.43}, {"mass_kg": 1.2}), "refined_on": "replay"}
+    assert not sharper(frame, wider)
+    assert not sharper(mech, {**mech, "refined_on": "replay"})  # the same intervals: no closer
+    assert not sharper(mech, {**closer, "refined_on": None})
