@@ -245,12 +245,25 @@ def test_valve_null_offset_of_one_actuator_found(floor, tmp_path):
     reported offset is the whole null (estimate + correction, pathsearch.null_total)."""
     paths = _cgs_measured(tmp_path, [{"type": "valve_null_offset", "where": "actuator:X1", "offset": 0.01}])
     res = S.calibrate(paths, path="replay", effects=["valve_null_offset", "valve_flow_gain"], workers=2)
-    # measured: 0.01049 +/- 0.00039, 4.9 % high: the truth OUTSIDE its interval (by 1.25 x its
-    # half width; with a compensating -0.00052 +/- 0.00019 at X3); held out 43.8 % -> 6.86 %,
-    # 1.5 x the floor
+    # measured: 0.01075 +/- 0.00039, 7.5 % high: the truth OUTSIDE its interval (by 1.9 x its
+    # half width; 0.01049 with every column alike). Held out 19.4 % -> 7.17 % with the columns
+    # weighted by their noise (43.8 % -> 6.86 % alike): X1 pushes against X2-X4, and the load
+    # cells' 4-5 % floors weigh their columns half the motion's, which the model already
+    # matches to its floor before; X1's own force 63.1 % -> 19.8 %
     _check(
-        res, floor, "valve_null_offset", "actuator:X1", "offset", 0.01, rel=0.10, inside=False, fall=0.2, near_floor=2.0
+        res,
+        floor,
+        "valve_null_offset",
+        "actuator:X1",
+        "offset",
+        0.01,
+        rel=0.10,
+        inside=False,
+        fall=0.45,
+        near_floor=2.0,
     )
+    x1 = next(v for k, v in res.per_channel.items() if k.endswith("actuator_force[X1]"))
+    assert x1["after"] < 0.4 * x1["before"], x1
     (row,) = [c for c in res.candidates if c["accepted"] and c["name"] == "valve_null_offset"][:1]
     assert 0 < row["parameters"]["offset"] < 0.5 * res.effects_added[0]["parameters"]["offset"]  # the correction
 
