@@ -21,11 +21,12 @@ stay those of its values.
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import replace
 
 import numpy as np
+
+from sim.calibrate.entries import as_entries, holdout_error, with_effects
 
 #: a refitted value is the same effect's when it moves by at most this many times the
 #: two paths' 95 % intervals together (about 4 standard deviations). Measured: a specimen's
@@ -45,8 +46,8 @@ def refit_inherited(runs, ho_given, desc, payload, path, added, *, workers, say)
     from sim.calibrate.pathsearch import search_windows
     from sim.calibrate.revisit import refit
 
-    entries = _entries(added)
-    fit_runs, ho_runs, score_from, _note = split_for_replay(runs, ho_given)
+    entries = as_entries(added)
+    fit_runs, _ho, _from, _note = split_for_replay(runs, ho_given)
     pfit = P.path_runs(fit_runs, desc, path, payload=payload)
     _wscr, wref = search_windows(pfit)
     base = with_effects(desc, [e for e, a in zip(entries, added) if not _refitted(a)])
@@ -58,8 +59,9 @@ def refit_inherited(runs, ho_given, desc, payload, path, added, *, workers, say)
     if final == added:
         say(f"{path} path: the mechanical path's effects refitted there: not kept (none pinned closer)")
         return added
-    pho = P.path_runs(ho_runs, desc, path, score_from=score_from, payload=payload)
-    e_old, e_new = (_holdout(pho, desc, payload, _entries(es), workers) for es in (added, final))
+    e_old, e_new = (
+        holdout_error(runs, ho_given, desc, payload, path, as_entries(es), workers) for es in (added, final)
+    )
     ok = e_new <= (1 - HOLDOUT_MARGIN) * e_old
     why = ("" if ok else holdout_not_enough(e_old, e_new, HOLDOUT_MARGIN)) or disagreement(added, final)
     say(
@@ -82,12 +84,6 @@ def sharper(before: dict, after: dict) -> bool:
     return bool(pairs) and all(n <= o for n, o in pairs) and any(n < o for n, o in pairs)
 
 
-def _entries(effects) -> list:
-    from sim.calibrate.result import effect_entry
-
-    return [effect_entry(e, "calibrated")[0] for e in effects]
-
-
 def disagreement(before: list, after: list) -> str:
     """Why a refit on the later path is not the same effect ('' when it is): a value
     moved by more than :data:`AGREE` times the two paths' 95 % intervals together. The
@@ -102,16 +98,6 @@ def disagreement(before: list, after: list) -> str:
             if abs(v - a["parameters"][k]) > AGREE * u:
                 return f"{a['name']} {k} {a['parameters'][k]:.6g} -> {v:.6g}, beyond {AGREE:g} x +/-{u:.3g}"
     return ""
-
-
-def with_effects(desc, entries):
-    """``desc`` with the description entries ``entries`` added to its ``[[effect]]`` list."""
-    from mjcf.description import parse_table
-    from sim.calibrate.paths import build_order
-
-    raw = copy.deepcopy(desc.raw)
-    raw["effect"] = build_order(list(raw.get("effect", [])) + [dict(e) for e in entries])
-    return parse_table(raw, src=desc.source)
 
 
 def _refitted(effect: dict) -> bool:
@@ -155,14 +141,6 @@ def theta_of(cand, values: dict) -> np.ndarray | None:
     return th
 
 
-def _holdout(pho, desc, payload, entries, workers) -> float:
-    """The held-out error of ``pho`` replayed through ``desc`` with ``entries``."""
-    from sim.calibrate import paths as P
-
-    ms = P.simulate_many([p.job(desc.raw, str(desc.source), payload, entries) for p in pho], workers=workers)
-    return math.inf if any(m is None for m in ms) else P.nrmse(pho, ms)
-
-
 def _with_refits(added, items, out, path) -> list:
     """``added`` with each refitted effect's values, its 95 % interval from the joint fit
     and ``refined_on``."""
@@ -171,7 +149,7 @@ def _with_refits(added, items, out, path) -> list:
     new = [dict(a) for a in added]
     for k, ((i, c, _th), th) in enumerate(zip(items, out["thetas"])):
         vals = c.values(th)
-        new[i]["parameters"] = {**new[i]["parameters"], **{n: vals[n] for n in new[i]["parameters"] if n in vals}}
+        new[i]["parameters"] = {n: vals.get(n, v) for n, v in new[i]["parameters"].items()}
         sg = out["sigmas"][k] if out["sigmas"] is not None else None
         if sg is not None:
             unc = {n: Z95 * s for n, s in c.sigmas(th, sg).items()}

@@ -128,7 +128,7 @@ def refuse_unknowns_run_sets(desc, ran):
     from mjcf.unknowns import set_value_at, value_at
     from sim.loop.simulation import description_as_run
 
-    for key, (lo, hi) in getattr(desc, "unknowns", {}).items():
+    for key, (lo, hi) in desc.unknowns.items():
         moved = copy.deepcopy(desc.raw)  # the value moved within its range: does `run` keep it?
         probe = lo + 0.618 * (hi - lo)
         set_value_at(moved, key, probe)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from sim.calibrate.inherited import with_effects
+from sim.calibrate.entries import as_entries, holdout_error, with_effects
 from sim.calibrate.sensitivity import HYDRAULIC
 from sim.errors import UserError
 
@@ -89,21 +89,7 @@ def first_stage(stages, effects):
 
 def entries_of(res, tag: str = "calibrated") -> list:
     """The description entries of a result's ``effects_added``."""
-    from sim.calibrate.result import effect_entry
-
-    return [effect_entry(e, tag)[0] for e in res.effects_added]
-
-
-def holdout_error(runs, ho_given, desc, payload, path, entries, workers) -> float:
-    """The held-out NRMSE of ``path`` replayed through ``desc`` with ``entries`` added
-    (the same held-out runs and scored samples as the stage's own search)."""
-    from sim.calibrate import paths as P
-    from sim.calibrate.holdout import split_for_replay
-
-    _fit, ho_runs, score_from, _note = split_for_replay(runs, ho_given)
-    pho = P.path_runs(ho_runs, desc, path, score_from=score_from, payload=payload)
-    ms = P.simulate_many([p.job(desc.raw, str(desc.source), payload, entries) for p in pho], workers=workers)
-    return math.inf if any(m is None for m in ms) else P.nrmse(pho, ms)
+    return as_entries(res.effects_added, tag)
 
 
 def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, workers):
@@ -215,14 +201,13 @@ def _prune_one(first, second, ev, keep, i, ctx):
     entry kept): ``(evidence, the indices kept)``; the evidence holds the refitted
     entries under ``"added"``."""
     from sim.calibrate.mechsearch import refit_subset
-    from sim.calibrate.result import effect_entry
 
     runs, ho_given, desc, payload, workers = ctx
     n = len(first.series["terms"])
     rest = [j for j in keep if j != i]
     e_mech, added = refit_subset(first, rest)
     added += first.effects_added[n:]
-    kept = [effect_entry(e, "calibrated")[0] for e in added] + entries_of(second)
+    kept = as_entries(added) + entries_of(second)
     e_dyn = holdout_error(runs, ho_given, desc, payload, second.residual_path, kept, workers)
     return {**ev, "with": pool([e_mech, e_dyn]), "mech_with": e_mech, "later_with": e_dyn, "added": added}, rest
 
