@@ -501,6 +501,20 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
     """
     path = Path(path)
     name = str(path)
+    _check_archive(path, name)
+    data = _members(path, name)
+    meta = _meta(data.pop("meta"), name)
+    t = data.pop("t")
+    channels, extras = _channels(data, name)
+    if t.dtype.kind not in "fiu":
+        raise _error(name, f"has t of type {t.dtype}", "store t as float64 seconds")
+    run = RunFile(t=t.astype(np.float64, copy=False), meta=meta, **channels, path=name, extras=extras)
+    _validate(run, name, tuple(require))
+    return run
+
+
+def _check_archive(path: Path, name: str) -> None:
+    """The path is an existing file and a zip archive (what ``np.savez`` writes)."""
     if not path.exists():
         raise _error(name, "does not exist", "check the path")
     if path.is_dir():
@@ -511,6 +525,11 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
             "is not a NumPy .npz archive",
             f"write it with shaketable (sim.runs.runfile.write_run) or numpy.savez_compressed as {FORMAT}",
         )
+
+
+def _members(path: Path, name: str) -> dict:
+    """The archive's arrays by key: only the format's keys (and extension channels), ``t``
+    and ``meta`` among them, each a NumPy array."""
     known = set(CHANNELS) | {"t", "meta"}
     try:
         with np.load(path, allow_pickle=False) as npz:
@@ -538,7 +557,6 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
             f"is a damaged or unreadable archive ({_one_line(exc)})",
             "write it again, or restore it from the recorder export",
         ) from None
-
     if not all(isinstance(a, np.ndarray) for a in data.values()):
         bad = sorted(k for k, a in data.items() if not isinstance(a, np.ndarray))
         raise _error(
@@ -546,20 +564,27 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
             f"is a damaged archive (member(s) {', '.join(bad)} are not NumPy arrays)",
             "write it again, or restore it from the recorder export",
         )
-    meta_arr = data.pop("meta")
+    return data
+
+
+def _meta(meta_arr: np.ndarray, name: str) -> dict:
+    """The run's ``meta``: one string of JSON text."""
     if meta_arr.shape != () or meta_arr.dtype.kind not in "US":
         raise _error(name, "has a meta that is not a single string", "store meta as np.array(json.dumps(meta))")
     meta_text = meta_arr.item()
     if isinstance(meta_text, bytes):
         meta_text = meta_text.decode("utf-8", "replace")
     try:
-        meta = json.loads(meta_text)
+        return json.loads(meta_text)
     except json.JSONDecodeError as exc:
         raise _error(
             name, f"has meta that is not valid JSON ({exc.msg} at char {exc.pos})", "store meta as json.dumps(meta)"
         ) from None
 
-    t = data.pop("t")
+
+def _channels(data: dict, name: str) -> tuple[dict, dict]:
+    """The format's channels and the extension channels (``EXTRA_PREFIX`` dropped), each
+    numeric, as float64."""
     channels: dict[str, np.ndarray] = {}
     extras = {}
     for k in [k for k in data if k.startswith(EXTRA_PREFIX)]:
@@ -570,11 +595,7 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ()) -> RunFile:
         if arr.dtype.kind not in "fiu":
             raise _error(name, f"channel {key!r} has type {arr.dtype}", "store it as float64")
         channels[key] = arr.astype(np.float64, copy=False)
-    if t.dtype.kind not in "fiu":
-        raise _error(name, f"has t of type {t.dtype}", "store t as float64 seconds")
-    run = RunFile(t=t.astype(np.float64, copy=False), meta=meta, **channels, path=name, extras=extras)
-    _validate(run, name, tuple(require))
-    return run
+    return channels, extras
 
 
 # -- the descriptions a run was made with ------------------------------------------
