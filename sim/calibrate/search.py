@@ -130,7 +130,7 @@ def refuse_unknowns_run_sets(desc, ran):
 
     for key, (lo, hi) in desc.unknowns.items():
         moved = copy.deepcopy(desc.raw)  # the value moved within its range: does `run` keep it?
-        probe = lo + 0.618 * (hi - lo)
+        probe = lo + 0.618 * (hi - lo)  # any inside point but the ends; golden, to miss a round nominal
         set_value_at(moved, key, probe)
         if value_at(description_as_run(parse_table(moved, src=desc.source)).raw, key) != probe:
             c = desc.raw.get("controller", {})
