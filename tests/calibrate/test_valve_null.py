@@ -84,3 +84,34 @@ def test_the_internal_part_of_a_load_cell_offset():
     assert np.diag(P)[:8] == pytest.approx([0.625] * 8, abs=1e-9)
     assert np.diag(P)[8:] == pytest.approx([0.25] * 4, abs=1e-9)
     assert not internal_force_part(mjcf.load_table("lab")).any()
+
+
+def test_a_valve_the_test_left_still_is_divided_by_its_declared_gain(tmp_path):
+    """A vertical test (4 s of 0.5-10 Hz noise, z only) leaves the eight horizontal valves
+    at commands of ~2e-4: their gain read off the record was noise (0.005 +/- 1.2 m/s for
+    1.7), and the null it gave (up to 9.4e-3 of rated opening), replayed open loop, pushed
+    an internal force into the vertical load cells (their replay error 0.15-0.33 against a
+    0.07 floor). Those valves now take the declared gain; the vertical ones, which the test
+    moved, keep theirs (1.078 under the dead weight, 1.086 declared)."""
+    import mjcf
+    from sim.calibrate import paths as P
+    from sim.calibrate.valve_null import declared_velocity_gain, estimate
+    from sim.runs.runfile import read_run
+    from tests.calibrate.test_cgs_supports import DECLARED_M3, VERTICAL, _runs
+
+    desc = mjcf.load_table("cgs")
+    (path,) = _runs(tmp_path, DECLARED_M3, VERTICAL, seeds=(4,))
+    run = read_run(path)
+    est, k0 = estimate(run, desc, drift=False), declared_velocity_gain(desc)
+    still = [i for i, a in enumerate(run.actuators) if not a.startswith("Z")]
+    assert np.array_equal(est.gain[still], k0[still])
+    assert np.abs(est.offset[still]).max() < 1e-4, est.offset  # measured 9.4e-3 before
+    moved = [i for i, a in enumerate(run.actuators) if a.startswith("Z")]
+    assert np.all(np.abs(est.gain[moved] / k0[moved] - 1) < 0.02), est.gain
+    assert np.all(est.gain[moved] != k0[moved])  # read off the record
+    (pr,) = P.path_runs([run], desc, "replay")
+    model = P.simulate_job(pr.job(desc.raw, str(desc.source), None, []))
+    err, floor = P.column_errors(pr, model), P.column_floors(pr)
+    forces = [k for k in err if k.startswith("actuator_force")]
+    assert len(forces) == 4, err
+    assert all(err[k] < 1.1 * floor[k] for k in forces), (err, floor)  # measured 1.02 (0.0735 / 0.0723)
