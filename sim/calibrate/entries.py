@@ -30,10 +30,20 @@ def with_effects(desc, entries):
 def holdout_error(runs, ho_given, desc, payload, path, entries, workers) -> float:
     """The held-out NRMSE of ``path`` replayed through ``desc`` with ``entries`` added
     (the same held-out runs and scored samples as a stage's own search)."""
+    return holdout_errors(runs, ho_given, desc, payload, path, [entries], workers)[0]
+
+
+def holdout_errors(runs, ho_given, desc, payload, path, entry_sets, workers) -> list[float]:
+    """:func:`holdout_error` of each of ``entry_sets``, their replays run together."""
     from sim.calibrate import paths as P
     from sim.calibrate.holdout import split_for_replay
 
     _fit, ho_runs, score_from, _note = split_for_replay(runs, ho_given)
     pho = P.path_runs(ho_runs, desc, path, score_from=score_from, payload=payload)
-    ms = P.simulate_many([p.job(desc.raw, str(desc.source), payload, entries) for p in pho], workers=workers)
-    return math.inf if any(m is None for m in ms) else P.nrmse(pho, ms)
+    jobs = [p.job(desc.raw, str(desc.source), payload, entries) for entries in entry_sets for p in pho]
+    ms = P.simulate_many(jobs, workers=workers)
+    out = []
+    for k in range(len(entry_sets)):
+        mk = ms[k * len(pho) : (k + 1) * len(pho)]
+        out.append(math.inf if any(m is None for m in mk) else P.nrmse(pho, mk))
+    return out

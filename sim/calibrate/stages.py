@@ -129,12 +129,15 @@ def run_stages(runs, ho_given, desc, pl, stages, *, effects, search_one, say, wo
 
 
 def refit_first(runs, ho_given, desc, pl, path, first, *, workers, say):
-    """``first`` with its force laws and modes refitted on the later ``path``, where its
-    columns see them better (:func:`sim.calibrate.inherited.refit_inherited`)."""
+    """``first`` with its force laws placed where the later ``path`` tells a tie apart
+    (:func:`sim.calibrate.placement.place_on_later`) and, with its modes, refitted there,
+    where its columns see them better (:func:`sim.calibrate.inherited.refit_inherited`)."""
     from sim.calibrate.inherited import refit_inherited
+    from sim.calibrate.placement import place_on_later
 
     if not first.effects_added:
         return first
+    first = place_on_later(runs, ho_given, desc, pl, path, first, workers=workers, say=say)
     added = refit_inherited(runs, ho_given, desc, pl, path, first.effects_added, workers=workers, say=say)
     return replace(first, effects_added=added)
 

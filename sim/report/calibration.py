@@ -394,6 +394,13 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
             for e in res.effects_added
             if e.get("refined_on")
         ]
+        L += [
+            f"\n`{e['name']}` at {e['where']}: on the mechanical path other places explained it as "
+            f"well (the test moved them alike); the {e['placed_on'].replace('_', '-')} path's held-out "
+            "error chose this one."
+            for e in res.effects_added
+            if e.get("placed_on")
+        ]
     else:
         L.append("None: no candidate passed the acceptance tests.")
     L += [

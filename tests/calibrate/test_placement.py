@@ -1,0 +1,29 @@
+"""Which places tied with a mechanical path's effect (issue #23): the rows that passed and
+lost only on the tie-break, the same law with the same options and fixed part."""
+
+from __future__ import annotations
+
+from sim.calibrate.placement import tied_places
+
+WON = "passed, not added: spring at actuator:Z1 has a held-out error within 5 % of it and the whiter residual"
+
+
+def _row(name, where, reason, **kw):
+    return {"round": 1, "name": name, "where": where, "accepted": False, "reason": reason, **kw}
+
+
+def test_the_places_that_lost_on_the_tie_break_only():
+    effect = {"name": "spring", "where": "actuator:Z1", "parameters": {"stiffness_n_m": 5.5e5}}
+    rows = [
+        {**_row("spring", "actuator:Z1", ""), "accepted": True},
+        _row("spring", "dof:z", WON),
+        _row("spring", "class:vertical", WON),
+        _row("spring", "dof:z", WON),  # seen again in a later round: once
+        _row("spring", "dof:x", "passed, not added: spring at actuator:Z1 explains more (judged first)"),
+        _row("spring", "actuator:Z2", "held-out error 0.1 -> 0.2 rose"),
+        _row("viscous_damping", "dof:z", WON.replace("spring", "viscous_damping", 1)),
+        _row("spring", "dof:rx", WON, options={"from_payload": True}),
+        _row("spring", "actuator:Z3", WON.replace("Z1", "Z2")),  # lost to another place
+    ]
+    assert tied_places(rows, effect) == ["dof:z", "class:vertical"]
+    assert tied_places(rows[:1], effect) == []
