@@ -92,6 +92,10 @@ class RunResult:
     #: the physics step leaving t_k, which MuJoCo computed from the pressures of the
     #: hydraulic step before it, at t_k + h (h the physics step). 0 when they agree.
     force_lag_s: float = 0.0
+    #: each valve's command at which it passes no flow (minus its null offset, effects
+    #: included): what the controller holds while the table stands still. ``run --measure``
+    #: holds it through a quiet lead-in (:func:`sim.runs.measure.measure_run`)
+    valve_hold: np.ndarray | None = None
 
     @property
     def realtime_factor(self) -> float:
@@ -561,6 +565,7 @@ class Simulation:
             incomplete_reason=tally.reason,
             interrupted=tally.interrupted,
             force_lag_s=self.dt,
+            valve_hold=-self.hp.per_actuator("valve_null_offset"),
         )
 
     def _derive(self, Q, V, ACC) -> dict:

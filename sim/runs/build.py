@@ -40,6 +40,9 @@ def build_runfile(res, tm, *, source="simulated", description="", payload_name=N
     lag = float(getattr(res, "force_lag_s", 0.0) or 0.0)
     if lag:  # the loop's recorder: docs/run-file.md, meta force_lag_s
         meta["force_lag_s"] = lag
+    hold = getattr(res, "valve_hold", None)
+    if hold is not None:  # docs/run-file.md, meta valve_hold_command
+        meta["valve_hold_command"] = [float(v) for v in hold]
     if extra_meta:
         meta.update(extra_meta)
     ch = dict(res.channels)

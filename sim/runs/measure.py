@@ -219,12 +219,28 @@ def _columns(value, n: int, where: str) -> np.ndarray:
     return np.full(n, float(value))
 
 
-def _lead_in(x: np.ndarray, n_lead: int) -> np.ndarray:
-    """``x`` with ``n_lead`` copies of its first sample before it: the recorder ran while
-    the table stood still before the motion (a simulated run starts at rest)."""
+def _lead_in(x: np.ndarray, n_lead: int, hold=None) -> np.ndarray:
+    """``x`` with ``n_lead`` copies of ``hold`` (default: its first sample) before it: the
+    recorder ran while the table stood still before the motion (a simulated run starts at
+    rest)."""
     if n_lead <= 0 or len(x) == 0:
         return x
-    return np.concatenate([np.repeat(x[:1], n_lead, axis=0), x], axis=0)
+    first = x[:1] if hold is None else np.asarray(hold, float).reshape(1, -1)
+    return np.concatenate([np.repeat(first, n_lead, axis=0), x], axis=0)
+
+
+def _held(run, name: str):
+    """What ``name`` holds while the table stands still, where the first sample is not it:
+    the valve commands at which the valves pass no flow (meta ``valve_hold_command``,
+    written by the simulation). A run's first command already drives the motion's onset
+    (a white noise's starts at 1.5-2e-4 of rated opening on CGS); held 5 s through a
+    lead-in, the record's command moved a table its motion channels show still, which no
+    recorder writes (a replay through the model then pushed 3 kN into the longitudinal
+    load cells over the lead-in). None: the first sample."""
+    hold = (run.meta or {}).get("valve_hold_command") if name == "valve_command" else None
+    if hold is None or len(hold) != len(run.actuators):
+        return None
+    return hold
 
 
 def _force_at_one_instant(run) -> dict:
@@ -245,16 +261,16 @@ def _force_at_one_instant(run) -> dict:
     return out
 
 
-def _analog_part(x, name, spec, rec, fs, n_lead, seed, ci):
+def _analog_part(x, name, spec, rec, fs, n_lead, seed, ci, hold=None):
     """Gain, offset (fixed and per record), the channel's conditioner, the anti-alias
-    low-pass and the skew, at the run's rate (lead-in included)."""
+    low-pass and the skew, at the run's rate (lead-in included, holding ``hold``)."""
     ncol = x.shape[1]
     where = f"channel.{name}"
     off = _columns(spec.get("offset", 0.0), ncol, f"{where}.offset")
     orms = _columns(spec.get("offset_rms", 0.0), ncol, f"{where}.offset_rms")
     if np.any(orms > 0):  # a DC offset that changes from record to record (zeroed, then wandered)
         off = off + orms * np.random.default_rng([int(seed), ci, 1]).standard_normal(ncol)
-    x = _lead_in(x, n_lead) * _columns(spec.get("gain", 1.0), ncol, f"{where}.gain") + off
+    x = _lead_in(x, n_lead, hold) * _columns(spec.get("gain", 1.0), ncol, f"{where}.gain") + off
     if "lowpass_hz" in spec and len(x) > 1:  # the sensor's own analog conditioner
         fc = float(spec["lowpass_hz"])
         if not fc < 0.5 * fs:
@@ -393,7 +409,8 @@ def measure_run(run, sensors: dict, seed: int = 0):
         if x is None:
             continue
         spec = sensors.get("channel", {}).get(name, {})
-        x = _analog_part(np.array(x, dtype=np.float64), name, spec, rec, fs, n_lead, seed, ci)[::step]
+        x = np.array(x, dtype=np.float64)
+        x = _analog_part(x, name, spec, rec, fs, n_lead, seed, ci, _held(run, name))[::step]
         x = x + _drift(spec, x.shape, fs / step, seed, ci, f"channel.{name}")
         out[name] = _digitised(x, spec, f"channel.{name}", seed, ci)
     n = run.n_samples
@@ -408,12 +425,12 @@ def measure_run(run, sensors: dict, seed: int = 0):
 
 def _recorder_meta(meta: dict, sensors: dict, rate: float, present=None, table=None) -> dict:
     """The measured run's meta: the simulated run's, less what only a simulator knows
-    (``force_lag_s``, a ``measurement`` of an earlier measuring), plus the recorder's own
+    (``force_lag_s``, ``valve_hold_command``, a ``measurement`` of an earlier measuring), plus the recorder's own
     settings and the declared conditioning: the sensor file's, else the table's
     accelerometer conditioner (``table``, :func:`table_conditioner`) on the channels it
     declares nothing for, as ``shaketable import`` writes it."""
     meta = copy.deepcopy(meta)
-    for k in ("measurement", "force_lag_s", "recorder", "channel_conditioning"):
+    for k in ("measurement", "force_lag_s", "valve_hold_command", "recorder", "channel_conditioning"):
         meta.pop(k, None)
     rec = sensors.get("recorder", {})
     meta["source"] = "measured"

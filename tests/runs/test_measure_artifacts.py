@@ -298,3 +298,36 @@ def test_cli_measure_with_real_record_artifacts_is_reproducible(tmp_path):
     }
     assert set(a.meta["channel_conditioning"]) == {"table_acceleration", "accelerometers"}
     assert "measurement" not in a.meta and "force_lag_s" not in a.meta
+
+
+def test_the_lead_in_holds_the_valves_at_their_null():
+    """The lead-in holds each valve at the command that passes no flow (minus its null
+    offset: the simulation's ``valve_hold_command``), not the run's first command, which
+    already drives the motion's onset; the measured meta does not keep the key (a recorder
+    does not write it)."""
+    import copy
+
+    import mjcf
+    from mjcf.description import parse_table
+    from sim.effects import build_model
+    from sim.loop.simulation import Simulation
+    from sim.runs.build import build_runfile
+    from sim.scenario import motions as Mo
+    from sim.scenario.reference import reference_from_motions
+
+    base = mjcf.load_table("lab")
+    raw = copy.deepcopy(base.raw)
+    raw["effect"] = list(raw.get("effect", [])) + [{"type": "valve_null_offset", "where": "actuators", "offset": 0.004}]
+    tm = build_model(parse_table(raw, src=base.source))
+    mo = {
+        "x": Mo.white_noise(duration_s=4.0, sample_rate_hz=FS, band_hz=(1.0, 20.0), seed=(1, 0), rms_acceleration=2.0)
+    }
+    ref = reference_from_motions(mo, FS, 4.0)
+    run = build_runfile(Simulation(tm).run(reference=ref), tm, reference=ref)
+    assert run.meta["valve_hold_command"] == pytest.approx([-0.004])
+    assert abs(run.valve_command[0, 0] + 0.004) > 1e-5  # the first command is not the hold
+    m = M.measure_run(run, {"recorder": {"lead_in_s": 1.0, "digital": ["valve_command"]}}, seed=0)
+    n_lead = int(FS)
+    assert np.all(m.valve_command[:n_lead] == -0.004)
+    np.testing.assert_array_equal(m.valve_command[n_lead:], run.valve_command)
+    assert "valve_hold_command" not in m.meta
