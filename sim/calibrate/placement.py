@@ -55,7 +55,10 @@ def place_on_later(runs, ho_given, desc, payload, path, first, *, workers, say):
 def tied_places(candidates: list, effect: dict) -> list[str]:
     """The places where the same law (its options and fixed part alike) passed and lost to
     ``effect`` only on the tie-break: a held-out error within the margin of its
-    (:func:`sim.calibrate.mechjudge.forward_round`'s reason)."""
+    (:func:`sim.calibrate.mechjudge.forward_round`'s reason). None for one of several
+    terms of a law at a place (a specimen's modes): the rows do not say which one won."""
+    if "label" in effect:
+        return []
     lost = f"passed, not added: {effect['name']} at {effect['where']} has a held-out error within"
     out = []
     for r in candidates:

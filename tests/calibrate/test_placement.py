@@ -27,3 +27,10 @@ def test_the_places_that_lost_on_the_tie_break_only():
     ]
     assert tied_places(rows, effect) == ["dof:z", "class:vertical"]
     assert tied_places(rows[:1], effect) == []
+
+
+def test_one_of_several_modes_at_a_place_is_left_where_it_is():
+    effect = {"name": "payload_mode", "where": "payload", "label": "payload_mode 2", "parameters": {}}
+    rows = [_row("payload_mode", "dof:x", WON.replace("spring at actuator:Z1", "payload_mode at payload"))]
+    assert tied_places(rows, effect) == []
+    assert tied_places(rows, {k: v for k, v in effect.items() if k != "label"}) == ["dof:x"]
