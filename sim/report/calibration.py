@@ -401,6 +401,7 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
             for e in res.effects_added
             if e.get("placed_on")
         ]
+        L += _places_untold(res)
     else:
         L.append("None: no candidate passed the acceptance tests.")
     L += [
@@ -435,6 +436,24 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
     else:
         L += _time_md(res.timing, "Time: ")
     return "\n".join(L)
+
+
+def _places_untold(res) -> list[str]:
+    """A line for each effect whose place tied with others on the mechanical path and that
+    no later path placed (``--path mechanical``, or records without valve commands or a
+    reference): the place is the tie-break's choice, not what the records show."""
+    from sim.calibrate.placement import tied_places
+
+    out = []
+    for e in res.effects_added:
+        alts = [] if e.get("placed_on") else tied_places(res.candidates, e)
+        if alts:
+            out.append(
+                f"\n`{e['name']}` at {e['where']}: {', '.join(alts)} explained it as well on the mechanical "
+                "path (the test moved them alike) and no later path told them apart: the place is the "
+                "tie-break's choice, not a finding."
+            )
+    return out
 
 
 def _time_md(tm: dict, head: str) -> list[str]:

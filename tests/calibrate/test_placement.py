@@ -9,7 +9,8 @@ WON = "passed, not added: spring at actuator:Z1 has a held-out error within 5 % 
 
 
 def _row(name, where, reason, **kw):
-    return {"round": 1, "name": name, "where": where, "accepted": False, "reason": reason, **kw}
+    row = {"round": 1, "name": name, "where": where, "explained_fraction": 0.8272, "holdout_error": 0.0391}
+    return {**row, "accepted": False, "reason": reason, **kw}
 
 
 def test_the_places_that_lost_on_the_tie_break_only():
@@ -34,3 +35,32 @@ def test_one_of_several_modes_at_a_place_is_left_where_it_is():
     rows = [_row("payload_mode", "dof:x", WON.replace("spring at actuator:Z1", "payload_mode at payload"))]
     assert tied_places(rows, effect) == []
     assert tied_places(rows, {k: v for k, v in effect.items() if k != "label"}) == ["dof:x"]
+
+
+def test_the_report_says_when_no_path_told_the_places_apart():
+    from sim.calibrate.search import CalibrationResult
+    from sim.report.calibration import report_md
+
+    effect = {"name": "spring", "where": "actuator:Z1", "parameters": {"stiffness_n_m": 5.5e5}}
+    effect.update(uncertainty={"stiffness_n_m": 8e3}, units={"stiffness_n_m": "N/m"}, path="mechanical")
+    rows = [_row("spring", "dof:z", WON), _row("spring", "class:vertical", WON)]
+    res = CalibrationResult(
+        table="cgs",
+        table_source="cgs.toml",
+        runs=["a.run.npz", "b.run.npz"],
+        holdout=["b.run.npz"],
+        holdout_note="held out: b.run.npz",
+        residual_path="mechanical",
+        error_before=0.129,
+        error_after=0.039,
+        effects_added=[effect],
+        candidates=rows,
+        unexplained=None,
+        per_channel={},
+        timing={"total_s": 1.0, "read_s": 0.1, "residuals_s": 0.2, "search_s": 0.7, "least_squares_fits": 3},
+    )
+    md = report_md(res, [], "cgs_calibrated.toml")
+    assert "`spring` at actuator:Z1: dof:z, class:vertical explained it as well" in md
+    res.effects_added = [{**effect, "where": "dof:z", "placed_on": "replay"}]
+    md = report_md(res, [], "cgs_calibrated.toml")
+    assert "no later path told them apart" not in md and "the replay path's held-out error chose this one" in md
