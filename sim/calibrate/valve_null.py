@@ -134,7 +134,7 @@ def _one_null(u, v, dt, drift: bool, declared: float, run, i) -> tuple[float, fl
     2e-4), the gain read off the record is noise (0.005 +/- 1.2 m/s where the valve
     gives 1.7) and the null it gave, 1e-2 of rated opening, replayed open loop, pushed an
     internal force the closed loop never held (the vertical load cells' replay error
-    0.07 -> 0.31 on clean CGS runs, a leakage then accepted in its place). Where the gain
+    0.07 -> 0.15-0.33 on clean CGS runs, a leakage then accepted in its place). Where the gain
     is not read within :data:`GAIN_READ_WITHIN`, the declared one divides the intercept."""
     A = np.stack([u, np.ones_like(u)] + ([dt] if drift else []), axis=1)
     coef, *_ = np.linalg.lstsq(A, v, rcond=None)
@@ -171,14 +171,15 @@ def declared_velocity_gain(desc) -> np.ndarray:
 
 
 def _declared_hydraulics(desc):
-    """``desc``'s hydraulic parameters with its effects' edits applied."""
+    """``desc``'s hydraulic parameters with its hydraulic effects' edits applied."""
     from hydraulics.params import HydraulicParams
-    from sim.effects.base import EFFECTS
+    from sim.effects.base import EFFECTS, Effect
 
     hp = HydraulicParams.from_table(desc.raw)
     for e in desc.raw.get("effect", []) or []:
-        if isinstance(e, dict) and e.get("type") in EFFECTS:
-            hp = EFFECTS[e["type"]](e, source=f"{desc.source}: effect").edit_hydraulics(hp)
+        cls = EFFECTS.get(e.get("type")) if isinstance(e, dict) else None
+        if cls is not None and cls.edit_hydraulics is not Effect.edit_hydraulics:
+            hp = cls(e, source=f"{desc.source}: effect").edit_hydraulics(hp)
     return hp
 
 
