@@ -14,9 +14,15 @@ are refitted jointly on its refinement windows from their values
 (:func:`sim.calibrate.revisit.refit`). An effect takes its refitted values where the
 later path pins it closer (:func:`sharper`: not on every record; a frame's two modes under
 204.8 Hz noise runs came out wider there and further off), provided the later path's
-held-out error falls by the acceptance margin, as for an effect of its own, and every
-value stays the same effect's (:func:`disagreement`). The mechanical path's own figures
-stay those of its values.
+held-out error does not rise with them and every value stays the same effect's
+(:func:`disagreement`). A refit adds no parameter, so it is not held to the acceptance
+margin an effect of its own must pass: where the later path already sits at its noise
+there is no 5 % left to fall. Measured (CGS, a 20 t block 60 % on a 6 Hz mode, x-only
+runs through the real-record sensors): the mechanical path's modal mass 12136 +/- 67 kg,
+5.9960 +/- 0.0028 Hz (the truth 2 and 1.4 intervals out); refitted on the replay 12006
++/- 9 kg, 6.00067 +/- 0.00084 Hz, 0.05010 +/- 0.00014 (each truth inside), held out
+0.0670 -> 0.0665: refused by the margin, until this rule. The mechanical path's own
+figures stay those of its values.
 """
 
 from __future__ import annotations
@@ -37,11 +43,11 @@ AGREE = 2.0
 
 def refit_inherited(runs, ho_given, desc, payload, path, added, *, workers, say) -> list:
     """``added`` (the mechanical path's ``effects_added``) with the force laws and modes
-    the later ``path`` pins closer (:func:`sharper`) refitted there, where that lowers its
-    held-out error by the margin and each value agrees (:func:`disagreement`); each one
+    the later ``path`` pins closer (:func:`sharper`) refitted there, where its held-out
+    error does not rise with them and each value agrees (:func:`disagreement`); each one
     refitted carries ``refined_on``. Unchanged otherwise."""
     from sim.calibrate import paths as P
-    from sim.calibrate.acceptance import HOLDOUT_MARGIN, holdout_not_enough
+    from sim.calibrate.acceptance import holdout_not_enough
     from sim.calibrate.holdout import split_for_replay
     from sim.calibrate.pathsearch import search_windows
     from sim.calibrate.revisit import refit
@@ -62,8 +68,7 @@ def refit_inherited(runs, ho_given, desc, payload, path, added, *, workers, say)
     e_old, e_new = (
         holdout_error(runs, ho_given, desc, payload, path, as_entries(es), workers) for es in (added, final)
     )
-    ok = e_new <= (1 - HOLDOUT_MARGIN) * e_old
-    why = ("" if ok else holdout_not_enough(e_old, e_new, HOLDOUT_MARGIN)) or disagreement(added, final)
+    why = (holdout_not_enough(e_old, e_new, 0.0) if e_new > e_old else "") or disagreement(added, final)
     say(
         f"{path} path: the mechanical path's effects refitted there, held-out {e_old:.4f} -> {e_new:.4f}"
         + (f": not kept ({why})" if why else "")

@@ -32,8 +32,8 @@ def test_a_refit_beyond_the_two_intervals_is_refused():
     """A friction refitted on the later path far from the mechanical path's value (600 +/-
     30 N -> 800 +/- 30 N: 200 N against AGREE x 42 N) stands in for something else there.
     Measured, a 600 N friction refitted before the replay's valve delay was in its model
-    went 604.4 +/- 27.8 -> 860.5 +/- 126.0 N: 256 N against 258 N, just inside; the
-    acceptance margin refused that one (held out 0.3358 -> 0.3355)."""
+    went 604.4 +/- 27.8 -> 860.5 +/- 126.0 N: 256 N against 258 N, just inside; its
+    wider interval refused that one (:func:`sharper`; held out 0.3358 -> 0.3355)."""
     mech = _effect("coulomb_friction", {"force_n": 600.0}, {"force_n": 30.0})
     why = disagreement([mech], [_effect("coulomb_friction", {"force_n": 800.0}, {"force_n": 30.0})])
     assert why.startswith("coulomb_friction force_n 600 -> 800, beyond 2 x"), why
