@@ -388,20 +388,7 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
                     else "held at the description's value"
                 )
                 L.append(f"| {e['name']} | {e['where']} | {p} | {v:.6g} {e['units'][p]} | {iv} |")
-        L += [
-            f"\n`{e['name']}` at {e['where']}: found on the {e.get('path', 'mechanical')} path, its values "
-            f"refitted on the {e['refined_on'].replace('_', '-')} path, where its columns pin it (the intervals there)."
-            for e in res.effects_added
-            if e.get("refined_on")
-        ]
-        L += [
-            f"\n`{e['name']}` at {e['where']}: on the mechanical path other places explained it as "
-            f"well (the test moved them alike); the {e['placed_on'].replace('_', '-')} path's held-out "
-            "error chose this one."
-            for e in res.effects_added
-            if e.get("placed_on")
-        ]
-        L += _places_untold(res)
+        L += _later_path_notes(res) + _places_untold(res)
     else:
         L.append("None: no candidate passed the acceptance tests.")
     L += [
@@ -436,6 +423,24 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
     else:
         L += _time_md(res.timing, "Time: ")
     return "\n".join(L)
+
+
+def _later_path_notes(res) -> list[str]:
+    """A line for each effect the later path refitted (``refined_on``) or placed
+    (``placed_on``)."""
+    out = [
+        f"\n`{e['name']}` at {e['where']}: found on the {e.get('path', 'mechanical')} path, its values "
+        f"refitted on the {e['refined_on'].replace('_', '-')} path, where its columns pin it (the intervals there)."
+        for e in res.effects_added
+        if e.get("refined_on")
+    ]
+    return out + [
+        f"\n`{e['name']}` at {e['where']}: on the mechanical path other places explained it as "
+        f"well (the test moved them alike); the {e['placed_on'].replace('_', '-')} path's held-out "
+        "error chose this one."
+        for e in res.effects_added
+        if e.get("placed_on")
+    ]
 
 
 def _places_untold(res) -> list[str]:
