@@ -199,19 +199,17 @@ class _Table:
 
 def _table_of(desc, payload, accepted, effects) -> _Table:
     """The current model (the description with ``accepted`` in) as a :class:`_Table`."""
-    from hydraulics.params import HydraulicParams
     from mjcf.description import parse_table
     from sim.calibrate.paths import build_order
     from sim.calibrate.residuals import distinct_force_places
+    from sim.effects.registry import hydraulics_with
     from sim.loop.simulation import table_model
 
     raw = dict(desc.raw)
     raw["effect"] = build_order(list(raw.get("effect", [])) + [dict(e) for e in accepted])
     cur = parse_table(raw, src=desc.source)
     tm = table_model(cur, payload)  # at the physics step of the replays (a valve delay's grid)
-    hp = HydraulicParams.from_table(cur.raw)
-    for e in tm.effects:
-        hp = e.edit_hydraulics(hp)
+    hp = hydraulics_with(cur, tm.effects)
     cap = float(np.mean(hp.area_a_m2)) * hp.supply_pressure_pa
     names = list(cur.actuator_names)
     classes = sorted({a.cls.name for a in cur.actuators})

@@ -164,29 +164,20 @@ def declared_velocity_gain(desc) -> np.ndarray:
     (m/s): the valve's no-load flow at full opening, ``rated_flow sqrt((p_s - p_t) /
     rated_drop)`` times its flow gain factor, over the piston area. CGS: 1.09 m/s on its
     vertical actuators, where the records read 1.078 under the dead weight."""
-    hp = _declared_hydraulics(desc)
+    from sim.effects.registry import hydraulics_with
+
+    hp = hydraulics_with(desc)
     drop = (hp.supply_pressure_pa - hp.return_pressure_pa) / hp.rated_drop_pa
     flow = hp.rated_flow_m3_s * np.sqrt(drop) * hp.per_actuator("valve_flow_gain")
     return np.asarray(flow / hp.area_a_m2, float)
 
 
-def _declared_hydraulics(desc):
-    """``desc``'s hydraulic parameters with its hydraulic effects' edits applied."""
-    from hydraulics.params import HydraulicParams
-    from sim.effects.base import EFFECTS, Effect
-
-    hp = HydraulicParams.from_table(desc.raw)
-    for e in desc.raw.get("effect", []) or []:
-        cls = EFFECTS.get(e.get("type")) if isinstance(e, dict) else None
-        if cls is not None and cls.edit_hydraulics is not Effect.edit_hydraulics:
-            hp = cls(e, source=f"{desc.source}: effect").edit_hydraulics(hp)
-    return hp
-
-
 def declared_null(desc) -> np.ndarray:
     """Each actuator's valve null offset as ``desc`` declares it (``[servovalve]`` and its
     ``valve_null_offset`` effects), fraction of rated opening."""
-    return np.asarray(_declared_hydraulics(desc).per_actuator("valve_null_offset"), float)
+    from sim.effects.registry import hydraulics_with
+
+    return np.asarray(hydraulics_with(desc).per_actuator("valve_null_offset"), float)
 
 
 __all__ = ["ValveNull", "declared_null", "declared_velocity_gain", "estimate", "internal_basis", "stroke_velocity"]

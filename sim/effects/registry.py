@@ -126,4 +126,30 @@ def build_effects(spec, effects: list[dict], desc=None) -> tuple[list, list]:
     return steps, objs
 
 
-__all__ = ["build_effects", "catalogue", "dahl_step", "description_folder", "known", "load_user_effect"]
+def hydraulics_with(desc, effects=None):
+    """``desc``'s :class:`hydraulics.params.HydraulicParams` with its effects' edits applied
+    (``edit_hydraulics``): ``effects`` built (a compiled model's ``tm.effects``), else the
+    description's own entries of the registered types that edit the hydraulics, created
+    here without compiling a model."""
+    from hydraulics.params import HydraulicParams
+
+    hp = HydraulicParams.from_table(desc.raw)
+    if effects is None:
+        entries = [e for e in desc.raw.get("effect", []) or [] if isinstance(e, dict)]
+        hydraulic = [e for e in entries if e.get("type") in EFFECTS]
+        hydraulic = [e for e in hydraulic if EFFECTS[e["type"]].edit_hydraulics is not Effect.edit_hydraulics]
+        effects = [create(e, source=f"{desc.source}: effect") for e in hydraulic]
+    for e in effects:
+        hp = e.edit_hydraulics(hp)
+    return hp
+
+
+__all__ = [
+    "build_effects",
+    "hydraulics_with",
+    "catalogue",
+    "dahl_step",
+    "description_folder",
+    "known",
+    "load_user_effect",
+]

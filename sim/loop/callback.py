@@ -637,7 +637,7 @@ class Context:
             timing={"callback_s": wall_s, "output_s": post, "steps": n_done * spt},
             incomplete_reason=reason,
             force_lag_s=sim.dt,
-            valve_hold=-sim.hp.per_actuator("valve_null_offset"),
+            valve_hold=sim.valve_hold,
         )
 
 

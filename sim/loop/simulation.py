@@ -34,11 +34,11 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from hydraulics import HydraulicParams, HydraulicSystem
+from hydraulics import HydraulicSystem
 from mjcf.model import TableModel
 from sim.control.base import controller_settings
 from sim.effects.faults import hooks_for  # faults:
-from sim.effects.registry import dahl_step
+from sim.effects.registry import dahl_step, hydraulics_with
 from sim.errors import RunInterrupted, ScenarioError, is_interrupt
 from sim.loop.recorder import derive, foundation_slides
 from sim.loop.wiring import Recording, Tally, Wiring
@@ -141,9 +141,8 @@ class Simulation:
         self.tm = tm
         self.m = tm.model
         self.dt = float(self.m.opt.timestep)
-        hp = HydraulicParams.from_table(tm.desc.raw)
-        for e in tm.effects:  # hydraulic effects (bulk modulus, leakage, valve delay, ...)
-            hp = e.edit_hydraulics(hp)
+        # hydraulic effects (bulk modulus, leakage, valve delay, ...) edit the description's
+        hp = hydraulics_with(tm.desc, tm.effects)
         self.hp = hp
         self.hs = HydraulicSystem(self.hp, n_sim=1, dt=self.dt, backend=backend)
         for e in tm.effects:
@@ -565,8 +564,13 @@ class Simulation:
             incomplete_reason=tally.reason,
             interrupted=tally.interrupted,
             force_lag_s=self.dt,
-            valve_hold=-self.hp.per_actuator("valve_null_offset"),
+            valve_hold=self.valve_hold,
         )
+
+    @property
+    def valve_hold(self) -> np.ndarray:
+        """Each valve's command at which it passes no flow: minus its null offset."""
+        return -self.hp.per_actuator("valve_null_offset")
 
     def _derive(self, Q, V, ACC) -> dict:
         """Recorder channels from raw qpos/qvel/platen-qacc samples (:func:`sim.loop.recorder.derive`)."""
