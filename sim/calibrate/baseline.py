@@ -486,11 +486,14 @@ def mechanical_baseline(mfit, mho) -> dict:
 
 
 def _one_dof(mr, j):
-    """A view of a mechanical run with only DOF ``j`` (for its own NRMSE)."""
+    """A view of a mechanical run with only DOF ``j`` (for its own NRMSE): its own
+    excitation flag and weight, and its own ``extra`` (the run's is not to be written)."""
     import copy
 
     one = copy.copy(mr)
     one.dofs, one.force = [mr.dofs[j]], mr.force[:, [j]]
+    one.excited = None if mr.excited is None else np.asarray(mr.excited)[[j]]
+    one.extra = {**mr.extra, "noise_weight": np.ones(1)}
     return one
 
 

@@ -548,17 +548,18 @@ def distinct_places(mr, wheres) -> list:
 
 def mechanical_errors(mho, before, after) -> tuple[dict, dict, list]:
     """Where the held-out error sits: per run and excited DOF (``"<run>:<dof>"`` ->
-    before/after, and the floor the accelerometers' noise sets there,
-    :func:`accelerometer_floor`), per run (pooled over its excited DOFs), and the
-    ``"<run>:<dof>"`` the runs do not excite (:func:`sim.calibrate.residuals.excited_dofs`),
-    left out of both."""
+    before/after, the floor the accelerometers' and load cells' noise sets there and the
+    DOF's weight in the pooled error, :mod:`sim.calibrate.mechnoise`), per run (pooled
+    over its excited DOFs), and the ``"<run>:<dof>"`` the runs do not excite
+    (:func:`sim.calibrate.residuals.excited_dofs`), left out of both."""
+    from sim.calibrate.mechnoise import dof_floor, dof_noise_weights
     from sim.calibrate.residuals import nrmse_runs
 
     per, per_run, quiet = {}, {}, []
     for mr, e0, e1 in zip(mho, before, after):
         run = Path(mr.name).name
         per_run[run] = {"before": nrmse_runs([mr], [e0]), "after": nrmse_runs([mr], [e1])}
-        floor = accelerometer_floor(mr)
+        floor, weight = dof_floor(mr), dof_noise_weights(mr)
         for j, d in enumerate(mr.dofs):
             if mr.excited is not None and not mr.excited[j]:
                 quiet.append(f"{run}:{d}")
@@ -566,32 +567,8 @@ def mechanical_errors(mho, before, after) -> tuple[dict, dict, list]:
             per[f"{run}:{d}"] = {"before": _nrmse_col(mr, e0, j), "after": _nrmse_col(mr, e1, j)}
             if np.isfinite(floor[j]):
                 per[f"{run}:{d}"]["floor"] = float(floor[j])
+            per[f"{run}:{d}"]["weight"] = float(weight[j])
     return per, per_run, quiet
-
-
-def accelerometer_floor(mr) -> np.ndarray:
-    """Per DOF, the NRMSE a perfect model would still leave on the mechanical path: the
-    recorded acceleration's white noise times the declared moving mass (the balance's
-    inertial term read in the top of its band, where the table's motion holds next to
-    nothing: :func:`sim.calibrate.conditioning.noise_floor`), over the DOF's recorded
-    force. A rotation that a translational test moves only through coupling has its
-    accelerometers' noise times its inertia for most of its error (CGS: the moments
-    about x and y); this says so beside the error instead of leaving it to be read as
-    a model that misses."""
-    from sim.calibrate.conditioning import noise_floor
-
-    inertial = mr.extra.get("inertial")
-    if inertial is None:
-        return np.full(len(mr.dofs), np.nan)
-    rows = np.flatnonzero(mr.rows)
-    if rows.size < 2:
-        return np.full(len(mr.dofs), np.nan)
-    # the span of the fit rows, whole: the still rows cut out of it would put steps into
-    # the spectrum's top band
-    noise = noise_floor(inertial[rows[0] : rows[-1] + 1], 1.0 / mr.dt)
-    F = mr.demean(mr.force)[mr.rows]
-    rms = np.sqrt(np.mean(F**2, axis=0))
-    return np.where(rms > 0, noise / np.where(rms > 0, rms, 1.0), np.nan)
 
 
 def _nrmse_col(mr, e, j) -> float:
@@ -605,7 +582,6 @@ __all__ = [
     "accel_lowpass",
     "candidate_laws",
     "check_effect_names",
-    "accelerometer_floor",
     "added_entries",
     "backward_pass",
     "backward_row",

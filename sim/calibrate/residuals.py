@@ -388,6 +388,8 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         )
         mr.filter_delay_s = known["accel_delay_s"]
         mr.extra["force_at_instant"] = f  # before any declared or found force delay
+        # the load cells' white noise taken to the DOFs, as recorded (sim.calibrate.mechnoise)
+        mr.extra["force_noise"] = conditioning.noise_floor(np.asarray(r.actuator_force, float) @ J, 1.0 / r.dt)
         f = conditioning.shift(f, -known["force_delay_s"], r.dt)
         mr.force = mr.filt(f @ J)
         mr.extra["actuator_force"] = f
@@ -589,11 +591,16 @@ def joint_terms(tm, k_of) -> JointTerms:
 
 
 def nrmse_runs(mruns, residuals, dofs=None) -> float:
-    """Pooled NRMSE of ``residuals`` (list of (n, k)) against the recorded force, each run
-    and excited DOF (:func:`excited_dofs`) weighted alike (the paper's force weighting);
-    ``dofs``: only these DOF names (None: every one)."""
-    vals = []
+    """Pooled NRMSE of ``residuals`` (list of (n, k)) against the recorded force, over
+    each run's excited DOFs (:func:`excited_dofs`), each DOF's squared NRMSE weighted by
+    its noise (:func:`sim.calibrate.mechnoise.dof_noise_weights`: alike where the record
+    is clean, the paper's force weighting); ``dofs``: only these DOF names (None: every
+    one)."""
+    from sim.calibrate.mechnoise import dof_noise_weights
+
+    vals, weights = [], []
     for mr, e in zip(mruns, residuals):
+        w = dof_noise_weights(mr)
         for j in range(len(mr.dofs)):
             if (mr.excited is not None and not mr.excited[j]) or (dofs is not None and mr.dofs[j] not in dofs):
                 continue
@@ -601,7 +608,8 @@ def nrmse_runs(mruns, residuals, dofs=None) -> float:
             den = float(np.sum(F**2))
             if den > 0:
                 vals.append(float(np.sum(e[mr.rows, j] ** 2)) / den)
-    return float(math.sqrt(np.mean(vals))) if vals else float("nan")
+                weights.append(float(w[j]))
+    return float(math.sqrt(np.average(vals, weights=weights))) if vals and sum(weights) > 0 else float("nan")
 
 
 # ------------------------------------------------------------------ frequency domain

@@ -56,11 +56,17 @@ class Fit:
 
 
 def _weights(mr) -> np.ndarray:
+    """Per DOF, the weight of its residual in the fit: over its recorded force (the
+    paper's Eq. 14), times the root of its noise weight
+    (:func:`sim.calibrate.mechnoise.dof_noise_weights`), so that the fit minimises the
+    pooled error the held-out judgement reads (:func:`sim.calibrate.residuals.nrmse_runs`)."""
+    from sim.calibrate.mechnoise import dof_noise_weights
+
     F = mr.demean(mr.force)[mr.rows]
     den = np.sqrt(np.sum(F**2, axis=0))
     if mr.excited is not None:  # a DOF the run does not excite: noise over nothing, left out
         den = np.where(mr.excited, den, 0.0)
-    return np.where(den > 0, 1.0 / np.where(den > 0, den, 1.0), 0.0)
+    return np.where(den > 0, np.sqrt(dof_noise_weights(mr)) / np.where(den > 0, den, 1.0), 0.0)
 
 
 def _key(t) -> tuple:

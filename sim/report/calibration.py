@@ -269,17 +269,18 @@ def _paths_md(res) -> list[str]:
 
 def _has_floor(per: dict) -> bool:
     """Whether any column of ``per`` carries a noise floor (the mechanical path's
-    accelerometer floor, the replay and closed-loop paths' channel noise)."""
+    accelerometers' and load cells', the replay and closed-loop paths' channel noise)."""
     return any(v.get("floor") is not None for v in per.values())
 
 
 def _per_channel_table(per: dict, head: str) -> list[str]:
     """The held-out error per column before and after, with the noise floor where a column
-    has one (:func:`sim.calibrate.mechsearch.accelerometer_floor`,
+    has one (:func:`sim.calibrate.mechnoise.dof_floor`,
     :func:`sim.calibrate.paths.column_floors`) and the column's weight in the pooled error
-    on the replay and closed-loop paths (:func:`sim.calibrate.paths.noise_weights`)."""
+    (:func:`sim.calibrate.mechnoise.dof_noise_weights`,
+    :func:`sim.calibrate.paths.noise_weights`)."""
     floor = _has_floor(per)
-    weight = any("weight" in v for v in per.values())  # the replay and closed-loop paths'
+    weight = any("weight" in v for v in per.values())
     L = [
         f"| {head} | before | after |" + (" noise floor |" if floor else "") + (" weight |" if weight else ""),
         "|---|---|---|" + ("---|" if floor else "") + ("---|" if weight else ""),

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sim.calibrate.mechsearch import accelerometer_floor
+from sim.calibrate.mechnoise import accelerometer_floor
 
 FS = 1024.0
 MASS = 5.0e4  # kg
