@@ -8,7 +8,11 @@ temperature). In closed loop the controller hides it: the recorded command settl
 such offset, that command drives the piston at a steady ``K delta`` and the model runs to
 its end stop. The estimate: each actuator's stroke velocity ``v`` against its recorded
 command ``u`` by least squares, ``v = K (u + delta0 + delta1 (t - t_mid))``, i.e. the mean
-command that keeps the actuator still, and its linear drift over the record.
+command that keeps the actuator still, and its linear drift over the record. Where the
+record starts still (an earthquake record's quiet seconds), the command held there is
+the null (and, where it also ends still, the change between the two is the drift): the
+fit's intercept over a strong test takes in what the valve's square-root flow law
+rectifies, up to 0.7e-4 of rated opening on an x-only CGS test.
 """
 
 from __future__ import annotations
@@ -31,6 +35,9 @@ class ValveNull:
     gain: np.ndarray
     velocity_from: str
     t_mid: float
+    #: "fit": the intercept of the whole record's fit; "lead-in" (or "lead-in and end"):
+    #: the commands held at the record's still start (and end), :func:`still_holds`
+    method: str = "fit"
 
     def at(self, t: np.ndarray) -> np.ndarray:
         """The offset (len(t), n_act) to add to the recorded command."""
@@ -42,7 +49,8 @@ class ValveNull:
             "drift_per_s": {a: float(v) for a, v in zip(actuators, self.drift_per_s)},
             "velocity_gain_m_s": {a: (float(v) if np.isfinite(v) else None) for a, v in zip(actuators, self.gain)},
             "velocity_from": self.velocity_from,
-            "method": "least squares of stroke velocity on valve command: v = K (u + offset + drift (t - t_mid))",
+            "method": "least squares of stroke velocity on valve command: v = K (u + offset + drift (t - t_mid))"
+            + ("" if self.method == "fit" else f"; the null and drift from the commands held still ({self.method})"),
         }
 
 
@@ -108,15 +116,23 @@ def stroke_velocity(run, desc) -> tuple[np.ndarray, str]:
 GAIN_READ_WITHIN = 0.1
 
 
+#: the shortest still lead-in (s) read as the valves' null (assumed: half a second, 500
+#: samples at 1 kHz, averages a command's noise well below the nulls of 1e-4 to 1e-2 that
+#: matter; an earthquake record's lead-in is seconds)
+NULL_LEAD_S = 0.5
+
+
 def estimate(run, desc, *, drift: bool = True) -> ValveNull:
     """Least-squares valve null offset (and drift) per actuator of ``run`` (a RunFile
-    with ``valve_command`` and a motion channel) on table ``desc``."""
+    with ``valve_command`` and a motion channel) on table ``desc``; where the record
+    starts still (:func:`still_holds`), the null is the command held there."""
     u = np.asarray(run.valve_command, float)
     v, what = stroke_velocity(run, desc)
     t = np.asarray(run.t, float)
     tm = 0.5 * (t[0] + t[-1])
     n_act = u.shape[1]
     declared = declared_velocity_gain(desc)
+    holds = still_holds(u, v, run.sample_rate_hz)
     off, dr, gain = np.zeros(n_act), np.zeros(n_act), np.zeros(n_act)
     for i in range(n_act):
         if np.ptp(u[:, i]) < 1e-12 and np.max(np.abs(v[:, i])) < 1e-9:
@@ -125,7 +141,50 @@ def estimate(run, desc, *, drift: bool = True) -> ValveNull:
             off[i], dr[i], gain[i] = -float(u[0, i]), 0.0, float("nan")
             continue
         gain[i], off[i], dr[i] = _one_null(u[:, i], v[:, i], t - tm, drift, declared[i], run, i)
-    return ValveNull(offset=off, drift_per_s=dr, gain=gain, velocity_from=what, t_mid=tm)
+        if holds:
+            off[i], dr[i] = _null_held(u[:, i], t - tm, holds, drift)
+    return ValveNull(offset=off, drift_per_s=dr, gain=gain, velocity_from=what, t_mid=tm, method=_method(holds))
+
+
+def still_holds(u: np.ndarray, v: np.ndarray, fs: float) -> list[slice]:
+    """The record's still stretches at its start and its end (each at least
+    :data:`NULL_LEAD_S`): the first half of its quiet lead-in
+    (:func:`sim.calibrate.windows.quiet_lead` of the commands and stroke velocities) and
+    the last half of its quiet end (the same, the record reversed); none without a still
+    start. Half: the quiet test ends where the motion reaches 5 % of its RMS, and the
+    onset's oil compression before that (the pressure that starts the table) is not
+    flow through the piston.
+    The stroke velocity counts through its running mean over the quiet test's window: a
+    transducer differentiated at 1 kHz is noisy (20 um of noise: ~0.03 m/s), the
+    motion's onset is not."""
+    from sim.calibrate.windows import QUIET_SMOOTH_S, quiet_lead
+
+    w = max(1, int(round(QUIET_SMOOTH_S * fs)))
+    slow = np.apply_along_axis(lambda c: np.convolve(c, np.ones(w) / w, mode="same"), 0, np.asarray(v, float))
+    n, m = len(u), int(NULL_LEAD_S * fs)
+    lead = quiet_lead([u, slow], fs) // 2
+    if lead < m or 2 * lead >= n:
+        return []
+    tail = quiet_lead([u[::-1], slow[::-1]], fs) // 2
+    return [slice(0, lead)] + ([slice(n - tail, n)] if m <= tail and 2 * (lead + tail) < n else [])
+
+
+def _null_held(u, dt, holds: list, drift: bool) -> tuple[float, float]:
+    """``(offset at the record's middle, drift)`` from the still stretches: the lead-in's
+    alone (no drift), or the lead-in's and the end's (the drift between them). Over each,
+    the null is minus the mean command: what holds the table still passes no flow. (Not
+    corrected by the stroke's change over the stretch: read off two displacement samples
+    of 20 um noise it was 0.1-0.3e-4 of rated opening over 2.6 s, on a still table.)"""
+    n0, t0 = -float(np.mean(u[holds[0]])), float(np.mean(dt[holds[0]]))
+    if len(holds) < 2 or not drift:
+        return n0, 0.0
+    n1, t1 = -float(np.mean(u[holds[1]])), float(np.mean(dt[holds[1]]))
+    d = (n1 - n0) / (t1 - t0)
+    return n0 - d * t0, d
+
+
+def _method(holds: list) -> str:
+    return {0: "fit", 1: "lead-in"}.get(len(holds), "lead-in and end")
 
 
 def _one_null(u, v, dt, drift: bool, declared: float, run, i) -> tuple[float, float, float]:
@@ -137,7 +196,8 @@ def _one_null(u, v, dt, drift: bool, declared: float, run, i) -> tuple[float, fl
     gives 1.7) and the null it gave, 1e-2 of rated opening, replayed open loop, pushed an
     internal force the closed loop never held (the vertical load cells' replay error
     0.07 -> 0.15-0.33 on clean CGS runs, a leakage then accepted in its place). Where the gain
-    is not read within :data:`GAIN_READ_WITHIN`, the declared one divides the intercept."""
+    is not read within :data:`GAIN_READ_WITHIN`, the declared one divides the intercept.
+    (A record that starts still shows its null without a fit: :func:`_null_held`.)"""
     A = np.stack([u, np.ones_like(u)] + ([dt] if drift else []), axis=1)
     coef, *_ = np.linalg.lstsq(A, v, rcond=None)
     K = coef[0]
@@ -182,4 +242,12 @@ def declared_null(desc) -> np.ndarray:
     return np.asarray(hydraulics_with(desc).per_actuator("valve_null_offset"), float)
 
 
-__all__ = ["ValveNull", "declared_null", "declared_velocity_gain", "estimate", "internal_basis", "stroke_velocity"]
+__all__ = [
+    "ValveNull",
+    "declared_null",
+    "declared_velocity_gain",
+    "estimate",
+    "internal_basis",
+    "still_holds",
+    "stroke_velocity",
+]
