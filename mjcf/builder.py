@@ -566,8 +566,10 @@ def build(desc: TableDescription, payload: Payload | None = None, options: Build
             )
         for i, f in enumerate(loads, start=1):
             p0 = f / sp.piston_area_m2
-            k = sp.polytropic_exponent * p0 * sp.piston_area_m2**2 / sp.chamber_volume_m3
             j = spec.joint(f"S{i}_air")
+            # the air's linear stiffness n p0 A^2 / V0, on top of any an effect put there
+            # (a spring at 'supports'); the spring reference keeps the preload at home
+            k = sp.polytropic_exponent * p0 * sp.piston_area_m2**2 / sp.chamber_volume_m3 + float(j.stiffness[0])
             j.stiffness = [k, 0, 0]
             j.springref = f / k
         info.support_loads_n = loads

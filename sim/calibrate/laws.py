@@ -246,6 +246,8 @@ add_law(
         {"stiffness_n_m": ("N/m", -np.inf, np.inf)},
         "stiffness_n_m",
         lambda u, v, a, s: u,
+        # at supports: the static supports' air springs, each alike (stiffer chambers)
+        places=("dof", "actuator", "class", "supports"),
         what="linear spring k u",
     )
 )

@@ -110,6 +110,9 @@ class MechRun:
     #: bool (k,): the DOFs the run excites (:func:`excited_dofs`); the others are left out
     #: of the fit's weights and the pooled error, and reported as not excited
     excited: np.ndarray | None = None
+    #: (n_sup, k) each static support's vertical travel per DOF (:func:`support_jacobian`),
+    #: None on a table without supports
+    supports: np.ndarray | None = None
 
     @property
     def residual(self) -> np.ndarray:
@@ -151,9 +154,13 @@ class MechRun:
             idx = self.classes[name]
             Jc = self.J[idx]
             return self.u @ Jc.T, self.v @ Jc.T, self.a @ Jc.T, Jc
+        if kind == "supports" and self.supports is not None:
+            Js = self.supports
+            return self.u @ Js.T, self.v @ Js.T, self.a @ Js.T, Js
         raise CalibrationError(
-            f"where = '{where}': the mechanical path acts at dof:, actuator: or class: places"
+            f"where = '{where}': the mechanical path acts at dof:, actuator:, class: or supports places"
             + (" (payload: only with a declared payload)" if kind == "payload" else "")
+            + (" (supports: only on a table with [supports])" if kind == "supports" else "")
         )
 
     def law_motion(self, law, where: str):
@@ -233,7 +240,26 @@ def places(desc, kinds, payload: bool = False) -> list[str]:
         cl = sorted({a.cls.name for a in desc.actuators})
         if len(cl) > 1:
             out += [f"class:{c}" for c in cl]
+    if "supports" in kinds and desc.supports is not None:
+        out.append("supports")
     return out
+
+
+def support_jacobian(desc) -> np.ndarray | None:
+    """(n_sup, k) each static support's vertical travel per unit motion of the table's
+    DOFs (``desc.dofs``), small angles: ``z + y_i rx - x_i ry`` at the support's position
+    from the reference point (the shoe slides: horizontal motion does not reach the air
+    piston). None without supports."""
+    from mjcf.description import DOFS6
+
+    if desc.supports is None:
+        return None
+    rows = []
+    for x, y, _z in desc.supports.positions_m:
+        r = np.zeros(6)
+        r[2], r[3], r[4] = 1.0, y, -x
+        rows.append(r)
+    return np.asarray(rows)[:, [DOFS6.index(d) for d in desc.dofs]]
 
 
 def supported_paths(runs) -> list[str]:
@@ -385,6 +411,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             prefilter=pre,
             presliding_m=desc.friction_presliding_m if desc.friction_model == "presliding" else None,
             payload=pay,
+            supports=support_jacobian(desc),
         )
         mr.filter_delay_s = known["accel_delay_s"]
         mr.extra["force_at_instant"] = f  # before any declared or found force delay
@@ -699,6 +726,8 @@ def distinct_force_places(desc, wheres) -> list:
         kind, _, name = w.partition(":")
         if kind == "dof":
             return np.eye(len(cols))[[desc.dofs.index(name)]]
+        if kind == "supports":
+            return support_jacobian(desc)
         return J[[names.index(name)]] if kind == "actuator" else J[classes[name]]
 
     return first_of_each_direction(wheres, force_map)
@@ -732,6 +761,7 @@ __all__ = [
     "choose_path",
     "mechanical_runs",
     "excited_dofs",
+    "support_jacobian",
     "nrmse_runs",
     "places",
     "distinct_force_places",

@@ -10,7 +10,8 @@ description (or a scenario) as an ``[[effect]]`` entry and applied at one place:
     source = "calibrated: shaketable calibrate run1.run.npz"
 
 Places (``where``): ``"dof:<x|y|z|rx|ry|rz>"``, ``"actuator:<name>"``, ``"class:<actuator
-class>"``, ``"actuators"`` (every actuator of the table), ``"supply"``, ``"channel:<run-file channel>[<column>]"``, ``"payload"`` and
+class>"``, ``"actuators"`` (every actuator of the table), ``"supports"`` (the static
+supports' air pistons, each alike), ``"supply"``, ``"channel:<run-file channel>[<column>]"``, ``"payload"`` and
 ``"table"`` (the whole table, e.g. a foundation mode).
 
 Lifecycle (every method optional but the parameters):
@@ -41,7 +42,7 @@ from typing import ClassVar
 
 from sim.errors import ScenarioError
 
-PLACE_KINDS = ("dof", "actuator", "class", "actuators", "supply", "channel", "payload", "table")
+PLACE_KINDS = ("dof", "actuator", "class", "actuators", "supports", "supply", "channel", "payload", "table")
 
 
 @dataclass(frozen=True)

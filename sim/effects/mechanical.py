@@ -98,6 +98,10 @@ class Place:
                     f"{src}: where = '{effect.where}': no actuator class '{name}'{_hint(name, desc.actuator_classes)}"
                 )
             self.joints = [f"{a.name}_stroke" for a in desc.actuators if a.cls.name == name]
+        elif kind == "supports":
+            if desc.supports is None:
+                raise ScenarioError(f"{src}: where = 'supports': '{desc.name}' has no [supports]")
+            self.joints = [f"S{i}_air" for i in range(1, len(desc.supports.positions_m) + 1)]
         if spec is not None:
             for j in self.joints:
                 if spec.joint(j) is None:
@@ -223,10 +227,12 @@ class StepForce(Effect):
 @register
 class Spring(Effect):
     """A linear spring about home on a DOF or actuator stroke (N/m; N m/rad on rotations):
-    hold-down struts, air springs, centring springs. Joint/tendon ``stiffness``."""
+    hold-down struts, air springs, centring springs. Joint/tendon ``stiffness``. At
+    ``supports``: each static support's air spring stiffer by this much (its preload
+    kept: :func:`mjcf.builder.build` sets the air spring on top of it)."""
 
     type = "spring"
-    places = ("dof", "actuator", "class")
+    places = ("dof", "actuator", "class", "supports")
     SPEC = {"stiffness_n_m": ("N/m", 0.0, INF, None)}
 
     def edit_spec(self, spec, desc):
