@@ -18,11 +18,10 @@ held-out error does not rise with them and every value stays the same effect's
 (:func:`disagreement`). A refit adds no parameter, so it is not held to the acceptance
 margin an effect of its own must pass: where the later path already sits at its noise
 there is no 5 % left to fall. Measured (CGS, a 20 t block 60 % on a 6 Hz mode, x-only
-runs through the real-record sensors): the mechanical path's modal mass 12136 +/- 67 kg,
-5.9960 +/- 0.0028 Hz (the truth 2 and 1.4 intervals out); refitted on the replay 12006
-+/- 9 kg, 6.00067 +/- 0.00084 Hz, 0.05010 +/- 0.00014 (each truth inside), held out
-0.0670 -> 0.0665: refused by the margin, until this rule. The mechanical path's own
-figures stay those of its values.
+runs through the real-record sensors): the mechanical path's modal mass 12055 +/- 27 kg,
+5.99611 +/- 0.00133 Hz (the truth 2.0 and 2.9 intervals out); refitted on the replay
+6.00065 Hz, held out 0.0664 -> 0.0662. The mechanical path's own figures stay those of
+its values.
 """
 
 from __future__ import annotations
@@ -39,6 +38,13 @@ from sim.calibrate.entries import as_entries, holdout_error, with_effects
 #: modal mass 890.75 +/- 7.94 kg on the mechanical path, 899.67 +/- 0.33 refitted on the
 #: replay (1.1 times; truth 900)
 AGREE = 2.0
+#: the share of a value each path's model error may move it by, beside its interval
+#: (which holds none): assumed 1 %. Measured biases of the mechanical path are below it: a
+#: CGS block's modal mass 0.46 % high and its frequency 0.065 % low, 2.0 and 2.9 of the
+#: intervals the noise weights (sim/calibrate/mechnoise.py) sharpened to +/-27 kg and
+#: +/-0.0013 Hz; what a refit absorbs of an effect not yet in the model is tens of per
+#: cent (a friction 604 -> 860 N)
+AGREE_SHARE = 0.01
 
 
 def refit_inherited(runs, ho_given, desc, payload, path, added, *, workers, say) -> list:
@@ -91,7 +97,8 @@ def sharper(before: dict, after: dict) -> bool:
 
 def disagreement(before: list, after: list) -> str:
     """Why a refit on the later path is not the same effect ('' when it is): a value
-    moved by more than :data:`AGREE` times the two paths' 95 % intervals together. The
+    moved by more than :data:`AGREE` times the two paths' 95 % intervals and their model
+    error (:data:`AGREE_SHARE` of the value) together. The
     later path sees everything the model lacks, its own effects not yet found included,
     and an inherited law refitted there can absorb them: a 600 N friction, with the valve
     delay not yet in the replay's model, went 604.4 +/- 27.8 -> 860.5 +/- 126.0 N (just
@@ -99,9 +106,10 @@ def disagreement(before: list, after: list) -> str:
     only 0.3358 -> 0.3355)."""
     for a, b in zip(before, after):
         for k, v in b["parameters"].items():
-            u = math.hypot(a["uncertainty"].get(k, math.inf), b["uncertainty"].get(k, math.inf))
-            if abs(v - a["parameters"][k]) > AGREE * u:
-                return f"{a['name']} {k} {a['parameters'][k]:.6g} -> {v:.6g}, beyond {AGREE:g} x +/-{u:.3g}"
+            v0 = a["parameters"][k]
+            u = math.hypot(a["uncertainty"].get(k, math.inf), b["uncertainty"].get(k, math.inf), AGREE_SHARE * v0)
+            if abs(v - v0) > AGREE * u:
+                return f"{a['name']} {k} {v0:.6g} -> {v:.6g}, beyond {AGREE:g} x +/-{u:.3g}"
     return ""
 
 
