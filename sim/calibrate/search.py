@@ -161,6 +161,7 @@ def calibrate(
     runs support, :mod:`sim.calibrate.stages`); ``workers``: processes of the replay and
     closed-loop searches (default: every core)."""
     from sim.calibrate.mechsearch import mechanical_stage
+    from sim.calibrate.readings import add_readings
     from sim.calibrate.stages import plan, run_stages
     from sim.calibrate.unknowns import identify as identify_unknowns
 
@@ -181,6 +182,7 @@ def calibrate(
 
     kw = {"effects": effects, "search_one": search_one, "say": say, "workers": workers}
     res = run_stages(runs, ho_given, desc, pl, stages, **kw)
+    add_readings(res, desc, pl)
     res.unknowns_identified = unk
     res.timing["total_s"] = time.perf_counter() - t0  # the unknowns, every path and the pooled verdict
     if not res.paths:

@@ -428,19 +428,23 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
 
 def _later_path_notes(res) -> list[str]:
     """A line for each effect the later path refitted (``refined_on``) or placed
-    (``placed_on``)."""
+    (``placed_on``), and for each that a description number says the same as
+    (``reads_as``, :mod:`sim.calibrate.readings`)."""
     out = [
         f"\n`{e['name']}` at {e['where']}: found on the {e.get('path', 'mechanical')} path, its values "
         f"refitted on the {e['refined_on'].replace('_', '-')} path, where its columns pin it (the intervals there)."
         for e in res.effects_added
         if e.get("refined_on")
     ]
-    return out + [
+    out += [
         f"\n`{e['name']}` at {e['where']}: on the mechanical path other places explained it as "
         f"well (the test moved them alike); the {e['placed_on'].replace('_', '-')} path's held-out "
         "error chose this one."
         for e in res.effects_added
         if e.get("placed_on")
+    ]
+    return out + [
+        f"\n`{e['name']}` at {e['where']} reads as {e['reads_as']}." for e in res.effects_added if e.get("reads_as")
     ]
 
 

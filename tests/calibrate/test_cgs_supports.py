@@ -263,3 +263,23 @@ def test_the_supports_place_moves_with_the_platen_as_a_vertical_actuator_there_w
     raw["effect"] = list(raw.get("effect", [])) + [{"type": "spring", "where": "supports", "stiffness_n_m": 1.0}]
     with pytest.raises(UserError, match="has no \\[supports\\]"):
         build_model(parse_table(raw, src=lab.source))
+
+
+def test_a_support_spring_reads_as_the_chamber_that_gives_it():
+    """A spring at the supports as large as the declared air spring doubles it: the
+    chamber that gives it is half the declared (n p0 A^2 / V), the TRUE_M3 of these tests;
+    the report says so beside the effect."""
+    from types import SimpleNamespace
+
+    from sim.calibrate.readings import support_air_stiffness, support_reading
+    from sim.report.calibration import _later_path_notes
+
+    declared = _cgs_with_chambers(DECLARED_M3)
+    k0 = support_air_stiffness(declared, None)
+    assert np.allclose(k0, _air_stiffness(declared)) and np.ptp(k0) < 1e-9 * k0.mean()
+    e = {"name": "spring", "where": "supports", "parameters": {"stiffness_n_m": float(k0.mean())}}
+    line = support_reading(declared, None, e)
+    assert f"a chamber of {TRUE_M3:.4g} m^3 for the declared {DECLARED_M3:g}" in line, line
+    assert support_reading(declared, None, {**e, "where": "dof:z"}) is None
+    res = SimpleNamespace(effects_added=[{**e, "reads_as": line}])
+    assert _later_path_notes(res) == [f"\n`spring` at supports reads as {line}."]

@@ -1,0 +1,47 @@
+"""What a found effect means in the description's own numbers, where one number of it
+says the same: a ``spring`` at ``supports`` is each static support's air spring made
+stiffer, and the air spring's linear stiffness is ``n p0 A^2 / V0`` (the polytropic law
+about its preload, :func:`mjcf.builder.build`). At the same preload (the static balance)
+and exponent, the stiffer spring is a chamber of ``V0 k0 / (k0 + k)``: the lab reads
+"the chambers hold less air than declared" where the search names a spring.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def support_air_stiffness(desc, payload) -> np.ndarray:
+    """Each static support's linear air stiffness as the declared model builds it (N/m)."""
+    from sim.effects import build_model
+
+    m = build_model(desc, payload).model
+    return np.array([m.jnt_stiffness[m.joint(f"S{i}_air").id] for i in range(1, len(desc.supports.positions_m) + 1)])
+
+
+def support_reading(desc, payload, effect: dict) -> str | None:
+    """The line a ``spring`` at ``supports`` reads as (None for any other effect): the
+    air springs' declared and found stiffness and the chamber volume that gives it."""
+    if effect.get("name") != "spring" or effect.get("where") != "supports" or desc.supports is None:
+        return None
+    k = float(effect["parameters"]["stiffness_n_m"])
+    k0 = float(np.mean(support_air_stiffness(desc, payload)))
+    if k0 + k <= 0:
+        return f"each support's air spring {k0:.4g} N/m declared, {k0 + k:.4g} found: no chamber gives that"
+    v0 = float(desc.supports.chamber_volume_m3)
+    return (
+        f"each support's air spring {k0:.4g} -> {k0 + k:.4g} N/m: a chamber of {v0 * k0 / (k0 + k):.4g} m^3 "
+        f"for the declared {v0:g} (n p0 A^2 / V, the preload and exponent as declared)"
+    )
+
+
+def add_readings(res, desc, payload) -> None:
+    """Each effect of ``res.effects_added`` that one description number says the same as
+    gets ``reads_as`` (:func:`support_reading`)."""
+    for e in res.effects_added:
+        line = support_reading(desc, payload, e)
+        if line:
+            e["reads_as"] = line
+
+
+__all__ = ["add_readings", "support_air_stiffness", "support_reading"]
