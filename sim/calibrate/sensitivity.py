@@ -216,7 +216,8 @@ def _table_of(desc, payload, accepted, effects) -> _Table:
     own = [f"class:{c}" for c in classes] + ([f"actuator:{a}" for a in names] if len(names) > 1 else [])
     # all at once (several classes): a description's number (oil, valve) wrong on every one
     hyd_places = (["actuators"] if len(classes) > 1 else []) + own
-    mech_places = distinct_force_places(cur, [f"dof:{d}" for d in cur.dofs] + own)
+    sup = ["supports"] if cur.supports is not None else []  # a spring there: their air springs
+    mech_places = distinct_force_places(cur, [f"dof:{d}" for d in cur.dofs] + own + sup)
     want = set(effects) if effects else None
     have = {(e["type"], e["where"]) for e in accepted}
     return _Table(cur, hp, float(tm.model.opt.timestep), FORCE_STEP * cap, hyd_places, mech_places, want, have)
@@ -304,13 +305,15 @@ def _hydraulic_candidates(tb: _Table) -> list[Candidate]:
 
 
 def _mechanical_candidates(tb: _Table, motion_rms) -> list[Candidate]:
-    """The force laws at each mechanical place, stepped by the recorded motion there."""
+    """The force laws at each mechanical place they act at, stepped by the recorded motion there."""
+    from sim.effects.base import EFFECTS
+
     out, have, Fs, spec = [], tb.have, tb.Fs, tb.spec
     for t, (key, shape) in MECHANICAL.items():
         if not tb.offered(t):
             continue
         for w in tb.mech_places:
-            if (t, w) in have or w not in motion_rms:
+            if (t, w) in have or w not in motion_rms or w.partition(":")[0] not in EFFECTS[t].places:
                 continue
             u, v, a = motion_rms[w]
             ref = {"stiffness_n_m": u, "damping_n_s_m": v, "force_n": 1.0, "mass_kg": a, "coefficient": math.sqrt(v)}

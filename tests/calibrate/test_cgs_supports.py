@@ -283,3 +283,35 @@ def test_a_support_spring_reads_as_the_chamber_that_gives_it():
     assert support_reading(declared, None, {**e, "where": "dof:z"}) is None
     res = SimpleNamespace(effects_added=[{**e, "reads_as": line}])
     assert _later_path_notes(res) == [f"\n`spring` at supports reads as {line}."]
+
+
+def test_the_replay_path_offers_a_spring_at_the_supports_and_nothing_else_there():
+    """The replay path's mechanical candidates on CGS include the supports' spring, stepped
+    by the supports' own travel, and no law the supports' place cannot carry."""
+    from types import SimpleNamespace
+
+    import mjcf
+    from sim.calibrate.pathsearch import motion_rms
+    from sim.calibrate.sensitivity import _mechanical_candidates, _table_of
+
+    desc = mjcf.load_table("cgs")
+    tb = _table_of(desc, None, [], None)
+    assert "supports" in tb.mech_places
+    t = np.arange(2048) / 1024.0
+    z = 0.01 * np.sin(2 * np.pi * 1.0 * t)
+    six = np.zeros((len(t), 6))
+    six[:, 2] = z
+    run = SimpleNamespace(
+        t=t,
+        sample_rate_hz=1024.0,
+        dofs=list(desc.dofs),
+        table_displacement=six,
+        reference=None,
+        table_velocity=None,
+        table_acceleration=None,
+    )
+    rms = motion_rms([run], desc)
+    assert rms["supports"][0] == pytest.approx(rms["dof:z"][0], rel=1e-9)  # z alone: each support travels z
+    got = {(c.type, c.where) for c in _mechanical_candidates(tb, rms)}
+    assert ("spring", "supports") in got and ("spring", "dof:z") in got
+    assert not any(w == "supports" for e, w in got if e != "spring"), got
