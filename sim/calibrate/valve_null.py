@@ -120,6 +120,12 @@ GAIN_READ_WITHIN = 0.1
 #: samples at 1 kHz, averages a command's noise well below the nulls of 1e-4 to 1e-2 that
 #: matter; an earthquake record's lead-in is seconds)
 NULL_LEAD_S = 0.5
+#: the largest difference (fraction of rated opening) between a still stretch's null and
+#: the fit's for the stretch to be read as a held null: assumed 2e-4, three times the
+#: largest the flow law's rectification was measured to put into the fit (0.6e-4 on a
+#: strong lab test). Beyond it the stretch is not the controller holding the table (the
+#: hydraulics off before the test, the table on its stops), and the fit stands
+HELD_AGREES = 2e-4
 
 
 def estimate(run, desc, *, drift: bool = True) -> ValveNull:
@@ -133,17 +139,20 @@ def estimate(run, desc, *, drift: bool = True) -> ValveNull:
     n_act = u.shape[1]
     declared = declared_velocity_gain(desc)
     holds = still_holds(u, v, run.sample_rate_hz)
-    off, dr, gain = np.zeros(n_act), np.zeros(n_act), np.zeros(n_act)
+    moving = _moving_rows(len(u), holds)
+    off, dr, gain, n_held = np.zeros(n_act), np.zeros(n_act), np.zeros(n_act), 0
     for i in range(n_act):
         if np.ptp(u[:, i]) < 1e-12 and np.max(np.abs(v[:, i])) < 1e-9:
             # a constant command holding a still actuator: that command is the null itself
             # (no flow gain can be read from such a record, and none is needed)
             off[i], dr[i], gain[i] = -float(u[0, i]), 0.0, float("nan")
             continue
-        gain[i], off[i], dr[i] = _one_null(u[:, i], v[:, i], t - tm, drift, declared[i], run, i)
-        if holds:
-            off[i], dr[i] = _null_held(u[:, i], t - tm, holds, drift)
-    return ValveNull(offset=off, drift_per_s=dr, gain=gain, velocity_from=what, t_mid=tm, method=_method(holds))
+        ui, vi, ti = u[moving, i], v[moving, i], t[moving] - tm
+        gain[i], off[i], dr[i] = _one_null(ui, vi, ti, drift, declared[i], run, i)
+        held = _null_held(u[:, i], t - tm, holds, drift) if holds else None
+        if held is not None and abs(held[0] - off[i]) <= HELD_AGREES:
+            (off[i], dr[i]), n_held = held, n_held + 1
+    return ValveNull(off, dr, gain, what, tm, method=_method(holds, n_held, n_act))
 
 
 def still_holds(u: np.ndarray, v: np.ndarray, fs: float) -> list[slice]:
@@ -151,7 +160,7 @@ def still_holds(u: np.ndarray, v: np.ndarray, fs: float) -> list[slice]:
     :data:`NULL_LEAD_S`): the first half of its quiet lead-in
     (:func:`sim.calibrate.windows.quiet_lead` of the commands and stroke velocities) and
     the last half of its quiet end (the same, the record reversed); none without a still
-    start. Half: the quiet test ends where the motion reaches 5 % of its RMS, and the
+    start. A valve's stretch is read where it agrees with the fit (:data:`HELD_AGREES`). Half: the quiet test ends where the motion reaches 5 % of its RMS, and the
     onset's oil compression before that (the pressure that starts the table) is not
     flow through the piston.
     The stroke velocity counts through its running mean over the quiet test's window: a
@@ -169,6 +178,19 @@ def still_holds(u: np.ndarray, v: np.ndarray, fs: float) -> list[slice]:
     return [slice(0, lead)] + ([slice(n - tail, n)] if m <= tail and 2 * (lead + tail) < n else [])
 
 
+def _moving_rows(n: int, holds: list) -> np.ndarray:
+    """Bool (n,): the rows the fit reads, the still start and end left out (twice each
+    hold: the whole quiet stretch). A still stretch shows no gain, and one the controller
+    did not hold (the hydraulics off, the command at zero) would read as flow at zero
+    velocity: 0.0026 for a 0.004 null on the lab table, 2 s of 6 off."""
+    keep = np.ones(n, bool)
+    if holds:
+        keep[: 2 * holds[0].stop] = False
+    if len(holds) > 1:
+        keep[n - 2 * (n - holds[1].start) :] = False
+    return keep
+
+
 def _null_held(u, dt, holds: list, drift: bool) -> tuple[float, float]:
     """``(offset at the record's middle, drift)`` from the still stretches: the lead-in's
     alone (no drift), or the lead-in's and the end's (the drift between them). Over each,
@@ -183,8 +205,11 @@ def _null_held(u, dt, holds: list, drift: bool) -> tuple[float, float]:
     return n0 - d * t0, d
 
 
-def _method(holds: list) -> str:
-    return {0: "fit", 1: "lead-in"}.get(len(holds), "lead-in and end")
+def _method(holds: list, n_held: int, n_act: int) -> str:
+    if not n_held:
+        return "fit"
+    where = "lead-in" if len(holds) == 1 else "lead-in and end"
+    return where if n_held == n_act else f"{where}, {n_held} of {n_act} valves (the others: the fit)"
 
 
 def _one_null(u, v, dt, drift: bool, declared: float, run, i) -> tuple[float, float, float]:

@@ -166,3 +166,19 @@ def test_a_still_lead_in_shows_the_null_that_a_fit_over_strong_motion_misses(tmp
     fit = estimate(moving, desc)
     assert fit.method == "fit"
     assert abs(fit.offset[0] - 0.004) > 1e-5, fit  # the fit's bias, which the lead-in removes
+
+
+def test_a_still_lead_in_that_is_not_held_leaves_the_fit(tmp_path):
+    """A lead-in logged with the valve at zero command (the hydraulics off before the
+    test, the table on its stops) is still but says nothing of the null: it disagrees with
+    the fit by far more than the flow law's rectification (HELD_AGREES), and the fit's
+    null stands."""
+    from sim.calibrate.valve_null import HELD_AGREES, estimate
+
+    desc, held = _lab_with_null(tmp_path, 0.004, 2.0)
+    fit = estimate(held, desc)
+    n = int(2.0 * held.sample_rate_hz)
+    held.valve_command[:n] = 0.0
+    est = estimate(held, desc)
+    assert est.method == "fit" and abs(est.offset[0] - 0.004) < HELD_AGREES, est
+    assert fit.method == "lead-in"
