@@ -427,9 +427,9 @@ def report_md(res, figs: list[str], toml_name: str) -> str:
 
 
 def _later_path_notes(res) -> list[str]:
-    """A line for each effect the later path refitted (``refined_on``) or placed
-    (``placed_on``), and for each that a description number says the same as
-    (``reads_as``, :mod:`sim.calibrate.readings`)."""
+    """A line for each effect the later path refitted (``refined_on``), placed
+    (``placed_on``) or could not place either (``tied_on_later``), and for each that a
+    description number says the same as (``reads_as``, :mod:`sim.calibrate.readings`)."""
     out = [
         f"\n`{e['name']}` at {e['where']}: found on the {e.get('path', 'mechanical')} path, its values "
         f"refitted on the {e['refined_on'].replace('_', '-')} path, where its columns pin it (the intervals there)."
@@ -442,6 +442,12 @@ def _later_path_notes(res) -> list[str]:
         "error chose this one."
         for e in res.effects_added
         if e.get("placed_on")
+    ]
+    out += [
+        f"\n`{e['name']}` at {e['where']}: {', '.join(e['tied_on_later'])} held out within the margin of it on "
+        "the later path too: the records do not tell these places apart (a test that moves them differently would)."
+        for e in res.effects_added
+        if e.get("tied_on_later")
     ]
     return out + [
         f"\n`{e['name']}` at {e['where']} reads as {e['reads_as']}." for e in res.effects_added if e.get("reads_as")

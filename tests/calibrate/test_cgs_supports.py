@@ -170,6 +170,8 @@ def test_stiffer_supports_found_as_a_vertical_spring_on_a_low_frequency_test(tmp
     e = res.effects_added[0]
     assert e["path"] == "mechanical" and e["where"] in ("dof:z", "class:vertical", "supports"), e
     assert e["placed_on"] == "replay", e
+    vertical = {"dof:z", "class:vertical", "supports"}
+    assert set(e["tied_on_later"]) == vertical - {e["where"]}, e  # the replay does not tell them apart
     k, u95 = e["parameters"]["stiffness_n_m"], e["uncertainty"]["stiffness_n_m"]
     assert abs(k - _equivalent(e["where"], dk_z, declared)) <= u95, (k, u95, dk_z)  # inside its 95 %: 0.57 of it
     mech, replay = res.paths["mechanical"], res.paths["replay"]

@@ -64,3 +64,21 @@ def test_the_report_says_when_no_path_told_the_places_apart():
     res.effects_added = [{**effect, "where": "dof:z", "placed_on": "replay"}]
     md = report_md(res, [], "cgs_calibrated.toml")
     assert "no later path told them apart" not in md and "the replay path's held-out error chose this one" in md
+
+
+def test_places_the_later_path_does_not_tell_apart_either():
+    """The vertical supports test's replay (measured): Z1 0.1280, z, the class and the
+    supports 0.0522 each. z is chosen (the lowest); the class and the supports stay tied
+    (within the margin of it) and the report says so; Z1 does not."""
+    from sim.calibrate.placement import still_tied
+    from sim.report.calibration import _later_path_notes
+
+    wheres = ["actuator:Z1", "dof:z", "class:vertical", "supports"]
+    errs = [0.1280, 0.05220, 0.05221, 0.05224]
+    assert still_tied(wheres, errs, 1) == ["class:vertical", "supports"]
+    assert still_tied(wheres, [0.1280, 0.0522, 0.060, 0.070], 1) == []
+    from types import SimpleNamespace
+
+    e = {"name": "spring", "where": "dof:z", "placed_on": "replay", "tied_on_later": ["class:vertical", "supports"]}
+    lines = _later_path_notes(SimpleNamespace(effects_added=[e]))
+    assert any("class:vertical, supports held out within the margin of it on the later path too" in x for x in lines)
