@@ -80,15 +80,14 @@ def prefilter_noise_gain(mr) -> float:
 
 def dof_noise_weights(mr) -> np.ndarray:
     """Per DOF, its weight in the fit and the pooled error: ``1 / (floor^2 +
-    MODEL_ERROR^2)`` (:data:`sim.calibrate.paths.MODEL_ERROR`; a DOF without a known floor
+    MODEL_ERROR^2)`` (:func:`sim.calibrate.conditioning.noise_weight`; a DOF without a known floor
     as one without noise), scaled to average 1 over the run's excited DOFs. Computed once
     per run (``extra["noise_weight"]``)."""
     if "noise_weight" in mr.extra:
         return mr.extra["noise_weight"]
-    from sim.calibrate.paths import MODEL_ERROR
+    from sim.calibrate.conditioning import noise_weight
 
-    floor = np.nan_to_num(dof_floor(mr))
-    w = MODEL_ERROR**2 / (floor**2 + MODEL_ERROR**2)
+    w = noise_weight(np.nan_to_num(dof_floor(mr)))
     on = np.ones(len(w), bool) if mr.excited is None else np.asarray(mr.excited, bool)
     mean = float(np.mean(w[on])) if on.any() else 1.0
     mr.extra["noise_weight"] = w / mean if mean > 0 else np.ones(len(w))

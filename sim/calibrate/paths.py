@@ -52,12 +52,6 @@ FIT_CHANNELS = ("actuator_force", "table_acceleration", "table_velocity")
 #: :func:`sim.calibrate.conditioning.noise_floor`: read off the record, as a real one holds
 #: nothing about its sensors)
 NOISE_COLUMN = 3.0
-#: the share of a well-measured column's RMS the model's own approximations leave, against
-#: which a column's noise floor weighs it (:func:`noise_weights`): a column's squared error
-#: counts by ``1 / (floor^2 + MODEL_ERROR^2)``, a chi-square whose every column also
-#: carries this much model error. Assumed; measured: the Rice table's clean replays leave
-#: 5.9 % on the columns well above their noise (docs/calibration-validation-blind.md)
-MODEL_ERROR = 0.05
 DOF_CHANNELS = ("table_displacement", "table_velocity", "table_acceleration")
 #: accelerometers on the specimen: compared where the model gives their reading
 #: (:mod:`sim.calibrate.specimen_model`), so that a specimen's mode is pinned by them too
@@ -315,12 +309,13 @@ def _compared_columns(r, chans, J6, readable):
 
 def noise_weights(floors: dict) -> dict:
     """Per channel, each compared column's weight in the pooled error: ``1 / (floor^2 +
-    MODEL_ERROR^2)`` over ``1 / MODEL_ERROR^2`` (1 for a column without noise). A column's
+    MODEL_ERROR^2)`` over ``1 / MODEL_ERROR^2`` (:func:`sim.calibrate.conditioning.noise_weight`;
+    1 for a column without noise). A column's
     NRMSE cannot fall below its noise floor whatever the model; counted alike with the
     others, a light table's 3 kN forces under 1 kN of load-cell noise (a floor of 31 %)
     held the Rice table's replay held-out error at 19 %, and a 400 MPa bulk modulus lowered
     it 3.3 %, under the margin. Weighted (the force 0.026), 5.65 % -> 3.72 %."""
-    return {c: MODEL_ERROR**2 / (np.asarray(f, float) ** 2 + MODEL_ERROR**2) for c, f in floors.items()}
+    return {c: conditioning.noise_weight(f) for c, f in floors.items()}
 
 
 def holds_total(force) -> bool:
