@@ -82,12 +82,16 @@ def retime(mr, state: dict):
     acceleration timing of ``state`` in place of its own (same rows, same weights: every
     timing is scored by one measure; the terms' columns kept while the filter is)."""
     from sim.calibrate.conditioning import Conditioner
+    from sim.calibrate.mechnoise import dof_noise_weights
 
     old = mr.extra["timing"]
     same_filter = all(old[k] == state[k] for k in ("accel_delay_s", "accel_lowpass_hz", "accel_lowpass_order"))
-    keep = ("force_at_instant", "inertial", "other", "w", "basis") + (
+    # the weights stay the run's own (the fit's "w" and each DOF's noise weight): a timing
+    # candidate is judged on the same pooled error as the model without it
+    keep = ("force_at_instant", "inertial", "other", "w", "noise_weight", "force_noise", "basis") + (
         ("raw_columns", "columns", "second") if same_filter else ()
     )
+    dof_noise_weights(mr)  # computed on the run as declared, before it is copied
     new = dataclasses.replace(mr, extra={k: mr.extra[k] for k in keep if k in mr.extra})
     fc = state["accel_lowpass_hz"]
     new.prefilter = Conditioner(float(fc), int(state["accel_lowpass_order"]), 1.0 / mr.dt) if fc else None
