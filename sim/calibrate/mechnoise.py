@@ -22,7 +22,9 @@ from __future__ import annotations
 import numpy as np
 
 #: length of the white probe that measures the prefilter's noise gain (samples; the first
-#: PROBE_SETTLE left out, the conditioner starting from rest)
+#: PROBE_SETTLE left out, the conditioner starting from rest). A numerical setting: 7680
+#: samples give the gain within ~1 % (the RMS of n white samples scatters by 1/sqrt(2n));
+#: a 4-pole conditioner at 100 Hz and 1 kHz settles in well under 512 samples
 PROBE_N = 8192
 PROBE_SETTLE = 512
 

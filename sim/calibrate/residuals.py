@@ -150,13 +150,9 @@ class MechRun:
             i = self.actuators.index(name)
             Ji = self.J[i]
             return self.u @ Ji, self.v @ Ji, self.a @ Ji, Ji
-        if kind == "class":
-            idx = self.classes[name]
-            Jc = self.J[idx]
-            return self.u @ Jc.T, self.v @ Jc.T, self.a @ Jc.T, Jc
-        if kind == "supports" and self.supports is not None:
-            Js = self.supports
-            return self.u @ Js.T, self.v @ Js.T, self.a @ Js.T, Js
+        if kind == "class" or (kind == "supports" and self.supports is not None):
+            Jm = self.J[self.classes[name]] if kind == "class" else self.supports  # several strokes at once
+            return self.u @ Jm.T, self.v @ Jm.T, self.a @ Jm.T, Jm
         raise CalibrationError(
             f"where = '{where}': the mechanical path acts at dof:, actuator:, class: or supports places"
             + (" (payload: only with a declared payload)" if kind == "payload" else "")
