@@ -5,8 +5,6 @@ mode at each DOF share one part of it (:meth:`PayloadMode._shared`)."""
 
 from __future__ import annotations
 
-import math
-
 import mujoco
 import numpy as np
 
@@ -57,7 +55,7 @@ class PayloadMode(Effect):
         b = _point_body(spec, _unique(spec, f"payload_mode_{d}"), m, pos)
         if self.options["from_payload"]:
             b.inertia = np.maximum(inertia, 1e-6 * m).tolist()
-        self.joint = _mode_slide(b, f"{b.name}_slide", d, m, v["frequency_hz"], v["damping_ratio"], desc).name
+        self.joint = _mode_slide(spec, b, f"{b.name}_slide", d, m, v["frequency_hz"], v["damping_ratio"], desc).name
 
     def _shared(self, spec, desc, group: dict) -> str:
         """The first ``from_payload`` mode at each DOF: one part of the payload that moves on
@@ -86,6 +84,7 @@ class PayloadMode(Effect):
                 for e in members[: k + 1]:
                     dd = str(e["where"]).partition(":")[2]
                     _mode_slide(
+                        spec,
                         b,
                         f"{b.name}_{dd}",
                         dd,
@@ -161,17 +160,20 @@ def _point_body(spec, name: str, m: float, pos) -> object:
     return b
 
 
-def _mode_slide(b, name: str, d: str, m: float, f: float, z: float, desc):
+def _mode_slide(spec, b, name: str, d: str, m: float, f: float, z: float, desc):
     """A slide of body ``b`` (mass ``m``) along ``d`` with the spring and damper of a mode
-    of frequency ``f`` and damping ratio ``z``."""
-    w = 2 * math.pi * f
+    of frequency ``f`` and damping ratio ``z`` as the model's step has it
+    (:func:`mjcf.builder.mode_spring`)."""
+    from mjcf.builder import mode_spring
+
     axis = [0.0, 0.0, 0.0]
     axis[("x", "y", "z").index(d)] = 1.0
     j = b.add_joint(name=name, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=axis)
-    j.stiffness = [m * w * w, 0, 0]
-    j.damping = [2 * z * m * w, 0, 0]
+    k, c = mode_spring(spec, m, f, z)
+    j.stiffness = [k, 0, 0]
+    j.damping = [c, 0, 0]
     if d == "z":  # home is the static equilibrium under gravity
-        j.springref = m * desc.gravity_m_s2 / (m * w * w)
+        j.springref = m * desc.gravity_m_s2 / k
     return j
 
 
