@@ -182,3 +182,21 @@ def test_a_still_lead_in_that_is_not_held_leaves_the_fit(tmp_path):
     est = estimate(held, desc)
     assert est.method == "fit" and abs(est.offset[0] - 0.004) < HELD_AGREES, est
     assert fit.method == "lead-in"
+
+
+def test_a_lead_in_whose_command_carries_the_loop_noise_still_shows_the_null(tmp_path):
+    """A real controller holding a still table answers its displacement transducer's
+    noise, so the lead-in's command is not constant: white noise of 2e-4 of rated opening
+    RMS (assumed: 10 um of transducer noise times a loop gain of 20 /m) on the lead-in's
+    samples. The held value is their mean over the first second (1024 samples), so it
+    moves by about 2e-4 / 32 = 6e-6 (measured 4.3e-6; 2.2e-5 at 1e-3 RMS): the lead-in is
+    still read, within 3e-5."""
+    from sim.calibrate.valve_null import estimate
+
+    desc, held = _lab_with_null(tmp_path, 0.004, 2.0)
+    n = int(2.0 * held.sample_rate_hz)
+    noise = np.random.default_rng(5).normal(0.0, 2e-4, size=held.valve_command[:n].shape)
+    held.valve_command[:n] = held.valve_command[:n] + noise
+    est = estimate(held, desc)
+    assert est.method == "lead-in", est
+    assert est.offset[0] == pytest.approx(0.004, abs=3e-5), est
