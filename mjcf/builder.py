@@ -467,13 +467,22 @@ def _add_shear_frame(spec, platen, p: ShearFramePayload, info: BuildInfo) -> Non
 
 def _add_frame_tendons(spec, p: ShearFramePayload, names: list[str]) -> None:
     """K and C as sums of rank-one springs/dampers on fixed tendons: K = sum k_i v_i v_i^T
-    with v_i the eigenvectors of K (all k_i > 0 since K is positive definite)."""
+    with v_i the eigenvectors of K (all k_i > 0 since K is positive definite).
+
+    Both are built mode by mode, ``M phi diag(k_n) phi^T M`` with mass-normalised shapes
+    ``phi``, each mode's ``k_n``, ``c_n`` those that give its frequency and the modal
+    damping as the model's step has them (:func:`mode_spring`; the damping is classical,
+    so the step keeps the modes apart). With a plain K, the 3-storey frame's 34 Hz, 2 %
+    mode stepped 0.06 % low."""
     n = len(names)
     M = np.diag(p.mass_kg)
     w2, phi = _generalized_eig(p.stiffness_n_m, M)
     Mphi = M @ phi
-    C = Mphi @ np.diag(2 * p.damping_ratio * np.sqrt(w2)) @ Mphi.T
-    for label, mat, kind in (("k", p.stiffness_n_m, "stiffness"), ("c", C, "damping")):
+    f = np.sqrt(w2) / (2 * np.pi)
+    modal = np.array([mode_spring(spec, 1.0, fn, zn) for fn, zn in zip(f, np.broadcast_to(p.damping_ratio, f.shape))])
+    K = Mphi @ np.diag(modal[:, 0]) @ Mphi.T
+    C = Mphi @ np.diag(modal[:, 1]) @ Mphi.T
+    for label, mat, kind in (("k", K, "stiffness"), ("c", C, "damping")):
         vals, vecs = np.linalg.eigh(mat)
         for i in range(n):
             if vals[i] <= 1e-12 * max(abs(vals).max(), 1.0):

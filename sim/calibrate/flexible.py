@@ -26,10 +26,10 @@ bilinear, interpolated). For one body of mass ``m`` on a slide this is ``m (H - 
 the law's ``m H a`` less the rigid ``m a`` the effective mass holds.
 
 Each mode's frequency and damping are taken as the model's integrator steps them
-(:func:`mjcf.stepping.stepped_mode`): the builder's specimen modes are set so that this is
-the declared mode; a shear frame's floors, built with plain springs, step up to
-``z w h / 2`` low (0.06 % at the 3-storey frame's 34 Hz, 2 % mode), and the model's records
-have them there.
+(:func:`mjcf.stepping.stepped_mode`): the builder's clamps, ``payload_mode`` entries and
+shear frames are set so that this is the declared mode; a cantilever's segments, on plain
+springs with stiffness-proportional damping, step up to ``z w h / 2`` low, and the model's
+records have them there.
 
 Assumed: the platen's rotations drive the parts through their coupling at home only (a
 floor's rocking by ``alpha h`` is in ``M_qp``; the frame's geometric stiffness under

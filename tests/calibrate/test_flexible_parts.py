@@ -30,7 +30,8 @@ def _declared_modes(payload):
 
 def test_the_compiled_frames_modes_are_the_declared_ones():
     """The modes read from the compiled model (mass, tendon stiffness and damping by finite
-    differences) are the description's: frequencies, modal masses and damping."""
+    differences, each mode as the model's step has it: mjcf.stepping) are the description's:
+    frequencies, modal masses and damping."""
     import mjcf
     from mjcf.description import load_payload
     from sim.calibrate.flexible import flexible_parts
