@@ -140,14 +140,19 @@ UCSD_PLANTED = {
     ),
     "payload_mode": (
         [{"type": "payload_mode", "where": "dof:x", "mass_kg": 10e3, "frequency_hz": 6.0, "damping_ratio": 0.05}],
-        # measured: 10043 +/- 61 kg, 6.0021 +/- 0.0043 Hz, 0.0507 +/- 0.0007 (all inside)
+        # measured: 10043 +/- 61 kg, 6.0048 +/- 0.0043 Hz, 0.0507 +/- 0.0008 (the frequency
+        # 0.08 % high, OUTSIDE its interval: UCSD_OUTSIDE)
         {"mass_kg": 0.01, "frequency_hz": 0.001, "damping_ratio": 0.03},
         "none",
     ),
 }
 #: (case, parameter) whose truth falls outside the 95 % interval found (measured above):
-#: a bias of a few per cent the residual's colour does not show (docs/calibration.md, Limits)
-UCSD_OUTSIDE = {("viscous", "damping_n_s_m")}
+#: a bias of a few per cent the residual's colour does not show (docs/calibration.md, Limits);
+#: and the mode's frequency, 0.08 % high from the simulator's step: the same runs stepped at
+#: 1/8192 s give 5.99979 +/- 0.0047 Hz (measured 2026-11-28). The stepped mode has the
+#: declared poles (mjcf.stepping); what is left is likely the semi-implicit step's spring
+#: force, read at each step's start, half a step behind a continuous mode's.
+UCSD_OUTSIDE = {("viscous", "damping_n_s_m"), ("payload_mode", "frequency_hz")}
 
 
 @pytest.mark.parametrize("case", UCSD_PLANTED)
