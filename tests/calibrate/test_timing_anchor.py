@@ -104,6 +104,22 @@ def test_no_coherent_band_says_so():
     assert kinematic_check(cand, 0.001, [r], lambda: [r]) is None
 
 
+def test_a_refit_may_not_move_the_acceleration_out_of_the_displacements_agreement():
+    """An acceleration delay accepted at the balance's value, within half a sample of the
+    displacement's reading (8.7 ms against 9.75 at 204.8 Hz): a refit that keeps it there
+    stands; one that puts the whole skew on it (14.5 ms) gives way to the displacement's
+    reading, and the entry is then timed by the displacement."""
+    from sim.calibrate.timing import _held_to_the_displacement
+
+    dt = 1 / 204.8
+    entry = {"name": "sensor_delay", "displacement_reads": {"delay_s": 9.75e-3, "sigma_s": 6e-6}}
+    assert _held_to_the_displacement(dict(entry), 8.9e-3, 1e-4, dt) == (8.9e-3, 1e-4)
+    moved = dict(entry)
+    assert _held_to_the_displacement(moved, 14.5e-3, 1e-4, dt) == (9.75e-3, 6e-6)
+    assert moved["timed_by"] == "displacement"
+    assert _held_to_the_displacement({"name": "sensor_delay"}, 14.5e-3, 1e-4, dt) == (14.5e-3, 1e-4)
+
+
 # ------------------------------------------------------------------ the worked example's records
 def _example():
     spec = importlib.util.spec_from_file_location("lab_quake_export_anchor", EX / "make_quake_export.py")
