@@ -47,6 +47,7 @@ from mjcf.description import (
     TableDescription,
     payload_mass,
 )
+from mjcf.stepping import mode_spring
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -383,20 +384,6 @@ def _add_payload(spec, platen, payload, info):
         _add_cantilever(platen, payload, info)
 
 
-def mode_spring(spec, mass: float, frequency_hz: float, damping_ratio: float) -> tuple[float, float]:
-    """(stiffness N/m, damping N s/m) of a slide carrying ``mass`` on a mode of
-    ``frequency_hz`` and ``damping_ratio`` as ``spec``'s integrator steps it
-    (:mod:`mjcf.stepping`: k = m w^2, c = 2 z m w put a 6 Hz, 5 % mode 0.045 % low at the
-    builder's step; on a CGS block's clamp, that was the calibration's mechanical path's
-    -0.065 %, which the replay, stepping the same model, could not see)."""
-    from mjcf.stepping import damping_implicit, matched_spring
-
-    if damping_implicit(spec.option.integrator):
-        return matched_spring(mass, frequency_hz, damping_ratio, float(spec.option.timestep))
-    w = 2.0 * math.pi * frequency_hz
-    return mass * w * w, 2.0 * damping_ratio * mass * w
-
-
 def _add_rigid_payload(spec, platen, p: RigidPayload, info: BuildInfo) -> None:
     """A rigid block, fixed to the platen or (with a clamp frequency) partly on springs."""
     info.payload_kind = "rigid"
@@ -665,4 +652,4 @@ def _rated(max_specimen_kg) -> str:
     return "" if max_specimen_kg is None else f" (max specimen {max_specimen_kg / 1000:.0f} t)"
 
 
-__all__ = ["BuildOptions", "build", "build_spec", "mode_spring", "write_xml", "payload_mass"]
+__all__ = ["BuildOptions", "build", "build_spec", "write_xml", "payload_mass"]

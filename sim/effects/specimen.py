@@ -163,8 +163,8 @@ def _point_body(spec, name: str, m: float, pos) -> object:
 def _mode_slide(spec, b, name: str, d: str, m: float, f: float, z: float, desc):
     """A slide of body ``b`` (mass ``m``) along ``d`` with the spring and damper of a mode
     of frequency ``f`` and damping ratio ``z`` as the model's step has it
-    (:func:`mjcf.builder.mode_spring`)."""
-    from mjcf.builder import mode_spring
+    (:func:`mjcf.stepping.mode_spring`)."""
+    from mjcf.stepping import mode_spring
 
     axis = [0.0, 0.0, 0.0]
     axis[("x", "y", "z").index(d)] = 1.0

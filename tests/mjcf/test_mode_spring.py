@@ -11,8 +11,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjcf.builder import BuildOptions, mode_spring
-from mjcf.stepping import stepped_mode
+from mjcf.builder import BuildOptions
+from mjcf.stepping import mode_spring, stepped_mode
 
 H = BuildOptions().timestep_s
 CASES = [(6.0, 0.05), (20.0, 0.05), (7.5, 0.003), (60.0, 0.2), (60.0, 1.5)]
