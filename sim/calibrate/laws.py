@@ -271,7 +271,7 @@ add_law(
 MODE_WARP = 1e-4
 
 
-def _mode(u, v, a, s):
+def _mode(u, v, a, s, relative: bool = False):
     """Absolute acceleration of a mode (``frequency_hz``, ``damping_ratio``) standing on
     the place and shaken by its acceleration ``a``: H(s) = (2 z w s + w^2) / (s^2 + 2 z w s
     + w^2), the force it puts on the place per unit modal mass (Newton on the mode's
@@ -283,7 +283,7 @@ def _mode(u, v, a, s):
     dt, f, z = s["_dt"], s["frequency_hz"], s["damping_ratio"]
     a = np.asarray(a, float)
     if f >= 0.45 / dt:
-        return a
+        return np.zeros_like(a) if relative else a
     # the bilinear transform warps the resonance's bandwidth by about (pi f dt)^2 / 3 of
     # itself (0.5 % at 7.5 Hz in a 200 Hz record: a lightly damped mode's damping and mass
     # 1 % off); the record is interpolated P times (band-limited) so that this stays
@@ -292,7 +292,7 @@ def _mode(u, v, a, s):
     # (a Kaiser window of beta 12: passband gain within 2e-6 to 0.1 x the record rate; the
     # default beta 5 is 0.1 % high at 7.5 Hz in 200 Hz, which biased a modal mass)
     x = _upsampled(a, P) if P > 1 else a
-    return sig.lfilter(*_mode_filter(float(f), float(z), dt / P), x, axis=0)[::P]
+    return sig.lfilter(*_mode_filter(float(f), float(z), dt / P, relative), x, axis=0)[::P]
 
 
 #: bytes of interpolated records :func:`_upsampled` keeps (the least recently used go)
@@ -324,14 +324,16 @@ def _upsampled(a: np.ndarray, P: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=1024)
-def _mode_filter(f: float, z: float, h: float) -> tuple:
-    """The mode's discrete filter (b, a) at step ``h`` (:func:`_mode`), made once per
-    frequency, damping and step: ``scipy.signal.bilinear`` is slow, and every round of
-    the search scans the same grid."""
+def _mode_filter(f: float, z: float, h: float, relative: bool = False) -> tuple:
+    """The mode's discrete filter (b, a) at step ``h`` (:func:`_mode`: its absolute
+    acceleration, or its ``relative`` displacement), made once per frequency, damping and
+    step: ``scipy.signal.bilinear`` is slow, and every round of the search scans the same
+    grid."""
     import scipy.signal as sig
 
     w = 2.0 / h * np.tan(np.pi * f * h)
-    b, den = sig.bilinear([2 * z * w, w * w], [1.0, 2 * z * w, w * w], 1.0 / h)
+    num = [-1.0] if relative else [2 * z * w, w * w]
+    b, den = sig.bilinear(num, [1.0, 2 * z * w, w * w], 1.0 / h)
     b.flags.writeable = den.flags.writeable = False
     return b, den
 
@@ -378,7 +380,11 @@ def _mode_of_payload(u, v, a, s):
     for a law ``at_payload_cg``), the mode stands at the payload's centre of gravity ``r``:
     it is shaken by that point's acceleration along its DOF, ``a + alpha x r`` (the
     platen's rocking drives a mode above it), and its force acts there, with the moment
-    ``r x F``: a wrench in DOF space (n, k)."""
+    ``r x F``: a wrench in DOF space (n, k). The mass the mode carries off the centre of
+    gravity by ``x`` moves its weight too, the moment ``x e x m g`` (P-delta: g / (h w^2)
+    of the inertial moment, 0.7 % for a 6 Hz mode 1 m up; left out, a CGS block's modal
+    mass came out 1.0 % high on raw runs, 0.5 % with it; the projection of gravity on the
+    tilted slide moved it by 0.005 % and is left out)."""
     if "_along" not in s:
         return _mode(u, v, a, s) - np.asarray(a, float)
     dofs, r = list(s["_dofs"]), np.asarray(s["_payload"][1], float)
@@ -389,8 +395,12 @@ def _mode_of_payload(u, v, a, s):
     e[("x", "y", "z").index(s["_along"])] = 1.0
     drive = a6[:, :3] @ e + np.cross(a6[:, 3:], r) @ e
     f = _mode(None, None, drive, s) - drive
-    wrench = np.concatenate([e, np.cross(r, e)])
-    return np.outer(f, wrench[[DOFS6.index(d) for d in dofs]])
+    wrench = np.outer(f, np.concatenate([e, np.cross(r, e)]))
+    # the residual's sign is the actuators' (force = m (H - 1) a): the weight moved by x
+    # turns the platen by x e x m g, which the actuators hold against
+    weight_arm = np.cross(e, [0.0, 0.0, -float(s["_payload"][2])])
+    wrench[:, 3:] -= np.outer(_mode(None, None, drive, s, relative=True), weight_arm)
+    return wrench[:, [DOFS6.index(d) for d in dofs]]
 
 
 add_law(

@@ -166,3 +166,38 @@ def test_foundation_mode_named_on_the_mechanical_path_says_use_the_replay_path()
         candidate_laws(["foundation_mode"])
     assert "\n" not in str(e.value)
     assert [w.type for w in candidate_laws(["cg_offset"])] == ["cg_offset"]
+
+
+def test_payload_mode_at_the_cg_holds_the_weight_it_moves():
+    """A declared payload's mode 1 m up, brought to a steady 1 m/s^2 along x: once it has
+    settled (away from the record's end, where the interpolation rings), the mode lags by
+    d / w^2 and the actuators hold no force but the moment of the weight it moved,
+    m g d / w^2 about y (the P-delta the law carries); on the way, the moment is the
+    force's at 1 m plus g times the lag, the drive through 1 / (s^2 + 2 z w s + w^2)
+    (to 0.1 %)."""
+    from sim.calibrate.laws import LAWS
+
+    dt, f, z, g = 1.0 / 1024, 6.0, 0.5, 9.81
+    w = 2.0 * np.pi * f
+    n = 4096
+    t = np.arange(n) * dt
+    a = np.zeros((n, 6))
+    a[:, 0] = np.where(t < 0.25, 0.5 - 0.5 * np.cos(np.pi * t / 0.25), 1.0)  # (smooth: no interpolation's ripple)
+    s = {
+        "_dt": dt,
+        "frequency_hz": f,
+        "damping_ratio": z,
+        "_dofs": ["x", "y", "z", "rx", "ry", "rz"],
+        "_payload": (20000.0, np.array([0.0, 0.0, 1.0]), g),
+        "_along": "x",
+        "_filt": lambda x: x,
+    }
+    cols = LAWS["payload_mode_from_payload"].basis(np.zeros_like(a), np.zeros_like(a), a, s)
+    assert cols.shape == (n, 6)
+    assert abs(cols[n // 2, 0]) < 1e-6 and np.all(np.abs(cols[:, [1, 2, 3, 5]]) < 1e-12)
+    assert cols[n // 2, 4] == pytest.approx(g / w**2, rel=1e-4)  # (the pre-warp: w (pi f h)^2 / 3)
+    import scipy.signal as sig
+
+    _, lag, _ = sig.lsim(([1.0], [1.0, 2 * z * w, w * w]), a[:, 0], t)  # -x: the mode's lag behind the platen
+    weight = cols[:, 4] - cols[:, 0] * 1.0  # the force's moment at 1 m taken out
+    assert np.max(np.abs(weight - g * lag)[: n // 2]) < 1e-3 * g / w**2
