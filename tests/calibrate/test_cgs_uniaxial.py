@@ -121,12 +121,13 @@ FLEXIBLE = BLOCK + "clamp_frequency_hz = 6.0\nclamp_damping_ratio = 0.05\nclamp_
 
 def test_declared_rigid_block_found_and_pinned_on_the_replay(tmp_path):
     """A 20 t block declared rigid, truly 60 % on a 6 Hz mode: the mechanical path names
-    the mode (12055 +/- 27 kg, 5.99878 +/- 0.00133 Hz, 0.04989 +/- 0.00025: the mass 2.0
-    intervals out, 0.46 % high; the frequency was 5.99611 before the clamp's spring was
-    matched to the step, mjcf/stepping.py); the replay, already at its noise (held out
-    0.0662), refits it to 12005 +/- 9 kg, 6.00065 +/- 0.00084 Hz, 0.05010 +/- 0.00014, each
-    truth inside: kept since a refit need not fall by the margin and its move is within
-    the paths' model error (sim/calibrate/inherited.py, AGREE_SHARE)."""
+    the mode (12035 +/- 26 kg, 5.99898 +/- 0.00127 Hz, 0.04991 +/- 0.00024: the mass 1.3
+    intervals out, 0.29 % high; 12055 kg before the mode carried the weight it moves,
+    5.99611 Hz before the clamp's spring was matched to the step, mjcf/stepping.py); the
+    replay, already at its noise (held out 0.0662), refits it to 12005 +/- 9 kg, 6.00065
+    +/- 0.00084 Hz, 0.05010 +/- 0.00014, each truth inside: kept since a refit need not
+    fall by the margin and its move is within the paths' model error
+    (sim/calibrate/inherited.py, AGREE_SHARE)."""
     declared = tmp_path / "block.toml"
     declared.write_text(BLOCK)
     paths = _runs(tmp_path, payload=FLEXIBLE)
