@@ -4,7 +4,11 @@ bearing friction, earthquake records at 204.8 Hz that sit still for their first 
 valve null that changes from record to record, the accelerometer's 50 Hz conditioner)
 exported without its pressure channel: no force, so only the replay path can see the
 specimen. Calibrated with defaults and ``--payload none`` (a specimen stands there,
-undeclared), El Centro fitted and Corralitos held out."""
+undeclared), El Centro fitted and Corralitos held out.
+
+Slow (about 95 s on 2 cores: the fast suite had grown to 21 min there); the fast suite's
+replay-only specimen is ``tests/calibrate/test_payload_mode_paths.py::
+test_undeclared_flexible_specimen_found_on_a_replay``."""
 
 from __future__ import annotations
 
@@ -17,6 +21,8 @@ import pytest
 
 import mjcf
 from sim.cli import main
+
+pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[2]
 EX = ROOT / "scenarios" / "lab_example"
