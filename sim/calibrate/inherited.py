@@ -43,8 +43,9 @@ AGREE = 2.0
 #: CGS block's modal mass 0.3 % high (1.3 of the intervals the noise weights,
 #: sim/calibrate/mechnoise.py, sharpened to +/-26 kg; 0.5 % on raw runs; 0.46 and 1.0 %
 #: before its mode carried the weight it moves, sim/calibrate/laws.py) and, before the
-#: step's own bias was matched (mjcf/stepping.py), its frequency 0.065 % low; what a refit absorbs of an effect not yet in the model is tens of per cent (a
-#: friction 604 -> 860 N)
+#: step's own bias was matched (mjcf/stepping.py), its frequency 0.065 % low; what a
+#: refit absorbs of an effect not yet in the model is tens of per cent (a friction
+#: 604 -> 860 N)
 AGREE_SHARE = 0.01
 
 

@@ -384,7 +384,8 @@ def _mode_of_payload(u, v, a, s):
     gravity by ``x`` moves its weight too, the moment ``x e x m g`` (P-delta: g / (h w^2)
     of the inertial moment, 0.7 % for a 6 Hz mode 1 m up; left out, a CGS block's modal
     mass came out 1.0 % high on raw runs, 0.5 % with it; the projection of gravity on the
-    tilted slide moved it by 0.005 % and is left out)."""
+    tilted slide moved it by 0.005 % and is left out: measured,
+    docs/calibration-validation-tests.md, the fourteenth session)."""
     if "_along" not in s:
         return _mode(u, v, a, s) - np.asarray(a, float)
     dofs, r = list(s["_dofs"]), np.asarray(s["_payload"][1], float)
@@ -397,10 +398,13 @@ def _mode_of_payload(u, v, a, s):
     f = _mode(None, None, drive, s) - drive
     wrench = np.outer(f, np.concatenate([e, np.cross(r, e)]))
     # the residual's sign is the actuators' (force = m (H - 1) a): the weight moved by x
-    # turns the platen by x e x m g, which the actuators hold against
+    # turns the platen by x e x m g, which the actuators hold against; filtered only where
+    # a recorded rotation takes it (not on a uni-axial table, nor for a vertical mode)
     weight_arm = np.cross(e, [0.0, 0.0, -float(s["_payload"][2])])
-    wrench[:, 3:] -= np.outer(_mode(None, None, drive, s, relative=True), weight_arm)
-    return wrench[:, [DOFS6.index(d) for d in dofs]]
+    cols = [DOFS6.index(d) for d in dofs]
+    if any(k >= 3 and weight_arm[k - 3] for k in cols):
+        wrench[:, 3:] -= np.outer(_mode(None, None, drive, s, relative=True), weight_arm)
+    return wrench[:, cols]
 
 
 add_law(

@@ -175,6 +175,8 @@ def test_payload_mode_at_the_cg_holds_the_weight_it_moves():
     m g d / w^2 about y (the P-delta the law carries); on the way, the moment is the
     force's at 1 m plus g times the lag, the drive through 1 / (s^2 + 2 z w s + w^2)
     (to 0.1 %)."""
+    import scipy.signal as sig
+
     from sim.calibrate.laws import LAWS
 
     dt, f, z, g = 1.0 / 1024, 6.0, 0.5, 9.81
@@ -196,11 +198,13 @@ def test_payload_mode_at_the_cg_holds_the_weight_it_moves():
     assert cols.shape == (n, 6)
     assert abs(cols[n // 2, 0]) < 1e-6 and np.all(np.abs(cols[:, [1, 2, 3, 5]]) < 1e-12)
     assert cols[n // 2, 4] == pytest.approx(g / w**2, rel=1e-4)  # (the pre-warp: w (pi f h)^2 / 3)
-    import scipy.signal as sig
-
     _, lag, _ = sig.lsim(([1.0], [1.0, 2 * z * w, w * w]), a[:, 0], t)  # -x: the mode's lag behind the platen
     weight = cols[:, 4] - cols[:, 0] * 1.0  # the force's moment at 1 m taken out
     assert np.max(np.abs(weight - g * lag)[: n // 2]) < 1e-3 * g / w**2
+
+
+#: the stepped clamp's base (kg): a platen's order of mass
+BASE_KG = 30000.0
 
 
 def _stepped_clamp_record(m: float, f: float, z: float, n: int = 6 * 2048):
@@ -216,7 +220,7 @@ def _stepped_clamp_record(m: float, f: float, z: float, n: int = 6 * 2048):
     spec = mujoco.MjSpec()
     spec.option.timestep = h = BuildOptions().timestep_s
     spec.option.gravity = [0.0, 0.0, 0.0]
-    base = spec.worldbody.add_body(name="base", mass=30000.0, inertia=[1.0, 1.0, 1.0])
+    base = spec.worldbody.add_body(name="base", mass=BASE_KG, inertia=[1.0, 1.0, 1.0])
     base.add_joint(type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
     block = base.add_body(name="block", mass=m, inertia=[1.0, 1.0, 1.0])
     k, c = mode_spring(spec, m, f, z)
@@ -230,7 +234,7 @@ def _stepped_clamp_record(m: float, f: float, z: float, n: int = 6 * 2048):
         d.qfrc_applied[0] = force[i]
         mujoco.mj_step(model, d)
         acc[i] = d.qacc[0]
-    return h, acc, force - (30000.0 + m) * acc
+    return h, acc, force - (BASE_KG + m) * acc
 
 
 def test_payload_mode_law_reads_the_stepped_clamp_at_its_declared_mode():
