@@ -22,13 +22,17 @@ demo: setup
 # checks (`@pytest.mark.slow`: minutes each, the replay-path and CGS calibration cases,
 # the papers' long programmes) run with `make test-slow`; together they no longer fit
 # the suite's 20 minutes on 2 cores.
+# JOBS: pytest-xdist workers, one per core by default (`make test JOBS=0` runs them in
+# this process). Whole files go to a worker (--dist loadfile), so a module's fixture is built
+# once; each process keeps one BLAS thread (sim/__init__.py).
+JOBS ?= auto
 test: setup
 	$(BIN)/ruff check sim mjcf hydraulics tests bench
 	$(BIN)/ruff format --check sim mjcf hydraulics tests bench
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -m "not slow" -n $(JOBS) --dist loadfile
 
 test-slow: setup
-	$(BIN)/python -m pytest -q -m slow
+	$(BIN)/python -m pytest -q -m slow -n $(JOBS) --dist loadfile
 
 bench: setup
 	$(BIN)/python -m bench
