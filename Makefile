@@ -21,7 +21,8 @@ demo: setup
 # The README's test command, and CI's: every test not marked slow. The slow physics
 # checks (`@pytest.mark.slow`: minutes each, the replay-path and CGS calibration cases,
 # the papers' long programmes) run with `make test-slow`; together they no longer fit
-# the suite's 20 minutes on 2 cores.
+# the suite's 20 minutes on 2 cores. With two workers the suite took 15:42 on the 2-core
+# machine, the real-record suite and replay-only cases back in it (922 passed).
 # JOBS: pytest-xdist workers, one per core by default (`make test JOBS=0` runs them in
 # this process). Whole files go to a worker (--dist loadfile), so a module's fixture is built
 # once; each process keeps one BLAS thread (sim/__init__.py).

@@ -14,8 +14,6 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
-import pytest
-
 from sim.calibrate import search as S
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -76,7 +74,6 @@ def _velocity_skew_found(res) -> None:
     assert abs(d - VELOCITY_SKEW_S) <= K_SIGMA * u < 1e-5, (d, u)
 
 
-@pytest.mark.slow
 def test_a_declared_rigid_block_that_is_flexible_on_a_replay_only_record(tmp_path):
     """The mode is named from the declared block, and the velocity's own undeclared lead
     (it is in the records), nothing else. Measured (2-core machine, 2026-11-27): 899.86
@@ -100,7 +97,6 @@ def test_a_declared_rigid_block_that_is_flexible_on_a_replay_only_record(tmp_pat
     assert res.error_after < res.baseline["holdout_error"], (res.error_after, res.baseline)
 
 
-@pytest.mark.slow
 def test_the_rigid_block_on_replay_only_records_adds_no_mode(tmp_path):
     """The same runs with the block rigid: no mode, only the velocity's lead (measured:
     -0.2947 +/- 0.0023 ms; held out 1.34 % -> 1.21 %, the ARX baseline 14.74 %)."""

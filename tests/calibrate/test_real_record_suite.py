@@ -86,7 +86,6 @@ def _calibrate(paths):
     return S.calibrate(paths[:3], holdout=paths[3:], table=str(UCSD), workers=2, log=lambda *a: None)
 
 
-@pytest.mark.slow
 def test_a_load_cell_early_is_the_load_cells_alone(tmp_path):
     """The load cell 4 ms early (its sample 4 ms after its time stamp), the displacement
     0.3 sample early as in every case: the force's delay alone, -4.000 +/- 0.003 ms
@@ -103,7 +102,6 @@ def test_a_load_cell_early_is_the_load_cells_alone(tmp_path):
         assert v["after"] <= 1.1 * v["floor"], (k, v)
 
 
-@pytest.mark.slow
 def test_an_added_mass_takes_no_compensating_mode(tmp_path):
     """8 t added at dof:x: the added mass alone, 7 927 +/- 43 kg measured (0.9 % low,
     outside its interval); a 91 Hz, 38 % mode of 87.8 t that took the mass to -80.7 t
@@ -115,7 +113,6 @@ def test_an_added_mass_takes_no_compensating_mode(tmp_path):
     assert res.error_after < 0.3 * res.error_before, (res.error_before, res.error_after)
 
 
-@pytest.mark.slow
 def test_an_accelerometer_reading_high_is_its_gain(tmp_path):
     """The accelerometer reads 4 % high: its gain on the closed loop, 1.03949 +/- 0.00040
     measured (the truth 1.3 intervals out); the velocity reads it so. No offset is taken
