@@ -3,7 +3,9 @@ says the same: a ``spring`` at ``supports`` is each static support's air spring 
 stiffer, and the air spring's linear stiffness is ``n p0 A^2 / V0`` (the polytropic law
 about its preload, :func:`mjcf.builder.build`). At the same preload (the static balance)
 and exponent, the stiffer spring is a chamber of ``V0 k0 / (k0 + k)``: the lab reads
-"the chambers hold less air than declared" where the search names a spring.
+"the chambers hold less air than declared" where the search names a spring. A
+``coulomb_friction`` at ``supports`` is each piston's friction (``[supports]
+piston_friction_n``, the same joint's dry friction) higher by its force.
 """
 
 from __future__ import annotations
@@ -35,13 +37,25 @@ def support_reading(desc, payload, effect: dict) -> str | None:
     )
 
 
+def piston_friction_reading(desc, effect: dict) -> str | None:
+    """The line a ``coulomb_friction`` at ``supports`` reads as (None for any other
+    effect): each piston's declared and found friction."""
+    if effect.get("name") != "coulomb_friction" or effect.get("where") != "supports" or desc.supports is None:
+        return None
+    if effect.get("options", {}).get("grows_with", "none") != "none":
+        return None
+    f0 = float(desc.supports.piston_friction_n)
+    f = f0 + float(effect["parameters"]["force_n"])
+    return f"each support piston's friction {f0:.4g} -> {f:.4g} N ([supports] piston_friction_n = {f:.4g})"
+
+
 def add_readings(res, desc, payload) -> None:
     """Each effect of ``res.effects_added`` that one description number says the same as
-    gets ``reads_as`` (:func:`support_reading`)."""
+    gets ``reads_as`` (:func:`support_reading`, :func:`piston_friction_reading`)."""
     for e in res.effects_added:
-        line = support_reading(desc, payload, e)
+        line = support_reading(desc, payload, e) or piston_friction_reading(desc, e)
         if line:
             e["reads_as"] = line
 
 
-__all__ = ["add_readings", "support_air_stiffness", "support_reading"]
+__all__ = ["add_readings", "piston_friction_reading", "support_air_stiffness", "support_reading"]

@@ -306,10 +306,14 @@ class CoulombFriction(StepForce):
       ``dof:``; ``"displacement"``: F_c = force_n + coefficient |x| (N/m), x from home.
       A level that changes is applied every step (with ``presliding_m``, else linear
       below ``linear_below_m_s``).
+    * at ``supports``: each static support's piston friction higher by ``force_n`` (the
+      description's ``[supports] piston_friction_n`` is the same joint's ``frictionloss``);
+      ``grows_with = "load"`` is not offered there (a support's load is its air pressure,
+      which no run records).
     """
 
     type = "coulomb_friction"
-    places = ("dof", "actuator", "class")
+    places = ("dof", "actuator", "class", "supports")
     per_step = (
         False  # per instance: only a level that changes, pre-sliding, or a free platen's DOF on a pre-sliding table
     )
@@ -326,6 +330,11 @@ class CoulombFriction(StepForce):
         g = self.options["grows_with"]
         if g not in GROWS:
             raise ScenarioError(f"{source}: grows_with = '{g}' is not one of {', '.join(GROWS)}{_hint(g, GROWS)}")
+        if g == "load" and self.where == "supports":
+            raise ScenarioError(
+                f"{source}: grows_with = 'load' has no load at where = 'supports' (their air pressure is "
+                "not modelled as a friction load); use grows_with = 'none' or 'displacement' there"
+            )
         self.z = np.zeros(1)
         self.per_step = self._needs_step(None)
 
