@@ -170,8 +170,9 @@ add_law(
         {"force_n": ("N", 0.0, np.inf)},
         "force_n",
         _coulomb,
-        # at supports: each static support's piston friction, alike (a seal tighter than declared)
-        places=("dof", "actuator", "class", "supports"),
+        # at supports: each static support's piston friction, alike (a seal tighter than
+        # declared); at shoes: each sliding shoe's, over its x and y slides
+        places=("dof", "actuator", "class", "supports", "shoes"),
         what="dry friction F sign(v) (with the table's pre-sliding law, if it has one)",
     )
 )

@@ -103,12 +103,12 @@ def motion_rms(runs, desc, stat: str = "rms") -> dict:
     for c in sorted({a_.cls.name for a_ in desc.actuators}):
         idx = [i for i, a_ in enumerate(desc.actuators) if a_.cls.name == c]
         out[f"class:{c}"] = tuple(float(np.max(x[idx]) if stat == "peak" else np.mean(x[idx])) for x in stroke)
-    if desc.supports is not None:  # each support's vertical travel (sim.calibrate.residuals.support_jacobian)
-        from sim.calibrate.residuals import support_jacobian
+    if desc.supports is not None:  # each support's vertical travel, each shoe's slides
+        from sim.calibrate.residuals import shoe_jacobian, support_jacobian
 
-        Js = support_jacobian(desc)
-        travel = [size(x[:, [DOFS6.index(d) for d in desc.dofs]] @ Js.T) for x in six]
-        out["supports"] = tuple(float(np.max(x) if stat == "peak" else np.mean(x)) for x in travel)
+        for place, Js in (("supports", support_jacobian(desc)), ("shoes", shoe_jacobian(desc))):
+            travel = [size(x[:, [DOFS6.index(d) for d in desc.dofs]] @ Js.T) for x in six]
+            out[place] = tuple(float(np.max(x) if stat == "peak" else np.mean(x)) for x in travel)
     return out
 
 

@@ -5,7 +5,8 @@ about its preload, :func:`mjcf.builder.build`). At the same preload (the static 
 and exponent, the stiffer spring is a chamber of ``V0 k0 / (k0 + k)``: the lab reads
 "the chambers hold less air than declared" where the search names a spring. A
 ``coulomb_friction`` at ``supports`` is each piston's friction (``[supports]
-piston_friction_n``, the same joint's dry friction) higher by its force.
+piston_friction_n``, the same joint's dry friction) higher by its force; at ``shoes``,
+each shoe's (``shoe_friction_n``).
 """
 
 from __future__ import annotations
@@ -37,25 +38,31 @@ def support_reading(desc, payload, effect: dict) -> str | None:
     )
 
 
-def piston_friction_reading(desc, effect: dict) -> str | None:
-    """The line a ``coulomb_friction`` at ``supports`` reads as (None for any other
-    effect): each piston's declared and found friction."""
-    if effect.get("name") != "coulomb_friction" or effect.get("where") != "supports" or desc.supports is None:
+#: where -> (what it is, the [supports] key that says the same)
+SUPPORT_FRICTIONS = {"supports": ("support piston", "piston_friction_n"), "shoes": ("support shoe", "shoe_friction_n")}
+
+
+def support_friction_reading(desc, effect: dict) -> str | None:
+    """The line a ``coulomb_friction`` at ``supports`` or ``shoes`` reads as (None for any
+    other effect): each piston's (shoe's) declared and found friction."""
+    where = effect.get("where")
+    if effect.get("name") != "coulomb_friction" or where not in SUPPORT_FRICTIONS or desc.supports is None:
         return None
     if effect.get("options", {}).get("grows_with", "none") != "none":
         return None
-    f0 = float(desc.supports.piston_friction_n)
+    what, key = SUPPORT_FRICTIONS[where]
+    f0 = float(getattr(desc.supports, key))
     f = f0 + float(effect["parameters"]["force_n"])
-    return f"each support piston's friction {f0:.4g} -> {f:.4g} N ([supports] piston_friction_n = {f:.4g})"
+    return f"each {what}'s friction {f0:.4g} -> {f:.4g} N ([supports] {key} = {f:.4g})"
 
 
 def add_readings(res, desc, payload) -> None:
     """Each effect of ``res.effects_added`` that one description number says the same as
-    gets ``reads_as`` (:func:`support_reading`, :func:`piston_friction_reading`)."""
+    gets ``reads_as`` (:func:`support_reading`, :func:`support_friction_reading`)."""
     for e in res.effects_added:
-        line = support_reading(desc, payload, e) or piston_friction_reading(desc, e)
+        line = support_reading(desc, payload, e) or support_friction_reading(desc, e)
         if line:
             e["reads_as"] = line
 
 
-__all__ = ["add_readings", "piston_friction_reading", "support_air_stiffness", "support_reading"]
+__all__ = ["add_readings", "support_air_stiffness", "support_friction_reading", "support_reading"]

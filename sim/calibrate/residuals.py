@@ -113,6 +113,8 @@ class MechRun:
     #: (n_sup, k) each static support's vertical travel per DOF (:func:`support_jacobian`),
     #: None on a table without supports
     supports: np.ndarray | None = None
+    #: (2 n_sup, k) each support's shoe's x and y slide per DOF (:func:`shoe_jacobian`)
+    shoes: np.ndarray | None = None
 
     @property
     def residual(self) -> np.ndarray:
@@ -153,10 +155,13 @@ class MechRun:
         if kind == "class" or (kind == "supports" and self.supports is not None):
             Jm = self.J[self.classes[name]] if kind == "class" else self.supports  # several strokes at once
             return self.u @ Jm.T, self.v @ Jm.T, self.a @ Jm.T, Jm
+        if kind == "shoes" and self.shoes is not None:  # a shoe's force is split over its two slides
+            Jm = self.shoes
+            return self.u @ Jm.T, self.v @ Jm.T, self.a @ Jm.T, Jm / math.sqrt(2.0)
         raise CalibrationError(
-            f"where = '{where}': the mechanical path acts at dof:, actuator:, class: or supports places"
+            f"where = '{where}': the mechanical path acts at dof:, actuator:, class:, supports or shoes places"
             + (" (payload: only with a declared payload)" if kind == "payload" else "")
-            + (" (supports: only on a table with [supports])" if kind == "supports" else "")
+            + (f" ({kind}: only on a table with [supports])" if kind in ("supports", "shoes") else "")
         )
 
     def law_motion(self, law, where: str):
@@ -238,6 +243,8 @@ def places(desc, kinds, payload: bool = False) -> list[str]:
             out += [f"class:{c}" for c in cl]
     if "supports" in kinds and desc.supports is not None:
         out.append("supports")
+    if "shoes" in kinds and desc.supports is not None:
+        out.append("shoes")
     return out
 
 
@@ -255,6 +262,22 @@ def support_jacobian(desc) -> np.ndarray | None:
         r = np.zeros(6)
         r[2], r[3], r[4] = 1.0, y, -x
         rows.append(r)
+    return np.asarray(rows)[:, [DOFS6.index(d) for d in desc.dofs]]
+
+
+def shoe_jacobian(desc) -> np.ndarray | None:
+    """(2 n_sup, k) each support's shoe's x and y slide per unit motion of the table's
+    DOFs, small angles: the platen's motion at the shoe's pin (the support's position
+    from the reference point), ``x + z_i ry - y_i rz`` and ``y + x_i rz - z_i rx`` (the
+    piston under it moves only vertically). None without supports."""
+    from mjcf.description import DOFS6
+
+    if desc.supports is None:
+        return None
+    rows = []
+    for x, y, z in desc.supports.positions_m:
+        rows.append([1.0, 0.0, 0.0, 0.0, z, -y])
+        rows.append([0.0, 1.0, 0.0, -z, 0.0, x])
     return np.asarray(rows)[:, [DOFS6.index(d) for d in desc.dofs]]
 
 
@@ -408,6 +431,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             presliding_m=desc.friction_presliding_m if desc.friction_model == "presliding" else None,
             payload=pay,
             supports=support_jacobian(desc),
+            shoes=shoe_jacobian(desc),
         )
         mr.filter_delay_s = known["accel_delay_s"]
         mr.extra["force_at_instant"] = f  # before any declared or found force delay
@@ -724,6 +748,8 @@ def distinct_force_places(desc, wheres) -> list:
             return np.eye(len(cols))[[desc.dofs.index(name)]]
         if kind == "supports":
             return support_jacobian(desc)
+        if kind == "shoes":
+            return shoe_jacobian(desc)
         return J[[names.index(name)]] if kind == "actuator" else J[classes[name]]
 
     return first_of_each_direction(wheres, force_map)
@@ -757,6 +783,7 @@ __all__ = [
     "choose_path",
     "mechanical_runs",
     "excited_dofs",
+    "shoe_jacobian",
     "support_jacobian",
     "nrmse_runs",
     "places",

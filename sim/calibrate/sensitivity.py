@@ -216,7 +216,8 @@ def _table_of(desc, payload, accepted, effects) -> _Table:
     own = [f"class:{c}" for c in classes] + ([f"actuator:{a}" for a in names] if len(names) > 1 else [])
     # all at once (several classes): a description's number (oil, valve) wrong on every one
     hyd_places = (["actuators"] if len(classes) > 1 else []) + own
-    sup = ["supports"] if cur.supports is not None else []  # a spring there: their air springs
+    # the supports: their air springs and pistons' friction; their shoes: the shoes' friction
+    sup = ["supports", "shoes"] if cur.supports is not None else []
     mech_places = distinct_force_places(cur, [f"dof:{d}" for d in cur.dofs] + own + sup)
     want = set(effects) if effects else None
     have = {(e["type"], e["where"]) for e in accepted}

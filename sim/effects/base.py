@@ -11,7 +11,8 @@ description (or a scenario) as an ``[[effect]]`` entry and applied at one place:
 
 Places (``where``): ``"dof:<x|y|z|rx|ry|rz>"``, ``"actuator:<name>"``, ``"class:<actuator
 class>"``, ``"actuators"`` (every actuator of the table), ``"supports"`` (the static
-supports' air pistons, each alike), ``"supply"``, ``"channel:<run-file channel>[<column>]"``, ``"payload"`` and
+supports' air pistons, each alike), ``"shoes"`` (the supports' sliding shoes, in x and y,
+each alike), ``"supply"``, ``"channel:<run-file channel>[<column>]"``, ``"payload"`` and
 ``"table"`` (the whole table, e.g. a foundation mode).
 
 Lifecycle (every method optional but the parameters):
@@ -42,7 +43,7 @@ from typing import ClassVar
 
 from sim.errors import ScenarioError
 
-PLACE_KINDS = ("dof", "actuator", "class", "actuators", "supports", "supply", "channel", "payload", "table")
+PLACE_KINDS = ("dof", "actuator", "class", "actuators", "supports", "shoes", "supply", "channel", "payload", "table")
 
 
 @dataclass(frozen=True)

@@ -98,10 +98,14 @@ class Place:
                     f"{src}: where = '{effect.where}': no actuator class '{name}'{_hint(name, desc.actuator_classes)}"
                 )
             self.joints = [f"{a.name}_stroke" for a in desc.actuators if a.cls.name == name]
-        elif kind == "supports":
+        elif kind in ("supports", "shoes"):
             if desc.supports is None:
-                raise ScenarioError(f"{src}: where = 'supports': '{desc.name}' has no [supports]")
-            self.joints = [f"S{i}_air" for i in range(1, len(desc.supports.positions_m) + 1)]
+                raise ScenarioError(f"{src}: where = '{kind}': '{desc.name}' has no [supports]")
+            n = len(desc.supports.positions_m)
+            if kind == "supports":
+                self.joints = [f"S{i}_air" for i in range(1, n + 1)]
+            else:  # each shoe slides on two joints, x and y
+                self.joints = [f"S{i}_shoe_{ax}" for i in range(1, n + 1) for ax in ("x", "y")]
         if spec is not None:
             for j in self.joints:
                 if spec.joint(j) is None:
@@ -310,10 +314,13 @@ class CoulombFriction(StepForce):
       description's ``[supports] piston_friction_n`` is the same joint's ``frictionloss``);
       ``grows_with = "load"`` is not offered there (a support's load is its air pressure,
       which no run records).
+    * at ``shoes``: each support's sliding shoe's friction higher by ``force_n``, split over
+      its x and y slides as the builder splits ``[supports] shoe_friction_n``
+      (``force_n / sqrt 2`` on each); a constant level only.
     """
 
     type = "coulomb_friction"
-    places = ("dof", "actuator", "class", "supports")
+    places = ("dof", "actuator", "class", "supports", "shoes")
     per_step = (
         False  # per instance: only a level that changes, pre-sliding, or a free platen's DOF on a pre-sliding table
     )
@@ -334,6 +341,11 @@ class CoulombFriction(StepForce):
             raise ScenarioError(
                 f"{source}: grows_with = 'load' has no load at where = 'supports' (their air pressure is "
                 "not modelled as a friction load); use grows_with = 'none' or 'displacement' there"
+            )
+        if self.where == "shoes" and (g != "none" or self.values["presliding_m"] > 0):
+            raise ScenarioError(
+                f"{source}: at where = 'shoes' a coulomb_friction is a constant level (the table's own "
+                "friction law applies): leave out grows_with and presliding_m there"
             )
         self.z = np.zeros(1)
         self.per_step = self._needs_step(None)
@@ -382,6 +394,8 @@ class CoulombFriction(StepForce):
             level = self.values["force_n"]
             if self._constant_load:
                 level += self.values["coefficient"] * _platen_weight(spec, desc)
+            if self.where == "shoes":  # over each shoe's two slides, as mjcf.builder splits it
+                level /= math.sqrt(2.0)
             _add(_elements(self, spec, desc), "frictionloss", level)
 
     def with_values(self, values):

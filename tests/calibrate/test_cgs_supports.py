@@ -320,6 +320,7 @@ def test_the_replay_path_offers_a_spring_at_the_supports_and_nothing_else_there(
     assert ("spring", "supports") in got and ("spring", "dof:z") in got
     assert ("coulomb_friction", "supports") in got  # the pistons' friction
     assert {e for e, w in got if w == "supports"} == {"spring", "coulomb_friction"}, got
+    assert {e for e, w in got if w == "shoes"} == {"coulomb_friction"}, got  # the shoes' friction
 
 
 # ---------------------------------------------------------------- the pistons' friction
@@ -390,17 +391,94 @@ def test_the_supports_friction_law_is_the_pistons_friction_through_their_travel(
     assert np.max(np.abs(law - added)) < 1e-9 * rms.max()
 
 
-def test_a_support_friction_reads_as_the_pistons_friction():
+DECLARED_SHOE_N = 2000.0  #: scenarios/tables/cgs.toml [supports] shoe_friction_n
+TRUE_SHOE_N = 6000.0  #: three times as tight
+
+
+def _cgs_with_shoe_friction(force_n: float):
+    """The cgs description with each support shoe's friction set (re-parsed and checked)."""
+    import mjcf
+    from mjcf.description import parse_table
+
+    base = mjcf.load_table("cgs")
+    raw = copy.deepcopy(base.raw)
+    raw["supports"]["shoe_friction_n"] = force_n
+    return parse_table(raw, src=base.source)
+
+
+def test_a_friction_at_the_shoes_is_each_shoes_friction_raised():
+    """``coulomb_friction`` at ``shoes`` builds the same model as ``shoe_friction_n``
+    raised by its force (split over each shoe's x and y slides as the builder splits it);
+    a level that changes (``grows_with``, ``presliding_m``) is a one-line error there, and
+    so is the place on a table without supports."""
+    import mjcf
+    from sim.effects import build_model
+    from sim.errors import UserError
+
+    declared = _cgs_with_shoe_friction(DECLARED_SHOE_N)
+    entry = {"type": "coulomb_friction", "where": "shoes", "force_n": TRUE_SHOE_N - DECLARED_SHOE_N}
+    a, b = build_model(_with_effect(declared, entry)), build_model(_cgs_with_shoe_friction(TRUE_SHOE_N))
+    assert list(a.info.friction_joints) == list(b.info.friction_joints)
+    assert np.allclose(a.friction_force, b.friction_force, rtol=1e-12, atol=0)
+    shoes = [f for j, f in zip(a.info.friction_joints, a.friction_force) if "_shoe_" in j]
+    assert len(shoes) == 8 and np.allclose(shoes, TRUE_SHOE_N / np.sqrt(2), rtol=1e-12), shoes
+    for extra in ({"grows_with": "displacement", "coefficient": 1.0}, {"presliding_m": 1e-4}):
+        with pytest.raises(UserError, match="at where = 'shoes' a coulomb_friction is a constant level"):
+            build_model(_with_effect(declared, {**entry, **extra}))
+    with pytest.raises(UserError, match="where = 'shoes': 'lab' has no \\[supports\\]"):
+        build_model(_with_effect(mjcf.load_table("lab"), entry))
+
+
+def test_the_shoes_slide_as_the_models_loop_moves_them():
+    """Each shoe's x and y slide per DOF (:func:`shoe_jacobian`: the platen's motion at
+    the shoe's pin, ``x + z ry - y rz``, ``y + x rz - z rx``) is MuJoCo's loop-closed
+    projection of the built model at home (the one the declared model's forces go through)."""
+    import mjcf
+    from sim.calibrate.residuals import joint_terms, shoe_jacobian
+    from sim.effects import build_model
+
+    cgs = mjcf.load_table("cgs")
+    tm = build_model(cgs)
+    T = joint_terms(tm, list(range(6))).T
+    m = tm.model
+    rows = [T[m.jnt_dofadr[m.joint(f"S{i}_shoe_{ax}").id]] for i in (1, 2, 3, 4) for ax in ("x", "y")]
+    assert np.allclose(shoe_jacobian(cgs), rows, atol=1e-6), (shoe_jacobian(cgs), np.round(rows, 6))
+
+
+def test_the_shoes_friction_law_is_the_shoes_friction_through_their_slides(tmp_path):
+    """On a 3-axis record, the mechanical path's dry-friction law at ``shoes`` at the added
+    4 kN is the declared model's force difference between the two shoe frictions, to
+    rounding (x, y and the moments their pins' height gives)."""
+    from sim.calibrate.laws import LAWS
+    from sim.calibrate.residuals import joint_terms, mechanical_runs
+    from sim.effects import build_model
+    from sim.runs.runfile import read_run
+
+    declared, true = (_cgs_with_shoe_friction(f) for f in (DECLARED_SHOE_N, TRUE_SHOE_N))
+    (path,) = _runs(tmp_path, true, THREE_AXIS, seeds=(3,))
+    (mr,) = mechanical_runs([read_run(path)], declared)
+    j0, j1 = (joint_terms(build_model(d), list(range(6))) for d in (declared, true))
+    added = (j1.force(mr.u, mr.v, mr.dt) - j0.force(mr.u, mr.v, mr.dt))[mr.rows]
+    (Q,) = mr.basis(LAWS["coulomb_friction"], "shoes", {})
+    law = (TRUE_SHOE_N - DECLARED_SHOE_N) * Q[mr.rows]
+    rms = np.sqrt(np.mean(added**2, axis=0))
+    assert np.all(rms[[0, 1, 3, 4]] > 5e3) and rms[2] == 0.0, rms  # measured 9.3 and 7.9 kN (kN m)
+    assert np.max(np.abs(law - added)) < 1e-9 * rms.max()
+
+
+def test_a_support_friction_reads_as_the_pistons_or_shoes_friction():
     """The report's line beside a friction at the supports: each piston's declared and
     found friction, as the description number that says the same."""
-    from sim.calibrate.readings import piston_friction_reading
+    from sim.calibrate.readings import support_friction_reading
 
     declared = _cgs_with_piston_friction(DECLARED_PISTON_N)
     e = {"name": "coulomb_friction", "where": "supports", "parameters": {"force_n": 3000.0}}
-    line = piston_friction_reading(declared, e)
+    line = support_friction_reading(declared, e)
     assert line == "each support piston's friction 1500 -> 4500 N ([supports] piston_friction_n = 4500)", line
-    assert piston_friction_reading(declared, {**e, "where": "dof:z"}) is None
-    assert piston_friction_reading(declared, {**e, "options": {"grows_with": "displacement"}}) is None
+    assert support_friction_reading(declared, {**e, "where": "dof:z"}) is None
+    assert support_friction_reading(declared, {**e, "options": {"grows_with": "displacement"}}) is None
+    shoe = support_friction_reading(declared, {**e, "where": "shoes"})
+    assert shoe == "each support shoe's friction 2000 -> 5000 N ([supports] shoe_friction_n = 5000)", shoe
 
 
 @pytest.mark.slow
@@ -420,3 +498,24 @@ def test_tighter_pistons_named_on_a_rocking_test(tmp_path):
     assert e["reads_as"].endswith(f"piston_friction_n = {DECLARED_PISTON_N + f:.4g})"), e
     mech = res.paths["mechanical"]
     assert mech["error_after"] < 0.7 * mech["error_before"], mech
+
+
+@pytest.mark.slow
+def test_tighter_shoes_named_on_three_axis_noise(tmp_path):
+    """3 x 3 s of 3-axis 1-30 Hz noise, each support shoe's friction 6 kN where 2 kN is
+    declared, the whole library, no path named: one ``coulomb_friction`` at ``shoes``,
+    each shoe's added 4 kN within 1 % (measured 3979 +/- 13 N; seeds 6-8: 3982 +/- 15).
+    The truth lies 1.2-1.6 intervals out there, inside with the recorder's noise drawn
+    from other seeds (4002 and 4005 +/- 13 N): the noise's draw, which the interval
+    under-covers (docs/calibration-validation-tests.md, sixteenth session). Before the
+    shoes were a place, the search took the horizontal classes' friction, 3006 +/- 73 N
+    longitudinal and 2971 +/- 64 N lateral (mechanical held out 5.74 %, now 5.29 %)."""
+    res = S.calibrate(_runs(tmp_path, _cgs_with_shoe_friction(TRUE_SHOE_N), THREE_AXIS), workers=2)
+    assert [(e["name"], e["where"]) for e in res.effects_added] == [("coulomb_friction", "shoes")], res.effects_added
+    e = res.effects_added[0]
+    f, u95 = e["parameters"]["force_n"], e["uncertainty"]["force_n"]
+    dF = TRUE_SHOE_N - DECLARED_SHOE_N
+    assert abs(f - dF) < 0.01 * dF and abs(f - dF) < 2 * u95, (f, u95)
+    assert e["reads_as"].endswith(f"shoe_friction_n = {DECLARED_SHOE_N + f:.4g})"), e
+    mech = res.paths["mechanical"]
+    assert mech["error_after"] < 0.6 * mech["error_before"], mech  # measured 0.0529 / 0.1094
