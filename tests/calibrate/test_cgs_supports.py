@@ -35,15 +35,20 @@ THREE_AXIS = {"axes": {"x": 1.0, "y": 1.0, "z": 0.8}, "band_hz": (1.0, 30.0), "s
 ROCKED = {"axes": {"z": 0.8, "rx": 0.3, "ry": 0.3}, "band_hz": (0.5, 10.0), "seconds": 4.0}
 
 
-def _cgs_with_chambers(volume_m3: float):
-    """The cgs description with its supports' chamber volume set (re-parsed and checked)."""
+def _cgs_with_supports(key: str, value: float):
+    """The cgs description with one ``[supports]`` number set (re-parsed and checked)."""
     import mjcf
     from mjcf.description import parse_table
 
     base = mjcf.load_table("cgs")
     raw = copy.deepcopy(base.raw)
-    raw["supports"]["chamber_volume_m3"] = volume_m3
+    raw["supports"][key] = value
     return parse_table(raw, src=base.source)
+
+
+def _cgs_with_chambers(volume_m3: float):
+    """The cgs description with its supports' chamber volume set."""
+    return _cgs_with_supports("chamber_volume_m3", volume_m3)
 
 
 def _runs(out, true, test, seeds=(3, 4, 5)):
@@ -329,14 +334,8 @@ TRUE_PISTON_N = 4500.0  #: three times as tight: +3 kN a piston, 12 kN in z
 
 
 def _cgs_with_piston_friction(force_n: float):
-    """The cgs description with each support piston's friction set (re-parsed and checked)."""
-    import mjcf
-    from mjcf.description import parse_table
-
-    base = mjcf.load_table("cgs")
-    raw = copy.deepcopy(base.raw)
-    raw["supports"]["piston_friction_n"] = force_n
-    return parse_table(raw, src=base.source)
+    """The cgs description with each support piston's friction set."""
+    return _cgs_with_supports("piston_friction_n", force_n)
 
 
 def _with_effect(desc, entry):
@@ -368,23 +367,32 @@ def test_a_friction_at_the_supports_is_each_pistons_friction_raised():
     assert "\n" not in str(err.value)
 
 
-def test_the_supports_friction_law_is_the_pistons_friction_through_their_travel(tmp_path):
-    """On a rocked record, the mechanical path's dry-friction law at ``supports`` (each
-    piston's pre-sliding law along its own travel, through the supports' Jacobian) at the
-    added 3 kN is the declared model's force difference between the two frictions, to
-    rounding; the rotations carry it (the supports at +/-1.5 m), not z alone."""
+def _friction_law_and_model(out, declared, true, test, where: str, added_n: float):
+    """On one record of ``test`` made on ``true``: the mechanical path's dry-friction law at
+    ``where`` at ``added_n``, and the force the declared model's joints need beyond
+    ``declared``'s under ``true`` (both (n, 6), the record's rows)."""
     from sim.calibrate.laws import LAWS
     from sim.calibrate.residuals import joint_terms, mechanical_runs
     from sim.effects import build_model
     from sim.runs.runfile import read_run
 
-    declared, true = (_cgs_with_piston_friction(f) for f in (DECLARED_PISTON_N, TRUE_PISTON_N))
-    (path,) = _runs(tmp_path, true, ROCKED, seeds=(3,))
+    (path,) = _runs(out, true, test, seeds=(3,))
     (mr,) = mechanical_runs([read_run(path)], declared)
     j0, j1 = (joint_terms(build_model(d), list(range(6))) for d in (declared, true))
     added = (j1.force(mr.u, mr.v, mr.dt) - j0.force(mr.u, mr.v, mr.dt))[mr.rows]
-    (Q,) = mr.basis(LAWS["coulomb_friction"], "supports", {})
-    law = (TRUE_PISTON_N - DECLARED_PISTON_N) * Q[mr.rows]
+    (Q,) = mr.basis(LAWS["coulomb_friction"], where, {})
+    return added_n * Q[mr.rows], added
+
+
+def test_the_supports_friction_law_is_the_pistons_friction_through_their_travel(tmp_path):
+    """On a rocked record, the mechanical path's dry-friction law at ``supports`` (each
+    piston's pre-sliding law along its own travel, through the supports' Jacobian) at the
+    added 3 kN is the declared model's force difference between the two frictions, to
+    rounding; the rotations carry it (the supports at +/-1.5 m), not z alone."""
+    declared, true = (_cgs_with_piston_friction(f) for f in (DECLARED_PISTON_N, TRUE_PISTON_N))
+    law, added = _friction_law_and_model(
+        tmp_path, declared, true, ROCKED, "supports", TRUE_PISTON_N - DECLARED_PISTON_N
+    )
     rms = np.sqrt(np.mean(added**2, axis=0))
     assert rms[2] > 5e3 and np.all(rms[3:5] > 3e3), rms  # measured 8.9 kN, 7.5 and 4.9 kN m
     assert np.all(rms[[0, 1, 5]] == 0.0), rms
@@ -396,14 +404,8 @@ TRUE_SHOE_N = 6000.0  #: three times as tight
 
 
 def _cgs_with_shoe_friction(force_n: float):
-    """The cgs description with each support shoe's friction set (re-parsed and checked)."""
-    import mjcf
-    from mjcf.description import parse_table
-
-    base = mjcf.load_table("cgs")
-    raw = copy.deepcopy(base.raw)
-    raw["supports"]["shoe_friction_n"] = force_n
-    return parse_table(raw, src=base.source)
+    """The cgs description with each support shoe's friction set."""
+    return _cgs_with_supports("shoe_friction_n", force_n)
 
 
 def test_a_friction_at_the_shoes_is_each_shoes_friction_raised():
@@ -449,18 +451,8 @@ def test_the_shoes_friction_law_is_the_shoes_friction_through_their_slides(tmp_p
     """On a 3-axis record, the mechanical path's dry-friction law at ``shoes`` at the added
     4 kN is the declared model's force difference between the two shoe frictions, to
     rounding (x, y and the moments their pins' height gives)."""
-    from sim.calibrate.laws import LAWS
-    from sim.calibrate.residuals import joint_terms, mechanical_runs
-    from sim.effects import build_model
-    from sim.runs.runfile import read_run
-
     declared, true = (_cgs_with_shoe_friction(f) for f in (DECLARED_SHOE_N, TRUE_SHOE_N))
-    (path,) = _runs(tmp_path, true, THREE_AXIS, seeds=(3,))
-    (mr,) = mechanical_runs([read_run(path)], declared)
-    j0, j1 = (joint_terms(build_model(d), list(range(6))) for d in (declared, true))
-    added = (j1.force(mr.u, mr.v, mr.dt) - j0.force(mr.u, mr.v, mr.dt))[mr.rows]
-    (Q,) = mr.basis(LAWS["coulomb_friction"], "shoes", {})
-    law = (TRUE_SHOE_N - DECLARED_SHOE_N) * Q[mr.rows]
+    law, added = _friction_law_and_model(tmp_path, declared, true, THREE_AXIS, "shoes", TRUE_SHOE_N - DECLARED_SHOE_N)
     rms = np.sqrt(np.mean(added**2, axis=0))
     assert np.all(rms[[0, 1, 3, 4]] > 5e3) and rms[2] == 0.0, rms  # measured 9.3 and 7.9 kN (kN m)
     assert np.max(np.abs(law - added)) < 1e-9 * rms.max()
