@@ -270,6 +270,29 @@ add_law(
 )
 
 
+def _piston_mass(u, v, a, s):
+    """A static support's piston heavier by one kilogram: its inertia along the support's
+    travel, and the stiffer air spring its weight makes (the air carries the weight at
+    home, and its linear stiffness ``n F0 A / V0`` grows with the load ``F0``:
+    ``s["_air_per_kg"]`` = n g A / V0, N/m per kg). The spring's term goes through the
+    sensor prefilter, the inertial term not (the recorded acceleration already did)."""
+    return np.asarray(a, float) + s["_air_per_kg"] * s["_filt"](np.asarray(u, float))
+
+
+add_law(
+    Law(
+        "added_mass_support",
+        {"mass_kg": ("kg", 0.0, np.inf)},
+        "mass_kg",
+        _piston_mass,
+        places=("supports",),
+        inertial=True,
+        filters_inside=True,
+        effect="added_mass",
+        what="each static support's piston heavier by m: m a, and the air spring its weight stiffens",
+    )
+)
+
 #: the largest relative warp of a mode's bandwidth its discrete filter may have (:func:`_mode`)
 MODE_WARP = 1e-4
 

@@ -6,7 +6,8 @@ and exponent, the stiffer spring is a chamber of ``V0 k0 / (k0 + k)``: the lab r
 "the chambers hold less air than declared" where the search names a spring. A
 ``coulomb_friction`` at ``supports`` is each piston's friction (``[supports]
 piston_friction_n``, the same joint's dry friction) higher by its force; at ``shoes``,
-each shoe's (``shoe_friction_n``).
+each shoe's (``shoe_friction_n``). An ``added_mass`` at ``supports`` is each piston
+heavier (``piston_mass_kg``).
 """
 
 from __future__ import annotations
@@ -38,31 +39,33 @@ def support_reading(desc, payload, effect: dict) -> str | None:
     )
 
 
-#: where -> (what it is, the [supports] key that says the same)
-SUPPORT_FRICTIONS = {"supports": ("support piston", "piston_friction_n"), "shoes": ("support shoe", "shoe_friction_n")}
+#: (effect, where) -> (what it is, its parameter, unit, the [supports] key that says the same)
+SUPPORT_NUMBERS = {
+    ("coulomb_friction", "supports"): ("support piston's friction", "force_n", "N", "piston_friction_n"),
+    ("coulomb_friction", "shoes"): ("support shoe's friction", "force_n", "N", "shoe_friction_n"),
+    ("added_mass", "supports"): ("support piston's mass", "mass_kg", "kg", "piston_mass_kg"),
+}
 
 
-def support_friction_reading(desc, effect: dict) -> str | None:
-    """The line a ``coulomb_friction`` at ``supports`` or ``shoes`` reads as (None for any
-    other effect): each piston's (shoe's) declared and found friction."""
-    where = effect.get("where")
-    if effect.get("name") != "coulomb_friction" or where not in SUPPORT_FRICTIONS or desc.supports is None:
+def support_number_reading(desc, effect: dict) -> str | None:
+    """The line a dry friction at ``supports`` or ``shoes``, or a mass at ``supports``,
+    reads as (None for any other effect): each piston's (shoe's) declared and found number."""
+    known = SUPPORT_NUMBERS.get((effect.get("name"), effect.get("where")))
+    if known is None or desc.supports is None or effect.get("options", {}).get("grows_with", "none") != "none":
         return None
-    if effect.get("options", {}).get("grows_with", "none") != "none":
-        return None
-    what, key = SUPPORT_FRICTIONS[where]
-    f0 = float(getattr(desc.supports, key))
-    f = f0 + float(effect["parameters"]["force_n"])
-    return f"each {what}'s friction {f0:.4g} -> {f:.4g} N ([supports] {key} = {f:.4g})"
+    what, par, unit, key = known
+    x0 = float(getattr(desc.supports, key))
+    x = x0 + float(effect["parameters"][par])
+    return f"each {what} {x0:.4g} -> {x:.4g} {unit} ([supports] {key} = {x:.4g})"
 
 
 def add_readings(res, desc, payload) -> None:
     """Each effect of ``res.effects_added`` that one description number says the same as
-    gets ``reads_as`` (:func:`support_reading`, :func:`support_friction_reading`)."""
+    gets ``reads_as`` (:func:`support_reading`, :func:`support_number_reading`)."""
     for e in res.effects_added:
-        line = support_reading(desc, payload, e) or support_friction_reading(desc, e)
+        line = support_reading(desc, payload, e) or support_number_reading(desc, e)
         if line:
             e["reads_as"] = line
 
 
-__all__ = ["add_readings", "support_air_stiffness", "support_friction_reading", "support_reading"]
+__all__ = ["add_readings", "support_air_stiffness", "support_number_reading", "support_reading"]

@@ -115,6 +115,8 @@ class MechRun:
     supports: np.ndarray | None = None
     #: (2 n_sup, k) each support's shoe's x and y slide per DOF (:func:`shoe_jacobian`)
     shoes: np.ndarray | None = None
+    #: N/m a static support's air spring gains per kg it carries (:func:`air_stiffness_per_kg`)
+    air_per_kg: float = 0.0
 
     @property
     def residual(self) -> np.ndarray:
@@ -281,6 +283,16 @@ def shoe_jacobian(desc) -> np.ndarray | None:
     return np.asarray(rows)[:, [DOFS6.index(d) for d in desc.dofs]]
 
 
+def air_stiffness_per_kg(desc) -> float:
+    """N/m a static support's air spring gains per kg of load: the build sets its linear
+    stiffness to ``n F0 A / V0`` at the preload ``F0`` it solves for (:func:`mjcf.builder.build`),
+    so a kilogram more on it is ``n g A / V0``. 0 without supports."""
+    sp = desc.supports
+    if sp is None:
+        return 0.0
+    return float(sp.polytropic_exponent * desc.gravity_m_s2 * sp.piston_area_m2 / sp.chamber_volume_m3)
+
+
 def supported_paths(runs) -> list[str]:
     """The residual paths every run supports, in :data:`PATHS` order: mechanical (forces
     and motion), replay (valve commands and an output to compare), closed loop (the
@@ -432,6 +444,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             payload=pay,
             supports=support_jacobian(desc),
             shoes=shoe_jacobian(desc),
+            air_per_kg=air_stiffness_per_kg(desc),
         )
         mr.filter_delay_s = known["accel_delay_s"]
         mr.extra["force_at_instant"] = f  # before any declared or found force delay
@@ -488,6 +501,7 @@ def _force_at_acceleration_instant(r) -> np.ndarray:
 
 def _law_args(mr, shape) -> dict:
     s = {**shape, "_presliding_m": mr.presliding_m, "_dt": mr.dt, "_dofs": mr.dofs, "_filt": mr.filt}
+    s["_air_per_kg"] = mr.air_per_kg
     if mr.payload is not None:
         s["_payload"] = mr.payload
     return s
@@ -783,6 +797,7 @@ __all__ = [
     "choose_path",
     "mechanical_runs",
     "excited_dofs",
+    "air_stiffness_per_kg",
     "shoe_jacobian",
     "support_jacobian",
     "nrmse_runs",

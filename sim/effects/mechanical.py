@@ -482,10 +482,13 @@ class AddedMass(Effect):
     ``dof:<d>``, ``actuator:``, ``class:``: mass along that coordinate only (the slide's
     ``armature``; on a free platen the free joint's armature of that DOF, set in
     :meth:`edit_model`: oil columns, rods, the moving part of a bearing); on a rotation
-    the mass is read as kg m^2 (about the platen's own axes)."""
+    the mass is read as kg m^2 (about the platen's own axes); ``supports``: each static
+    support's piston heavier by ``mass_kg`` (its body's mass: the build's preload carries
+    the weight, and the air spring stiffens with it, as ``[supports] piston_mass_kg``
+    raised by as much would)."""
 
     type = "added_mass"
-    places = ("payload", "dof", "actuator", "class")
+    places = ("payload", "dof", "actuator", "class", "supports")
     SPEC = {
         "mass_kg": ("kg", 0.0, INF, None),
         "inertia_x_kg_m2": ("kg m^2", 0.0, INF, 0.0),
@@ -507,6 +510,11 @@ class AddedMass(Effect):
     def edit_spec(self, spec, desc):
         v = self.values
         self._free = None
+        if self.where == "supports":
+            Place(self, desc, spec)  # checks the table has supports
+            for i in range(1, len(desc.supports.positions_m) + 1):
+                spec.body(f"S{i}_piston").mass += v["mass_kg"]
+            return
         if self.where != "payload":
             place = Place(self, desc, spec)
             if place.free_dof is not None:  # one DOF of the free joint: edit_model
