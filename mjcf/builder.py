@@ -79,6 +79,10 @@ _ROD = [0.8, 0.8, 0.82, 1.0]
 _SUPPORT = [0.45, 0.5, 0.3, 1.0]
 _PAYLOAD = [0.75, 0.45, 0.2, 1.0]
 
+#: the share of a support shoe's friction on each of its x and y slides: the shoe's
+#: ``shoe_friction_n`` along a diagonal (assumed: the slides' split, one number per shoe)
+SHOE_SLIDE_SHARE = 1.0 / math.sqrt(2.0)
+
 
 def _frame_from_z(z: np.ndarray) -> np.ndarray:
     """Quaternion (w, x, y, z) of a frame whose local z axis is ``z``.
@@ -360,7 +364,7 @@ def _add_support(spec: mujoco.MjSpec, base_parent, nm: str, p, sp, sup_cls, opt:
     shoe.inertia = _box_inertia(sp.shoe_mass_kg, [0.4, 0.4, 0.1])
     for ax, vec in (("x", [1, 0, 0]), ("y", [0, 1, 0])):
         jsh = shoe.add_joint(name=f"{nm}_shoe_{ax}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=vec)
-        jsh.frictionloss = sp.shoe_friction_n / math.sqrt(2)
+        jsh.frictionloss = sp.shoe_friction_n * SHOE_SLIDE_SHARE
     _visual(
         shoe,
         name=f"{nm}_shoe",

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mjcf.builder import SHOE_SLIDE_SHARE
 from sim.calibrate.errors import CalibrationError
 from sim.calibrate.supports import air_stiffness_per_kg, shoe_jacobian, support_jacobian
 
@@ -160,7 +161,7 @@ class MechRun:
             return self.u @ Jm.T, self.v @ Jm.T, self.a @ Jm.T, Jm
         if kind == "shoes" and self.shoes is not None:  # a shoe's force is split over its two slides
             Jm = self.shoes
-            return self.u @ Jm.T, self.v @ Jm.T, self.a @ Jm.T, Jm / math.sqrt(2.0)
+            return self.u @ Jm.T, self.v @ Jm.T, self.a @ Jm.T, Jm * SHOE_SLIDE_SHARE
         raise CalibrationError(
             f"where = '{where}': the mechanical path acts at dof:, actuator:, class:, supports or shoes places"
             + (" (payload: only with a declared payload)" if kind == "payload" else "")

@@ -32,6 +32,7 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 
+from mjcf.builder import SHOE_SLIDE_SHARE
 from mjcf.description import DOFS6, actuator_strokes
 from sim.effects.base import Effect, register
 from sim.errors import ScenarioError
@@ -394,8 +395,8 @@ class CoulombFriction(StepForce):
             level = self.values["force_n"]
             if self._constant_load:
                 level += self.values["coefficient"] * _platen_weight(spec, desc)
-            if self.where == "shoes":  # over each shoe's two slides, as mjcf.builder splits it
-                level /= math.sqrt(2.0)
+            if self.where == "shoes":  # over each shoe's two slides, as the build splits it
+                level *= SHOE_SLIDE_SHARE
             _add(_elements(self, spec, desc), "frictionloss", level)
 
     def with_values(self, values):
