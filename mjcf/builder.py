@@ -84,6 +84,14 @@ _PAYLOAD = [0.75, 0.45, 0.2, 1.0]
 SHOE_SLIDE_SHARE = 1.0 / math.sqrt(2.0)
 
 
+def air_spring_stiffness(sp, load_n: float) -> float:
+    """The linear stiffness (N/m) of a static support's air spring carrying ``load_n``:
+    ``n p0 A^2 / V0`` at the pressure ``p0 = load / A`` (the polytropic law about its
+    preload)."""
+    p0 = load_n / sp.piston_area_m2
+    return sp.polytropic_exponent * p0 * sp.piston_area_m2**2 / sp.chamber_volume_m3
+
+
 def _frame_from_z(z: np.ndarray) -> np.ndarray:
     """Quaternion (w, x, y, z) of a frame whose local z axis is ``z``.
 
@@ -579,11 +587,10 @@ def build(desc: TableDescription, payload: Payload | None = None, options: Build
                 f"{sp.capacity_kg / 1000:.1f} t; use a lighter payload" + _rated(desc.limits.max_specimen_kg)
             )
         for i, f in enumerate(loads, start=1):
-            p0 = f / sp.piston_area_m2
             j = spec.joint(f"S{i}_air")
-            # the air's linear stiffness n p0 A^2 / V0, on top of any an effect put there
-            # (a spring at 'supports'); the spring reference keeps the preload at home
-            k = sp.polytropic_exponent * p0 * sp.piston_area_m2**2 / sp.chamber_volume_m3 + float(j.stiffness[0])
+            # the air's linear stiffness, on top of any an effect put there (a spring at
+            # 'supports'); the spring reference keeps the preload at home
+            k = air_spring_stiffness(sp, f) + float(j.stiffness[0])
             j.stiffness = [k, 0, 0]
             j.springref = f / k
         info.support_loads_n = loads

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mjcf.builder import air_spring_stiffness
 from mjcf.description import DOFS6
 
 
@@ -40,13 +41,12 @@ def shoe_jacobian(desc) -> np.ndarray | None:
 
 
 def air_stiffness_per_kg(desc) -> float:
-    """N/m a static support's air spring gains per kg of load: the build sets its linear
-    stiffness to ``n F0 A / V0`` at the preload ``F0`` it solves for (:func:`mjcf.builder.build`),
-    so a kilogram more on it is ``n g A / V0``. 0 without supports."""
-    sp = desc.supports
-    if sp is None:
+    """N/m a static support's air spring gains per kg of load: the build's linear stiffness
+    at the preload it solves for (:func:`mjcf.builder.air_spring_stiffness`, linear in the
+    load) at the weight of one kilogram, ``n g A / V0``. 0 without supports."""
+    if desc.supports is None:
         return 0.0
-    return float(sp.polytropic_exponent * desc.gravity_m_s2 * sp.piston_area_m2 / sp.chamber_volume_m3)
+    return float(air_spring_stiffness(desc.supports, desc.gravity_m_s2))
 
 
 __all__ = ["air_stiffness_per_kg", "shoe_jacobian", "support_jacobian"]
