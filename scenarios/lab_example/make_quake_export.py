@@ -122,12 +122,14 @@ def lab_record(
     seed: int = SEED,
     pressure_lead_s: float = PRESSURE_LEAD_S,
     accel_lag_s: float = 0.0,
+    displacement_lag_s: float = 0.0,
 ):
     """What the lab's recorder holds: a uni-axial RunFile at 204.8 Hz (DOF x, actuator A,
     floor accelerometers 1F/2F, force from the differential pressure), the drive biased
     by ``-bias``, the platen accelerometer through its conditioner, the pressure early;
     ``accel_lag_s``: the platen accelerometer's sample taken that much before its time
-    stamp (an undeclared lag in its chain; 0 in the example)."""
+    stamp (an undeclared lag in its chain; 0 in the example); ``displacement_lag_s``: the
+    LVDT's likewise (its demodulator's delay; 0 in the example)."""
     import mjcf
     from sim.runs.runfile import FORMAT, RunFile
     from sim.runs.specimen import specimen_accelerations
@@ -169,7 +171,7 @@ def lab_record(
         meta=meta,
         valve_command=interpolate(t, run.valve_command, tr) - bias,
         reference=interpolate(t, run.reference[:, [x]], tr),
-        table_displacement=interpolate(t, run.table_displacement[:, [x]], tr),
+        table_displacement=interpolate(t, run.table_displacement[:, [x]], np.maximum(tr - displacement_lag_s, t[0])),
         table_acceleration=interpolate(t, acc_t, np.maximum(tr - accel_lag_s, t[0]))
         + ACC_NOISE_M_S2 * rng.standard_normal((n, 1)),
         specimen_acceleration=interpolate(t, floors, tr) + ACC_NOISE_M_S2 * rng.standard_normal((n, 2)),

@@ -49,7 +49,10 @@ def channel_conditioning(run) -> dict:
             raise CalibrationError(f"{where}.delay_s must be a number of seconds (got {delay!r})")
         if fc is not None and (isinstance(fc, bool) or not isinstance(fc, (int, float)) or not fc > 0):
             raise CalibrationError(f"{where}.lowpass_hz must be a cut-off > 0 Hz or null (got {fc!r})")
-        if isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= 12:
+        if fc is None:
+            # no low-pass, no poles: an import writes 0 for a column that declares only its delay
+            order = DEFAULT_ORDER
+        elif isinstance(order, bool) or not isinstance(order, int) or not 1 <= order <= 12:
             raise CalibrationError(f"{where}.lowpass_order must be a whole number 1..12 (got {order!r})")
         out[ch] = {"delay_s": float(delay), "lowpass_hz": None if fc is None else float(fc), "lowpass_order": order}
     return out
@@ -256,7 +259,7 @@ def declared_state(run, accel_lowpass_hz, table_order: int = TABLE_ORDER) -> dic
     cond = channel_conditioning(run)
     acc = cond.get("table_acceleration", {})
     fc = acc.get("lowpass_hz") if "table_acceleration" in cond else accel_lowpass_hz
-    order = int(acc.get("lowpass_order", table_order) if "table_acceleration" in cond else table_order)
+    order = int(acc["lowpass_order"]) if acc.get("lowpass_hz") else table_order
     delay = acc.get("delay_s", 0.0)
     if fc and fc >= 0.45 / run.dt and "table_acceleration" in cond:
         delay += 1.0 / (2 * math.pi * fc * math.sin(math.pi / (2 * order)))

@@ -212,7 +212,10 @@ def test_declared_conditioning_read_from_the_run_not_the_chain():
     "cond, match",
     [
         ({"table_acceleration": {"lowpass_hz": -3.0}}, "lowpass_hz must be a cut-off > 0 Hz"),
-        ({"table_acceleration": {"lowpass_order": 0}}, "lowpass_order must be a whole number 1..12"),
+        (
+            {"table_acceleration": {"lowpass_hz": 50.0, "lowpass_order": 0}},
+            "lowpass_order must be a whole number 1..12",
+        ),
         ({"actuator_force": {"delay_s": "4 ms"}}, "delay_s must be a number of seconds"),
         ({"actuator_force": 0.004}, "must be a table of delay_s"),
     ],
@@ -226,6 +229,25 @@ def test_bad_declared_conditioning_is_one_line(cond, match):
     with pytest.raises(CalibrationError, match=match) as ei:
         channel_conditioning(SimpleNamespace(name="rec.run.npz", meta={"channel_conditioning": cond}))
     assert "\n" not in str(ei.value) and "rec.run.npz: meta.channel_conditioning" in str(ei.value)
+
+
+def test_a_declared_delay_without_a_low_pass_is_read_whatever_its_order():
+    """What ``import`` writes for a map column that declares only its delay (``lowpass_order
+    = 0``: no filter, no poles) is read, not refused (it stopped calibrate until the
+    seventeenth session); the acceleration's conditioner order then stays the table's."""
+    from types import SimpleNamespace
+
+    from sim.calibrate.conditioning import channel_conditioning, declared_state
+
+    cond = {
+        "table_displacement": {"delay_s": 0.002, "lowpass_hz": None, "lowpass_order": 0},
+        "table_acceleration": {"delay_s": 0.001, "lowpass_hz": None, "lowpass_order": 0},
+    }
+    r = SimpleNamespace(name="rec.run.npz", meta={"channel_conditioning": cond}, dt=1 / 204.8)
+    got = channel_conditioning(r)
+    assert got["table_displacement"]["delay_s"] == 0.002 and got["table_displacement"]["lowpass_hz"] is None
+    s = declared_state(r, 50.0, 4)
+    assert s["accel_lowpass_hz"] is None and s["accel_delay_s"] == 0.001 and s["accel_lowpass_order"] == 4
 
 
 def test_conditioner_at_a_low_record_rate_is_the_recorders():

@@ -138,8 +138,9 @@ def lab(tmp_path_factory):
     return mod, folder, sims
 
 
-def _records(lab, tag: str, *, pressure_lead_s: float = 0.0, accel_lag_s: float = 0.0) -> list[str]:
-    """The lab's CSV exports of both tests with the given skews, imported with the map."""
+def _records(lab, tag: str, *, map_path: Path = EX / "light_map.toml", **skews) -> list[str]:
+    """The lab's CSV exports of both tests with the given skews (``pressure_lead_s``,
+    ``accel_lag_s``, ``displacement_lag_s``: none unless given), imported with the map."""
     from sim.cli import main
     from sim.runs.importer import export_csv
 
@@ -148,9 +149,9 @@ def _records(lab, tag: str, *, pressure_lead_s: float = 0.0, accel_lag_s: float 
     out.mkdir()
     csvs = []
     for name, run in sims.items():
-        rec = mod.lab_record(run, bias=mod.BIAS[name], pressure_lead_s=pressure_lead_s, accel_lag_s=accel_lag_s)
-        csvs.append(str(export_csv(rec, EX / "light_map.toml", out / f"{name}.csv")))
-    assert main(["import", *csvs, "--map", str(EX / "light_map.toml"), "--out", str(out / "runs")]) == 0
+        rec = mod.lab_record(run, bias=mod.BIAS[name], **{"pressure_lead_s": 0.0, **skews})
+        csvs.append(str(export_csv(rec, map_path, out / f"{name}.csv")))
+    assert main(["import", *csvs, "--map", str(map_path), "--out", str(out / "runs")]) == 0
     return [str(out / "runs" / f"{name}.run.npz") for name in sims]
 
 
@@ -232,3 +233,36 @@ def test_records_on_time_add_no_timing(lab):
     assert _timing(res) == {}, res.effects_added
     assert {e["name"] for e in res.effects_added} == {"coulomb_friction", "payload_mode"}
     assert res.error_after < 0.05 * res.error_before
+
+
+def _found(res) -> list:
+    return [(e["name"], e["where"]) for e in res.effects_added]
+
+
+def test_a_displacement_late_by_its_declared_delay_calibrates_as_on_time(lab, tmp_path):
+    """The LVDT 2 samples late (its demodulator), the map declaring it (``delay_s`` on the
+    column, nothing else): the mechanical path reads the displacement and the velocity made
+    from it at the force's instants, and finds what it finds on time (measured: the same
+    858.46 kg and 48.41 kg modes, 1201.7 N of friction, 1.84 % held out). Until the
+    seventeenth session an import of a column declaring only its delay wrote
+    ``lowpass_order = 0``, which calibrate refused (a one-line error, no calibration), and
+    the mechanical path left a declared displacement delay out. Undeclared, the same records
+    lose the frame's second mode (876 kg, 1187 N, 8.5 % held out): a friction switching two
+    samples off the force."""
+    lag = 2 / 204.8
+    text = (EX / "light_map.toml").read_text()
+    head = 'channel = "table_displacement"\n'
+    assert text.count(head) == 1
+    declared = tmp_path / "light_map.toml"
+    declared.write_text(text.replace(head, head + f"delay_s = {lag!r}\n"))
+    late = _calibrate(_records(lab, "disp_declared", map_path=declared, displacement_lag_s=lag))
+    clean = _calibrate(_records(lab, "disp_clean"))
+    assert _found(late) == _found(clean), (late.effects_added, clean.effects_added)
+    assert [n for n, _ in _found(late)] == ["payload_mode", "coulomb_friction", "payload_mode"], late.effects_added
+    for a, b in zip(late.effects_added, clean.effects_added):
+        for k, v in b["parameters"].items():
+            assert a["parameters"][k] == pytest.approx(v, rel=1e-3), (k, a["parameters"], b["parameters"])
+    assert late.error_after == pytest.approx(clean.error_after, rel=1e-3)
+    undeclared = _calibrate(_records(lab, "disp_undeclared", displacement_lag_s=lag))
+    assert len(undeclared.effects_added) < len(clean.effects_added), undeclared.effects_added
+    assert undeclared.error_after > 2 * clean.error_after, (undeclared.error_after, clean.error_after)
