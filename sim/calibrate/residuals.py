@@ -103,6 +103,9 @@ class MechRun:
     #: a delay (s) after the prefilter: the acceleration's own sensor delay
     #: (:mod:`sim.calibrate.timing`), applied to every other term as the prefilter is
     filter_delay_s: float = 0.0
+    #: the load cells' declared analog conditioner (:func:`sim.calibrate.conditioning.force_chain_of`):
+    #: the recorded force went through it, so every force of the model goes through it too
+    force_chain: object = None
     t0: float = 0.0
     presliding_m: float | None = None  #: the table's pre-sliding travel, if its dry friction has one
     #: the declared payload's (mass kg, centre of gravity from the reference point m (3,),
@@ -140,6 +143,10 @@ class MechRun:
 
             x = shift(x, self.filter_delay_s, self.dt)
         return x
+
+    def chain(self, x: np.ndarray) -> np.ndarray:
+        """A force of the model through the load cells' declared conditioner (if any)."""
+        return x if self.force_chain is None else self.force_chain(x)
 
     def place_motion(self, where: str):
         """(u, v, a, map) of a place: its coordinate's motion (n,) and ``map`` (k,) or
@@ -197,7 +204,7 @@ class MechRun:
         u, v, a, m = self.place_motion(where)
         b = np.asarray(law.second_order(u, v, a, _law_args(self, shape), values), float)
         Q = b[:, None] * m[None, :] if b.ndim == 1 else b @ m
-        return Q if law.inertial else self.filt(Q)
+        return self.chain(Q if law.inertial else self.filt(Q))
 
     def basis(self, law, where: str, shape: dict) -> list:
         """The law's unfiltered columns (:func:`_raw_columns`), kept in ``extra["basis"]``,
@@ -223,7 +230,7 @@ class MechRun:
         cache = self.extra.setdefault("raw_columns", {})
         if key in cache:
             return cache[key]
-        Qs = [Q if law.inertial else self.filt(Q) for Q in self.basis(law, where, shape)]
+        Qs = [self.chain(Q if law.inertial else self.filt(Q)) for Q in self.basis(law, where, shape)]
         if len(cache) > 128:  # shape scans make many; the accepted terms' come back
             for k in [k for k in cache if k[2]][:64]:
                 del cache[k]
@@ -407,6 +414,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             air_per_kg=air_stiffness_per_kg(desc),
         )
         mr.filter_delay_s = known["accel_delay_s"]
+        mr.force_chain = conditioning.force_chain_of(r)
         mr.extra["force_at_instant"] = f  # before any declared or found force delay
         # the load cells' white noise taken to the DOFs, as recorded (sim.calibrate.mechnoise)
         mr.extra["force_noise"] = conditioning.noise_floor(np.asarray(r.actuator_force, float) @ J, 1.0 / r.dt)
@@ -419,7 +427,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             if law.second_order is not None:
                 other = other + mr.second(law, where, vals, vals)
         inertial = a @ Me.T if parts is None else a @ Me.T + parts.force(a, r.dt)
-        mr.model = inertial + mr.filt(other)
+        mr.model = mr.chain(inertial + mr.filt(other))
         mr.extra.update(inertial=inertial, other=other, timing=known, basis=BasisCache())
         mr.rows = _still_rows(v, pre, r.dt)
         mr.excited = excited_dofs(mr, J6)

@@ -98,7 +98,7 @@ def retime(mr, state: dict):
     new.filter_delay_s = state["accel_delay_s"]
     f = shift(mr.extra["force_at_instant"], -state["force_delay_s"], mr.dt)
     new.force = new.filt(f @ mr.J)
-    new.model = mr.extra["inertial"] + new.filt(mr.extra["other"])
+    new.model = new.chain(mr.extra["inertial"] + new.filt(mr.extra["other"]))
     new.extra.update(actuator_force=f, timing=dict(state))
     if "w" in new.extra:
         new.extra["y"] = (new.residual[new.rows] * new.extra["w"]).reshape(-1)
