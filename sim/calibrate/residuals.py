@@ -389,7 +389,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         u = r.table_displacement[:, cols]
         v = r.table_velocity[:, cols]
         a = r.table_acceleration[:, cols]
-        u, v = _motion_on_the_force_clock(r, u, v)
+        u, v = conditioning.motion_on_the_force_clock(r, u, v)
         f = _force_at_acceleration_instant(r)
         known = conditioning.declared_state(r, accel_lowpass_hz, desc.accelerometer_filter_order)
         pre = conditioning.prefilter_of(known, r)
@@ -447,22 +447,6 @@ def excited_dofs(mr, J6) -> np.ndarray:
     F = mr.demean(mr.force)[mr.rows]
     rms = np.sqrt(np.mean(F**2, axis=0)) if len(F) else np.zeros(len(mr.dofs))
     return excited(rms, dof_weights(J6, mr.dofs, "force"))
-
-
-def _motion_on_the_force_clock(r, u: np.ndarray, v: np.ndarray) -> tuple:
-    """The recorded displacement and velocity read at the instants their time stamps say:
-    each less its channel's declared delay (``meta.channel_conditioning``, a map's
-    ``delay_s``), a velocity an import made from the displacement with the displacement's.
-    Left late, they put the friction's switching, the damping and the springs off the force:
-    the worked example's LVDT 2 samples late and read as if on time, 8.5 % held out
-    instead of 1.84 %, the frame's second mode lost (tests/calibrate/test_timing_anchor.py)."""
-    from sim.calibrate.conditioning import channel_conditioning, shift
-
-    cond = channel_conditioning(r)
-    du = cond.get("table_displacement", {}).get("delay_s", 0.0)
-    derived = "table_velocity" in ((r.meta or {}).get("derived_channels") or {})
-    dv = du if derived else cond.get("table_velocity", {}).get("delay_s", 0.0)
-    return shift(u, -du, r.dt), shift(v, -dv, r.dt)
 
 
 def _force_at_acceleration_instant(r) -> np.ndarray:

@@ -250,6 +250,27 @@ def test_a_declared_delay_without_a_low_pass_is_read_whatever_its_order():
     assert s["accel_lowpass_hz"] is None and s["accel_delay_s"] == 0.001 and s["accel_lowpass_order"] == 4
 
 
+def test_the_motion_is_read_at_the_force_instants_through_its_declared_chain():
+    """The displacement's declared delay and low-pass (taken as its low-frequency delay)
+    come off the displacement, and off a velocity the import made from it; a velocity of
+    its own keeps its own channel's."""
+    from types import SimpleNamespace
+
+    from sim.calibrate.conditioning import low_frequency_delay_s, motion_on_the_force_clock
+
+    dt = 1 / 1024
+    t = np.arange(4096) * dt
+    ramp = (t - 1.0)[:, None]
+    cond = {"table_displacement": {"delay_s": 0.001, "lowpass_hz": 30.0, "lowpass_order": 4}}
+    late = 0.001 + low_frequency_delay_s(30.0, 4)
+    for derived, v_late in (({"table_velocity": "central difference"}, late), ({}, 0.0)):
+        r = SimpleNamespace(name="r", dt=dt, meta={"channel_conditioning": cond, "derived_channels": derived})
+        u, v = motion_on_the_force_clock(r, ramp, ramp)
+        mid = slice(1000, 3000)
+        assert np.allclose(u[mid], ramp[mid] + late, atol=1e-9), derived
+        assert np.allclose(v[mid], ramp[mid] + v_late, atol=1e-9), derived
+
+
 def test_conditioner_at_a_low_record_rate_is_the_recorders():
     """A 4-pole 50 Hz conditioner applied to a 204.8 Hz record (calibration's model of it)
     is the one a recorder applied at the simulation's 1024 Hz, then kept every fifth sample
