@@ -305,7 +305,7 @@ def force_chain_of(run):
     return Conditioner(float(fc), int(spec["lowpass_order"]), 1.0 / run.dt)
 
 
-def motion_on_the_force_clock(r, u: np.ndarray, v: np.ndarray) -> tuple:
+def motion_on_the_force_clock(run, u: np.ndarray, v: np.ndarray) -> tuple:
     """The recorded displacement and velocity read at the instants their time stamps say:
     each less its channel's declared delay (``meta.channel_conditioning``, a map's
     ``delay_s``) and its declared low-pass's low-frequency delay (an LVDT demodulator's
@@ -315,7 +315,7 @@ def motion_on_the_force_clock(r, u: np.ndarray, v: np.ndarray) -> tuple:
     springs off the force: the worked example's LVDT 2 samples late and read as if on
     time, 8.5 % held out instead of 1.84 %, the frame's second mode lost
     (tests/calibrate/test_timing_anchor.py)."""
-    cond = channel_conditioning(r)
+    cond = channel_conditioning(run)
 
     def late(channel: str) -> float:
         spec = cond.get(channel, {})
@@ -323,9 +323,9 @@ def motion_on_the_force_clock(r, u: np.ndarray, v: np.ndarray) -> tuple:
         return spec.get("delay_s", 0.0) + (low_frequency_delay_s(fc, spec["lowpass_order"]) if fc else 0.0)
 
     du = late("table_displacement")
-    derived = "table_velocity" in ((r.meta or {}).get("derived_channels") or {})
+    derived = "table_velocity" in ((run.meta or {}).get("derived_channels") or {})
     dv = du if derived else late("table_velocity")
-    return shift(u, -du, r.dt), shift(v, -dv, r.dt)
+    return shift(u, -du, run.dt), shift(v, -dv, run.dt)
 
 
 def prefilter_of(state: dict, run):
