@@ -243,10 +243,10 @@ def test_a_displacement_late_by_its_declared_delay_calibrates_as_on_time(lab, tm
     """The LVDT 2 samples late (its demodulator), the map declaring it (``delay_s`` on the
     column, nothing else): the mechanical path reads the displacement and the velocity made
     from it at the force's instants, and finds what it finds on time (measured: the same
-    858.46 kg and 48.41 kg modes, 1201.7 N of friction, 1.84 % held out). Until the
-    seventeenth session an import of a column declaring only its delay wrote
-    ``lowpass_order = 0``, which calibrate refused (a one-line error, no calibration), and
-    the mechanical path left a declared displacement delay out. Undeclared, the same records
+    858.46 kg and 48.41 kg modes, 1201.7 N of friction, 1.84 % held out). An import of a
+    column declaring only its delay writes ``lowpass_order = 0``, which calibrate refused
+    until the seventeenth session (a one-line error, no calibration), and the mechanical
+    path left a declared displacement delay out. Undeclared, the same records
     lose the frame's second mode (876 kg, 1187 N, 8.5 % held out): a friction switching two
     samples off the force."""
     lag = 2 / 204.8
