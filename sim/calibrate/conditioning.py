@@ -266,21 +266,21 @@ def declared_state(run, accel_lowpass_hz, table_order: int = TABLE_ORDER) -> dic
         fc = None
     return {
         "force_delay_s": cond.get("actuator_force", {}).get("delay_s", 0.0)
-        + _unfilterable_delay(run, "actuator_force"),
+        + _unfilterable_delay(cond.get("actuator_force", {}), run.dt),
         "accel_delay_s": delay,
         "accel_lowpass_hz": fc or None,
         "accel_lowpass_order": order,
     }
 
 
-def _unfilterable_delay(run, channel: str) -> float:
-    """The low-frequency delay of ``channel``'s declared conditioner when it is too close
-    to the record's Nyquist frequency to be filtered at its rate (0 otherwise)."""
-    spec = channel_conditioning(run).get(channel, {})
-    fc, order = spec.get("lowpass_hz"), int(spec.get("lowpass_order") or TABLE_ORDER)
-    if not fc or fc < 0.45 / run.dt:
+def _unfilterable_delay(spec: dict, dt: float) -> float:
+    """The low-frequency delay of a channel's declared conditioner ``spec`` when it is too
+    close to the Nyquist frequency of a record sampled every ``dt`` to be filtered at its
+    rate (0 otherwise)."""
+    fc = spec.get("lowpass_hz")
+    if not fc or fc < 0.45 / dt:
         return 0.0
-    return low_frequency_delay_s(fc, order)
+    return low_frequency_delay_s(fc, int(spec["lowpass_order"]))
 
 
 def low_frequency_delay_s(fc: float, order: int) -> float:
