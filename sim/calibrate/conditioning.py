@@ -261,7 +261,7 @@ def declared_state(run, accel_lowpass_hz, table_order: int = TABLE_ORDER) -> dic
     fc = acc.get("lowpass_hz") if "table_acceleration" in cond else accel_lowpass_hz
     order = int(acc["lowpass_order"]) if acc.get("lowpass_hz") else table_order
     delay = acc.get("delay_s", 0.0)
-    if fc and fc >= 0.45 / run.dt and "table_acceleration" in cond:
+    if fc and not filterable(fc, run.dt) and "table_acceleration" in cond:
         delay += low_frequency_delay_s(fc, order)
         fc = None
     return {
@@ -278,9 +278,17 @@ def _unfilterable_delay(spec: dict, dt: float) -> float:
     close to the Nyquist frequency of a record sampled every ``dt`` to be filtered at its
     rate (0 otherwise)."""
     fc = spec.get("lowpass_hz")
-    if not fc or fc < 0.45 / dt:
+    if not fc or filterable(fc, dt):
         return 0.0
     return low_frequency_delay_s(fc, int(spec["lowpass_order"]))
+
+
+def filterable(fc: float, dt: float) -> bool:
+    """Whether a conditioner at ``fc`` can be filtered at the rate of a record sampled
+    every ``dt``: below 0.45 of the rate, near the Nyquist frequency (assumed: the number
+    the accelerometer's conditioner was held to before it was shared; above it the
+    conditioner counts as its low-frequency delay)."""
+    return fc < 0.45 / dt
 
 
 def low_frequency_delay_s(fc: float, order: int) -> float:
@@ -300,7 +308,7 @@ def force_chain_of(run):
     tests/calibrate/test_force_conditioner.py)."""
     spec = channel_conditioning(run).get("actuator_force", {})
     fc = spec.get("lowpass_hz")
-    if not fc or fc >= 0.45 / run.dt:
+    if not fc or not filterable(fc, run.dt):
         return None
     return Conditioner(float(fc), int(spec["lowpass_order"]), 1.0 / run.dt)
 

@@ -407,6 +407,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             classes=classes,
             rows=np.ones(len(u), bool),
             prefilter=pre,
+            force_chain=conditioning.force_chain_of(r),
             presliding_m=desc.friction_presliding_m if desc.friction_model == "presliding" else None,
             payload=pay,
             supports=support_jacobian(desc),
@@ -414,7 +415,6 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
             air_per_kg=air_stiffness_per_kg(desc),
         )
         mr.filter_delay_s = known["accel_delay_s"]
-        mr.force_chain = conditioning.force_chain_of(r)
         mr.extra["force_at_instant"] = f  # before any declared or found force delay
         # the load cells' white noise taken to the DOFs, as recorded (sim.calibrate.mechnoise)
         mr.extra["force_noise"] = conditioning.noise_floor(np.asarray(r.actuator_force, float) @ J, 1.0 / r.dt)
