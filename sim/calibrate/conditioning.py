@@ -70,9 +70,12 @@ def of_run(run) -> dict:
     (``meta.force_lag_s``: a simulator's own record; 0 for a recorder's)."""
     lag = float((run.meta or {}).get("force_lag_s") or 0.0)
     derived = "table_velocity" in ((run.meta or {}).get("derived_channels") or {})
+    chans = channel_conditioning(run)
+    if derived and "table_displacement" in chans:  # the velocity made from it went through its chain
+        chans["table_velocity"] = chans["table_displacement"]
     return {
         "recorder": recorder(run),
-        "channels": channel_conditioning(run),
+        "channels": chans,
         "force_lag_s": lag,
         # an import's velocity is the displacement's central difference (map derive_velocity):
         # the model's is made alike, sin(w T) / T, 6 % under w at 20 Hz of a 204.8 Hz record
