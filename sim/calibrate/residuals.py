@@ -29,6 +29,7 @@ coherence with the states).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -338,7 +339,11 @@ def check_finite(run, channels) -> None:
             )
 
 
-def _still_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.ndarray:
+def moving_rows(v: np.ndarray, prefilter, dt: float, trim: float = 0.01) -> np.ndarray:
+    """Bool (n,): the samples a fit reads, from the first to the last where the table moves
+    (``trim`` of its top speed), less those where it is still (``DEADBAND``) and the
+    acceleration conditioner's memory after them: there a dry friction is anything within
+    its bounds."""
     speed = np.max(np.abs(v), axis=1)
     n = len(speed)
     keep = np.ones(n, bool)
@@ -392,6 +397,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         u, v = conditioning.motion_on_the_force_clock(r, u, v)
         f = _force_at_acceleration_instant(r)
         known = conditioning.declared_state(r, accel_lowpass_hz, desc.accelerometer_filter_order)
+        known["motion_delay_s"] = 0.0  # the motion's own skew beyond what it declares (timing.py)
         pre = conditioning.prefilter_of(known, r)
         mr = MechRun(
             name=r.name,
@@ -421,18 +427,26 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         f = conditioning.shift(f, -known["force_delay_s"], r.dt)
         mr.force = mr.filt(f @ J)
         mr.extra["actuator_force"] = f
-        other = joints.force(u, v, r.dt)
-        for law, where, vals in declared:
-            other = other + sum(vals[k] * Q for k, Q in zip(law.linears, _raw_columns(mr, law, where, vals)))
-            if law.second_order is not None:
-                other = other + mr.second(law, where, vals, vals)
+        mr.extra["declared_other"] = functools.partial(_declared_other, joints=joints, declared=declared)
+        other = mr.extra["declared_other"](mr)
         inertial = a @ Me.T if parts is None else a @ Me.T + parts.force(a, r.dt)
         mr.model = mr.chain(inertial + mr.filt(other))
-        mr.extra.update(inertial=inertial, other=other, timing=known, basis=BasisCache())
-        mr.rows = _still_rows(v, pre, r.dt)
+        mr.extra.update(inertial=inertial, other=other, timing=known, basis=BasisCache(), motion=(u, v))
+        mr.rows = moving_rows(v, pre, r.dt)
         mr.excited = excited_dofs(mr, J6)
         out.append(mr)
     return out
+
+
+def _declared_other(mr, joints, declared) -> np.ndarray:
+    """(n, k) the declared model's forces other than the inertial ones for ``mr``'s
+    recorded motion, unfiltered: its joints' (:class:`JointTerms`) and its effects' laws."""
+    other = joints.force(mr.u, mr.v, mr.dt)
+    for law, where, vals in declared:
+        other = other + sum(vals[k] * Q for k, Q in zip(law.linears, _raw_columns(mr, law, where, vals)))
+        if law.second_order is not None:
+            other = other + mr.second(law, where, vals, vals)
+    return other
 
 
 def excited_dofs(mr, J6) -> np.ndarray:

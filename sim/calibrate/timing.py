@@ -15,7 +15,13 @@ model's forces:
   conditioner's filter is applied to them);
 * ``sensor_lowpass`` at ``channel:table_acceleration``: the accelerometer's analog
   conditioner is a Butterworth of ``cutoff_hz`` and ``order`` instead of the declared
-  one; the other terms go through it instead.
+  one; the other terms go through it instead;
+* ``sensor_delay`` at ``channel:table_displacement``: the displacement and the velocity
+  are ``delay_s`` late beyond what the record declares of them (an LVDT's demodulator, a
+  multiplexed recorder); the declared forces are made from the motion read at t +
+  delay_s, and the still samples are its own. Its value is not the balance's: it is the
+  delay at which the displacement and the acceleration agree
+  (:func:`read_by_the_acceleration`).
 
 What a record declares (``meta.channel_conditioning``, else the table's
 ``accelerometer_bandwidth_hz``) is the starting point (:func:`declared_state`). Each
@@ -78,31 +84,46 @@ TIMING_EFFECTS = ("sensor_delay", "sensor_lowpass")
 
 
 def retime(mr, state: dict):
-    """A mechanical run (:class:`sim.calibrate.residuals.MechRun`) with the force and
-    acceleration timing of ``state`` in place of its own (same rows, same weights: every
-    timing is scored by one measure; the terms' columns kept while the filter is)."""
+    """A mechanical run (:class:`sim.calibrate.residuals.MechRun`) with the force,
+    acceleration and motion timing of ``state`` in place of its own (the same weights:
+    every timing is scored by one measure; the same rows unless the motion is re-timed;
+    the terms' columns kept while the filter and the motion are)."""
     from sim.calibrate.conditioning import Conditioner
     from sim.calibrate.mechnoise import dof_noise_weights
+    from sim.calibrate.residuals import moving_rows
 
     old = mr.extra["timing"]
-    same_filter = all(old[k] == state[k] for k in ("accel_delay_s", "accel_lowpass_hz", "accel_lowpass_order"))
+    same_motion = old.get("motion_delay_s", 0.0) == state.get("motion_delay_s", 0.0)
+    same_filter = same_motion and all(
+        old[k] == state[k] for k in ("accel_delay_s", "accel_lowpass_hz", "accel_lowpass_order")
+    )
     # the weights stay the run's own (the fit's "w" and each DOF's noise weight): a timing
     # candidate is judged on the same pooled error as the model without it
-    keep = ("force_at_instant", "inertial", "other", "w", "noise_weight", "force_noise", "basis") + (
-        ("raw_columns", "columns", "second") if same_filter else ()
-    )
+    keep = ("force_at_instant", "inertial", "w", "noise_weight", "force_noise", "motion", "declared_other")
+    keep += (("other", "basis") if same_motion else ()) + (("raw_columns", "columns", "second") if same_filter else ())
     dof_noise_weights(mr)  # computed on the run as declared, before it is copied
     new = dataclasses.replace(mr, extra={k: mr.extra[k] for k in keep if k in mr.extra})
     fc = state["accel_lowpass_hz"]
     new.prefilter = Conditioner(float(fc), int(state["accel_lowpass_order"]), 1.0 / mr.dt) if fc else None
     new.filter_delay_s = state["accel_delay_s"]
+    if not same_motion:  # the motion re-read: the declared forces made from it anew, its still samples its own
+        new.u, new.v = motion_at(mr, state["motion_delay_s"])
+        new.extra["other"] = mr.extra["declared_other"](new)
+        new.rows = moving_rows(new.v, new.prefilter, mr.dt)
     f = shift(mr.extra["force_at_instant"], -state["force_delay_s"], mr.dt)
     new.force = new.filt(f @ mr.J)
-    new.model = new.chain(mr.extra["inertial"] + new.filt(mr.extra["other"]))
+    new.model = new.chain(mr.extra["inertial"] + new.filt(new.extra["other"]))
     new.extra.update(actuator_force=f, timing=dict(state))
     if "w" in new.extra:
         new.extra["y"] = (new.residual[new.rows] * new.extra["w"]).reshape(-1)
     return new
+
+
+def motion_at(mr, delay_s: float) -> tuple:
+    """``(u, v)``: the run's displacement and velocity as read at its declared timing
+    (``extra["motion"]``), read ``delay_s`` later (the motion sensors that much late)."""
+    u, v = mr.extra["motion"]
+    return shift(u, -delay_s, mr.dt), shift(v, -delay_s, mr.dt)
 
 
 @dataclass
@@ -159,6 +180,17 @@ def candidates(mruns) -> list[Candidate]:
             base["accel_delay_s"],
         ),
     ]
+    out.append(  # the motion sensors' own skew, timed by the acceleration (:func:`read_by_the_acceleration`)
+        Candidate(
+            "sensor_delay",
+            "channel:table_displacement",
+            "delay_s",
+            "motion_delay_s",
+            -MAX_DELAY_S,
+            MAX_DELAY_S,
+            base.get("motion_delay_s", 0.0),
+        )
+    )
     g0 = 1.0 / base["accel_lowpass_hz"] if base["accel_lowpass_hz"] else 0.0
     for order in sorted(set(ORDERS) | {base["accel_lowpass_order"]}):  # the declared order
         out.append(
@@ -236,16 +268,23 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
     from sim.calibrate.residuals import nrmse_runs
     from sim.calibrate.trace import fit_terms, flatness, predict
 
-    x, s, kin = placed(mfit, cur.terms, cand, search(mfit, cur.terms, cand))
+    if cand.field == "motion_delay_s":
+        x, s, kin = read_by_the_acceleration(mfit, cand)
+    else:
+        x, s, kin = placed(mfit, cur.terms, cand, search(mfit, cur.terms, cand))
     nf = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mfit]
     nh = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mho]
+    if cand.field == "motion_delay_s":  # judged on the samples where the re-timed motion moves
+        cur, e_ho, flat = _on_the_rows_of(mfit, mho, nf, nh, cur)
     new = fit_terms(nf, cur.terms, refine="none")
     e_new = nrmse_runs(nh, predict(nh, new))
     f_new = flatness(nf, new.residuals)
     bic_new = new.n * math.log(max(new.rss, 1e-300) / new.n) + (new.p + 1) * math.log(new.n)
     ok, why = _param_check(cand, x, s)
     share = coherent_share(mfit, cur.residuals, new.residuals)
-    if ok and share < COHERENT_SHARE:
+    # the motion's delay is the kinematics', not fitted to the residual, and what it takes
+    # out goes through the friction's sign: not a filtered copy of the motion's own force
+    if ok and share < COHERENT_SHARE and cand.field != "motion_delay_s":
         ok, why = False, f"what it takes out of the residual is {100 * share:.0f} % coherent with the motion"
     if ok and kin is not None and not kin["ok"]:
         ok, why = False, kin["reason"]
@@ -268,6 +307,32 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
         "reason": why,
     }
     return {"row": row, "accepted": ok, "fit": new, "mfit": nf, "mho": nh, "e_ho": e_new, "flat": f_new}
+
+
+def _on_the_rows_of(mfit, mho, nf, nh, cur) -> tuple:
+    """``(fit, held-out error, flatness)`` of the current terms refitted on ``mfit`` and
+    scored on ``mho`` over the samples the re-timed runs ``nf`` and ``nh`` read. A re-timed
+    motion has its own still samples (:func:`sim.calibrate.residuals.moving_rows`); judged
+    against the model on the old ones, a candidate is judged by which samples the noise on
+    the velocity leaves below the deadband: on clean NEES-UCSD records (tests/calibrate/
+    test_timing.py) the displacement re-timed 0.3 sample either way moved the held-out
+    error up by 2.9-3.4 %, on the same samples by 0.2 % or less."""
+    from sim.calibrate.residuals import nrmse_runs
+    from sim.calibrate.trace import fit_terms, flatness, predict
+
+    bf = [on_rows(mr, r.rows) for mr, r in zip(mfit, nf)]
+    bh = [on_rows(mr, r.rows) for mr, r in zip(mho, nh)]
+    fit = fit_terms(bf, cur.terms, refine="none")
+    return fit, nrmse_runs(bh, predict(bh, fit)), flatness(bf, fit.residuals)
+
+
+def on_rows(mr, rows: np.ndarray):
+    """A mechanical run read over ``rows`` (its weighted target and stacked columns made
+    anew, its weights kept: :func:`retime`'s)."""
+    new = dataclasses.replace(mr, rows=rows, extra={k: v for k, v in mr.extra.items() if k not in ("y", "columns")})
+    if "w" in new.extra:
+        new.extra["y"] = (new.residual[new.rows] * new.extra["w"]).reshape(-1)
+    return new
 
 
 def placed(mfit, terms, cand: Candidate, x: float) -> tuple[float, float, dict | None]:
@@ -295,6 +360,48 @@ def placed(mfit, terms, cand: Candidate, x: float) -> tuple[float, float, dict |
     # nearer the displacement is not enough: an accelerometer 2 samples late and a
     # pressure 1 early put 14.5 ms on the acceleration, which the displacement read 9.8
     return x_kin, aligned["sigma_after_s"], {**aligned, "from_displacement": True}
+
+
+def read_by_the_acceleration(mfit, cand: Candidate) -> tuple[float, float, dict | None]:
+    """The motion sensors' delay (the displacement's, the velocity's with it) at which the
+    displacement and the acceleration through its chain agree (:mod:`sim.calibrate.anchor`),
+    its standard deviation and the reading (:func:`kinematic_check`'s keys). Offered where
+    the displacement puts the acceleration off its chain (:func:`round_candidates`), beside
+    the acceleration's own candidates: where the balance sees the force and the
+    acceleration apart, the acceleration is the one off and its candidate explains more;
+    where it sees them together, the displacement is. Its value is the kinematics', not the
+    balance's: a Coulomb law switches a whole sample at a time, so the balance's residual is
+    a staircase in the motion's delay, its least on the worked example's records on time
+    already 0.4-0.8 sample off. Read again with the displacement aligned by the last
+    reading, as :func:`_displacement_reading`."""
+    from sim.calibrate import anchor
+
+    def at(x):
+        return anchor.measure([dataclasses.replace(mr, u=motion_at(mr, x)[0]) for mr in mfit])
+
+    first = a = at(cand.neutral)
+    x = cand.neutral
+    for _ in range(ANCHOR_PASSES):
+        if not math.isfinite(a.delay_s):
+            return x, math.inf, None
+        x -= a.delay_s  # the acceleration read early against the displacement: the displacement late
+        a = at(x)
+        if abs(a.delay_s) < 0.1 * a.sigma_s:
+            break
+    return (
+        x,
+        a.sigma_s,
+        {
+            "ok": True,
+            "reason": "",
+            "significant": first.significant,
+            "delay_before_s": float(first.delay_s),
+            "delay_after_s": float(a.delay_s),
+            "uncertainty_s": float(anchor.Z95 * a.sigma_s),
+            "sigma_after_s": a.sigma_s,
+            "band_hz": list(a.band_hz),
+        },
+    )
 
 
 def _displacement_reading(cand: Candidate, kin: dict, check) -> tuple[float, dict]:
@@ -410,7 +517,7 @@ def refit_accepted(mfit, mho, terms, done: list) -> tuple[list, list]:
             (c for c in candidates(mfit) if (c.name, c.where) == (entry["name"], entry["where"])),
             None,
         )
-        if cand is None or entry.get("timed_by") == "displacement":  # kinematics: the terms do not move it
+        if cand is None or entry.get("timed_by"):  # kinematics: the terms do not move it
             continue
         x = search(mfit, terms, cand)
         s = sigma(mfit, terms, cand, x)
@@ -476,11 +583,15 @@ def settled(before: list, entries: list) -> bool:
 def round_candidates(mfit, mho, cur, e_ho, flat, margin, effects, done) -> list:
     """Every timing candidate not yet accepted (``done``: effects_added entries) and
     allowed by ``effects`` (None: all), fitted and judged against the current fit."""
+    from sim.calibrate import anchor
+
     have = {(d["name"], d["where"]) for d in done}
     out = []
     for cand in candidates(mfit):
         if (cand.name, cand.where) in have or (effects and cand.name not in effects):
             continue
+        if cand.field == "motion_delay_s" and not anchor.measure(mfit).significant:
+            continue  # the displacement and the acceleration agree: nothing to time
         out.append(evaluate(mfit, mho, cur, cand, e_ho, flat, margin))
     return out
 
@@ -506,17 +617,21 @@ def log_line(row: dict) -> str:
 def added_entry(row: dict) -> dict:
     """The ``effects_added`` entry of an accepted timing candidate."""
     units = {"delay_s": "s", "cutoff_hz": "Hz"}
-    # the channel's whole delay or conditioner, as the balance fits it: in place of the
-    # declared one when the later path compares the record (sim.calibrate.paths)
+    motion = row["where"] == "channel:table_displacement"
+    kin = row.get("kinematics") or {}
+    # the force's and acceleration's whole delay or conditioner, as the balance fits it: in
+    # place of the declared one when the later path compares the record (sim.calibrate.paths);
+    # the motion's, beyond what it declares (its declared delay is read before any timing)
+    timed_by = "acceleration" if motion else "displacement" if kin.get("from_displacement") else None
     return {
         "name": row["name"],
         "where": row["where"],
-        "options": {**row.get("options", {}), "replaces_declared": True},
+        "options": {**row.get("options", {}), "replaces_declared": not motion},
         "parameters": row["parameters"],
         "uncertainty": row["uncertainty"],
         "units": {k: units[k] for k in row["parameters"]},
-        **({"timed_by": "displacement"} if (row.get("kinematics") or {}).get("from_displacement") else {}),
-        **_displacement_reads(row.get("kinematics") or {}),
+        **({"timed_by": timed_by} if timed_by else {}),
+        **_displacement_reads(kin),
     }
 
 
