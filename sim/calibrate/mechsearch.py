@@ -365,8 +365,11 @@ def timing_backward(ms: MechStage, cur, e_ho: float):
     margin. An acceleration delay timed by the displacement is put back only when the
     displacement puts it less than half a sample off its chain
     (:data:`sim.calibrate.timing.DISPLACEMENT_SKEW_SAMPLES`): the displacement's own skew
-    may be that large, so below it the displacement cannot say which of the two is late (a load cell 4 ms early and a displacement 0.3 sample early gave the
-    acceleration +0.32 ms while the load cell's delay waited, and the load cell -3.68 ms).
+    may be that large, so below it the displacement cannot say which of the two is late (a
+    load cell 4 ms early and a displacement 0.3 sample early gave the acceleration +0.32
+    ms while the load cell's delay waited, and the load cell -3.68 ms). The motion's own
+    delay, timed by the acceleration, is put back only when it is under half a sample
+    (beyond, it was accepted without a margin: :func:`sim.calibrate.timing._margin_of`).
     ``(fit, error)``."""
     from sim.calibrate import timing
     from sim.calibrate.residuals import nrmse_runs
@@ -405,6 +408,8 @@ def _may_drop(entry: dict, mr, declared: dict) -> bool:
     """Whether the backward pass may put a timing entry back (:func:`timing_backward`)."""
     from sim.calibrate.timing import DISPLACEMENT_SKEW_SAMPLES
 
+    if entry.get("timed_by") == "acceleration":  # the motion's own skew: no margin beyond a scan's (timing._margin_of)
+        return abs(entry["parameters"]["delay_s"]) < DISPLACEMENT_SKEW_SAMPLES * mr.dt
     if entry.get("timed_by") != "displacement":
         return True
     off = entry["parameters"]["delay_s"] - declared[mr.name]["accel_delay_s"]

@@ -319,3 +319,32 @@ def test_conditioner_at_a_low_record_rate_is_the_recorders():
     np.testing.assert_array_equal(  # at 1 kHz or more: the record's own rate, as before
         Conditioner(100.0, 4, FS)(x), sig.lfilter(*analog_lowpass(100.0, FS, 4), x)
     )
+
+
+def test_a_motion_off_by_more_than_a_recorders_scan_is_judged_without_a_margin():
+    """The motion's own delay is measured by the kinematics, not fitted: beyond half a
+    sample (a multiplexed recorder's scan) it is taken when the held-out error does not
+    rise, and the backward pass keeps it; under half a sample, and for every delay the
+    balance fits, the search's margin holds (tests/calibrate/test_real_record_suite.py has
+    the NEES-UCSD case that needs it)."""
+    from types import SimpleNamespace
+
+    from sim.calibrate.mechsearch import _may_drop
+    from sim.calibrate.timing import Candidate, _margin_of
+
+    dt = 1 / FS
+    motion = Candidate("sensor_delay", "channel:table_displacement", "delay_s", "motion_delay_s", -0.05, 0.05, 0.0)
+    accel = Candidate("sensor_delay", "channel:table_acceleration", "delay_s", "accel_delay_s", -0.05, 0.05, 0.0)
+    assert _margin_of(motion, -2 * dt, dt, 0.05) == 0.0
+    assert _margin_of(motion, 0.3 * dt, dt, 0.05) == 0.05
+    assert _margin_of(accel, 2 * dt, dt, 0.05) == 0.05
+    mr = SimpleNamespace(name="r", dt=dt)
+    entry = {
+        "name": "sensor_delay",
+        "where": motion.where,
+        "timed_by": "acceleration",
+        "parameters": {"delay_s": -2 * dt},
+    }
+    assert not _may_drop(entry, mr, {})
+    entry["parameters"]["delay_s"] = 0.3 * dt
+    assert _may_drop(entry, mr, {})
