@@ -190,10 +190,10 @@ def test_accelerometer_lag_is_found_on_the_acceleration_only(lab):
     e = found["channel:table_acceleration"]
     assert e["name"] == "sensor_delay", e
     d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
-    # within 3 sigma (u is 1.96 sigma): 1.890 +/- 0.104 ms measured. The balance re-times the
+    # within 3 sigma (u is 1.96 sigma): 1.889 +/- 0.107 ms measured. The balance re-times the
     # other terms by a cubic spline, exact for a whole sample (the force's one-sample skew:
-    # -4.869 +/- 0.027 ms for -4.883), 0.11 ms short for this 0.41-sample lag across the
-    # friction's jumps; the displacement alone times it at +1.984 +/- 0.012 ms (the row's
+    # -4.877 +/- 0.060 ms for -4.883), 0.11 ms short for this 0.41-sample lag across the
+    # friction's jumps; the displacement alone times it at +1.992 +/- 0.020 ms (the row's
     # kinematics)
     assert abs(d - 0.002) <= 3.0 / 1.96 * u and u < 2e-4, (d, u)
     row = next(c for c in res.candidates if c["accepted"] and c["name"] == "sensor_delay")
@@ -206,8 +206,8 @@ def test_pressure_early_and_accelerometer_late_at_once_each_on_its_channel(lab):
     """Both skews of the real record in issue #23 (the pressure leading, the accelerometer's
     conditioner lagging): the balance alone would put the whole 6.9 ms skew on one channel.
     The displacement times the acceleration first (its value, from the displacement, not
-    the balance: +1.994 +/- 0.012 ms measured), then the balance the force (-4.878 +/-
-    0.038 ms measured)."""
+    the balance: +9.7645 +/- 0.0188 ms measured), then the balance the force (-4.863 +/-
+    0.056 ms measured)."""
     mod = lab[0]
     lag = 2 / 204.8  # the issue's "about 2 samples" of conditioner lag (below a sample the
     # displacement cannot say which channel is late: a multiplexed recorder skews it that much)
@@ -216,11 +216,12 @@ def test_pressure_early_and_accelerometer_late_at_once_each_on_its_channel(lab):
     assert sorted(found) == ["channel:actuator_force", "channel:table_acceleration"], found
     acc, force = found["channel:table_acceleration"], found["channel:actuator_force"]
     assert acc["name"] == "sensor_delay" and acc.get("timed_by") == "displacement", acc
-    # the acceleration's truth lies 1.25 of its intervals out (9.7504 +/- 0.0122 ms for
-    # 9.7656 measured: a 0.16 % bias the phase variance does not hold)
-    for e, truth, k in ((acc, lag, 1.5), (force, -mod.PRESSURE_LEAD_S, 1.0)):
+    # the acceleration's truth inside its interval since the anchor reads 8 segments or
+    # more: in 1.25 s segments (5.9 of this record) it read 9.7504 +/- 0.0122 ms for 9.7656,
+    # 1.25 of its intervals out
+    for e, truth in ((acc, lag), (force, -mod.PRESSURE_LEAD_S)):
         d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
-        assert abs(d - truth) <= k * u and u < 2e-4, (e["where"], d, u)
+        assert abs(d - truth) <= u and u < 2e-4, (e["where"], d, u)
     refused = [
         c for c in res.candidates if c["where"] == "channel:actuator_force" and "its timing first" in c["reason"]
     ]
@@ -272,9 +273,9 @@ def test_a_displacement_late_by_its_declared_delay_calibrates_as_on_time(lab, on
 def test_a_displacement_skew_nobody_declared_is_timed_by_the_acceleration(lab, on_time, samples):
     """The LVDT 2 samples late or early, not declared: the acceleration (on its declared
     chain, as the force is) puts the displacement off, and the motion's own delay is read
-    from the two (9.7757 +/- 0.0124 ms late and -9.7562 +/- 0.0116 ms early measured, for
+    from the two (9.7704 +/- 0.0209 ms late and -9.7678 +/- 0.0192 ms early measured, for
     9.7656). With it the records calibrate as on time: the same effects within their
-    intervals (858.44 kg and 50.3 kg modes, 1201.4 N), held out 1.847 % against 1.843 %.
+    intervals (858.44 kg and 48.41 kg modes, 1201.7 N), held out 1.844 % against 1.843 %.
     Before it the late records lost the frame's second mode (876 kg, 1187 N, 8.5 % held
     out): a friction switching two samples off the force."""
     lag = samples / 204.8
@@ -283,7 +284,7 @@ def test_a_displacement_skew_nobody_declared_is_timed_by_the_acceleration(lab, o
     assert list(found) == ["channel:table_displacement"], found
     e = found["channel:table_displacement"]
     d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
-    assert abs(d - lag) <= u < 2e-5, (d, u)
+    assert abs(d - lag) <= u < 3e-5, (d, u)
     assert e["timed_by"] == "acceleration" and not e["options"]["replaces_declared"], e
     laws = [x for x in res.effects_added if x["name"] not in TIMING]
     assert _found(on_time) == [(x["name"], x["where"]) for x in laws], res.effects_added
