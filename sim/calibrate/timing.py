@@ -77,7 +77,9 @@ COHERENT_SHARE = 0.5
 ANCHOR_PASSES = 3
 #: how far the displacement's own timing may be off, in samples (assumed: half a sample, a
 #: multiplexed recorder's scan; the test records skew it 0.3 sample). Nearer than this the
-#: displacement cannot tell an acceleration's delay from the balance's own reading of it
+#: displacement cannot tell an acceleration's delay from the balance's own reading of it;
+#: beyond it, the motion's own delay read by the acceleration needs no held-out margin
+#: (:func:`_margin_of`)
 DISPLACEMENT_SKEW_SAMPLES = 0.5
 #: the effect types of these candidates (``--effects`` names them)
 TIMING_EFFECTS = ("sensor_delay", "sensor_lowpass")
