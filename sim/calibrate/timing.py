@@ -143,6 +143,14 @@ class Candidate:
     order: int | None = None
     unit: str = "s"
 
+    @property
+    def read_by_kinematics(self) -> bool:
+        """Whether the value is the acceleration's reading, not the balance's fit (the
+        motion's own delay, :func:`read_by_the_acceleration`): it then needs no coherence
+        with the motion, is judged on the re-timed motion's own samples, and beyond half
+        a sample needs no held-out margin (:func:`_margin_of`)."""
+        return self.field == "motion_delay_s"
+
     def state(self, base: dict, x: float) -> dict:
         s = dict(base)
         if self.field == "accel_lowpass_hz":  # searched in 1/cut-off (a delay-like scale)
@@ -270,13 +278,13 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
     from sim.calibrate.residuals import nrmse_runs
     from sim.calibrate.trace import fit_terms, flatness, predict
 
-    if cand.field == "motion_delay_s":
+    if cand.read_by_kinematics:
         x, s, kin = read_by_the_acceleration(mfit, cand)
     else:
         x, s, kin = placed(mfit, cur.terms, cand, search(mfit, cur.terms, cand))
     nf = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mfit]
     nh = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mho]
-    if cand.field == "motion_delay_s":  # judged on the samples where the re-timed motion moves
+    if cand.read_by_kinematics:  # judged on the samples where the re-timed motion moves
         cur, e_ho, flat = _on_the_rows_of(mfit, mho, nf, nh, cur)
     new = fit_terms(nf, cur.terms, refine="none")
     e_new = nrmse_runs(nh, predict(nh, new))
@@ -286,7 +294,7 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
     share = coherent_share(mfit, cur.residuals, new.residuals)
     # the motion's delay is the kinematics', not fitted to the residual, and what it takes
     # out goes through the friction's sign: not a filtered copy of the motion's own force
-    if ok and share < COHERENT_SHARE and cand.field != "motion_delay_s":
+    if ok and share < COHERENT_SHARE and not cand.read_by_kinematics:
         ok, why = False, f"what it takes out of the residual is {100 * share:.0f} % coherent with the motion"
     if ok and kin is not None and not kin["ok"]:
         ok, why = False, kin["reason"]
@@ -319,7 +327,7 @@ def _margin_of(cand: Candidate, x: float, dt: float, margin: float) -> float:
     most of what it changes: NEES-UCSD records with the displacement 2 samples early and
     8 t added took the added mass 3.9 % low while the delay moved the held-out error by
     1.7 %."""
-    if cand.field == "motion_delay_s" and abs(x - cand.neutral) > DISPLACEMENT_SKEW_SAMPLES * dt:
+    if cand.read_by_kinematics and abs(x - cand.neutral) > DISPLACEMENT_SKEW_SAMPLES * dt:
         return 0.0
     return margin
 
@@ -605,7 +613,7 @@ def round_candidates(mfit, mho, cur, e_ho, flat, margin, effects, done) -> list:
     for cand in candidates(mfit):
         if (cand.name, cand.where) in have or (effects and cand.name not in effects):
             continue
-        if cand.field == "motion_delay_s" and not anchor.measure(mfit).significant:
+        if cand.read_by_kinematics and not anchor.measure(mfit).significant:
             continue  # the displacement and the acceleration agree: nothing to time
         out.append(evaluate(mfit, mho, cur, cand, e_ho, flat, margin))
     return out
