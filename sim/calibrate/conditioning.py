@@ -58,6 +58,21 @@ def channel_conditioning(run) -> dict:
     return out
 
 
+def velocity_derived(run) -> bool:
+    """Whether ``run``'s velocity is one an import made from its displacement (map
+    ``derive_velocity``: ``meta.derived_channels``)."""
+    return "table_velocity" in ((run.meta or {}).get("derived_channels") or {})
+
+
+def declared_channels(run) -> dict:
+    """:func:`channel_conditioning`, a velocity an import made from the displacement given
+    the displacement's chain (it went through it)."""
+    chans = channel_conditioning(run)
+    if velocity_derived(run) and "table_displacement" in chans:
+        chans["table_velocity"] = chans["table_displacement"]
+    return chans
+
+
 def recorder(run) -> dict:
     """The recorder's own settings (``meta.recorder``), {} when the record has none."""
     rec = (run.meta or {}).get("recorder") or {}
@@ -69,17 +84,13 @@ def of_run(run) -> dict:
     settings, the declared conditioning, and how long the record's force lags its motion
     (``meta.force_lag_s``: a simulator's own record; 0 for a recorder's)."""
     lag = float((run.meta or {}).get("force_lag_s") or 0.0)
-    derived = "table_velocity" in ((run.meta or {}).get("derived_channels") or {})
-    chans = channel_conditioning(run)
-    if derived and "table_displacement" in chans:  # the velocity made from it went through its chain
-        chans["table_velocity"] = chans["table_displacement"]
     return {
         "recorder": recorder(run),
-        "channels": chans,
+        "channels": declared_channels(run),
         "force_lag_s": lag,
         # an import's velocity is the displacement's central difference (map derive_velocity):
         # the model's is made alike, sin(w T) / T, 6 % under w at 20 Hz of a 204.8 Hz record
-        "velocity_from_displacement": derived,
+        "velocity_from_displacement": velocity_derived(run),
     }
 
 
@@ -326,17 +337,14 @@ def motion_on_the_force_clock(run, u: np.ndarray, v: np.ndarray) -> tuple:
     springs off the force: the worked example's LVDT 2 samples late and read as if on
     time, 8.5 % held out instead of 1.84 %, the frame's second mode lost
     (tests/calibrate/test_timing_anchor.py)."""
-    cond = channel_conditioning(run)
+    cond = declared_channels(run)
 
     def late(channel: str) -> float:
         spec = cond.get(channel, {})
         fc = spec.get("lowpass_hz")
         return spec.get("delay_s", 0.0) + (low_frequency_delay_s(fc, spec["lowpass_order"]) if fc else 0.0)
 
-    du = late("table_displacement")
-    derived = "table_velocity" in ((run.meta or {}).get("derived_channels") or {})
-    dv = du if derived else late("table_velocity")
-    return shift(u, -du, run.dt), shift(v, -dv, run.dt)
+    return shift(u, -late("table_displacement"), run.dt), shift(v, -late("table_velocity"), run.dt)
 
 
 def prefilter_of(state: dict, run):

@@ -440,12 +440,11 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
 
 def _declared_other(mr, joints, declared) -> np.ndarray:
     """(n, k) the declared model's forces other than the inertial ones for ``mr``'s
-    recorded motion, unfiltered: its joints' (:class:`JointTerms`) and its effects' laws."""
+    recorded motion, unfiltered: its joints' (:class:`JointTerms`) and its effects' laws
+    (:func:`sim.calibrate.laws.declared_forces`: laws of one coefficient, first order in it)."""
     other = joints.force(mr.u, mr.v, mr.dt)
     for law, where, vals in declared:
         other = other + sum(vals[k] * Q for k, Q in zip(law.linears, _raw_columns(mr, law, where, vals)))
-        if law.second_order is not None:
-            other = other + mr.second(law, where, vals, vals)
     return other
 
 

@@ -116,9 +116,15 @@ def retime(mr, state: dict):
     new.force = new.filt(f @ mr.J)
     new.model = new.chain(mr.extra["inertial"] + new.filt(new.extra["other"]))
     new.extra.update(actuator_force=f, timing=dict(state))
-    if "w" in new.extra:
-        new.extra["y"] = (new.residual[new.rows] * new.extra["w"]).reshape(-1)
-    return new
+    return _restacked(new)
+
+
+def _restacked(mr):
+    """``mr`` with its weighted target made anew from its residual and rows (its weights
+    kept: a timing is scored by the measure the run was)."""
+    if "w" in mr.extra:
+        mr.extra["y"] = (mr.residual[mr.rows] * mr.extra["w"]).reshape(-1)
+    return mr
 
 
 def motion_at(mr, delay_s: float) -> tuple:
@@ -352,10 +358,9 @@ def _on_the_rows_of(mfit, mho, nf, nh, cur) -> tuple:
 def on_rows(mr, rows: np.ndarray):
     """A mechanical run read over ``rows`` (its weighted target and stacked columns made
     anew, its weights kept: :func:`retime`'s)."""
-    new = dataclasses.replace(mr, rows=rows, extra={k: v for k, v in mr.extra.items() if k not in ("y", "columns")})
-    if "w" in new.extra:
-        new.extra["y"] = (new.residual[new.rows] * new.extra["w"]).reshape(-1)
-    return new
+    return _restacked(
+        dataclasses.replace(mr, rows=rows, extra={k: v for k, v in mr.extra.items() if k not in ("y", "columns")})
+    )
 
 
 def placed(mfit, terms, cand: Candidate, x: float) -> tuple[float, float, dict | None]:
@@ -399,8 +404,8 @@ def read_by_the_acceleration(mfit, cand: Candidate) -> tuple[float, float, dict 
     reading, as :func:`_displacement_reading`."""
     from sim.calibrate import anchor
 
-    def at(x):
-        return anchor.measure([dataclasses.replace(mr, u=motion_at(mr, x)[0]) for mr in mfit])
+    def at(x):  # the displacement re-read (the anchor reads no velocity)
+        return anchor.measure([dataclasses.replace(mr, u=shift(mr.extra["motion"][0], -x, mr.dt)) for mr in mfit])
 
     first = a = at(cand.neutral)
     x = cand.neutral
