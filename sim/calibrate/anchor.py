@@ -48,6 +48,12 @@ TOP_FRACTION = 0.4
 #: bins a line needs before its slope counts (assumed: 5)
 MIN_BINS = 5
 Z95 = 1.96
+#: standard deviations a line's phase at zero frequency may sit off the origin for the
+#: line to be a delay's (assumed: 3; a pure delay leaves it off by chance 0.3 % of the
+#: time). Measured on NEES-UCSD records: a velocity 2 samples late, +0.6; the LHPOST DAQ's
+#: complementary velocity (the displacement's derivative below 2 Hz, the 100 Hz
+#: conditioned acceleration's integral above) against its displacement, -1 278
+DELAY_Z = 3.0
 
 
 @dataclass(frozen=True)
@@ -60,6 +66,17 @@ class Anchor:
     sigma_s: float
     n_bins: int
     band_hz: tuple
+    #: the phase at zero frequency of a free line through the same bins (rad) and its
+    #: standard deviation: a delay's phase passes through the origin, a filter's bends
+    #: (:attr:`a_delay`)
+    offset_rad: float = 0.0
+    offset_sigma_rad: float = math.inf
+
+    @property
+    def a_delay(self) -> bool:
+        """The phase is a line through the origin, as a delay's: a filter's bends, and a
+        free line through its bins meets zero frequency off the origin (:data:`DELAY_Z`)."""
+        return not abs(self.offset_rad) > DELAY_Z * self.offset_sigma_rad
 
     @property
     def significant(self) -> bool:
@@ -108,12 +125,28 @@ def _coherent_bins(x, a, fs: float, top_hz: float) -> tuple:
     return f[keep], Pxa[keep], Pxx[keep], (1.0 - g2) / (2.0 * n_seg * g2)
 
 
-def measure(mruns) -> Anchor:
-    """The acceleration's delay beyond the runs' chain, pooled over runs and DOFs: the
+def velocity_bins(mr, j: int) -> tuple:
+    """``(omega, phase, variance)`` of DOF ``j`` of a mechanical run: the coherent bins of
+    the recorded velocity against the recorded displacement (phase of their transfer
+    function over i omega, -omega tau for a velocity tau late; a velocity the import made
+    by a central difference has none)."""
+    fs = 1.0 / mr.dt
+    rows = np.flatnonzero(mr.rows)
+    if len(rows) < 16:
+        return (np.zeros(0),) * 3
+    span = slice(rows[0], rows[-1] + 1)
+    f, Puv, _Puu, var = _coherent_bins(mr.u[span, j], mr.v[span, j], fs, TOP_FRACTION * fs)
+    return 2 * np.pi * f, np.angle(-1j * Puv), var
+
+
+def measure(mruns, bins_of=None) -> Anchor:
+    """The acceleration's delay beyond the runs' chain (``bins_of``: :func:`phase_bins`; or
+    the velocity's, :func:`velocity_bins`), pooled over runs and DOFs: the
     weighted least-squares slope of phase = -omega tau, its standard deviation from the
     weights, scaled up by the scatter about the line when that is larger (a conditioner of
     another shape bends the phase: the line then fits it less well and says so)."""
-    bins = [phase_bins(mr, j) for mr in mruns for j in range(mr.u.shape[1])]
+    bins_of = bins_of or phase_bins
+    bins = [bins_of(mr, j) for mr in mruns for j in range(mr.u.shape[1])]
     w = np.concatenate([b[0] for b in bins]) if bins else np.zeros(0)
     if len(w) < MIN_BINS:
         return Anchor(math.nan, math.inf, len(w), (0.0, 0.0))
@@ -124,7 +157,20 @@ def measure(mruns) -> Anchor:
     chi2 = float(np.sum(wt * (ph + w * tau) ** 2)) / max(len(w) - 1, 1)
     sigma = math.sqrt(max(chi2, 1.0) / sw2)
     f = w / (2 * np.pi)
-    return Anchor(tau, sigma, len(w), (float(f.min()), float(f.max())))
+    return Anchor(tau, sigma, len(w), (float(f.min()), float(f.max())), *_offset(w, ph, wt))
+
+
+def _offset(w: np.ndarray, ph: np.ndarray, wt: np.ndarray) -> tuple[float, float]:
+    """``(c, sigma_c)``: the intercept of the weighted line phase = c - omega tau through
+    the bins and its standard deviation (scaled up by the scatter about the line, as the
+    slope's)."""
+    X = np.column_stack([np.ones_like(w), -w])
+    A = X.T @ (wt[:, None] * X)
+    if len(w) < 3 or np.linalg.cond(A) > 1e12:
+        return 0.0, math.inf
+    coef = np.linalg.solve(A, X.T @ (wt * ph))
+    chi2 = float(np.sum(wt * (ph - X @ coef) ** 2)) / (len(w) - 2)
+    return float(coef[0]), math.sqrt(max(chi2, 1.0) * np.linalg.inv(A)[0, 0])
 
 
 def corroborates(before: Anchor, after: Anchor) -> tuple[bool, str]:
@@ -191,4 +237,4 @@ def _magnitude_bins(x, a, fs: float, order: int):
     return f, np.abs(Pxa) / Pxx / (2 * np.pi * f) ** order, var
 
 
-__all__ = ["Anchor", "corroborates", "kinematic_gain", "measure", "phase_bins"]
+__all__ = ["Anchor", "corroborates", "kinematic_gain", "measure", "phase_bins", "velocity_bins"]

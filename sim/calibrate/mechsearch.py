@@ -406,9 +406,9 @@ def timing_backward(ms: MechStage, cur, e_ho: float):
 
 def _may_drop(entry: dict, mr, declared: dict) -> bool:
     """Whether the backward pass may put a timing entry back (:func:`timing_backward`)."""
-    from sim.calibrate.timing import DISPLACEMENT_SKEW_SAMPLES
+    from sim.calibrate.timing import DISPLACEMENT_SKEW_SAMPLES, MOTION_WHERES
 
-    if entry.get("timed_by") == "acceleration":  # the motion's own skew: no margin beyond a scan's (timing._margin_of)
+    if entry["where"] in MOTION_WHERES:  # the motion's own skew: no margin beyond a scan's (timing._margin_of)
         return abs(entry["parameters"]["delay_s"]) < DISPLACEMENT_SKEW_SAMPLES * mr.dt
     if entry.get("timed_by") != "displacement":
         return True

@@ -397,7 +397,8 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         u, v = conditioning.motion_on_the_force_clock(r, u, v)
         f = _force_at_acceleration_instant(r)
         known = conditioning.declared_state(r, accel_lowpass_hz, desc.accelerometer_filter_order)
-        known["motion_delay_s"] = 0.0  # the motion's own skew beyond what it declares (timing.py)
+        # the motion's own skew beyond what it declares (timing.py)
+        known.update(motion_delay_s=0.0, velocity_delay_s=0.0)
         pre = conditioning.prefilter_of(known, r)
         mr = MechRun(
             name=r.name,
@@ -432,6 +433,7 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         inertial = a @ Me.T if parts is None else a @ Me.T + parts.force(a, r.dt)
         mr.model = mr.chain(inertial + mr.filt(other))
         mr.extra.update(inertial=inertial, other=other, timing=known, basis=BasisCache(), motion=(u, v))
+        mr.extra["velocity_derived"] = conditioning.velocity_derived(r)  # no skew of its own (timing.py)
         mr.rows = moving_rows(v, pre, r.dt)
         mr.excited = excited_dofs(mr, J6)
         out.append(mr)

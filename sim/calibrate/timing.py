@@ -21,7 +21,11 @@ model's forces:
   multiplexed recorder); the declared forces are made from the motion read at t +
   delay_s, and the still samples are its own. Its value is not the balance's: it is the
   delay at which the displacement and the acceleration agree
-  (:func:`read_by_the_acceleration`).
+  (:func:`read_by_kinematics`);
+* ``sensor_delay`` at ``channel:table_velocity``: a velocity of its own channel is
+  ``delay_s`` late beyond the displacement (its value: where the two agree). The friction's
+  switching and the damping read the velocity: on NEES-UCSD records a velocity 2 samples
+  early took an 8 t added mass 3.8 % low.
 
 What a record declares (``meta.channel_conditioning``, else the table's
 ``accelerometer_bandwidth_hz``) is the starting point (:func:`declared_state`). Each
@@ -81,6 +85,11 @@ ANCHOR_PASSES = 3
 #: beyond it, the motion's own delay read by the acceleration needs no held-out margin
 #: (:func:`_margin_of`)
 DISPLACEMENT_SKEW_SAMPLES = 0.5
+#: the timing fields of the motion's own skew (the displacement's and velocity's together;
+#: the velocity's own), read by the kinematics (:func:`read_by_kinematics`)
+MOTION_FIELDS = ("motion_delay_s", "velocity_delay_s")
+#: their places, and the sensor each is timed against
+MOTION_WHERES = {"channel:table_displacement": "acceleration", "channel:table_velocity": "displacement"}
 #: the effect types of these candidates (``--effects`` names them)
 TIMING_EFFECTS = ("sensor_delay", "sensor_lowpass")
 
@@ -95,7 +104,7 @@ def retime(mr, state: dict):
     from sim.calibrate.residuals import moving_rows
 
     old = mr.extra["timing"]
-    same_motion = old.get("motion_delay_s", 0.0) == state.get("motion_delay_s", 0.0)
+    same_motion = all(old.get(k, 0.0) == state.get(k, 0.0) for k in MOTION_FIELDS)
     same_filter = same_motion and all(
         old[k] == state[k] for k in ("accel_delay_s", "accel_lowpass_hz", "accel_lowpass_order")
     )
@@ -109,7 +118,7 @@ def retime(mr, state: dict):
     new.prefilter = Conditioner(float(fc), int(state["accel_lowpass_order"]), 1.0 / mr.dt) if fc else None
     new.filter_delay_s = state["accel_delay_s"]
     if not same_motion:  # the motion re-read: the declared forces made from it anew, its still samples its own
-        new.u, new.v = motion_at(mr, state["motion_delay_s"])
+        new.u, new.v = motion_at(mr, state["motion_delay_s"], state.get("velocity_delay_s", 0.0))
         new.extra["other"] = mr.extra["declared_other"](new)
         new.rows = moving_rows(new.v, new.prefilter, mr.dt)
     f = shift(mr.extra["force_at_instant"], -state["force_delay_s"], mr.dt)
@@ -127,11 +136,12 @@ def _restacked(mr):
     return mr
 
 
-def motion_at(mr, delay_s: float) -> tuple:
+def motion_at(mr, delay_s: float, velocity_delay_s: float = 0.0) -> tuple:
     """``(u, v)``: the run's displacement and velocity as read at its declared timing
-    (``extra["motion"]``), read ``delay_s`` later (the motion sensors that much late)."""
+    (``extra["motion"]``), read ``delay_s`` later (the motion sensors that much late), the
+    velocity ``velocity_delay_s`` later still (its own skew)."""
     u, v = mr.extra["motion"]
-    return shift(u, -delay_s, mr.dt), shift(v, -delay_s, mr.dt)
+    return shift(u, -delay_s, mr.dt), shift(v, -(delay_s + velocity_delay_s), mr.dt)
 
 
 @dataclass
@@ -152,10 +162,10 @@ class Candidate:
     @property
     def read_by_kinematics(self) -> bool:
         """Whether the value is the acceleration's reading, not the balance's fit (the
-        motion's own delay, :func:`read_by_the_acceleration`): it then needs no coherence
+        motion's own delay, :func:`read_by_kinematics`): it then needs no coherence
         with the motion, is judged on the re-timed motion's own samples, and beyond half
         a sample needs no held-out margin (:func:`_margin_of`)."""
-        return self.field == "motion_delay_s"
+        return self.field in MOTION_FIELDS
 
     def state(self, base: dict, x: float) -> dict:
         s = dict(base)
@@ -196,7 +206,7 @@ def candidates(mruns) -> list[Candidate]:
             base["accel_delay_s"],
         ),
     ]
-    out.append(  # the motion sensors' own skew, timed by the acceleration (:func:`read_by_the_acceleration`)
+    out.append(  # the motion sensors' own skew, timed by the acceleration (:func:`read_by_kinematics`)
         Candidate(
             "sensor_delay",
             "channel:table_displacement",
@@ -207,6 +217,8 @@ def candidates(mruns) -> list[Candidate]:
             base.get("motion_delay_s", 0.0),
         )
     )
+    if not all(mr.extra.get("velocity_derived") for mr in mruns):
+        out.append(velocity_candidate(base))
     g0 = 1.0 / base["accel_lowpass_hz"] if base["accel_lowpass_hz"] else 0.0
     for order in sorted(set(ORDERS) | {base["accel_lowpass_order"]}):  # the declared order
         out.append(
@@ -223,6 +235,20 @@ def candidates(mruns) -> list[Candidate]:
             )
         )
     return out
+
+
+def velocity_candidate(base: dict) -> Candidate:
+    """The velocity's own skew against the displacement: a velocity of its own channel
+    (a transducer's, a recorder's), not one an import made from the displacement."""
+    return Candidate(
+        "sensor_delay",
+        "channel:table_velocity",
+        "delay_s",
+        "velocity_delay_s",
+        -MAX_DELAY_S,
+        MAX_DELAY_S,
+        base.get("velocity_delay_s", 0.0),
+    )
 
 
 def _rss(mruns, terms, cand, x) -> float:
@@ -277,15 +303,16 @@ def sigma(mruns, terms, cand: Candidate, x: float) -> float:
     return float(hac_sigma(J, y - X @ theta, _segments(runs))[-1])
 
 
-def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: float) -> dict:
+def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: float, first=None) -> dict:
     """The candidate fitted and judged: ``{"row": candidates row, "accepted": bool,
-    "fit", "mfit", "mho"}`` (the retimed runs and the refit when accepted)."""
+    "fit", "mfit", "mho"}`` (the retimed runs and the refit when accepted); ``first``: a
+    kinematic candidate's reading at its neutral value, when it was taken to offer it."""
     from sim.calibrate.acceptance import accept_numbers
     from sim.calibrate.residuals import nrmse_runs
     from sim.calibrate.trace import fit_terms, flatness, predict
 
     if cand.read_by_kinematics:
-        x, s, kin = read_by_the_acceleration(mfit, cand)
+        x, s, kin = read_by_kinematics(mfit, cand, first)
     else:
         x, s, kin = placed(mfit, cur.terms, cand, search(mfit, cur.terms, cand))
     nf = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mfit]
@@ -390,38 +417,42 @@ def placed(mfit, terms, cand: Candidate, x: float) -> tuple[float, float, dict |
     return x_kin, aligned["sigma_after_s"], {**aligned, "from_displacement": True}
 
 
-def read_by_the_acceleration(mfit, cand: Candidate) -> tuple[float, float, dict | None]:
-    """The motion sensors' delay (the displacement's, the velocity's with it) at which the
-    displacement and the acceleration through its chain agree (:mod:`sim.calibrate.anchor`),
-    its standard deviation and the reading (:func:`kinematic_check`'s keys). Offered where
-    the displacement puts the acceleration off its chain (:func:`round_candidates`), beside
-    the acceleration's own candidates: where the balance sees the force and the
-    acceleration apart, the acceleration is the one off and its candidate explains more;
-    where it sees them together, the displacement is. Its value is the kinematics', not the
-    balance's: a Coulomb law switches a whole sample at a time, so the balance's residual is
-    a staircase in the motion's delay, its least on the worked example's records on time
-    already 0.4-0.8 sample off. Read again with the displacement aligned by the last
-    reading, as :func:`_displacement_reading`."""
+def read_by_kinematics(mfit, cand: Candidate, first=None) -> tuple[float, float, dict | None]:
+    """The motion's own delay (:data:`MOTION_FIELDS`) at which two sensors of one motion
+    agree (:mod:`sim.calibrate.anchor`), its standard deviation and the reading
+    (:func:`kinematic_check`'s keys): the displacement's (the velocity's with it) where the
+    re-read displacement and the acceleration through its chain agree; the velocity's own
+    where the re-read velocity and the displacement do. Offered where they disagree
+    (:func:`round_candidates`), beside the acceleration's own candidates: where the balance
+    sees the force and the acceleration apart, the acceleration is the one off and its
+    candidate explains more; where it sees them together, the displacement is. Its value is
+    the kinematics', not the balance's: a Coulomb law switches a whole sample at a time, so
+    the balance's residual is a staircase in the motion's delay, its least on the worked
+    example's records on time already 0.4-0.8 sample off. Read again with the sensor
+    aligned by the last reading, as :func:`_displacement_reading`. A velocity whose phase
+    against the displacement is not a delay's (:attr:`sim.calibrate.anchor.Anchor.a_delay`:
+    a filtered velocity, as the LHPOST DAQ's complementary one) is not a skew: the reading
+    says so and the candidate is refused."""
     from sim.calibrate import anchor
 
-    def at(x):  # the displacement re-read (the anchor reads no velocity)
-        return anchor.measure([dataclasses.replace(mr, u=shift(mr.extra["motion"][0], -x, mr.dt)) for mr in mfit])
-
-    first = a = at(cand.neutral)
+    first = a = first if first is not None else _kinematic_reading(mfit, cand, cand.neutral)
     x = cand.neutral
     for _ in range(ANCHOR_PASSES):
         if not math.isfinite(a.delay_s):
             return x, math.inf, None
-        x -= a.delay_s  # the acceleration read early against the displacement: the displacement late
-        a = at(x)
+        # the acceleration read early against the displacement: the displacement late; the
+        # velocity read late against the displacement: the velocity late
+        x += a.delay_s if cand.field == "velocity_delay_s" else -a.delay_s
+        a = _kinematic_reading(mfit, cand, x)
         if abs(a.delay_s) < 0.1 * a.sigma_s:
             break
+    bent = cand.field == "velocity_delay_s" and not a.a_delay
     return (
         x,
         a.sigma_s,
         {
-            "ok": True,
-            "reason": "",
+            "ok": not bent,
+            "reason": _bent_reason(a) if bent else "",
             "significant": first.significant,
             "delay_before_s": float(first.delay_s),
             "delay_after_s": float(a.delay_s),
@@ -429,6 +460,33 @@ def read_by_the_acceleration(mfit, cand: Candidate) -> tuple[float, float, dict 
             "sigma_after_s": a.sigma_s,
             "band_hz": list(a.band_hz),
         },
+    )
+
+
+def _bent_reason(a) -> str:
+    from sim.calibrate.anchor import Z95
+
+    return (
+        "the velocity's phase against the displacement is not a delay's: a line through it meets 0 Hz "
+        f"at {a.offset_rad:+.4f} +/- {Z95 * a.offset_sigma_rad:.4f} rad (a filtered velocity, not a skewed one)"
+    )
+
+
+def _kinematic_reading(mfit, cand: Candidate, x: float):
+    """The anchor (:func:`sim.calibrate.anchor.measure`) of the runs with ``cand`` at
+    ``x``: the acceleration against the re-read displacement, or the re-read velocity
+    against the displacement."""
+    from sim.calibrate import anchor
+
+    def delays(mr) -> list:
+        return [cand.state(mr.extra["timing"], x).get(k, 0.0) for k in MOTION_FIELDS]
+
+    if cand.field == "velocity_delay_s":  # the velocity re-read, against the displacement as the runs read it
+        runs = [dataclasses.replace(mr, v=shift(mr.extra["motion"][1], -sum(delays(mr)), mr.dt)) for mr in mfit]
+        return anchor.measure(runs, anchor.velocity_bins)
+    # the displacement re-read (the anchor reads no velocity)
+    return anchor.measure(
+        [dataclasses.replace(mr, u=shift(mr.extra["motion"][0], -delays(mr)[0], mr.dt)) for mr in mfit]
     )
 
 
@@ -611,16 +669,15 @@ def settled(before: list, entries: list) -> bool:
 def round_candidates(mfit, mho, cur, e_ho, flat, margin, effects, done) -> list:
     """Every timing candidate not yet accepted (``done``: effects_added entries) and
     allowed by ``effects`` (None: all), fitted and judged against the current fit."""
-    from sim.calibrate import anchor
-
     have = {(d["name"], d["where"]) for d in done}
     out = []
     for cand in candidates(mfit):
         if (cand.name, cand.where) in have or (effects and cand.name not in effects):
             continue
-        if cand.read_by_kinematics and not anchor.measure(mfit).significant:
-            continue  # the displacement and the acceleration agree: nothing to time
-        out.append(evaluate(mfit, mho, cur, cand, e_ho, flat, margin))
+        first = _kinematic_reading(mfit, cand, cand.neutral) if cand.read_by_kinematics else None
+        if first is not None and not first.significant:
+            continue  # the two sensors of the motion agree: nothing to time
+        out.append(evaluate(mfit, mho, cur, cand, e_ho, flat, margin, first))
     return out
 
 
@@ -645,12 +702,12 @@ def log_line(row: dict) -> str:
 def added_entry(row: dict) -> dict:
     """The ``effects_added`` entry of an accepted timing candidate."""
     units = {"delay_s": "s", "cutoff_hz": "Hz"}
-    motion = row["where"] == "channel:table_displacement"
+    motion = row["where"] in MOTION_WHERES
     kin = row.get("kinematics") or {}
     # the force's and acceleration's whole delay or conditioner, as the balance fits it: in
     # place of the declared one when the later path compares the record (sim.calibrate.paths);
     # the motion's, beyond what it declares (its declared delay is read before any timing)
-    timed_by = "acceleration" if motion else "displacement" if kin.get("from_displacement") else None
+    timed_by = MOTION_WHERES.get(row["where"]) or ("displacement" if kin.get("from_displacement") else None)
     return {
         "name": row["name"],
         "where": row["where"],

@@ -101,6 +101,46 @@ def test_anchor_against_a_chain_applies_it_to_the_displacement():
     assert late.significant and 7e-3 < late.delay_s < 9e-3, late.text()
 
 
+def _velocity_of(seed: int, lag_s: float, crossover_hz: float | None = None, fs: float = 204.8) -> _Run:
+    """A run of :func:`_kinematics`'s motion (on time) whose velocity is its own channel:
+    the displacement's derivative ``lag_s`` late, or (``crossover_hz``) a complementary
+    velocity as the LHPOST's DAQ makes it, the displacement's derivative below the
+    crossover and the integral of the acceleration through a 4-pole 50 Hz conditioner
+    above; 1 mm/s of noise."""
+    import scipy.signal as sig
+
+    r = _kinematics(seed, 0.0, fs)
+    u = r.u[:, 0]
+    n = len(u)
+    f = np.fft.rfftfreq(n, r.dt)
+    s = 2j * np.pi * f
+    V = s * np.fft.rfft(u)
+    if crossover_hz is None:
+        V = V * np.exp(-s * lag_s)
+    else:
+        b, a = sig.butter(4, 2 * np.pi * 50.0, analog=True)
+        _, C = sig.freqs(b, a, 2 * np.pi * f)
+        w = 2 * np.pi * crossover_hz
+        V = V * (w + s * C) / (s + w)
+    v = np.fft.irfft(V, n) + 1e-3 * np.random.default_rng(seed + 1).standard_normal(n)
+    r.v = v[:, None]
+    return r
+
+
+def test_a_skewed_velocity_reads_as_a_delay_a_blended_one_does_not():
+    """Against the displacement a velocity of its own channel 2 samples late has the phase
+    of a delay, a line through the origin; a complementary velocity's bends (the
+    conditioner's delay above the crossover, none below), and a line through it meets
+    0 Hz off the origin (anchor.DELAY_Z), where its slope alone read 1.28 ms on the LHPOST
+    DAQ's records."""
+    late = anchor.measure([_velocity_of(7, 2 / 204.8)], anchor.velocity_bins)
+    assert late.a_delay and abs(late.delay_s - 2 / 204.8) <= anchor.Z95 * late.sigma_s, late.text()
+    blended = anchor.measure([_velocity_of(7, 0.0, crossover_hz=2.0)], anchor.velocity_bins)
+    assert blended.significant and not blended.a_delay, (blended.text(), blended.offset_rad, blended.offset_sigma_rad)
+    on_time = anchor.measure([_velocity_of(7, 0.0)], anchor.velocity_bins)
+    assert on_time.a_delay and not on_time.significant, on_time.text()
+
+
 def test_no_coherent_band_says_so():
     rng = np.random.default_rng(1)
     r = _Run(rng.standard_normal(2048), rng.standard_normal(2048), 1 / 204.8)
