@@ -54,7 +54,7 @@ BASIS_BYTES = 32 * 2**20
 
 
 class BasisCache:
-    """A run's law bases by ``(law type, place, shape[, force delay])``
+    """A run's law bases by ``(law type, place, shape[, force delay and gain])``
     (:meth:`MechRun.basis`): those of fixed laws (no shape, no load) all, the others (a
     scan's grid, a load's law at each force delay a search tries) up to
     :data:`BASIS_BYTES`, the least recently used dropped first."""
@@ -211,7 +211,7 @@ class MechRun:
         """The law's unfiltered columns (:func:`_raw_columns`), kept in ``extra["basis"]``,
         which the run's re-timed copies share (:func:`sim.calibrate.timing.retime`): they
         depend on the recorded motion and the shape alone, a load's law also on the force
-        delay (the load is the re-timed force), and a law that filters inside on the
+        delay and gain (the load is the re-read force), and a law that filters inside on the
         timing: its columns are made anew. A timing search re-times the runs at every
         point it tries, and every round scans a mode's grid again: the accepted terms'
         columns (a dry friction's pre-sliding series) and the grid's (a mode's interpolated
@@ -220,7 +220,8 @@ class MechRun:
             return _raw_columns(self, law, where, shape)
         key = (law.type, where, tuple(sorted(shape.items())))
         if getattr(law, "load", False):
-            key += (self.extra.get("timing", {}).get("force_delay_s"),)
+            timing = self.extra.get("timing", {})
+            key += (timing.get("force_delay_s"), timing.get("force_gain", 1.0))
         cache = self.extra.setdefault("basis", BasisCache())
         bs = cache.get(key, lambda: _law_basis(self, law, where, shape))
         return _to_dofs(bs, self.law_motion(law, where)[3])
@@ -397,8 +398,8 @@ def mechanical_runs(runs, desc, payload=None, *, accel_lowpass_hz: float | None 
         u, v = conditioning.motion_on_the_force_clock(r, u, v)
         f = _force_at_acceleration_instant(r)
         known = conditioning.declared_state(r, accel_lowpass_hz, desc.accelerometer_filter_order)
-        # the motion's own skew beyond what it declares (timing.py)
-        known.update(motion_delay_s=0.0, velocity_delay_s=0.0)
+        # the motion's own skew beyond what it declares and the load cells' gain (timing.py)
+        known.update(motion_delay_s=0.0, velocity_delay_s=0.0, force_gain=1.0)
         pre = conditioning.prefilter_of(known, r)
         mr = MechRun(
             name=r.name,

@@ -1,4 +1,5 @@
-"""Sensor timing and conditioning on the mechanical path of ``shaketable calibrate``.
+"""Sensor timing, conditioning and the load cells' gain on the mechanical path of
+``shaketable calibrate``.
 
 The force balance compares the recorded force with the force the model needs for the
 recorded motion, sample by sample, so it holds only if every channel was sampled at the
@@ -25,7 +26,10 @@ model's forces:
 * ``sensor_delay`` at ``channel:table_velocity``: a velocity of its own channel is
   ``delay_s`` late beyond the displacement (its value: where the two agree). The friction's
   switching and the damping read the velocity: on NEES-UCSD records a velocity 2 samples
-  early took an 8 t added mass 3.8 % low.
+  early took an 8 t added mass 3.8 % low;
+* ``sensor_gain`` at ``channel:actuator_force``: the load cells read ``gain`` x the force
+  (a piston area, a unit); it is read at 1 / gain, where the velocity reads the
+  accelerometer true (:func:`_accelerometer_reads_true`).
 
 What a record declares (``meta.channel_conditioning``, else the table's
 ``accelerometer_bandwidth_hz``) is the starting point (:func:`declared_state`). Each
@@ -91,7 +95,10 @@ MOTION_FIELDS = ("motion_delay_s", "velocity_delay_s")
 #: their places, and the sensor each is timed against
 MOTION_WHERES = {"channel:table_displacement": "acceleration", "channel:table_velocity": "displacement"}
 #: the effect types of these candidates (``--effects`` names them)
-TIMING_EFFECTS = ("sensor_delay", "sensor_lowpass")
+TIMING_EFFECTS = ("sensor_delay", "sensor_lowpass", "sensor_gain")
+#: the load cells' gain is searched between these (assumed: a piston area or a force
+#: unit wrong by up to a factor 2, a rod side taken for a cap side included)
+FORCE_GAIN_RANGE = (0.5, 2.0)
 
 
 def retime(mr, state: dict):
@@ -108,12 +115,16 @@ def retime(mr, state: dict):
     same_filter = same_motion and all(
         old[k] == state[k] for k in ("accel_delay_s", "accel_lowpass_hz", "accel_lowpass_order")
     )
+    gain = state.get("force_gain", 1.0) / old.get("force_gain", 1.0)
     # the weights stay the run's own (the fit's "w" and each DOF's noise weight): a timing
     # candidate is judged on the same pooled error as the model without it
     keep = ("force_at_instant", "inertial", "w", "noise_weight", "force_noise", "motion", "declared_other")
-    keep += (("other", "basis") if same_motion else ()) + (("raw_columns", "columns", "second") if same_filter else ())
+    keep += (("other", "basis") if same_motion else ()) + (("raw_columns",) if same_filter else ())
+    keep += ("columns", "second") if same_filter and gain == 1.0 else ()  # weighted: they scale with "w"
     dof_noise_weights(mr)  # computed on the run as declared, before it is copied
     new = dataclasses.replace(mr, extra={k: mr.extra[k] for k in keep if k in mr.extra})
+    if "w" in new.extra:  # the force read at 1 / gain: its weights too, or a gain > 1 shrinks the error by itself
+        new.extra["w"] = new.extra["w"] * gain
     fc = state["accel_lowpass_hz"]
     new.prefilter = Conditioner(float(fc), int(state["accel_lowpass_order"]), 1.0 / mr.dt) if fc else None
     new.filter_delay_s = state["accel_delay_s"]
@@ -121,7 +132,7 @@ def retime(mr, state: dict):
         new.u, new.v = motion_at(mr, state["motion_delay_s"], state.get("velocity_delay_s", 0.0))
         new.extra["other"] = mr.extra["declared_other"](new)
         new.rows = moving_rows(new.v, new.prefilter, mr.dt)
-    f = shift(mr.extra["force_at_instant"], -state["force_delay_s"], mr.dt)
+    f = shift(mr.extra["force_at_instant"], -state["force_delay_s"], mr.dt) / state.get("force_gain", 1.0)
     new.force = new.filt(f @ mr.J)
     new.model = new.chain(mr.extra["inertial"] + new.filt(new.extra["other"]))
     new.extra.update(actuator_force=f, timing=dict(state))
@@ -219,6 +230,9 @@ def candidates(mruns) -> list[Candidate]:
     )
     if not all(mr.extra.get("velocity_derived") for mr in mruns):
         out.append(velocity_candidate(base))
+    out.append(  # the load cells' gain (a piston area or a unit nobody wrote down)
+        Candidate("sensor_gain", "channel:actuator_force", "gain", "force_gain", *FORCE_GAIN_RANGE, 1.0, unit="1")
+    )
     g0 = 1.0 / base["accel_lowpass_hz"] if base["accel_lowpass_hz"] else 0.0
     for order in sorted(set(ORDERS) | {base["accel_lowpass_order"]}):  # the declared order
         out.append(
@@ -267,6 +281,8 @@ def search(mruns, terms, cand: Candidate) -> float:
     dt = mruns[0].dt
     if cand.field == "accel_lowpass_hz":
         grid = np.geomspace(cand.lo, cand.hi, 16)
+    elif cand.field == "force_gain":  # 1 % steps near 1
+        grid = np.geomspace(cand.lo, cand.hi, 71)
     else:  # every second sample: the residual varies on the motion's time scale (> 10 samples)
         n = int(MAX_DELAY_S / (2 * dt))
         grid = cand.neutral + 2 * dt * np.arange(-n, n + 1)
@@ -287,7 +303,7 @@ def sigma(mruns, terms, cand: Candidate, x: float) -> float:
     from sim.calibrate.hac import hac_sigma
     from sim.calibrate.trace import _fit_linear, _segments
 
-    h = 0.05 * mruns[0].dt if cand.field != "accel_lowpass_hz" else 1e-3 * max(x, 1e-4)
+    h = {"accel_lowpass_hz": 1e-3 * max(x, 1e-4), "force_gain": 1e-4}.get(cand.field, 0.05 * mruns[0].dt)
     runs = [retime(mr, cand.state(mr.extra["timing"], x)) for mr in mruns]
     theta, _, y, X = _fit_linear(runs, terms)
 
@@ -324,6 +340,8 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
     f_new = flatness(nf, new.residuals)
     bic_new = new.n * math.log(max(new.rss, 1e-300) / new.n) + (new.p + 1) * math.log(new.n)
     ok, why = _param_check(cand, x, s)
+    if ok and cand.field == "force_gain":
+        ok, why = _accelerometer_reads_true(mfit)
     share = coherent_share(mfit, cur.residuals, new.residuals)
     # the motion's delay is the kinematics', not fitted to the residual, and what it takes
     # out goes through the friction's sign: not a filtered copy of the motion's own force
@@ -521,6 +539,8 @@ def kinematic_check(cand: Candidate, x: float, before, after) -> dict | None:
 
     from sim.calibrate import anchor
 
+    if cand.field == "force_gain":  # a gain, not a timing: the displacement has nothing to say
+        return None
     a0 = anchor.measure(before)
     if not math.isfinite(a0.delay_s):  # no band where both hold the motion: the balance alone decides
         return None
@@ -588,8 +608,32 @@ def _param_check(cand, x, s) -> tuple[bool, str]:
     if x - cand.lo <= 1e-3 * span or cand.hi - x <= 1e-3 * span:
         return False, f"{cand.param} at the edge of its searched range"
     if abs(x - cand.neutral) <= Z95 * s:
-        what = "the declared conditioner" if cand.field == "accel_lowpass_hz" else f"{cand.neutral:g} s"
+        what = "the declared conditioner" if cand.field == "accel_lowpass_hz" else f"{cand.neutral:g} {cand.unit}"
         return False, f"{cand.param}: its 95 % interval holds {what}"
+    from sim.calibrate.pathjudge import GAIN_TOLERANCE
+
+    if cand.field == "force_gain" and abs(x - 1.0) < GAIN_TOLERANCE:
+        return False, f"gain = {x:.5g}: within a transducer's calibration tolerance (+/-{GAIN_TOLERANCE:g})"
+    return True, ""
+
+
+def _accelerometer_reads_true(mfit) -> tuple[bool, str]:
+    """Whether the balance's scale is the load cells': a gain of the accelerometers scales
+    its inertial force alike (on NEES-UCSD records an accelerometer 4 % high was taken as
+    load cells 4 % low, then a specimen's mode and more made up the friction that gain
+    scaled). The velocity reads the acceleration's own gain
+    (:func:`sim.calibrate.anchor.balance_acceleration_gain`): where that leaves out 1 by more
+    than a transducer's tolerance the accelerometer is the one off, and the later path
+    compares it alone."""
+    from sim.calibrate.anchor import balance_acceleration_gain
+    from sim.calibrate.pathjudge import GAIN_TOLERANCE
+
+    g, s = balance_acceleration_gain(mfit)
+    if math.isfinite(g) and abs(g - 1.0) > max(Z95 * s, GAIN_TOLERANCE):
+        return (
+            False,
+            f"the velocity reads the accelerometer at a gain of {g:.4f} +/- {Z95 * s:.4f}: its gain, not the load cells'",
+        )
     return True, ""
 
 
@@ -701,17 +745,18 @@ def log_line(row: dict) -> str:
 
 def added_entry(row: dict) -> dict:
     """The ``effects_added`` entry of an accepted timing candidate."""
-    units = {"delay_s": "s", "cutoff_hz": "Hz"}
-    motion = row["where"] in MOTION_WHERES
+    units = {"delay_s": "s", "cutoff_hz": "Hz", "gain": "1"}
     kin = row.get("kinematics") or {}
     # the force's and acceleration's whole delay or conditioner, as the balance fits it: in
     # place of the declared one when the later path compares the record (sim.calibrate.paths);
-    # the motion's, beyond what it declares (its declared delay is read before any timing)
+    # the motion's, beyond what it declares (its declared delay is read before any timing);
+    # a gain: none is declared
+    replaces = {} if row["name"] == "sensor_gain" else {"replaces_declared": row["where"] not in MOTION_WHERES}
     timed_by = MOTION_WHERES.get(row["where"]) or ("displacement" if kin.get("from_displacement") else None)
     return {
         "name": row["name"],
         "where": row["where"],
-        "options": {**row.get("options", {}), "replaces_declared": not motion},
+        "options": {**row.get("options", {}), **replaces},
         "parameters": row["parameters"],
         "uncertainty": row["uncertainty"],
         "units": {k: units[k] for k in row["parameters"]},
