@@ -197,41 +197,31 @@ GAIN_TOP_HZ = 20.0
 
 
 def kinematic_gain(prs, columns) -> tuple[float, float]:
-    """The recorded acceleration's gain against the recorded velocity (the band-passed
-    displacement where the run has no velocity): ``(gain, sigma)`` of the magnitude of
-    their transfer function over ``i 2 pi f`` (``(2 pi f)^2`` from a displacement), from
-    the coherent bins up to :data:`GAIN_TOP_HZ` of ``columns`` (DOF indices) of the
-    replay/closed-loop runs ``prs``, pooled (weights from the log-magnitude's variance,
-    as the phase's); ``(nan, inf)`` without such bins. A sensor's gain is read against
-    another sensor of the same motion, as its timing is: the model's own amplitude
-    error is not in it."""
+    """The recorded acceleration's gain against the recorded velocity (the displacement's
+    second difference where the run has no velocity): ``(gain, sigma)`` from the coherent
+    bins up to :data:`GAIN_TOP_HZ` of ``columns`` (DOF indices) of the replay/closed-loop
+    runs ``prs``, pooled (weights from the log-magnitude's variance, as the phase's);
+    ``(nan, inf)`` without such bins (:func:`_gain_bins`). A sensor's gain is read
+    against another sensor of the same motion, as its timing is: the model's own
+    amplitude error is not in it."""
     logs, wts = [], []
     for pr in prs:
-        ref = "table_velocity" if "table_velocity" in pr.recorded else "table_displacement"
-        if "table_acceleration" not in pr.recorded or ref not in pr.recorded:
+        rec = pr.recorded
+        if "table_acceleration" not in rec or not {"table_velocity", "table_displacement"} & set(rec):
             continue
-        order = 1 if ref == "table_velocity" else 2
-        central = order == 1 and bool((getattr(pr, "conditioning", None) or {}).get("velocity_from_displacement"))
+        central = bool((getattr(pr, "conditioning", None) or {}).get("velocity_from_displacement"))
         for j in columns:
-            f, mag, var = _magnitude_bins(
-                pr.recorded[ref][pr.rows][:, j], pr.recorded["table_acceleration"][pr.rows][:, j], 1.0 / pr.dt, order
-            )
-            if central:  # a central difference's response, sin(w T) / T, not w
-                w, dt = 2 * np.pi * f, pr.dt
-                mag = mag * np.sin(w * dt) / (w * dt)
+            u, v = (rec[c][pr.rows][:, j] if c in rec else None for c in ("table_displacement", "table_velocity"))
+            f, mag, var = _gain_bins(u, v, rec["table_acceleration"][pr.rows][:, j], 1.0 / pr.dt, central)
             logs.append(np.log(mag))
             wts.append(1.0 / var)
     return _pooled_gain(logs, wts)
 
 
 def balance_acceleration_gain(mruns) -> tuple[float, float]:
-    """The recorded acceleration's gain against the recorded velocity on mechanical runs,
-    ``(gain, sigma)``, over each run's excited DOFs up to :data:`GAIN_TOP_HZ`. On the
+    """:func:`kinematic_gain` on mechanical runs, over each run's excited DOFs. On the
     mechanical path a gain of the load cells and one of the accelerometers both leave the
-    force balance off by a scale; this reads which sensor is off. Both are read against
-    the displacement, whose noise is neither's (:func:`_ratio_bins`: the ratio of two
-    cross-spectra with one reference), where the velocity's own noise in the reference
-    of :func:`kinematic_gain`'s ``P_va / P_vv`` read NEES-UCSD accelerometers 1.25 % low."""
+    force balance off by a scale; this reads which sensor is off."""
     logs, wts = [], []
     for mr in mruns:
         rows = np.flatnonzero(mr.rows)
@@ -240,28 +230,31 @@ def balance_acceleration_gain(mruns) -> tuple[float, float]:
         span = slice(rows[0], rows[-1] + 1)
         for j in range(mr.a.shape[1]):
             if mr.excited is None or mr.excited[j]:
-                f, mag, var = _ratio_bins(mr.u[span, j], mr.v[span, j], mr.a[span, j], 1.0 / mr.dt)
-                if mr.extra.get("velocity_derived"):  # a central difference's response, sin(w T) / T
-                    mag = mag * np.sin(2 * np.pi * f * mr.dt) / (2 * np.pi * f * mr.dt)
+                u, v, a = mr.u[span, j], mr.v[span, j], mr.a[span, j]
+                f, mag, var = _gain_bins(u, v, a, 1.0 / mr.dt, bool(mr.extra.get("velocity_derived")))
                 logs.append(np.log(mag))
                 wts.append(1.0 / var)
     return _pooled_gain(logs, wts)
 
 
-def _ratio_bins(u, v, a, fs: float):
-    """``(f, |H|, var)`` over the bins up to :data:`GAIN_TOP_HZ` where the displacement
-    ``u`` is coherent with both the acceleration ``a`` and the velocity's central
-    difference ``dv``: ``H = P_ua / P_udv`` over the difference's response ``sin(w T) / T``
-    / ``w``. The acceleration and ``dv`` share their spectrum's slope, so ``H`` is flat
-    and the window's leakage from the displacement's strong low frequencies cannot bend
-    it (against the velocity itself the 3-5 Hz bins read 4 % low). The variance of the log
-    ratio is the sum of the two log-magnitudes' (:func:`_coherent_bins`)."""
-    dv = np.gradient(v) * fs
-    fa, Pua, _, var_a = _coherent_bins(u, a, fs, GAIN_TOP_HZ)
-    fv, Pud, _, var_d = _coherent_bins(u, dv, fs, GAIN_TOP_HZ)
-    f, ia, iv = np.intersect1d(fa, fv, return_indices=True)
+def _gain_bins(u, v, a, fs: float, central: bool) -> tuple:
+    """``(f, |H|, var(log |H|))`` of the acceleration ``a`` against the velocity ``v``
+    (None: the displacement ``u``'s), over the bins up to :data:`GAIN_TOP_HZ` where the
+    reference (``u``, else ``v``) is coherent with both. ``H = P_ra / P_rd``: ``d`` the
+    velocity's central difference (the displacement's second), divided by the difference's
+    response ``sin(w T) / (w T)`` a step (``central``: the velocity itself an import's
+    central difference, one step more). ``a`` and ``d`` share their spectrum's slope, so
+    ``H`` is flat and the window's leakage from the displacement's strong low frequencies
+    cannot bend it: ``P_va / P_vv`` read the NEES-UCSD accelerometers' 3-5 Hz bins 4 % low
+    and their gain 1.25 % low. Against the displacement, neither the velocity's noise nor
+    the acceleration's is in the reference."""
+    ref = u if u is not None else v
+    d, steps = (np.gradient(v) * fs, 1 + central) if v is not None else (np.gradient(np.gradient(u)) * fs * fs, 2)
+    fa, Pra, _, var_a = _coherent_bins(ref, a, fs, GAIN_TOP_HZ)
+    fd, Prd, _, var_d = _coherent_bins(ref, d, fs, GAIN_TOP_HZ)
+    f, ia, idd = np.intersect1d(fa, fd, return_indices=True)
     wT = 2 * np.pi * f / fs
-    return f, np.abs(Pua[ia]) / np.abs(Pud[iv]) * np.sin(wT) / wT, var_a[ia] + var_d[iv]
+    return f, np.abs(Pra[ia]) / np.abs(Prd[idd]) * (np.sin(wT) / wT) ** steps, var_a[ia] + var_d[idd]
 
 
 def _pooled_gain(logs: list, wts: list) -> tuple[float, float]:
@@ -274,13 +267,6 @@ def _pooled_gain(logs: list, wts: list) -> tuple[float, float]:
     chi2 = float(np.sum(wt * (lg - mean) ** 2)) / max(len(lg) - 1, 1)
     sigma = math.sqrt(max(chi2, 1.0) / float(np.sum(wt)))
     return math.exp(mean), math.exp(mean) * sigma
-
-
-def _magnitude_bins(x, a, fs: float, order: int):
-    """``(f, |H|, var(log |H|))`` of the coherent bins of ``a`` against the ``order``-th
-    derivative of ``x`` (the velocity: 1; the displacement: 2) up to :data:`GAIN_TOP_HZ`."""
-    f, Pxa, Pxx, var = _coherent_bins(x, a, fs, GAIN_TOP_HZ)
-    return f, np.abs(Pxa) / Pxx / (2 * np.pi * f) ** order, var
 
 
 __all__ = [
