@@ -281,7 +281,7 @@ def search(mruns, terms, cand: Candidate) -> float:
     dt = mruns[0].dt
     if cand.field == "accel_lowpass_hz":
         grid = np.geomspace(cand.lo, cand.hi, 16)
-    elif cand.field == "force_gain":  # 1 % steps near 1
+    elif cand.field == "force_gain":  # 2 % steps, 1 on the grid
         grid = np.geomspace(cand.lo, cand.hi, 71)
     else:  # every second sample: the residual varies on the motion's time scale (> 10 samples)
         n = int(MAX_DELAY_S / (2 * dt))
@@ -601,7 +601,10 @@ def _uncertainty(cand, x, s) -> dict:
 
 
 def _param_check(cand, x, s) -> tuple[bool, str]:
-    """Off its bounds, a finite interval, the declared value outside it."""
+    """Off its bounds, a finite interval, the declared value outside it; a gain beyond a
+    transducer's tolerance."""
+    from sim.calibrate.pathjudge import GAIN_TOLERANCE
+
     if not math.isfinite(s):
         return False, f"{cand.param}: no finite confidence interval"
     span = cand.hi - cand.lo
@@ -610,8 +613,6 @@ def _param_check(cand, x, s) -> tuple[bool, str]:
     if abs(x - cand.neutral) <= Z95 * s:
         what = "the declared conditioner" if cand.field == "accel_lowpass_hz" else f"{cand.neutral:g} {cand.unit}"
         return False, f"{cand.param}: its 95 % interval holds {what}"
-    from sim.calibrate.pathjudge import GAIN_TOLERANCE
-
     if cand.field == "force_gain" and abs(x - 1.0) < GAIN_TOLERANCE:
         return False, f"gain = {x:.5g}: within a transducer's calibration tolerance (+/-{GAIN_TOLERANCE:g})"
     return True, ""
