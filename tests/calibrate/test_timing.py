@@ -354,3 +354,30 @@ def test_a_motion_off_by_more_than_a_recorders_scan_is_judged_without_a_margin()
     assert not _may_drop(entry, mr, {})
     entry["parameters"]["delay_s"] = 0.3 * dt
     assert _may_drop(entry, mr, {})
+
+
+def test_a_velocity_the_import_derived_has_no_skew_of_its_own_to_search():
+    """A velocity made from the displacement by a central difference shares its clock: its
+    own delay is not a candidate. A velocity of its own channel's is; so is the load cells'
+    gain, on every record."""
+    from types import SimpleNamespace
+
+    from sim.calibrate.timing import candidates
+
+    base = {
+        "force_delay_s": 0.0,
+        "accel_delay_s": 0.0,
+        "accel_lowpass_hz": 100.0,
+        "accel_lowpass_order": 4,
+        "motion_delay_s": 0.0,
+        "velocity_delay_s": 0.0,
+        "force_gain": 1.0,
+    }
+
+    def places(derived: bool) -> set:
+        mr = SimpleNamespace(dt=1 / FS, extra={"timing": base, "velocity_derived": derived})
+        return {(c.name, c.where) for c in candidates([mr])}
+
+    assert ("sensor_delay", "channel:table_velocity") not in places(True)
+    assert ("sensor_delay", "channel:table_velocity") in places(False)
+    assert all(("sensor_gain", "channel:actuator_force") in places(d) for d in (True, False))
