@@ -137,6 +137,25 @@ def mechanical_stage(runs, ho_given, desc, pl, *, effects, payload, accel_lowpas
     return _result(ms, cur, tried, st.timed_added, (mfit, mho), (e_ho0, times, ho_note), desc, runs)
 
 
+def _sensor_predicts_better(timed: dict, win: tuple, rows: list, margin: float) -> bool:
+    """Whether a sensor's candidate that passed (``timed``) goes in before the law that
+    passed explaining more of the fit runs (``win``: its fit, held-out error, flatness):
+    it predicts the held-out runs better by more than ``margin``. The law's row then says
+    so. NEES-UCSD, a load-cell conditioner nobody declared and the load cells 5 % high: a
+    17.9 Hz, 16 % mode of 2.5 t explained 71.74 % against the gain's 71.39 % and predicted
+    2.44 % against 2.08 %."""
+    if not timed["e_ho"] < (1.0 - margin) * win[1]:
+        return False
+    for row in rows:
+        if row.get("accepted"):
+            row["accepted"] = False
+            row["reason"] = (
+                f"passed, not added: {timed['row']['name']} at {timed['row']['where']} predicts the held-out "
+                f"runs better by more than {100 * margin:g} % ({timed['e_ho']:.4f} against {win[1]:.4f})"
+            )
+    return True
+
+
 def declared_timing(mruns) -> dict:
     return {mr.name: dict(mr.extra["timing"]) for mr in mruns}
 
@@ -235,6 +254,11 @@ class MechStage:
 
         ahead, timed, trs = split_at_timing(refined, rnd, self.say)
         rs, win = forward_round(self.st, self.cur, ahead, rnd, self.say)
+        if win is not None and timed is not None and _sensor_predicts_better(timed, win, rs, self.st.margin):
+            self.say(
+                f"  set aside: {timed['row']['name']} at {timed['row']['where']} predicts the held-out runs better"
+            )
+            win = None
         self.tried += rs + trs
         return None if win is None and timed is None else (win, timed)
 
