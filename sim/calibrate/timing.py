@@ -376,11 +376,11 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
 def _margin_of(cand: Candidate, x: float, dt: float, margin: float) -> float:
     """The held-out gain ``cand`` at ``x`` must make: the search's ``margin``, or none (the
     error only may not rise, and the residual need not whiten) for a motion read off its
-    clock by more than a recorder's scan (:data:`DISPLACEMENT_SKEW_SAMPLES`). That value is measured by the kinematics to a
-    hundredth of a sample, not fitted to the residual; the laws fitted before it take up
-    most of what it changes: NEES-UCSD records with the displacement 2 samples early and
-    8 t added took the added mass 3.9 % low while the delay moved the held-out error by
-    1.7 %."""
+    clock by more than a recorder's scan (:data:`DISPLACEMENT_SKEW_SAMPLES`). That value
+    is measured by the kinematics to a hundredth of a sample, not fitted to the residual;
+    the laws fitted before it take up most of what it changes: NEES-UCSD records with the
+    displacement 2 samples early and 8 t added took the added mass 3.9 % low while the
+    delay moved the held-out error by 1.7 %."""
     if cand.read_by_kinematics and abs(x - cand.neutral) > DISPLACEMENT_SKEW_SAMPLES * dt:
         return 0.0
     return margin
