@@ -93,16 +93,22 @@ class Anchor:
         )
 
 
+def spectral_span(mr) -> slice | None:
+    """The samples from a mechanical run's first fit row to its last (the test: a quiet
+    lead-in holds nothing coherent), whole, for a spectrum; None under 16 fit rows."""
+    rows = np.flatnonzero(mr.rows)
+    return slice(rows[0], rows[-1] + 1) if len(rows) >= 16 else None
+
+
 def phase_bins(mr, j: int) -> tuple:
     """``(omega, phase, variance)`` of DOF ``j`` of a mechanical run: the coherent bins of
     the recorded acceleration against the displacement through the run's chain (phase of
     the transfer function over -(2 pi f)^2, which is -omega tau for a delay tau)."""
 
     fs = 1.0 / mr.dt
-    rows = np.flatnonzero(mr.rows)
-    if len(rows) < 16:
+    span = spectral_span(mr)
+    if span is None:
         return (np.zeros(0),) * 3
-    span = slice(rows[0], rows[-1] + 1)  # the test: a quiet lead-in holds nothing coherent
     f, Pua, _Puu, var = _coherent_bins(mr.filt(mr.u)[span, j], mr.a[span, j], fs, TOP_FRACTION * fs)
     return 2 * np.pi * f, np.angle(-Pua), var
 
@@ -131,10 +137,9 @@ def velocity_bins(mr, j: int) -> tuple:
     function over i omega, -omega tau for a velocity tau late; a velocity the import made
     by a central difference has none)."""
     fs = 1.0 / mr.dt
-    rows = np.flatnonzero(mr.rows)
-    if len(rows) < 16:
+    span = spectral_span(mr)
+    if span is None:
         return (np.zeros(0),) * 3
-    span = slice(rows[0], rows[-1] + 1)
     f, Puv, _Puu, var = _coherent_bins(mr.u[span, j], mr.v[span, j], fs, TOP_FRACTION * fs)
     return 2 * np.pi * f, np.angle(-1j * Puv), var
 
@@ -224,11 +229,8 @@ def balance_acceleration_gain(mruns) -> tuple[float, float]:
     force balance off by a scale; this reads which sensor is off."""
     logs, wts = [], []
     for mr in mruns:
-        rows = np.flatnonzero(mr.rows)
-        if len(rows) < 16:
-            continue
-        span = slice(rows[0], rows[-1] + 1)
-        for j in range(mr.a.shape[1]):
+        span = spectral_span(mr)
+        for j in range(mr.a.shape[1] if span is not None else 0):
             if mr.excited is None or mr.excited[j]:
                 u, v, a = mr.u[span, j], mr.v[span, j], mr.a[span, j]
                 f, mag, var = _gain_bins(u, v, a, 1.0 / mr.dt, bool(mr.extra.get("velocity_derived")))
@@ -276,5 +278,6 @@ __all__ = [
     "kinematic_gain",
     "measure",
     "phase_bins",
+    "spectral_span",
     "velocity_bins",
 ]

@@ -168,13 +168,15 @@ def param_check(rf, z95) -> tuple[bool, str, dict]:
             return False, f"{k} = {vals[k]:.4g} {c.units[k]} at its bound", unc
         if i in c.screened and abs(th - c.neutral[i]) <= z95 * s:
             return False, f"{k} = {vals[k]:.4g} {c.units[k]}: its 95 % interval includes the no-effect value", unc
-    if c.type == "sensor_gain" and abs(vals["gain"] - 1.0) < GAIN_TOLERANCE:
-        return (
-            False,
-            f"gain = {vals['gain']:.5g}: within a transducer's calibration tolerance (+/-{GAIN_TOLERANCE:g})",
-            unc,
-        )
-    return True, "", unc
+    why = within_tolerance(vals["gain"]) if c.type == "sensor_gain" else ""
+    return (False, why, unc) if why else (True, "", unc)
+
+
+def within_tolerance(gain: float) -> str:
+    """Why a sensor's ``gain`` is not named (:data:`GAIN_TOLERANCE`); "" beyond it."""
+    if abs(gain - 1.0) < GAIN_TOLERANCE:
+        return f"gain = {gain:.5g}: within a transducer's calibration tolerance (+/-{GAIN_TOLERANCE:g})"
+    return ""
 
 
 def accel_gain_unseen(rf, unc: dict, pfit) -> str:
@@ -319,4 +321,5 @@ __all__ = [
     "record_the_rest",
     "refit_at_bound",
     "path_row",
+    "within_tolerance",
 ]

@@ -606,7 +606,7 @@ def _uncertainty(cand, x, s) -> dict:
 def _param_check(cand, x, s) -> tuple[bool, str]:
     """Off its bounds, a finite interval, the declared value outside it; a gain beyond a
     transducer's tolerance."""
-    from sim.calibrate.pathjudge import GAIN_TOLERANCE
+    from sim.calibrate.pathjudge import within_tolerance
 
     if not math.isfinite(s):
         return False, f"{cand.param}: no finite confidence interval"
@@ -616,9 +616,8 @@ def _param_check(cand, x, s) -> tuple[bool, str]:
     if abs(x - cand.neutral) <= Z95 * s:
         what = "the declared conditioner" if cand.field == "accel_lowpass_hz" else f"{cand.neutral:g} {cand.unit}"
         return False, f"{cand.param}: its 95 % interval holds {what}"
-    if cand.field == "force_gain" and abs(x - 1.0) < GAIN_TOLERANCE:
-        return False, f"gain = {x:.5g}: within a transducer's calibration tolerance (+/-{GAIN_TOLERANCE:g})"
-    return True, ""
+    why = within_tolerance(x) if cand.field == "force_gain" else ""
+    return not why, why
 
 
 def _accelerometer_reads_true(mfit) -> tuple[bool, str]:
