@@ -105,6 +105,9 @@ class Law:
     #: basis gets every DOF's motion and returns a wrench in DOF space (a mode of the
     #: payload's own mass: :func:`_mode_of_payload`)
     at_payload_cg: bool = False
+    #: the column is the declared model's own force (the load cells' gain read beside a law:
+    #: :mod:`sim.calibrate.gainpair`), not a basis of the motion
+    model_force: bool = False
 
     @property
     def name(self) -> str:

@@ -228,6 +228,8 @@ class MechRun:
 
     def columns(self, law, where: str, shape: dict) -> list:
         """One (n, k) generalised force per linear coefficient of ``law`` (unit value) at ``where``."""
+        if getattr(law, "model_force", False):  # already through the prefilter and the force chain
+            return [self.model]
         key = (law.type, where, tuple(sorted(shape.items())))
         cache = self.extra.setdefault("raw_columns", {})
         if key in cache:

@@ -73,9 +73,9 @@ ORDERS: tuple = ()
 #: the lowest conditioner cut-off searched (assumed: 2 Hz, below any table's test band)
 MIN_CUTOFF_HZ = 2.0
 Z95 = 1.96
-#: the share of what a timing candidate takes out of the residual that must be coherent
-#: with the motion (assumed: 0.5, the line :func:`sim.calibrate.search.unexplained` draws
-#: between a DOF's effect and a sensor's). A sensor that is late or filtered differently
+#: the share of what a timing candidate takes out of the residual that must be coherent with the
+#: motion (assumed: 0.5, :func:`sim.calibrate.search.unexplained`'s line between a DOF's effect
+#: and a sensor's). A sensor that is late or filtered differently
 #: changes the balance by a filtered copy of the motion's own force; a low-pass that
 #: "explains" a mains line picked up on the load cell (by filtering the force it is
 #: applied to) takes out something the motion did not make.
@@ -319,15 +319,17 @@ def sigma(mruns, terms, cand: Candidate, x: float) -> float:
     return float(hac_sigma(J, y - X @ theta, _segments(runs))[-1])
 
 
-def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: float, first=None) -> dict:
-    """The candidate fitted and judged: ``{"row": candidates row, "accepted": bool,
-    "fit", "mfit", "mho"}`` (the retimed runs and the refit when accepted); ``first``: a
-    kinematic candidate's reading at its neutral value, when it was taken to offer it."""
+def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: float, first=None, at=None) -> dict:
+    """The candidate fitted and judged: ``{"row", "accepted", "fit", "mfit", "mho"}`` (the
+    retimed runs and the refit); ``first``: a kinematic candidate's reading at its neutral
+    value, when taken to offer it; ``at``: ``(value, sd, None)`` read by :mod:`sim.calibrate.gainpair`."""
     from sim.calibrate.acceptance import accept_numbers
     from sim.calibrate.residuals import nrmse_runs
     from sim.calibrate.trace import fit_terms, flatness, predict
 
-    if cand.read_by_kinematics:
+    if at is not None:
+        x, s, kin = at
+    elif cand.read_by_kinematics:
         x, s, kin = read_by_kinematics(mfit, cand, first)
     else:
         x, s, kin = placed(mfit, cur.terms, cand, search(mfit, cur.terms, cand))
