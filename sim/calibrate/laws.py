@@ -108,6 +108,9 @@ class Law:
     #: the column is the declared model's own force (the load cells' gain read beside a law:
     #: :mod:`sim.calibrate.gainpair`), not a basis of the motion
     model_force: bool = False
+    #: the column is the recorded force of the place's actuators (a class's load cells' gain:
+    #: :data:`LOAD_CELLS_GAIN_CLASS`), not a basis of the motion
+    recorded_force: bool = False
 
     @property
     def name(self) -> str:
@@ -626,6 +629,37 @@ def fixed_law(law: Law, name: str, value: float) -> Law | None:
     )
 
 
+def _recorded_force(u, v, a, s):
+    raise NotImplementedError("the column is the place's recorded force (MechRun.columns)")
+
+
+#: one actuator class's load cells reading ``gain`` x the force (a piston area or a unit
+#: of one kind of actuator nobody wrote down): the class's recorded force less the share
+#: ``read_excess = 1 - 1 / gain`` of it. Its column is the class's recorded force (its
+#: noise is the load cells', a thousandth of the force: no bias worth a column of its
+#: own). Written as the ``sensor_gain`` of the class's force columns
+#: (:func:`sim.calibrate.mechsearch.added_entries`); the gain of every load cell at once
+#: is the sensor candidate's (:mod:`sim.calibrate.timing`). CGS records with the vertical
+#: class 5 % high: an added mass of 530 kg on the class, 520 kg in z and a friction of
+#: 554 N on the class stood for it.
+LOAD_CELLS_GAIN_CLASS = add_law(
+    Law(
+        type="load_cells_gain",
+        params={"read_excess": ("1", -1.0, 0.5)},
+        linear="read_excess",
+        basis=_recorded_force,
+        places=("class",),
+        what="one actuator class's load cells read gain x the force: read_excess = 1 - 1 / gain of it is not force",
+        recorded_force=True,
+    )
+)
+
+
+def class_gain(read_excess: float) -> float:
+    """The class's load-cell gain of a :data:`LOAD_CELLS_GAIN_CLASS` coefficient."""
+    return 1.0 / (1.0 - read_excess)
+
+
 def usable(law: Law) -> bool:
     """A law is a candidate when its type is not registered, or registered with the same keys."""
     from sim.effects.base import EFFECTS
@@ -637,11 +671,13 @@ def usable(law: Law) -> bool:
 __all__ = [
     "DEADBAND",
     "LAWS",
+    "LOAD_CELLS_GAIN_CLASS",
     "LINEAR_BELOW_M_S",
     "NOT_ON_MECHANICAL",
     "Law",
     "add_law",
     "cg_offset_force",
+    "class_gain",
     "declared_forces",
     "fixed_law",
     "usable",

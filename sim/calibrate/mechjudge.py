@@ -115,6 +115,12 @@ def _verdict(st: RoundState, cur, new):
     pushed = _pushed_out(new)
     if ok and pushed:
         ok, why = False, "compensation: " + pushed
+    if ok and getattr(term.law, "recorded_force", False):  # a class's load cells: a gain within tolerance is not named
+        from sim.calibrate.laws import class_gain
+        from sim.calibrate.pathjudge import within_tolerance
+
+        tol = within_tolerance(class_gain(new.values[i]["read_excess"]))
+        ok, why = (False, tol) if tol else (ok, why)
     if st.scale is not None and all(np.isfinite(v) for v in new.values[i].values()):
         params = {**term.law.options, **new.values[i]}
         if params.get("from_payload"):  # every mode of the payload's own mass together

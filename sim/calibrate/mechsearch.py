@@ -100,12 +100,25 @@ def stage_candidates(laws, mfit, desc, pl) -> list:
     from sim.calibrate.residuals import places
 
     own_forces = not any(np.all(mr.extra["actuator_force"] == 0, axis=0).any() for mr in mfit)
-    laws = [law for law in laws if own_forces or not law.load]
-    return [
-        (law, w)
-        for law in laws
-        for w in distinct_places(mfit[0], [p for p in places(desc, law.places, pl is not None) if law.acts_at(p)])
-    ]
+    laws = [law for law in laws if own_forces or not (law.load or law.recorded_force)]
+    out = []
+    for law in laws:
+        wheres = distinct_places(mfit[0], [p for p in places(desc, law.places, pl is not None) if law.acts_at(p)])
+        out += [(law, w) for w in (alone_in_direction(mfit[0], wheres) if law.recorded_force else wheres)]
+    return out
+
+
+def alone_in_direction(mr, wheres) -> list:
+    """The class places of ``wheres`` whose force maps into DOF space as no other class's
+    does, on a table of several classes: a class's load cells' gain is told from the
+    others' only there (NEES-UCSD's east and west actuators both push along x: their gains
+    traded 0.603 against 0.892 beside an undeclared conditioner)."""
+    from sim.calibrate.residuals import same_direction
+
+    others = [f"class:{c}" for c in mr.classes]
+    if len(others) < 2:
+        return []
+    return [w for w in wheres if sum(same_direction(_direction(mr, w), _direction(mr, c)) for c in others) == 1]
 
 
 def mechanical_stage(runs, ho_given, desc, pl, *, effects, payload, accel_lowpass_hz, margin, say, t0):
@@ -344,7 +357,7 @@ def _result(ms, cur, tried, timed_added, declared, facts, desc, runs):
         residual_path="mechanical",
         error_before=e_ho0,
         error_after=nrmse_runs(ms.mho, ho_res),
-        effects_added=added_entries(joint_intervals(ms.mfit, cur, timed_added)) + timed_added,
+        effects_added=added_entries(joint_intervals(ms.mfit, cur, timed_added), ms.mfit[0].classes) + timed_added,
         candidates=tried,
         unexplained=unexplained(ms.mfit, cur.residuals),
         per_channel=per,
@@ -372,7 +385,9 @@ def refit_subset(res, keep: list[int]):
 
     terms = res.series["terms"]
     fit = fit_terms(res.series["fit"], [terms[i] for i in keep])
-    return nrmse_runs(res.series["holdout"], predict(res.series["holdout"], fit)), added_entries(fit)
+    return nrmse_runs(res.series["holdout"], predict(res.series["holdout"], fit)), added_entries(
+        fit, res.series["fit"][0].classes
+    )
 
 
 def backward_pass(ms: MechStage, cur, e_ho: float, tried: list):
@@ -552,13 +567,17 @@ def _log_demotion(ms: MechStage, cur, i, name, at, simpler_at, fits, tried) -> N
     tried.append(backward_row(t, cur.values[i], unc95, alt, cur, e_alt, 0.0, flatness(ms.mfit, alt.residuals), why))
 
 
-def added_entries(cur) -> list:
-    """The ``effects_added`` entries of the fit's terms."""
+def added_entries(cur, classes: dict | None = None) -> list:
+    """The ``effects_added`` entries of the fit's terms (``classes``: the runs' actuator
+    classes, where a class's load cells' gain is written at its force columns)."""
     from sim.calibrate.acceptance import param_report
 
     out = []
     for i, t in enumerate(cur.terms):
         _, _, unc = param_report(t, cur.values[i], cur.sigma[i])
+        if getattr(t.law, "recorded_force", False):
+            out.append(class_gain_entry(t.where, cur.values[i], unc, classes))
+            continue
         out.append(
             {
                 "name": t.law.name,
@@ -572,6 +591,23 @@ def added_entries(cur) -> list:
             }
         )
     return out
+
+
+def class_gain_entry(where: str, values: dict, unc: dict, classes: dict) -> dict:
+    """The ``sensor_gain`` entry of a class's load cells (:data:`sim.calibrate.laws.LOAD_CELLS_GAIN_CLASS`)
+    at the class's columns of the recorded force: ``gain = 1 / (1 - read_excess)``."""
+    from sim.calibrate.laws import class_gain
+
+    b = values["read_excess"]
+    cols = ",".join(str(k) for k in classes[where.partition(":")[2]])
+    return {
+        "name": "sensor_gain",
+        "where": f"channel:actuator_force[{cols}]",
+        "class": where,
+        "parameters": {"gain": class_gain(b)},
+        "uncertainty": {"gain": unc.get("read_excess", math.inf) * class_gain(b) ** 2},
+        "units": {"gain": "1"},
+    }
 
 
 def backward_row(t, values, unc, new, cur, e_new, explained, flat, why) -> dict:

@@ -37,7 +37,7 @@ def place_on_later(runs, ho_given, desc, payload, path, first, *, workers, say):
             continue
         fits = [_moved(first, i, w) for w in [first.effects_added[i]["where"], *alts]]
         timing = first.effects_added[len(terms) :]
-        sets = [as_entries(_added(fit) + timing) for fit in fits]
+        sets = [as_entries(_added(fit, first) + timing) for fit in fits]
         errs = holdout_errors(runs, ho_given, desc, payload, path, sets, workers)
         k = int(np.argmin(errs))
         e, wheres = first.effects_added[i], [first.effects_added[i]["where"], *alts]
@@ -92,10 +92,10 @@ def _moved(first, i: int, where: str):
     return fit_terms(first.series["fit"], terms)
 
 
-def _added(fit) -> list:
+def _added(fit, first) -> list:
     from sim.calibrate.mechsearch import added_entries
 
-    return added_entries(fit)
+    return added_entries(fit, first.series["fit"][0].classes)
 
 
 def _with_fit(first, fit, path: str, i: int):
@@ -107,7 +107,7 @@ def _with_fit(first, fit, path: str, i: int):
     s = first.series
     after = predict(s["holdout"], fit)
     per, per_run, quiet = mechanical_errors(s["holdout"], s["before"], after)
-    added = _added(fit)
+    added = _added(fit, first)
     added[i]["placed_on"] = path
     return replace(
         first,

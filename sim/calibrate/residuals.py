@@ -230,6 +230,9 @@ class MechRun:
         """One (n, k) generalised force per linear coefficient of ``law`` (unit value) at ``where``."""
         if getattr(law, "model_force", False):  # already through the prefilter and the force chain
             return [self.model]
+        if getattr(law, "recorded_force", False):  # the place's share of the recorded force, as read now
+            idx = self.classes[where.partition(":")[2]]
+            return [self.filt(self.extra["actuator_force"][:, idx] @ self.J[idx])]
         key = (law.type, where, tuple(sorted(shape.items())))
         cache = self.extra.setdefault("raw_columns", {})
         if key in cache:

@@ -661,7 +661,8 @@ def acts_on(cand: Candidate):
     from sim.effects.sensors import parse_channel
 
     ch, col = parse_channel(cand.where)
-    return lambda c, j: c == ch and (col is None or j == col)
+    cols = col if isinstance(col, tuple) else (col,)
+    return lambda c, j: c == ch and (col is None or j in cols)
 
 
 # ------------------------------------------------------------------ refinement

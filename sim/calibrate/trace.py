@@ -87,6 +87,9 @@ def _stack(mruns, terms):
         cols = []
         for t in terms:
             k = _key(t)
+            if getattr(t.law, "recorded_force", False):  # the force as re-timed: not kept across timings
+                cols.extend((mr.demean(Q)[mr.rows] * w).reshape(-1) for Q in mr.columns(t.law, t.where, t.shape))
+                continue
             if k not in cache:
                 if len(cache) > 256:
                     cache.clear()

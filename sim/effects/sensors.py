@@ -1,6 +1,7 @@
 """Sensor effects: a run-file channel as its sensor reports it (``measure``).
 
-Each acts at ``where = "channel:<run-file channel>[<column>]"`` (one column, 0-based)
+Each acts at ``where = "channel:<run-file channel>[<column>]"`` (one column, 0-based),
+``"channel:<channel>[<column>,<column>,...]"`` (several: one actuator class's load cells)
 or ``"channel:<channel>"`` (every column); channels as in ``sim.runs.runfile.CHANNELS``
 (``docs/run-file.md``)::
 
@@ -51,19 +52,24 @@ CHANNEL_NAMES = (
     "specimen_acceleration",
 )
 
-_PLACE = re.compile(r"^([a-z_]+)(?:\[(\d+)\])?$")
+_PLACE = re.compile(r"^([a-z_]+)(?:\[(\d+(?:,\d+)*)\])?$")
 
 
-def parse_channel(where: str, source: str = "effect") -> tuple[str, int | None]:
-    """``"channel:actuator_force[2]"`` -> ``("actuator_force", 2)``; no column -> None."""
+def parse_channel(where: str, source: str = "effect") -> tuple[str, int | tuple | None]:
+    """``"channel:actuator_force[2]"`` -> ``("actuator_force", 2)``; several columns
+    (``[8,9,10,11]``: one actuator class's load cells) -> a tuple; no column -> None."""
     kind, _, rest = where.partition(":")
     m = _PLACE.match(rest)
     if kind != "channel" or not m or m.group(1) not in CHANNEL_NAMES:
         raise ScenarioError(
-            f"{source}: where = '{where}' is not a channel; use 'channel:<name>' or "
-            f"'channel:<name>[<column>]' with a name among {', '.join(CHANNEL_NAMES)}"
+            f"{source}: where = '{where}' is not a channel; use 'channel:<name>', "
+            f"'channel:<name>[<column>]' or 'channel:<name>[<column>,<column>,...]' with a name among "
+            f"{', '.join(CHANNEL_NAMES)}"
         )
-    return m.group(1), None if m.group(2) is None else int(m.group(2))
+    if m.group(2) is None:
+        return m.group(1), None
+    cols = tuple(int(c) for c in m.group(2).split(","))
+    return m.group(1), cols[0] if len(cols) == 1 else cols
 
 
 class _Sensor(Effect):
@@ -86,13 +92,14 @@ class _Sensor(Effect):
         if self.column is None:
             out[self.channel] = self.transform(np.asarray(t), x)
             return out
-        if x.ndim != 2 or not 0 <= self.column < x.shape[1]:
+        cols = list(self.column) if isinstance(self.column, tuple) else [self.column]
+        if x.ndim != 2 or not all(0 <= c < x.shape[1] for c in cols):
             raise ScenarioError(
                 f"{self.source}: where = '{self.where}': channel {self.channel} has "
                 f"{x.shape[1] if x.ndim == 2 else 1} column(s) (0-based index)"
             )
         y = x.copy()
-        y[:, self.column] = self.transform(np.asarray(t), x[:, self.column])
+        y[:, cols] = self.transform(np.asarray(t), x[:, cols])
         out[self.channel] = y
         return out
 

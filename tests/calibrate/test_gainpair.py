@@ -63,3 +63,60 @@ def test_clean_records_read_no_gain_beside_a_law():
     pair = pair_fit(runs, fit_terms(runs, []), Term(LAWS["added_mass"], "dof:x"))
     b = pair.values[0]["gain_change"]
     assert abs(b) < GAIN_TOLERANCE, b  # within a transducer's tolerance: refused
+
+
+def two_class_run(seed, gain_y, n=4000):
+    """Two DOFs, one actuator class pushing each (x: class longitudinal, y: class lateral);
+    the declared model is the platen's mass and dry friction; the lateral load cells read
+    ``gain_y`` x their force, plus 1 % noise."""
+    from sim.calibrate.residuals import MechRun
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(n)[:, None] / FS
+    f, A, ph = rng.uniform(0.3, 5.0, (2, 6)), rng.uniform(0.005, 0.02, (2, 6)), rng.uniform(0, 2 * np.pi, (2, 6))
+    motion = []
+    for k in range(2):
+        w = 2 * np.pi * f[k]
+        motion.append([(A[k] * x).sum(1) for x in (np.sin(w * t + ph[k]), w * np.cos(w * t + ph[k]))])
+        motion[-1].append(-((A[k] * w**2) * np.sin(w * t + ph[k])).sum(1))
+    u, v, a = (np.column_stack([motion[0][i], motion[1][i]]) for i in range(3))
+    model = MASS * a + FRICTION * np.clip(v / 1e-3, -1.0, 1.0)
+    act = model * np.array([1.0, gain_y]) + rng.normal(0.0, 0.01 * np.std(model), model.shape)
+    run = MechRun(
+        name=f"two{seed}", dt=1 / FS, dofs=["x", "y"], u=u, v=v, a=a, force=act, model=model, J=np.eye(2),
+        actuators=["X1", "Y1"], classes={"longitudinal": [0], "lateral": [1]}, rows=np.ones(n, bool),
+    )  # fmt: skip
+    run.extra["actuator_force"] = act
+    return run
+
+
+def test_one_class_of_load_cells_reads_its_own_gain():
+    from sim.calibrate.laws import LOAD_CELLS_GAIN_CLASS, class_gain
+    from sim.calibrate.mechsearch import alone_in_direction, class_gain_entry
+
+    runs = [two_class_run(s, 1.05) for s in (1, 2)]
+    assert alone_in_direction(runs[0], ["class:longitudinal", "class:lateral"]) == [
+        "class:longitudinal",
+        "class:lateral",
+    ]
+    fit = fit_terms(runs, [Term(LOAD_CELLS_GAIN_CLASS, "class:lateral")])
+    g = class_gain(fit.values[0]["read_excess"])
+    assert abs(g - 1.05) < GAIN_TOLERANCE * 1.05, g
+    other = fit_terms(runs, [Term(LOAD_CELLS_GAIN_CLASS, "class:longitudinal")])
+    assert abs(class_gain(other.values[0]["read_excess"]) - 1.0) < GAIN_TOLERANCE
+    entry = class_gain_entry("class:lateral", fit.values[0], {"read_excess": 0.001}, runs[0].classes)
+    assert (entry["name"], entry["where"], entry["parameters"]["gain"]) == (
+        "sensor_gain",
+        "channel:actuator_force[1]",
+        g,
+    )
+
+
+def test_classes_that_push_alike_have_no_gain_of_their_own():
+    """Two classes along one DOF (NEES-UCSD's east and west actuators): their load cells'
+    gains trade against each other, so neither is a candidate."""
+    from sim.calibrate.mechsearch import alone_in_direction
+
+    run = gain_and_mass_run(1, 1.0, 0.0)
+    run.J, run.actuators, run.classes = np.ones((2, 1)), ["E", "W"], {"east": [0], "west": [1]}
+    assert alone_in_direction(run, ["class:east"]) == []

@@ -77,6 +77,22 @@ def test_sensor_gain_and_offset_one_column_or_all():
     np.testing.assert_array_equal(o["actuator_force"], x - 3.5)
 
 
+def test_sensor_gain_on_several_columns():
+    """One actuator class's load cells (``[1,3]``): those columns scaled, the others not;
+    a column past the channel's is one line naming it."""
+    t = np.arange(100) / FS
+    x = np.random.default_rng(1).normal(size=(100, 4))
+    e = create({"type": "sensor_gain", "where": "channel:actuator_force[1,3]", "gain": 1.05})
+    y = e.measure(t, {"actuator_force": x}, None)["actuator_force"]
+    np.testing.assert_array_equal(y[:, [1, 3]], 1.05 * x[:, [1, 3]])
+    np.testing.assert_array_equal(y[:, [0, 2]], x[:, [0, 2]])
+    bad = create(
+        {"type": "sensor_gain", "where": "channel:actuator_force[1,4]", "gain": 1.05}, source="t.toml effect[0]"
+    )
+    with pytest.raises(ScenarioError, match="has 4 column"):
+        bad.measure(t, {"actuator_force": x}, None)
+
+
 def test_sensor_delay_is_a_fractional_delay():
     """A ramp delayed by 2.3 samples is the ramp 2.3 samples later, exactly (linear
     interpolation is exact on a line); a sine delayed by tau has its phase lowered by
