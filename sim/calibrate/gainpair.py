@@ -40,7 +40,7 @@ def _model_force(u, v, a, s):
 #: the load cells' gain relative to the one the records are read at, as a term: its
 #: column is the declared model's force, its coefficient ``g / g0 - 1``
 LOAD_CELLS_GAIN = Law(
-    type="load_cells_gain",
+    type="load_cells_gain_all",  # every load cell's (one class's: sim.calibrate.laws.LOAD_CELLS_GAIN_CLASS)
     params={"gain_change": ("1", -0.5, 1.0)},
     linear="gain_change",
     basis=_model_force,
