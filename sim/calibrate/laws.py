@@ -634,8 +634,8 @@ def _recorded_force(u, v, a, s):
 
 
 #: one actuator class's load cells reading ``gain`` x the force (a piston area or a unit
-#: of one kind of actuator nobody wrote down): the class's recorded force less the share
-#: ``read_excess = 1 - 1 / gain`` of it. Its column is the class's recorded force (its
+#: of one kind of actuator nobody wrote down), or one actuator's (its transducer): their
+#: recorded force less the share ``read_excess = 1 - 1 / gain`` of it. Its column is that recorded force (its
 #: noise is the load cells', a thousandth of the force: no bias worth a column of its
 #: own). Written as the ``sensor_gain`` of the class's force columns
 #: (:func:`sim.calibrate.mechsearch.added_entries`); the gain of every load cell at once
@@ -648,8 +648,8 @@ LOAD_CELLS_GAIN_CLASS = add_law(
         params={"read_excess": ("1", -1.0, 0.5)},
         linear="read_excess",
         basis=_recorded_force,
-        places=("class",),
-        what="one actuator class's load cells read gain x the force: read_excess = 1 - 1 / gain of it is not force",
+        places=("class", "actuator"),
+        what="one class's or actuator's load cells read gain x the force: read_excess = 1 - 1 / gain of it is not force",
         recorded_force=True,
     )
 )

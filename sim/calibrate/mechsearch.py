@@ -109,16 +109,20 @@ def stage_candidates(laws, mfit, desc, pl) -> list:
 
 
 def alone_in_direction(mr, wheres) -> list:
-    """The class places of ``wheres`` whose force maps into DOF space as no other class's
-    does, on a table of several classes: a class's load cells' gain is told from the
-    others' only there (NEES-UCSD's east and west actuators both push along x: their gains
-    traded 0.603 against 0.892 beside an undeclared conditioner)."""
+    """The class (actuator) places of ``wheres`` whose force maps into DOF space as no
+    other class's (actuator's) does, on a table of several: a load cell's gain is told from
+    the others' only there (NEES-UCSD's east and west actuators both push along x: their
+    gains traded 0.603 against 0.892 beside an undeclared conditioner; CGS's X1 and X3 are
+    a push-pull pair on one line, its Z1-Z4 each alone)."""
     from sim.calibrate.residuals import same_direction
 
-    others = [f"class:{c}" for c in mr.classes]
-    if len(others) < 2:
-        return []
-    return [w for w in wheres if sum(same_direction(_direction(mr, w), _direction(mr, c)) for c in others) == 1]
+    def alone(w: str) -> bool:
+        kind = w.partition(":")[0]
+        others = [f"class:{c}" for c in mr.classes] if kind == "class" else [f"actuator:{a}" for a in mr.actuators]
+        n = sum(same_direction(_direction(mr, w), _direction(mr, o)) for o in others)
+        return len(others) > 1 and n == 1
+
+    return [w for w in wheres if alone(w)]
 
 
 def mechanical_stage(runs, ho_given, desc, pl, *, effects, payload, accel_lowpass_hz, margin, say, t0):
@@ -357,7 +361,7 @@ def _result(ms, cur, tried, timed_added, declared, facts, desc, runs):
         residual_path="mechanical",
         error_before=e_ho0,
         error_after=nrmse_runs(ms.mho, ho_res),
-        effects_added=added_entries(joint_intervals(ms.mfit, cur, timed_added), ms.mfit[0].classes) + timed_added,
+        effects_added=added_entries(joint_intervals(ms.mfit, cur, timed_added), ms.mfit[0]) + timed_added,
         candidates=tried,
         unexplained=unexplained(ms.mfit, cur.residuals),
         per_channel=per,
@@ -386,7 +390,7 @@ def refit_subset(res, keep: list[int]):
     terms = res.series["terms"]
     fit = fit_terms(res.series["fit"], [terms[i] for i in keep])
     return nrmse_runs(res.series["holdout"], predict(res.series["holdout"], fit)), added_entries(
-        fit, res.series["fit"][0].classes
+        fit, res.series["fit"][0]
     )
 
 
@@ -567,16 +571,16 @@ def _log_demotion(ms: MechStage, cur, i, name, at, simpler_at, fits, tried) -> N
     tried.append(backward_row(t, cur.values[i], unc95, alt, cur, e_alt, 0.0, flatness(ms.mfit, alt.residuals), why))
 
 
-def added_entries(cur, classes: dict | None = None) -> list:
-    """The ``effects_added`` entries of the fit's terms (``classes``: the runs' actuator
-    classes, where a class's load cells' gain is written at its force columns)."""
+def added_entries(cur, mr=None) -> list:
+    """The ``effects_added`` entries of the fit's terms (``mr``: a run of theirs, where a
+    class's or an actuator's load cells' gain is written at its force columns)."""
     from sim.calibrate.acceptance import param_report
 
     out = []
     for i, t in enumerate(cur.terms):
         _, _, unc = param_report(t, cur.values[i], cur.sigma[i])
         if getattr(t.law, "recorded_force", False):
-            out.append(class_gain_entry(t.where, cur.values[i], unc, classes))
+            out.append(class_gain_entry(t.where, cur.values[i], unc, mr))
             continue
         out.append(
             {
@@ -593,13 +597,14 @@ def added_entries(cur, classes: dict | None = None) -> list:
     return out
 
 
-def class_gain_entry(where: str, values: dict, unc: dict, classes: dict) -> dict:
-    """The ``sensor_gain`` entry of a class's load cells (:data:`sim.calibrate.laws.LOAD_CELLS_GAIN_CLASS`)
-    at the class's columns of the recorded force: ``gain = 1 / (1 - read_excess)``."""
+def class_gain_entry(where: str, values: dict, unc: dict, mr) -> dict:
+    """The ``sensor_gain`` entry of a class's or an actuator's load cells
+    (:data:`sim.calibrate.laws.LOAD_CELLS_GAIN_CLASS`) at their columns of the recorded
+    force (``mr``'s): ``gain = 1 / (1 - read_excess)``."""
     from sim.calibrate.laws import class_gain
 
     b = values["read_excess"]
-    cols = ",".join(str(k) for k in classes[where.partition(":")[2]])
+    cols = ",".join(str(k) for k in mr.actuator_columns(where))
     return {
         "name": "sensor_gain",
         "where": f"channel:actuator_force[{cols}]",

@@ -95,7 +95,7 @@ def _moved(first, i: int, where: str):
 def _added(fit, first) -> list:
     from sim.calibrate.mechsearch import added_entries
 
-    return added_entries(fit, first.series["fit"][0].classes)
+    return added_entries(fit, first.series["fit"][0])
 
 
 def _with_fit(first, fit, path: str, i: int):

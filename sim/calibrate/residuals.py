@@ -195,6 +195,11 @@ class MechRun:
             return np.abs(f[:, self.classes[name]])
         raise CalibrationError(f"where = '{where}': a load is read at actuator: or class: places")
 
+    def actuator_columns(self, where: str) -> list:
+        """The actuator indices of a ``class:`` or ``actuator:`` place."""
+        kind, name = where.split(":", 1)
+        return list(self.classes[name]) if kind == "class" else [self.actuators.index(name)]
+
     def column(self, law, where: str, shape: dict) -> np.ndarray:
         """(n, k) generalised force of a one-coefficient ``law`` with unit coefficient at ``where``."""
         return self.columns(law, where, shape)[0]
@@ -210,12 +215,9 @@ class MechRun:
     def basis(self, law, where: str, shape: dict) -> list:
         """The law's unfiltered columns (:func:`_raw_columns`), kept in ``extra["basis"]``,
         which the run's re-timed copies share (:func:`sim.calibrate.timing.retime`): they
-        depend on the recorded motion and the shape alone, a load's law also on the force
-        delay and gain (the load is the re-read force), and a law that filters inside on the
-        timing: its columns are made anew. A timing search re-times the runs at every
-        point it tries, and every round scans a mode's grid again: the accepted terms'
-        columns (a dry friction's pre-sliding series) and the grid's (a mode's interpolated
-        filter) need not be made again."""
+        depend on the motion and the shape alone (a load's law on the force delay and gain
+        too; a law that filters inside is made anew), and a timing search re-times the runs
+        at every point, every round scans a mode's grid again."""
         if getattr(law, "filters_inside", False):
             return _raw_columns(self, law, where, shape)
         key = (law.type, where, tuple(sorted(shape.items())))
@@ -231,7 +233,7 @@ class MechRun:
         if getattr(law, "model_force", False):  # already through the prefilter and the force chain
             return [self.model]
         if getattr(law, "recorded_force", False):  # the place's share of the recorded force, as read now
-            idx = self.classes[where.partition(":")[2]]
+            idx = self.actuator_columns(where)
             return [self.filt(self.extra["actuator_force"][:, idx] @ self.J[idx])]
         key = (law.type, where, tuple(sorted(shape.items())))
         cache = self.extra.setdefault("raw_columns", {})
@@ -644,8 +646,7 @@ def nrmse_runs(mruns, residuals, dofs=None) -> float:
     """Pooled NRMSE of ``residuals`` (list of (n, k)) against the recorded force, over
     each run's excited DOFs (:func:`excited_dofs`), each DOF's squared NRMSE weighted by
     its noise (:func:`sim.calibrate.mechnoise.dof_noise_weights`: alike where the record
-    is clean, the paper's force weighting); ``dofs``: only these DOF names (None: every
-    one)."""
+    is clean, the paper's force weighting); ``dofs``: only these DOFs (None: every one)."""
     from sim.calibrate.mechnoise import dof_noise_weights
 
     vals, weights = [], []

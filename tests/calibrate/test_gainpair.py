@@ -104,7 +104,7 @@ def test_one_class_of_load_cells_reads_its_own_gain():
     assert abs(g - 1.05) < GAIN_TOLERANCE * 1.05, g
     other = fit_terms(runs, [Term(LOAD_CELLS_GAIN_CLASS, "class:longitudinal")])
     assert abs(class_gain(other.values[0]["read_excess"]) - 1.0) < GAIN_TOLERANCE
-    entry = class_gain_entry("class:lateral", fit.values[0], {"read_excess": 0.001}, runs[0].classes)
+    entry = class_gain_entry("class:lateral", fit.values[0], {"read_excess": 0.001}, runs[0])
     assert (entry["name"], entry["where"], entry["parameters"]["gain"]) == (
         "sensor_gain",
         "channel:actuator_force[1]",
