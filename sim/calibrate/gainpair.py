@@ -27,7 +27,8 @@ import numpy as np
 
 from sim.calibrate.laws import Law
 
-#: the round's laws (most explained first) the gain is fitted beside
+#: the round's laws (most explained first) the gain is fitted beside (assumed: 3; on the
+#: NEES-UCSD records with 8 t added the added mass was the second, a mode the first)
 PARTNERS = 3
 #: where the gain acts: the load cells
 WHERE = "channel:actuator_force"
@@ -38,7 +39,8 @@ def _model_force(u, v, a, s):
 
 
 #: the load cells' gain relative to the one the records are read at, as a term: its
-#: column is the declared model's force, its coefficient ``g / g0 - 1``
+#: column is the declared model's force, its coefficient ``g / g0 - 1`` (bounds: a factor
+#: of 2 either way, as :data:`sim.calibrate.timing.FORCE_GAIN_RANGE`)
 LOAD_CELLS_GAIN = Law(
     type="load_cells_gain_all",  # every load cell's (one class's: sim.calibrate.laws.LOAD_CELLS_GAIN_CLASS)
     params={"gain_change": ("1", -0.5, 1.0)},

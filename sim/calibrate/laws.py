@@ -638,7 +638,8 @@ def _recorded_force(u, v, a, s):
 #: recorded force less the share ``read_excess = 1 - 1 / gain`` of it. Its column is that recorded force (its
 #: noise is the load cells', a thousandth of the force: no bias worth a column of its
 #: own). Written as the ``sensor_gain`` of the class's force columns
-#: (:func:`sim.calibrate.mechsearch.added_entries`); the gain of every load cell at once
+#: (:func:`sim.calibrate.mechsearch.added_entries`); its bounds are a gain of 0.5-2 (as
+#: :data:`sim.calibrate.timing.FORCE_GAIN_RANGE`); the gain of every load cell at once
 #: is the sensor candidate's (:mod:`sim.calibrate.timing`). CGS records with the vertical
 #: class 5 % high: an added mass of 530 kg on the class, 520 kg in z and a friction of
 #: 554 N on the class stood for it.
