@@ -210,6 +210,8 @@ class MechStage:
     declared_timing: dict = field(default_factory=dict)
     n_fits: int = 0
     tried: list = field(default_factory=list)
+    #: the round's law to judge first (:func:`sim.calibrate.gainpair.class_gain_first`), or None
+    first: object = None
     #: the mechanical path revisits once, after the last round
     revisit_every_round = False
 
@@ -248,21 +250,24 @@ class MechStage:
             self.n_fits += 1
             scored.append((1.0 - new.rss / cur.rss if cur.rss > 0 else 0.0, law, w, new))
         scored.sort(key=lambda s: (-round(s[0], 6), rank.get(s[2].split(":")[0], 3)))
+        from sim.calibrate.gainpair import beside_a_law, class_gain_first
+
+        self.first = class_gain_first(self.st, cur, scored, self.say)
         st = self.st
         if not st.timing_on:
             return scored, None
-        from sim.calibrate.gainpair import beside_a_law
-
         args = (st.mfit, st.mho, cur, st.e_ho, st.flat, st.margin, st.effects, st.timed_added)
         return scored, beside_a_law(st, cur, scored, timing.round_candidates(*args), self.say)
 
     def choose(self, screened, rnd) -> list:
         """Every candidate (a least-squares fit is cheap), the laws and the timing ones in
-        one order, most explained first (:func:`sim.calibrate.timing.merged`)."""
+        one order, most explained first (:func:`sim.calibrate.timing.merged`), a load cell's
+        gain read beside a law before them (:func:`sim.calibrate.gainpair.class_gain_first`)."""
         from sim.calibrate import timing
 
         scored, timed = screened
-        return scored if timed is None else timing.merged(scored, timed)
+        order = scored if timed is None else timing.merged(scored, timed)
+        return order if self.first is None else [self.first] + [s for s in order if s is not self.first]
 
     def refine(self, chosen: list, rnd) -> list:
         """Nothing more: each candidate's screening was its refined least-squares fit."""

@@ -146,6 +146,8 @@ CASES = {
     "vertical_load_cells_high": [],
     # nothing planted: Z1's load cell alone reads 5 % high (below)
     "z1_load_cell_high": [],
+    # the vertical class's load cells 5 % high (below) and 6 t in z nobody declared
+    "vertical_load_cells_high_mass_z": [{"type": "added_mass", "where": "dof:z", "mass_kg": 6000.0}],
 }
 #: case -> samples its displacement and velocity are late (not declared)
 MOTION_LATE = {"coulomb_class_vertical_motion_late": 2}
@@ -156,6 +158,7 @@ FORCE_GAIN = {
     "load_cells_high": 1.05,
     "vertical_load_cells_high": [1.0] * 8 + [1.05] * 4,
     "z1_load_cell_high": [1.0] * 8 + [1.05] + [1.0] * 3,
+    "vertical_load_cells_high_mass_z": [1.0] * 8 + [1.05] * 4,
 }
 #: case -> the payload on the table (declared: the runs name it, the calibration reads it)
 PAYLOAD = {"clean_payload": "rigid_20t", "cg_offset_payload": "rigid_20t"}
@@ -458,3 +461,22 @@ def test_one_load_cell_reading_high_is_its_own_gain(cases):
     g, u = (res.effects_added[0][k]["gain"] for k in ("parameters", "uncertainty"))
     assert abs(g - 1.05) <= 2 * u < 0.005, (g, u)
     assert res.error_after <= 1.05 * cases["clean"].error_before, (res.error_after, cases["clean"].error_before)
+
+
+@pytest.mark.slow
+def test_one_class_of_load_cells_beside_a_mass_is_both(cases):
+    """The vertical class's load cells 5 % high and 6 t in z nobody declared: the vertical
+    force is mostly the z inertia, so alone the class's gain took the mass in (1.095) and an
+    added mass at the supports explained more (then 4.2 t in z and a friction). Judged
+    first where the two together predict better (sim/calibrate/gainpair.py): 1.05036 +/-
+    0.00154 and 5 925 +/- 118 kg measured, nothing else; held out 6.82 % -> 1.94 %."""
+    res = cases["vertical_load_cells_high_mass_z"]
+    found = {(e["name"], e["where"]): e for e in res.effects_added}
+    assert sorted(found) == [("added_mass", "dof:z"), ("sensor_gain", "channel:actuator_force[8,9,10,11]")], found
+    g, u = (
+        found[("sensor_gain", "channel:actuator_force[8,9,10,11]")][k]["gain"] for k in ("parameters", "uncertainty")
+    )
+    assert abs(g - 1.05) <= u < 3e-3, (g, u)
+    m, um = (found[("added_mass", "dof:z")][k]["mass_kg"] for k in ("parameters", "uncertainty"))
+    assert abs(m - 6000.0) <= um < 0.03 * 6000.0, (m, um)
+    assert res.error_after < 0.35 * res.error_before, (res.error_before, res.error_after)
