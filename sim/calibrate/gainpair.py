@@ -167,7 +167,7 @@ def class_gain_first(st, cur, scored: list, say):
     from sim.calibrate.residuals import nrmse_runs
     from sim.calibrate.trace import fit_terms, predict
 
-    top = scored[: 2 * PARTNERS]
+    top = scored[: 2 * PARTNERS]  # assumed: twice the partners (the class's gain was the fourth on CGS)
     gains = [s for s in top if s[1].recorded_force]
     others = [s for s in top if not s[1].recorded_force][:PARTNERS]
     if not gains or not others:
