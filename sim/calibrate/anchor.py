@@ -178,19 +178,31 @@ def _offset(w: np.ndarray, ph: np.ndarray, wt: np.ndarray) -> tuple[float, float
     return float(coef[0]), math.sqrt(max(chi2, 1.0) * np.linalg.inv(A)[0, 0])
 
 
-def corroborates(before: Anchor, after: Anchor) -> tuple[bool, str]:
+def corroborates(before: Anchor, after: Anchor, scan_s: float = 0.0) -> tuple[bool, str]:
     """Whether a timing candidate of the acceleration is what the displacement says: the
     acceleration measurably off its declared chain (``before``: at the declared timing,
-    its interval leaving out 0), and the candidate bringing it nearer the displacement
-    (``after``: at the candidate's timing). ``(ok, reason when not)``."""
+    its interval leaving out 0), and with the candidate (``after``) on it, up to the
+    displacement's own skew (``scan_s``: a multiplexed recorder's scan, the displacement
+    may be that far off itself) or the reading's interval, its phase no less a delay's
+    line than before. Nearer is not enough: on the worked example's records, the
+    accelerometer a sample late and the pressure a sample early, a 26.7 Hz conditioner in
+    place of the declared 50 Hz took both skews (the balance's) and left the acceleration
+    3.9 ms the other side of the displacement; a sample early, an 81 Hz one in place of
+    the declared 50 Hz left it 0.65 ms off with its phase bent (a line through it met 0 Hz
+    at 0.26 +/- 0.03 rad), where a delay left it on the line. ``(ok, reason when not)``."""
     if not math.isfinite(before.delay_s):
         return False, f"the displacement cannot time the acceleration: {before.text()}"
     if not before.significant:
         return False, f"the displacement puts the acceleration on its declared chain ({before.text()})"
+    off = f"the displacement puts the acceleration {before.text()} off its declared chain; "
     if not abs(after.delay_s) < abs(before.delay_s):
-        return False, (
-            f"the displacement puts the acceleration {before.text()} off its declared chain; "
-            f"with this it is {1e3 * after.delay_s:+.3f} ms off: the skew is on another channel"
+        return False, off + f"with this it is {1e3 * after.delay_s:+.3f} ms off: the skew is on another channel"
+    if abs(after.delay_s) > max(scan_s, Z95 * after.sigma_s):
+        return False, off + f"with this it is {1e3 * after.delay_s:+.3f} ms off the other way: not this sensor's alone"
+    if before.a_delay and not after.a_delay:
+        return False, off + (
+            f"with this its phase bends (a line through it meets 0 Hz at {after.offset_rad:+.3f} +/- "
+            f"{Z95 * after.offset_sigma_rad:.3f} rad): not its shape"
         )
     return True, ""
 

@@ -551,7 +551,7 @@ def kinematic_check(cand: Candidate, x: float, before, after) -> dict | None:
         return None
     if cand.where == "channel:table_acceleration":
         a1 = anchor.measure(after())
-        ok, why = anchor.corroborates(a0, a1)
+        ok, why = anchor.corroborates(a0, a1, DISPLACEMENT_SKEW_SAMPLES * before[0].dt)
     elif cand.where == "channel:actuator_force":
         mirror = cand.neutral - x  # the force read dx later is the acceleration read dx earlier
         a1 = dc.replace(a0, delay_s=a0.delay_s - mirror)
