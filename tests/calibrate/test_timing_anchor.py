@@ -171,6 +171,29 @@ def test_a_refit_may_not_move_the_acceleration_out_of_the_displacements_agreemen
     assert _held_to_the_displacement({"name": "sensor_delay"}, 14.5e-3, 1e-4, dt) == (14.5e-3, 1e-4)
 
 
+def test_an_acceleration_candidate_must_put_it_on_its_chain_as_a_delay():
+    """The displacement corroborates a candidate of the acceleration's timing only where,
+    with it, the acceleration sits on its chain up to the displacement's own scan skew and
+    its phase is no less a delay's line than before: the worked example's 26.7 Hz and
+    81 Hz conditioners (the readings below) were nearer than before, and wrong."""
+    dt = 1 / 204.8
+    scan = 0.5 * dt
+    before = anchor.Anchor(4.873e-3, 1.1e-5, 49, (5.1, 67.8), 0.0146, 0.0097)
+    assert before.significant and before.a_delay
+    on = anchor.Anchor(0.009e-3, 1.0e-5, 49, (5.1, 67.8), 0.0133, 0.0094)
+    assert anchor.corroborates(before, on, scan) == (True, "")
+    across = anchor.Anchor(-3.884e-3, 1.83e-4, 49, (5.1, 67.8), 0.053, 0.084)  # both skews taken
+    ok, why = anchor.corroborates(before, across, scan)
+    assert not ok and "the other way" in why, why
+    assert anchor.corroborates(before, across)[0] is False  # without a scan: its interval only
+    bent = anchor.Anchor(-0.65e-3, 4.5e-5, 49, (5.1, 67.8), 0.2614, 0.0293)
+    ok, why = anchor.corroborates(before, bent, scan)
+    assert not ok and "bends" in why, why
+    # a conditioner left out bends the phase before: a candidate that straightens it passes
+    curved = anchor.Anchor(9.7e-3, 2e-4, 40, (5.0, 60.0), 0.30, 0.03)
+    assert anchor.corroborates(curved, on, scan) == (True, "")
+
+
 # ------------------------------------------------------------------ the worked example's records
 def _example():
     spec = importlib.util.spec_from_file_location("lab_quake_export_anchor", EX / "make_quake_export.py")
@@ -277,6 +300,37 @@ def test_pressure_early_and_accelerometer_late_at_once_each_on_its_channel(lab):
         c for c in res.candidates if c["where"] == "channel:actuator_force" and "its timing first" in c["reason"]
     ]
     assert refused  # the force's candidate waited for the acceleration's timing
+    assert res.error_after < 0.05 * res.error_before, (res.error_before, res.error_after)
+
+
+@pytest.mark.parametrize("accel_samples, pressure_samples", [(1, 1), (-1, 0)])
+def test_an_accelerometer_a_sample_off_is_its_delay_not_a_conditioner(lab, accel_samples, pressure_samples):
+    """The platen accelerometer a sample late with the pressure a sample early, or a sample
+    early alone: a delay on the acceleration (and the force's), each inside its interval.
+    Measured: +4.882 +/- 0.020 ms and -4.868 +/- 0.058 ms; -4.987 +/- 0.108 ms. Before
+    the displacement held a conditioner candidate to its chain, a 26.7 Hz (81 Hz) one in
+    place of the declared 50 Hz took the balance's skew (both skews, 3.9 ms past the
+    displacement; 0.65 ms off with its phase bent) and the search went on to a
+    displacement delay and a second mode, or a force delay (held out 20.9 % and 6.0 %
+    pooled over the paths, 3.9 % now)."""
+    dt = 1 / 204.8
+    res = _calibrate(
+        _records(
+            lab,
+            f"sample_{accel_samples}_{pressure_samples}",
+            accel_lag_s=accel_samples * dt,
+            pressure_lead_s=pressure_samples * dt,
+        )
+    )
+    found = _timing(res)
+    truth = {"channel:table_acceleration": accel_samples * dt}
+    if pressure_samples:
+        truth["channel:actuator_force"] = -pressure_samples * dt
+    assert sorted(found) == sorted(truth), found
+    for where, value in truth.items():
+        e = found[where]
+        d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
+        assert e["name"] == "sensor_delay" and abs(d - value) <= u < 2e-4, (where, d, u)
     assert res.error_after < 0.05 * res.error_before, (res.error_before, res.error_after)
 
 
