@@ -155,14 +155,35 @@ def measure(mruns, bins_of=None) -> Anchor:
     w = np.concatenate([b[0] for b in bins]) if bins else np.zeros(0)
     if len(w) < MIN_BINS:
         return Anchor(math.nan, math.inf, len(w), (0.0, 0.0))
-    ph = np.concatenate([b[1] for b in bins])
     wt = 1.0 / np.concatenate([b[2] for b in bins])
+    ph = unwrapped(w, np.concatenate([b[1] for b in bins]), wt)
     sw2 = float(np.sum(wt * w**2))
     tau = -float(np.sum(wt * w * ph)) / sw2
     chi2 = float(np.sum(wt * (ph + w * tau) ** 2)) / max(len(w) - 1, 1)
     sigma = math.sqrt(max(chi2, 1.0) / sw2)
     f = w / (2 * np.pi)
     return Anchor(tau, sigma, len(w), (float(f.min()), float(f.max())), *_offset(w, ph, wt))
+
+
+#: the largest delay the anchor looks for, s (assumed: as the timing candidates' bound,
+#: :data:`sim.calibrate.timing.MAX_DELAY_S`)
+MAX_ANCHOR_DELAY_S = 0.05
+
+
+def unwrapped(w: np.ndarray, ph: np.ndarray, wt: np.ndarray) -> np.ndarray:
+    """The bins' phases ``ph`` (wrapped to +/-pi) about the delay whose phasors line up
+    best: ``tau0`` maximising the weighted sum of ``exp(i (ph + w tau))`` over a grid
+    fine enough for the top bin (its phase moves pi / 8 a step) within
+    :data:`MAX_ANCHOR_DELAY_S`; each phase is then ``-w tau0`` plus its own wrapped
+    remainder. Where no bin wraps this is ``ph`` itself. A line fitted to wrapped phases
+    goes wrong once the top bin's phase passes pi: the worked example's accelerometer 3
+    samples late beyond its 50 Hz conditioner (14.6 ms, 1.2 turns at 82 Hz) read -4.5 ms,
+    and the force took the skew."""
+    step = np.pi / 8 / float(np.max(w))
+    taus = np.arange(-MAX_ANCHOR_DELAY_S, MAX_ANCHOR_DELAY_S + step, step)
+    power = [abs(np.sum(wt * np.exp(1j * (ph + w * tau)))) for tau in taus]
+    tau0 = float(taus[int(np.argmax(power))])
+    return np.angle(np.exp(1j * (ph + w * tau0))) - w * tau0
 
 
 def _offset(w: np.ndarray, ph: np.ndarray, wt: np.ndarray) -> tuple[float, float]:
