@@ -120,3 +120,29 @@ def test_classes_that_push_alike_have_no_gain_of_their_own():
     run = gain_and_mass_run(1, 1.0, 0.0)
     run.J, run.actuators, run.classes = np.ones((2, 1)), ["E", "W"], {"east": [0], "west": [1]}
     assert alone_in_direction(run, ["class:east"]) == []
+
+
+def test_a_class_gain_gives_way_to_the_member_gain_it_stands_for():
+    """A class's load-cell gain that passed is refused where one of its actuators' gains
+    explained more and predicts the held-out runs better (mechjudge._a_member_stands_for_it);
+    a member that explains less, or predicts worse, and another class's actuator, do not
+    count."""
+    from types import SimpleNamespace
+
+    from sim.calibrate.mechjudge import _a_member_stands_for_it
+
+    mr = SimpleNamespace(classes={"vertical": [8, 9], "lateral": [4]}, actuators=[f"A{i}" for i in range(10)])
+
+    def row(where, expl, e_ho):
+        return {"name": "load_cells_gain", "where": where, "explained_fraction": expl, "holdout_error": e_ho}
+
+    cls = row("class:vertical", 0.0155, 0.0581)
+    assert _a_member_stands_for_it(mr, cls, [row("actuator:A8", 0.0505, 0.0571), cls])
+    assert not cls.get("accepted", True) and "actuator:A8" in cls["reason"], cls
+    for other in (row("actuator:A8", 0.0505, 0.0590), row("actuator:A9", 0.01, 0.0571), row("actuator:A4", 0.05, 0.05)):
+        fresh = row("class:vertical", 0.0155, 0.0581)
+        assert not _a_member_stands_for_it(mr, fresh, [other, fresh]), other
+        assert "reason" not in fresh
+    # another law at the class is not this rule's
+    mass = {**row("class:vertical", 0.0155, 0.0581), "name": "added_mass"}
+    assert not _a_member_stands_for_it(mr, mass, [row("actuator:A8", 0.0505, 0.0571)])
