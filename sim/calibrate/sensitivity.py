@@ -345,11 +345,13 @@ def _mechanical_candidates(tb: _Table, motion_rms) -> list[Candidate]:
 def _sensor_candidates(tb: _Table, prs) -> list[Candidate]:
     """The gain, delay and low-pass of each compared channel and column (an offset is each
     record's own zero, :func:`paths.tared`; the zero they share: :mod:`sim.calibrate.offsets`)."""
+    from sim.calibrate.paths import sensor_channel
+
     out, have, fs = [], tb.have, 1.0 / prs[0].dt
     for t in (t for t in SENSOR if t != "sensor_offset" and tb.offered(t)):
         for ch, cols in prs[0].columns.items():
-            one = np.shape(prs[0].recorded[ch])[1:] in ((), (1,))  # the channel is its column
-            for w in [f"channel:{ch}"] + ([] if one else [f"channel:{ch}[{j}]" for j in cols]):
+            one, s = np.shape(prs[0].recorded[ch])[1:] in ((), (1,)), sensor_channel(ch, prs)  # one: its column
+            for w in [f"channel:{s}"] + ([] if one else [f"channel:{s}[{j}]" for j in cols]):
                 if (t, w) in have:
                     continue
                 if t == "sensor_gain":
@@ -359,19 +361,8 @@ def _sensor_candidates(tb: _Table, prs) -> list[Candidate]:
                 else:  # internal 1/cutoff: the first step a filter at fs/4; the cutoff stays below Nyquist
                     c = ("cutoff_hz", 0.0, 4.0 / fs, 2.2 / fs, math.inf, "Hz")
                 k, x0, h, lo, hi, unit = c
-                out.append(
-                    Candidate(
-                        t,
-                        w,
-                        (k,),
-                        np.array([x0]),
-                        np.array([h]),
-                        np.array([lo]),
-                        np.array([hi]),
-                        {k: unit},
-                        sensor=True,
-                    )
-                )
+                start, step, low, high = (np.array([v]) for v in (x0, h, lo, hi))
+                out.append(Candidate(t, w, (k,), start, step, low, high, {k: unit}, sensor=True))
     return out
 
 
@@ -527,12 +518,11 @@ def sensor_model(cand: Candidate, theta, pr, model: dict) -> dict:
     if cand.type == "sensor_lowpass" and not theta[0] > 0:
         return model
     eff = EFFECTS[cand.type](cand.entry(theta))
-    ch = eff.channel
-    if ch not in model:
+    ch = next((c for c in (eff.channel, *_derived(eff.channel)) if c in model), None)
+    if ch is None:
         return model
-    out = dict(model)
-    x = np.asarray(model[ch], float)
-    out[ch] = eff.measure(pr.t, {ch: x}, None)[ch]
+    out = dict(model)  # a velocity derived from the displacement: its sensor's effect, linear, commutes with d/dt
+    out[ch] = eff.measure(pr.t, {eff.channel: np.asarray(model[ch], float)}, None)[eff.channel]
     return out
 
 
@@ -662,7 +652,14 @@ def acts_on(cand: Candidate):
 
     ch, col = parse_channel(cand.where)
     cols = col if isinstance(col, tuple) else (col,)
-    return lambda c, j: c == ch and (col is None or j in cols)
+    return lambda c, j: c in (ch, *_derived(ch)) and (col is None or j in cols)
+
+
+def _derived(sensor: str) -> tuple:
+    """The compared channels a run may derive from ``sensor`` (:data:`sim.calibrate.paths.DERIVED_FROM`)."""
+    from sim.calibrate.paths import DERIVED_FROM
+
+    return tuple(c for c, s in DERIVED_FROM.items() if s == sensor)
 
 
 # ------------------------------------------------------------------ refinement

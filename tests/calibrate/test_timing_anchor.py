@@ -214,9 +214,10 @@ def lab(tmp_path_factory):
     return mod, folder, sims
 
 
-def _records(lab, tag: str, *, map_path: Path = EX / "light_map.toml", **skews) -> list[str]:
+def _records(lab, tag: str, *, map_path: Path = EX / "light_map.toml", import_map: Path | None = None, **skews):
     """The lab's CSV exports of both tests with the given skews (``pressure_lead_s``,
-    ``accel_lag_s``, ``displacement_lag_s``: none unless given), imported with the map."""
+    ``accel_lag_s``, ``displacement_lag_s``: none unless given), imported with the map
+    (``import_map``: another one, a calibration factor the export did not apply)."""
     from sim.cli import main
     from sim.runs.importer import export_csv
 
@@ -227,7 +228,7 @@ def _records(lab, tag: str, *, map_path: Path = EX / "light_map.toml", **skews) 
     for name, run in sims.items():
         rec = mod.lab_record(run, bias=mod.BIAS[name], **{"pressure_lead_s": 0.0, **skews})
         csvs.append(str(export_csv(rec, map_path, out / f"{name}.csv")))
-    assert main(["import", *csvs, "--map", str(map_path), "--out", str(out / "runs")]) == 0
+    assert main(["import", *csvs, "--map", str(import_map or map_path), "--out", str(out / "runs")]) == 0
     return [str(out / "runs" / f"{name}.run.npz") for name in sims]
 
 
@@ -402,3 +403,24 @@ def test_a_displacement_skew_nobody_declared_is_timed_by_the_acceleration(lab, o
         for k, v in b["parameters"].items():
             assert abs(a["parameters"][k] - v) <= b["uncertainty"][k], (k, a["parameters"], b)
     assert res.error_after == pytest.approx(on_time.error_after, rel=0.01)
+
+
+def test_an_lvdt_reading_high_is_the_displacements_gain(lab, tmp_path):
+    """The example's LVDT 3 % high (its map's calibration factor 1.03) on records whose
+    velocity the import derives from the displacement: the replay reads the gain
+    (1.030409 +/- 0.000528 measured) and names the displacement, the sensor there is; it
+    named a velocity transducer the lab does not have (``sensor_gain`` at
+    ``table_velocity``, the same value) before ``paths.sensor_channel``. Pooled held out
+    3.91 %, as with the velocity's."""
+    text = (EX / "light_map.toml").read_text()
+    head = 'name = "disp"'
+    assert text.count(head) == 1
+    (tmp_path / "map.toml").write_text(text.replace(head, head + "\nscale = 1.03"))
+    mod = lab[0]
+    paths = _records(lab, "lvdt", import_map=tmp_path / "map.toml", pressure_lead_s=mod.PRESSURE_LEAD_S)
+    res = S.calibrate([paths[0]], holdout=[paths[1]], payload="none", log=lambda *a: None)
+    gains = [e for e in res.effects_added if e["name"] == "sensor_gain"]
+    assert [(e["where"], e["path"]) for e in gains] == [("channel:table_displacement", "replay")], res.effects_added
+    g, u = gains[0]["parameters"]["gain"], gains[0]["uncertainty"]["gain"]
+    assert abs(g - 1.03) < 1e-3 and u < 1e-3, (g, u)
+    assert res.error_after < 0.05 * res.error_before, (res.error_before, res.error_after)
