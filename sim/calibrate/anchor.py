@@ -242,12 +242,14 @@ def kinematic_gain(prs, columns) -> tuple[float, float]:
     ``(nan, inf)`` without such bins (:func:`_gain_bins`). A sensor's gain is read
     against another sensor of the same motion, as its timing is: the model's own
     amplitude error is not in it."""
+    from sim.calibrate.conditioning import path_velocity_derived
+
     logs, wts = [], []
     for pr in prs:
         rec = pr.recorded
         if "table_acceleration" not in rec or not {"table_velocity", "table_displacement"} & set(rec):
             continue
-        central = bool((getattr(pr, "conditioning", None) or {}).get("velocity_from_displacement"))
+        central = path_velocity_derived(pr)
         for j in columns:
             u, v = (rec[c][pr.rows][:, j] if c in rec else None for c in ("table_displacement", "table_velocity"))
             f, mag, var = _gain_bins(u, v, rec["table_acceleration"][pr.rows][:, j], 1.0 / pr.dt, central)

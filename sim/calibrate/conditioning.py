@@ -64,6 +64,22 @@ def velocity_derived(run) -> bool:
     return "table_velocity" in ((run.meta or {}).get("derived_channels") or {})
 
 
+#: a channel a run may derive from another (an import's ``derive_velocity``): its sensor is that one
+DERIVED_FROM = {"table_velocity": "table_displacement"}
+
+
+def path_velocity_derived(pr) -> bool:
+    """:func:`velocity_derived` of a path run (:class:`sim.calibrate.paths.PathRun`), from its conditioning."""
+    return bool((getattr(pr, "conditioning", None) or {}).get("velocity_from_displacement"))
+
+
+def sensor_channel(ch: str, prs) -> str:
+    """The sensor behind compared channel ``ch`` of the path runs ``prs``: the displacement
+    for a velocity every run derives from it (the worked example's LVDT reading 3 % high
+    came out as a gain of a velocity transducer the lab does not have)."""
+    return DERIVED_FROM.get(ch, ch) if all(path_velocity_derived(pr) for pr in prs) else ch
+
+
 def declared_channels(run) -> dict:
     """:func:`channel_conditioning`, a velocity an import made from the displacement given
     the displacement's chain (it went through it)."""

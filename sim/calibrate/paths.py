@@ -307,18 +307,6 @@ def _compared_columns(r, chans, J6, readable):
     return rec, cols, bands, quiet, floors
 
 
-#: a channel a run may derive from another (an import's ``derive_velocity``): its sensor is that one
-DERIVED_FROM = {"table_velocity": "table_displacement"}
-
-
-def sensor_channel(ch: str, prs) -> str:
-    """The sensor behind compared channel ``ch`` of these runs: the displacement for a
-    velocity every run derives from it (the worked example's LVDT reading 3 % high came
-    out as a gain of a velocity transducer the lab does not have)."""
-    derived = all((getattr(pr, "conditioning", None) or {}).get("velocity_from_displacement") for pr in prs)
-    return DERIVED_FROM.get(ch, ch) if derived else ch
-
-
 def noise_weights(floors: dict) -> dict:
     """Per channel, each compared column's weight in the pooled error: ``1 / (floor^2 +
     MODEL_ERROR^2)`` over ``1 / MODEL_ERROR^2`` (:func:`sim.calibrate.conditioning.noise_weight`;

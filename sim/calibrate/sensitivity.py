@@ -345,7 +345,7 @@ def _mechanical_candidates(tb: _Table, motion_rms) -> list[Candidate]:
 def _sensor_candidates(tb: _Table, prs) -> list[Candidate]:
     """The gain, delay and low-pass of each compared channel and column (an offset is each
     record's own zero, :func:`paths.tared`; the zero they share: :mod:`sim.calibrate.offsets`)."""
-    from sim.calibrate.paths import sensor_channel
+    from sim.calibrate.conditioning import sensor_channel
 
     out, have, fs = [], tb.have, 1.0 / prs[0].dt
     for t in (t for t in SENSOR if t != "sensor_offset" and tb.offered(t)):
@@ -656,8 +656,8 @@ def acts_on(cand: Candidate):
 
 
 def _derived(sensor: str) -> tuple:
-    """The compared channels a run may derive from ``sensor`` (:data:`sim.calibrate.paths.DERIVED_FROM`)."""
-    from sim.calibrate.paths import DERIVED_FROM
+    """The compared channels a run may derive from ``sensor`` (:data:`sim.calibrate.conditioning.DERIVED_FROM`)."""
+    from sim.calibrate.conditioning import DERIVED_FROM
 
     return tuple(c for c, s in DERIVED_FROM.items() if s == sensor)
 

@@ -410,7 +410,7 @@ def test_an_lvdt_reading_high_is_the_displacements_gain(lab, tmp_path):
     velocity the import derives from the displacement: the replay reads the gain
     (1.030409 +/- 0.000528 measured) and names the displacement, the sensor there is; it
     named a velocity transducer the lab does not have (``sensor_gain`` at
-    ``table_velocity``, the same value) before ``paths.sensor_channel``. Pooled held out
+    ``table_velocity``, the same value) before ``conditioning.sensor_channel``. Pooled held out
     3.91 %, as with the velocity's."""
     text = (EX / "light_map.toml").read_text()
     head = 'name = "disp"'
