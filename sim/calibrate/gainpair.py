@@ -126,11 +126,11 @@ def best_pair(st, cur, scored: list):
 
 
 def beside_a_law(st, cur, scored: list, timed: list, say) -> list:
-    """``timed`` (the round's sensor candidates, :func:`sim.calibrate.timing.round_candidates`)
+    """``timed`` (the round's sensor candidates, :func:`sim.calibrate.timingjudge.round_candidates`)
     with the load cells' gain judged at its reading beside the law it goes with best,
     where that pair predicts the held-out runs better than either alone by the margin
     (the evaluation then holds ``e_pair`` and its row a ``partner``)."""
-    from sim.calibrate import timing
+    from sim.calibrate import timing, timingjudge
 
     k = _gain_index(timed)
     found = best_pair(st, cur, scored) if k is not None and scored else None
@@ -144,7 +144,7 @@ def beside_a_law(st, cur, scored: list, timed: list, say) -> list:
     x = g0 * (1.0 + pair.values[i]["gain_change"])
     s = g0 * pair.sigma[i]["gain_change"]
     cand = next(c for c in timing.candidates(st.mfit) if c.field == "force_gain")
-    ev = timing.evaluate(st.mfit, st.mho, cur, cand, st.e_ho, st.flat, st.margin, at=(x, s, None))
+    ev = timingjudge.evaluate(st.mfit, st.mho, cur, cand, st.e_ho, st.flat, st.margin, at=(x, s, None))
     expl = 1.0 - pair.rss / cur.rss if cur.rss > 0 else 0.0
     ev["row"]["partner"] = {"name": law.name, "where": w, "explained_fraction": expl, "holdout_error": e_pair}
     ev["e_pair"] = e_pair

@@ -231,7 +231,7 @@ class MechStage:
         """Every candidate fitted with the current terms (its least-squares fit, shape
         parameters scanned and refined: the screening and the refinement at once), best
         explained first, and the sensor-timing candidates fitted and judged (None: off)."""
-        from sim.calibrate import timing
+        from sim.calibrate import timingjudge
         from sim.calibrate.trace import Term, fit_terms
 
         cur, scored = self.cur, []
@@ -257,7 +257,7 @@ class MechStage:
         if not st.timing_on:
             return scored, None
         args = (st.mfit, st.mho, cur, st.e_ho, st.flat, st.margin, st.effects, st.timed_added)
-        return scored, beside_a_law(st, cur, scored, timing.round_candidates(*args), self.say)
+        return scored, beside_a_law(st, cur, scored, timingjudge.round_candidates(*args), self.say)
 
     def choose(self, screened, rnd) -> list:
         """Every candidate (a least-squares fit is cheap), the laws and the timing ones in
@@ -435,7 +435,7 @@ def timing_backward(ms: MechStage, cur, e_ho: float):
     load cell 4 ms early and a displacement 0.3 sample early gave the acceleration +0.32
     ms while the load cell's delay waited, and the load cell -3.68 ms). The motion's own
     delay, timed by the acceleration, is put back only when it is under half a sample
-    (beyond, it was accepted without a margin: :func:`sim.calibrate.timing._margin_of`).
+    (beyond, it was accepted without a margin: :func:`sim.calibrate.timingjudge._margin_of`).
     ``(fit, error)``."""
     from sim.calibrate import timing
     from sim.calibrate.residuals import nrmse_runs
@@ -474,7 +474,7 @@ def _may_drop(entry: dict, mr, declared: dict) -> bool:
     """Whether the backward pass may put a timing entry back (:func:`timing_backward`)."""
     from sim.calibrate.timing import DISPLACEMENT_SKEW_SAMPLES, MOTION_WHERES
 
-    if entry["where"] in MOTION_WHERES:  # the motion's own skew: no margin beyond a scan's (timing._margin_of)
+    if entry["where"] in MOTION_WHERES:  # the motion's own skew: no margin beyond a scan's (timingjudge._margin_of)
         return abs(entry["parameters"]["delay_s"]) < DISPLACEMENT_SKEW_SAMPLES * mr.dt
     if entry.get("timed_by") != "displacement":
         return True

@@ -336,7 +336,8 @@ def test_a_motion_off_by_more_than_a_recorders_scan_is_judged_without_a_margin()
     from types import SimpleNamespace
 
     from sim.calibrate.mechsearch import _may_drop
-    from sim.calibrate.timing import Candidate, _margin_of
+    from sim.calibrate.timing import Candidate
+    from sim.calibrate.timingjudge import _margin_of
 
     dt = 1 / FS
     motion = Candidate("sensor_delay", "channel:table_displacement", "delay_s", "motion_delay_s", -0.05, 0.05, 0.0)

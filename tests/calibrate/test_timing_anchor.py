@@ -151,7 +151,8 @@ def test_no_coherent_band_says_so():
     ok, why = anchor.corroborates(a, a)
     assert not ok and "cannot time" in why
     # with no band to judge by, the balance alone decides (as before the anchor)
-    from sim.calibrate.timing import Candidate, kinematic_check
+    from sim.calibrate.kinematic_timing import kinematic_check
+    from sim.calibrate.timing import Candidate
 
     cand = Candidate("sensor_delay", "channel:table_acceleration", "delay_s", "accel_delay_s", -0.05, 0.05, 0.0)
     assert kinematic_check(cand, 0.001, [r], lambda: [r]) is None
