@@ -263,22 +263,40 @@ def split_at_timing(order: list, rnd, say) -> tuple[list, dict | None, list]:
     split at the first timing candidate that passes (fitted and judged on its own re-timed
     records, :mod:`sim.calibrate.timing`): the law candidates that explain more (judged
     first by :func:`forward_round`), that timing candidate (None: none passed) and the
-    rows of the timing candidates judged up to it."""
+    rows of the timing candidates judged up to it. Where one that passes puts the motion's
+    sensors back on their chain from more than a scan apart (``"first"``:
+    :func:`sim.calibrate.kinematic_timing.off_its_chain`), it is the one, and no law is judged
+    before it: the laws wait for records the displacement reads as timed."""
     from sim.calibrate import timing
 
+    urgent = next((n for _e, law, _w, n in order if law is None and n.get("first")), None)
     ahead, rows = [], []
     for expl, law, w, new in order:
         if law is not None:
-            ahead.append((expl, law, w, new))
+            if urgent is None:
+                ahead.append((expl, law, w, new))
             continue
         if new["accepted"]:
             new = _best_of_channel(order, new)
+        taken = new["accepted"] and (urgent is None or new["row"]["where"] == urgent["row"]["where"])
+        if new["accepted"] and not taken:
+            new["row"] = {**new["row"], "accepted": False, "reason": _waits_for(urgent)}
         rows.append({"round": rnd, **new["row"]})
         say(timing.log_line(new["row"]).replace("  ACCEPTED", "  passes"))
-        if new["accepted"]:
+        if taken:
             new["row"] = rows[-1]
+            if urgent is not None:
+                say(f"  the laws wait: {_waits_for(urgent)}")
             return ahead, new, rows
     return ahead, None, rows
+
+
+def _waits_for(urgent: dict) -> str:
+    kin = urgent["row"].get("kinematics") or {}
+    return (
+        f"the displacement reads the motion's sensors {1e3 * abs(kin.get('delay_before_s') or 0.0):.3f} ms apart: "
+        f"{urgent['row']['name']} at {urgent['row']['where']} first"
+    )
 
 
 def _best_of_channel(order: list, first: dict) -> dict:

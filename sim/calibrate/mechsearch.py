@@ -435,7 +435,7 @@ def timing_backward(ms: MechStage, cur, e_ho: float):
     load cell 4 ms early and a displacement 0.3 sample early gave the acceleration +0.32
     ms while the load cell's delay waited, and the load cell -3.68 ms). The motion's own
     delay, timed by the acceleration, is put back only when it is under half a sample
-    (beyond, it was accepted without a margin: :func:`sim.calibrate.timingjudge._margin_of`).
+    (beyond, it was accepted without a margin: :func:`sim.calibrate.kinematic_timing.off_its_chain`).
     ``(fit, error)``."""
     from sim.calibrate import timing
     from sim.calibrate.residuals import nrmse_runs
@@ -474,10 +474,10 @@ def _may_drop(entry: dict, mr, declared: dict) -> bool:
     """Whether the backward pass may put a timing entry back (:func:`timing_backward`)."""
     from sim.calibrate.timing import DISPLACEMENT_SKEW_SAMPLES, MOTION_WHERES
 
-    if entry["where"] in MOTION_WHERES:  # the motion's own skew: no margin beyond a scan's (timingjudge._margin_of)
+    if entry["where"] in MOTION_WHERES:  # the motion's own skew: no margin beyond a scan's (off_its_chain)
         return abs(entry["parameters"]["delay_s"]) < DISPLACEMENT_SKEW_SAMPLES * mr.dt
-    if entry.get("timed_by") != "displacement":
-        return True
+    if entry.get("timed_by") != "displacement" and "displacement_reads" not in entry:
+        return True  # the balance's own: judged by its held-out error alone
     off = entry["parameters"]["delay_s"] - declared[mr.name]["accel_delay_s"]
     return abs(off) < DISPLACEMENT_SKEW_SAMPLES * mr.dt
 

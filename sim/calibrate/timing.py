@@ -87,7 +87,7 @@ ANCHOR_PASSES = 3
 #: multiplexed recorder's scan; the test records skew it 0.3 sample). Nearer than this the
 #: displacement cannot tell an acceleration's delay from the balance's own reading of it;
 #: beyond it, the motion's own delay read by the acceleration needs no held-out margin
-#: (:func:`sim.calibrate.timingjudge._margin_of`)
+#: (:func:`kinematic_timing.off_its_chain`)
 DISPLACEMENT_SKEW_SAMPLES = 0.5
 #: the timing fields of the motion's own skew (the displacement's and velocity's together;
 #: the velocity's own), read by the kinematics (:func:`kinematic_timing.read_by_kinematics`)
@@ -175,7 +175,7 @@ class Candidate:
         """Whether the value is the acceleration's reading, not the balance's fit (the
         motion's own delay, :func:`read_by_kinematics`): it then needs no coherence
         with the motion, is judged on the re-timed motion's own samples, and beyond half
-        a sample needs no held-out margin (:func:`sim.calibrate.timingjudge._margin_of`)."""
+        a sample needs no held-out margin (:func:`kinematic_timing.off_its_chain`)."""
         return self.field in MOTION_FIELDS
 
     def state(self, base: dict, x: float) -> dict:

@@ -15,10 +15,9 @@ import math
 
 import numpy as np
 
-from sim.calibrate.kinematic_timing import kinematic_reading, placed, read_by_kinematics
+from sim.calibrate.kinematic_timing import kinematic_reading, off_its_chain, placed, read_by_kinematics
 from sim.calibrate.timing import (
     COHERENT_SHARE,
-    DISPLACEMENT_SKEW_SAMPLES,
     Z95,
     Candidate,
     _restacked,
@@ -62,8 +61,9 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
         ok, why = False, f"what it takes out of the residual is {100 * share:.0f} % coherent with the motion"
     if ok and kin is not None and not kin["ok"]:
         ok, why = False, kin["reason"]
+    first = ok and off_its_chain(cand, x, kin, mfit[0].dt)
     if ok:
-        m = _margin_of(cand, x, mfit[0].dt, margin)
+        m = 0.0 if first else margin
         # read by the kinematics beyond a scan: no whiteness veto either (a velocity 2 samples early
         # was refused at flatness 0.518 -> 0.506, an undeclared conditioner's shape in the residual)
         ok, why = accept_numbers(e_ho, e_new, cur.bic, bic_new, -math.inf if m == 0.0 else flat, f_new, m)
@@ -83,20 +83,8 @@ def evaluate(mfit, mho, cur, cand: Candidate, e_ho: float, flat: float, margin: 
         "accepted": ok,
         "reason": why,
     }
-    return {"row": row, "accepted": ok, "fit": new, "mfit": nf, "mho": nh, "e_ho": e_new, "flat": f_new}
-
-
-def _margin_of(cand: Candidate, x: float, dt: float, margin: float) -> float:
-    """The held-out gain ``cand`` at ``x`` must make: the search's ``margin``, or none (the
-    error only may not rise, and the residual need not whiten) for a motion read off its
-    clock by more than a recorder's scan (:data:`DISPLACEMENT_SKEW_SAMPLES`). That value
-    is measured by the kinematics to a hundredth of a sample, not fitted to the residual;
-    the laws fitted before it take up most of what it changes: NEES-UCSD records with the
-    displacement 2 samples early and 8 t added took the added mass 3.9 % low while the
-    delay moved the held-out error by 1.7 %."""
-    if cand.read_by_kinematics and abs(x - cand.neutral) > DISPLACEMENT_SKEW_SAMPLES * dt:
-        return 0.0
-    return margin
+    out = {"row": row, "accepted": ok, "fit": new, "mfit": nf, "mho": nh, "e_ho": e_new, "flat": f_new}
+    return {**out, "first": first and ok}
 
 
 def _on_the_rows_of(mfit, mho, nf, nh, cur) -> tuple:

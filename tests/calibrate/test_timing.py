@@ -330,21 +330,27 @@ def test_conditioner_at_a_low_record_rate_is_the_recorders():
 def test_a_motion_off_by_more_than_a_recorders_scan_is_judged_without_a_margin():
     """The motion's own delay is measured by the kinematics, not fitted: beyond half a
     sample (a multiplexed recorder's scan) it is taken when the held-out error does not
-    rise, and the backward pass keeps it; under half a sample, and for every delay the
-    balance fits, the search's margin holds (tests/calibrate/test_real_record_suite.py has
+    rise, and the backward pass keeps it; so is an acceleration's timing the displacement
+    corroborates where it reads the acceleration that far off its chain. Under half a
+    sample, and for every delay the balance alone fits, the search's margin holds (tests/calibrate/test_real_record_suite.py has
     the NEES-UCSD case that needs it)."""
     from types import SimpleNamespace
 
+    from sim.calibrate.kinematic_timing import off_its_chain
     from sim.calibrate.mechsearch import _may_drop
     from sim.calibrate.timing import Candidate
-    from sim.calibrate.timingjudge import _margin_of
 
     dt = 1 / FS
     motion = Candidate("sensor_delay", "channel:table_displacement", "delay_s", "motion_delay_s", -0.05, 0.05, 0.0)
     accel = Candidate("sensor_delay", "channel:table_acceleration", "delay_s", "accel_delay_s", -0.05, 0.05, 0.0)
-    assert _margin_of(motion, -2 * dt, dt, 0.05) == 0.0
-    assert _margin_of(motion, 0.3 * dt, dt, 0.05) == 0.05
-    assert _margin_of(accel, 2 * dt, dt, 0.05) == 0.05
+    assert off_its_chain(motion, -2 * dt, None, dt)
+    assert not off_its_chain(motion, 0.3 * dt, None, dt)
+    assert not off_its_chain(accel, 2 * dt, None, dt)  # the balance's own delay, nothing read
+    read = {"ok": True, "significant": True, "delay_before_s": -2 * dt}
+    assert off_its_chain(accel, 2 * dt, read, dt)  # the displacement reads it 2 samples off
+    assert not off_its_chain(accel, 2 * dt, {**read, "delay_before_s": 0.3 * dt}, dt)
+    assert not off_its_chain(accel, 2 * dt, {**read, "ok": False}, dt)  # not corroborated
+    assert not off_its_chain(accel, 2 * dt, {**read, "significant": False}, dt)
     mr = SimpleNamespace(name="r", dt=dt)
     entry = {
         "name": "sensor_delay",
@@ -355,6 +361,12 @@ def test_a_motion_off_by_more_than_a_recorders_scan_is_judged_without_a_margin()
     assert not _may_drop(entry, mr, {})
     entry["parameters"]["delay_s"] = 0.3 * dt
     assert _may_drop(entry, mr, {})
+    # an acceleration delay the balance placed within half a sample of the displacement's reading
+    declared = {"r": {"accel_delay_s": 0.0}}
+    entry = {"name": "sensor_delay", "where": accel.where, "parameters": {"delay_s": 2 * dt}}
+    assert _may_drop(entry, mr, declared)  # the balance's own: the backward pass judges it
+    entry["displacement_reads"] = {"delay_s": 2.1 * dt, "sigma_s": 0.01 * dt}
+    assert not _may_drop(entry, mr, declared)
 
 
 def test_a_velocity_the_import_derived_has_no_skew_of_its_own_to_search():

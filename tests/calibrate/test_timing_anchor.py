@@ -307,7 +307,7 @@ def test_pressure_early_and_accelerometer_late_at_once_each_on_its_channel(lab):
     assert res.error_after < 0.05 * res.error_before, (res.error_before, res.error_after)
 
 
-@pytest.mark.parametrize("accel_samples, pressure_samples", [(1, 1), (-1, 0), (3, 1)])
+@pytest.mark.parametrize("accel_samples, pressure_samples", [(1, 1), (-1, 0), (3, 1), (-3, 0)])
 def test_an_accelerometer_a_sample_off_is_its_delay_not_a_conditioner(lab, accel_samples, pressure_samples):
     """The platen accelerometer a sample late with the pressure a sample early, or a sample
     early alone, or 3 samples late (14.6 ms beyond its conditioner's 8.3) with the pressure
@@ -319,7 +319,11 @@ def test_an_accelerometer_a_sample_off_is_its_delay_not_a_conditioner(lab, accel
     place of the declared 50 Hz took the balance's skew (both skews, 3.9 ms past the
     displacement; 0.65 ms off with its phase bent) and the search went on to a
     displacement delay and a second mode, or a force delay (held out 20.9 % and 6.0 %
-    pooled over the paths, 3.9 % now)."""
+    pooled over the paths, 3.9 % now). 3 samples early: -14.580 +/- 0.149 ms; before the
+    laws waited for it (:func:`sim.calibrate.kinematic_timing.off_its_chain`) its delay
+    was refused in the first round by the whiteness rule (a 5.5 % held-out gain) and under
+    the margin once a mode and a power-law damping were fitted on the mistimed records
+    (42 % held out pooled, 4.4 % now). The laws are the records' on time ones."""
     dt = 1 / 204.8
     res = _calibrate(
         _records(
@@ -338,6 +342,8 @@ def test_an_accelerometer_a_sample_off_is_its_delay_not_a_conditioner(lab, accel
         e = found[where]
         d, u = e["parameters"]["delay_s"], e["uncertainty"]["delay_s"]
         assert e["name"] == "sensor_delay" and abs(d - value) <= u < 2e-4, (where, d, u)
+    laws = {e["name"] for e in res.effects_added if e["name"] not in TIMING}
+    assert laws == {"coulomb_friction", "payload_mode"}, res.effects_added
     assert res.error_after < 0.05 * res.error_before, (res.error_before, res.error_after)
 
 
