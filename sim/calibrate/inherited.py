@@ -147,7 +147,7 @@ def _items(runs, base, payload, wref, chosen) -> list:
 
 def theta_of(cand, values: dict) -> np.ndarray | None:
     """The internal parameters of ``cand`` for an entry's ``values`` (the inverse of
-    :meth:`sim.calibrate.sensitivity.Candidate.values`); None where one is missing."""
+    :meth:`sim.calibrate.candidate.Candidate.values`); None where one is missing."""
     if any(n not in values for n in cand.names):
         return None
     th = np.array([float(values[n]) for n in cand.names], float)

@@ -55,7 +55,7 @@ def judge_whole_runs(st, rnd: int, rf, sc_of):
     when it passes, else None (its row in ``st.tried`` either way)."""
     from sim.calibrate import paths as P
     from sim.calibrate.acceptance import Z95, accept_numbers
-    from sim.calibrate.sensitivity import sensor_model
+    from sim.calibrate.sensorcands import sensor_model
 
     pfit, pho = st.pfit, st.pho
     t = time.perf_counter()
@@ -122,7 +122,7 @@ def judge_sensor(cand, pfit, pho, cur, new, bics, margin) -> tuple[bool, str, di
     channels without / with it."""
     from sim.calibrate import paths as P
     from sim.calibrate.acceptance import accept_numbers
-    from sim.calibrate.sensitivity import acts_on
+    from sim.calibrate.sensorcands import acts_on
 
     keep = acts_on(cand)
     on_ho = [p.only(keep) for p in pho]

@@ -304,7 +304,7 @@ class _Revisit:
         """The items without item ``i`` when it is dropped, else None (its row written)."""
         from sim.calibrate import paths as P
         from sim.calibrate.pathjudge import bic
-        from sim.calibrate.sensitivity import acts_on
+        from sim.calibrate.sensorcands import acts_on
 
         st, a = self.st, items[i]
         rest, _ = self.joint(items[:i] + items[i + 1 :])

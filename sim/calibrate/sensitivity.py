@@ -35,6 +35,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sim.calibrate.candidate import Candidate
+from sim.calibrate.sensorcands import acts_on, sensor_candidates, sensor_model
+
 #: mechanical effect types tried on these paths: coefficient key, and shape keys held
 #: at a start value during the screening (freed in the refinement)
 MECHANICAL = {
@@ -54,17 +57,6 @@ HYDRAULIC = (
     "leakage",
     "supply_pressure_drop",
 )
-SENSOR = ("sensor_gain", "sensor_offset", "sensor_delay", "sensor_lowpass")
-#: a sensor delay's range on these paths: a channel up to MAX_DELAY_S late (assumed: 50 ms,
-#: ten times the largest conditioner delay of the tables here, 4.2 ms for 4 poles at 100 Hz;
-#: the mechanical path's bound, sim.calibrate.timing.MAX_DELAY_S) or up to
-#: MAX_ADVANCE_SAMPLES samples early. A sensor cannot answer before its cause: a channel
-#: that leads the motion is a recorder's timing, not physics (a multiplexed or separately
-#: clocked channel, a conditioner on the *other* channels; issue 23: a pressure leading
-#: by 1-2 samples at 204.8 Hz), a few samples at most; a wider advance would let a delay
-#: stand in for a model that responds late (a valve, an oil column)
-MAX_DELAY_S = 0.05
-MAX_ADVANCE_SAMPLES = 8
 #: the foundation mode's softest frequency searched (Hz): below the runs' band (1-30 Hz on
 #: the CGS tests) a reaction mass on its soil is no longer a foundation but another table mode
 FOUNDATION_MIN_HZ = 1.0
@@ -101,72 +93,6 @@ MODE_DAMPING_BOUNDS = (0.0005, 1.0)
 #: servo-actuator, docs/effects.md; large enough to stand above round-off, small enough
 #: to stay linear)
 FORCE_STEP = 0.01
-
-
-@dataclass
-class Candidate:
-    """One effect type at one place, with the parameters fitted (``names``, in the
-    order of ``neutral``/``step``/bounds) and fixed entry keys (``fixed``)."""
-
-    type: str
-    where: str
-    names: tuple
-    neutral: np.ndarray
-    step: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    units: dict
-    screened: tuple = (0,)  # indices of the parameters stepped in the screening
-    fixed: dict = field(default_factory=dict)
-    sensor: bool = False
-    grid: float | None = None  # the parameter (index 0) is realised on this grid
-    ref: dict = field(default_factory=dict)  # constants of a transformed parameter (foundation_mode)
-    line: tuple | None = None  # the line search's points (internal values), instead of its steps
-    #: points (whole internal vectors) the screening steps from, the best kept (a mode's frequencies)
-    scan: tuple | None = None
-
-    @property
-    def key(self) -> tuple:
-        return (self.type, self.where)
-
-    def values(self, theta) -> dict:
-        """Parameter values (the effect's own keys, SI) for the internal ``theta``."""
-        if self.type == "sensor_lowpass":  # internal: 1/cutoff (s), neutral 0 = no filter
-            return {"cutoff_hz": 1.0 / float(theta[0]) if theta[0] > 0 else math.inf}
-        if self.type == "payload_mode":  # internal: (mass, log f, damping)
-            return {
-                "mass_kg": float(theta[0]),
-                "frequency_hz": math.exp(float(theta[1])),
-                "damping_ratio": float(theta[2]),
-            }
-        if self.type == "foundation_mode":  # internal: compliance s = (f_ref / f)^2, 0 = rigid
-            s = float(theta[0])
-            out = {"frequency_hz": self.ref["f_ref"] / math.sqrt(s) if s > 0 else math.inf}
-            if self.ref.get("fz_ref"):
-                out["frequency_z_hz"] = self.ref["fz_ref"] / math.sqrt(s) if s > 0 else math.inf
-            return {**out, **self.ref["held"], **{k: float(v) for k, v in zip(self.names[1:], theta[1:])}}
-        return {k: float(v) for k, v in zip(self.names, theta)}
-
-    def sigmas(self, theta, sigma) -> dict:
-        if self.type == "sensor_lowpass":
-            return {"cutoff_hz": float(sigma[0]) / float(theta[0]) ** 2 if theta[0] > 0 else math.inf}
-        if self.type == "payload_mode":  # df = f d(log f)
-            f = math.exp(float(theta[1]))
-            return {"mass_kg": float(sigma[0]), "frequency_hz": f * float(sigma[1]), "damping_ratio": float(sigma[2])}
-        if self.type == "foundation_mode":  # df = f_ref / (2 s^1.5) ds (the held values: no interval)
-            s = float(theta[0])
-            d = 0.5 * float(sigma[0]) / s**1.5 if s > 0 else math.inf
-            out = {"frequency_hz": self.ref["f_ref"] * d}
-            if self.ref.get("fz_ref"):
-                out["frequency_z_hz"] = self.ref["fz_ref"] * d
-            return {**out, **{k: float(v) for k, v in zip(self.names[1:], sigma[1:])}}
-        return {k: float(s) for k, s in zip(self.names, sigma)}
-
-    def entry(self, theta) -> dict:
-        return {"type": self.type, "where": self.where, **self.fixed, **self.values(theta)}
-
-    def is_neutral(self, theta) -> bool:
-        return bool(np.all(np.asarray(theta) == self.neutral))
 
 
 # ------------------------------------------------------------------ the candidates
@@ -239,7 +165,7 @@ def candidates(desc, payload, prs, accepted, motion_rms, effects=None, undeclare
         # where a specimen may be flexible (a declared rigid payload, --payload none) or when
         # named: not on every bare table, nor after the mechanical path, which looks for it
         out += mode_candidates(tb.cur, payload, accepted, motion_rms, tb.Fs, 1.0 / prs[0].dt)
-    return out + _sensor_candidates(tb, prs)
+    return out + sensor_candidates(tb, prs)
 
 
 def _hydraulic_candidates(tb: _Table) -> list[Candidate]:
@@ -339,30 +265,6 @@ def _mechanical_candidates(tb: _Table, motion_rms) -> list[Candidate]:
                     units,
                 )
             )
-    return out
-
-
-def _sensor_candidates(tb: _Table, prs) -> list[Candidate]:
-    """The gain, delay and low-pass of each compared channel and column (an offset is each
-    record's own zero, :func:`paths.tared`; the zero they share: :mod:`sim.calibrate.offsets`)."""
-    from sim.calibrate.conditioning import sensor_channel
-
-    out, have, fs = [], tb.have, 1.0 / prs[0].dt
-    for t in (t for t in SENSOR if t != "sensor_offset" and tb.offered(t)):
-        for ch, cols in prs[0].columns.items():
-            one, s = np.shape(prs[0].recorded[ch])[1:] in ((), (1,)), sensor_channel(ch, prs)  # one: its column
-            for w in [f"channel:{s}"] + ([] if one else [f"channel:{s}[{j}]" for j in cols]):
-                if (t, w) in have:
-                    continue
-                if t == "sensor_gain":
-                    c = ("gain", 1.0, 0.01, -1e3, 1e3, "1")
-                elif t == "sensor_delay":  # either sign: a channel may lead its motion (an advance)
-                    c = ("delay_s", 0.0, 0.5 / fs, -MAX_ADVANCE_SAMPLES / fs, MAX_DELAY_S, "s")
-                else:  # internal 1/cutoff: the first step a filter at fs/4; the cutoff stays below Nyquist
-                    c = ("cutoff_hz", 0.0, 4.0 / fs, 2.2 / fs, math.inf, "Hz")
-                k, x0, h, lo, hi, unit = c
-                start, step, low, high = (np.array([v]) for v in (x0, h, lo, hi))
-                out.append(Candidate(t, w, (k,), start, step, low, high, {k: unit}, sensor=True))
     return out
 
 
@@ -508,24 +410,6 @@ def internal_force_part(desc) -> np.ndarray:
     return N @ N.T
 
 
-# ------------------------------------------------------------------ sensor candidates
-def sensor_model(cand: Candidate, theta, pr, model: dict) -> dict:
-    """The model's channels with sensor candidate ``cand`` at ``theta`` applied."""
-    from sim.effects.base import EFFECTS
-
-    if model is None:
-        return None
-    if cand.type == "sensor_lowpass" and not theta[0] > 0:
-        return model
-    eff = EFFECTS[cand.type](cand.entry(theta))
-    ch = next((c for c in (eff.channel, *_derived(eff.channel)) if c in model), None)
-    if ch is None:
-        return model
-    out = dict(model)  # a velocity derived from the displacement: its sensor's effect, linear, commutes with d/dt
-    out[ch] = eff.measure(pr.t, {eff.channel: np.asarray(model[ch], float)}, None)[eff.channel]
-    return out
-
-
 # ------------------------------------------------------------------ screening
 @dataclass
 class Screen:
@@ -644,22 +528,6 @@ def _best_of_scan(c: Candidate, got: list, prs, r0) -> Screen:
             best = Screen(c, score, found[-1])
     best.estimates = found
     return best
-
-
-def acts_on(cand: Candidate):
-    """``keep(channel, column)``: the compared columns a sensor candidate acts on."""
-    from sim.effects.sensors import parse_channel
-
-    ch, col = parse_channel(cand.where)
-    cols = col if isinstance(col, tuple) else (col,)
-    return lambda c, j: c in (ch, *_derived(ch)) and (col is None or j in cols)
-
-
-def _derived(sensor: str) -> tuple:
-    """The compared channels a run may derive from ``sensor`` (:data:`sim.calibrate.conditioning.DERIVED_FROM`)."""
-    from sim.calibrate.conditioning import DERIVED_FROM
-
-    return tuple(c for c, s in DERIVED_FROM.items() if s == sensor)
 
 
 # ------------------------------------------------------------------ refinement
@@ -781,13 +649,10 @@ def refine_job(job) -> Refined:
 
 
 __all__ = [
-    "Candidate",
     "HYDRAULIC",
     "MECHANICAL",
     "Refined",
-    "SENSOR",
     "Screen",
-    "acts_on",
     "candidates",
     "mode_candidates",
     "foundation_candidate",

@@ -31,7 +31,7 @@ PAIR = ("sensor_delay", "sensor_lowpass")
 def heldout_on_columns(rf, pho, mho) -> float:
     """Held-out NRMSE of the columns a refined sensor candidate ``rf`` acts on, with it applied."""
     from sim.calibrate import paths as P
-    from sim.calibrate.sensitivity import acts_on, sensor_model
+    from sim.calibrate.sensorcands import acts_on, sensor_model
 
     keep = acts_on(rf.cand)
     on = [p.only(keep) for p in pho]

@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
+from sim.calibrate.candidate import Candidate
 from sim.calibrate.inherited import disagreement, sharper, theta_of
-from sim.calibrate.sensitivity import Candidate
 
 
 def _effect(name, values, unc):
