@@ -279,6 +279,25 @@ def shift(x: np.ndarray, delay_s: float, dt: float) -> np.ndarray:
     return CubicSpline(np.arange(n, dtype=float), x, axis=0)(k)
 
 
+def controller_lag(effects) -> float:
+    """How late the controller's channels were recorded against the analog ones (s): the
+    description's ``sensor_delay`` at ``channel:valve_command`` (calibrate's replay path
+    writes it, :func:`sim.calibrate.sensorcands.command_candidate`), 0 without one."""
+    return sum(
+        float(e.get("delay_s", 0.0))
+        for e in effects or []
+        if e.get("type") == "sensor_delay" and e.get("where") == "channel:valve_command"
+    )
+
+
+def on_the_analog_clock(drive: np.ndarray, effects, dt: float) -> np.ndarray:
+    """A recorded drive (valve commands or reference) as it was on the analog channels'
+    clock: read :func:`controller_lag` later. The model's own command channel is then
+    delayed back by that sensor effect (``sim.runs.build``), as the record's was."""
+    lag = controller_lag(effects)
+    return shift(drive, -lag, dt) if lag else drive
+
+
 def declared_state(run, accel_lowpass_hz, table_order: int = TABLE_ORDER) -> dict:
     """What is known of ``run``'s force and acceleration timing: its
     ``meta.channel_conditioning`` (:mod:`sim.calibrate.conditioning`), else
@@ -380,6 +399,8 @@ def prefilter_of(state: dict, run):
 
 __all__ = [
     "TABLE_ORDER",
+    "controller_lag",
+    "on_the_analog_clock",
     "declared_state",
     "force_chain_of",
     "low_frequency_delay_s",

@@ -7,7 +7,9 @@ and exponent, the stiffer spring is a chamber of ``V0 k0 / (k0 + k)``: the lab r
 ``coulomb_friction`` at ``supports`` is each piston's friction (``[supports]
 piston_friction_n``, the same joint's dry friction) higher by its force; at ``shoes``,
 each shoe's (``shoe_friction_n``). An ``added_mass`` at ``supports`` is each piston
-heavier (``piston_mass_kg``).
+heavier (``piston_mass_kg``). A ``sensor_delay`` at ``channel:valve_command`` is the
+controller's recorded channels late against the analog ones: each analog channel that
+much early against the command (:func:`command_reading`).
 """
 
 from __future__ import annotations
@@ -63,9 +65,21 @@ def add_readings(res, desc, payload) -> None:
     """Each effect of ``res.effects_added`` that one description number says the same as
     gets ``reads_as`` (:func:`support_reading`, :func:`support_number_reading`)."""
     for e in res.effects_added:
-        line = support_reading(desc, payload, e) or support_number_reading(desc, e)
+        line = support_reading(desc, payload, e) or support_number_reading(desc, e) or command_reading(e)
         if line:
             e["reads_as"] = line
 
 
-__all__ = ["add_readings", "support_air_stiffness", "support_number_reading", "support_reading"]
+def command_reading(effect: dict) -> str | None:
+    """A delay of the recorded command as each analog channel's skew against it (the
+    replay path reads the two clocks against each other, not which one is off)."""
+    if effect.get("name") != "sensor_delay" or effect.get("where") != "channel:valve_command":
+        return None
+    d = 1e3 * float(effect["parameters"]["delay_s"])
+    return (
+        f"every analog channel {d:.3g} ms early against the valve command (the controller's channels "
+        f"recorded {d:.3g} ms late against the analog recorder's): the clocks, not the valve"
+    )
+
+
+__all__ = ["add_readings", "command_reading", "support_air_stiffness", "support_number_reading", "support_reading"]

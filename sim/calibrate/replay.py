@@ -389,6 +389,7 @@ def replay(
     if bias is None:
         bias = "estimate" if src.source == "measured" else "none"
     u, vn = _with_valve_null(src, desc, bias, drift, notes)
+    u = _on_the_analog_clock(u, desc, rec.t, notes)
     rate = tick_rate(src.sample_rate_hz, hold, *model_rates(rec.tm))
     if rate != src.sample_rate_hz:
         notes.append(
@@ -421,6 +422,20 @@ def replay(
         not_compared=not_compared(src, run),
         hold=hold,
     )
+
+
+def _on_the_analog_clock(u: np.ndarray, desc, t, notes: list) -> np.ndarray:
+    """The commands read as late as the description says the controller's channels were
+    recorded (:func:`sim.calibrate.conditioning.on_the_analog_clock`), said in a note."""
+    from sim.calibrate import conditioning
+
+    lag = conditioning.controller_lag(desc.raw.get("effect", []))
+    if lag:
+        notes.append(
+            f"the controller's channels recorded {1e3 * lag:.3g} ms late (the description's "
+            "sensor_delay at channel:valve_command): the command replayed that much earlier"
+        )
+    return conditioning.on_the_analog_clock(u, desc.raw.get("effect", []), float(t[1] - t[0]))
 
 
 def _with_valve_null(src, desc, bias, drift: bool, notes: list) -> tuple[np.ndarray, dict | None]:

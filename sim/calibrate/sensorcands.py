@@ -44,7 +44,34 @@ def sensor_candidates(tb, prs) -> list[Candidate]:
                 k, x0, h, lo, hi, unit = c
                 start, step, low, high = (np.array([v]) for v in (x0, h, lo, hi))
                 out.append(Candidate(t, w, (k,), start, step, low, high, {k: unit}, sensor=True))
-    return out
+    return out + command_candidate(tb, prs)
+
+
+#: the controller's recorded channels (what drives a replay or a closed loop)
+COMMAND = "channel:valve_command"
+
+
+def command_candidate(tb, prs) -> list[Candidate]:
+    """The controller's channels recorded late against the analog ones (``sensor_delay``
+    at :data:`COMMAND`), on the replay path: the drive is then the recorded command read
+    ``delay_s`` later, so every compared channel of the model moves ``delay_s`` earlier
+    (:func:`sensor_model`). The mechanical path sees the analog channels only against each
+    other: several skewed alike (the displacement and the pressure a sample early on the
+    worked example's records) leave them on time among themselves and early against the
+    command, which no other candidate takes (a valve delay only lags). Offered only early,
+    up to :data:`MAX_ADVANCE_SAMPLES` (a recorder's skew; lagging is a valve delay's),
+    wherever a valve delay or a sensor's delay is looked for, and judged against the declared valve delay (``ref``: the least of it; within it a
+    valve delay that much shorter is the same records: :func:`sim.calibrate.pathjudge.judge_sensor`)."""
+    if prs[0].path != "replay" or ("sensor_delay", COMMAND) in tb.have:
+        return []
+    if not (tb.offered("sensor_delay") or tb.offered("valve_delay")):  # the valve delay's other sign
+        return []
+    fs = 1.0 / prs[0].dt
+    start, step, low, high = (np.array([v]) for v in (0.0, 0.5 / fs, 0.0, MAX_ADVANCE_SAMPLES / fs))
+    ref = {"valve_delay_s": float(np.min(tb.hp.per_actuator("valve_delay_s")))}
+    return [
+        Candidate("sensor_delay", COMMAND, ("delay_s",), start, step, low, high, {"delay_s": "s"}, ref=ref, sensor=True)
+    ]
 
 
 def sensor_model(cand: Candidate, theta, pr, model: dict) -> dict:
@@ -56,6 +83,8 @@ def sensor_model(cand: Candidate, theta, pr, model: dict) -> dict:
     if cand.type == "sensor_lowpass" and not theta[0] > 0:
         return model
     eff = EFFECTS[cand.type](cand.entry(theta))
+    if cand.where == COMMAND:  # the drive read later: every channel of the model that much earlier
+        return {c: _advanced(x, eff.values["delay_s"], pr.t) for c, x in model.items()}
     ch = next((c for c in (eff.channel, *_derived(eff.channel)) if c in model), None)
     if ch is None:
         return model
@@ -64,10 +93,20 @@ def sensor_model(cand: Candidate, theta, pr, model: dict) -> dict:
     return out
 
 
+def _advanced(x, delay_s: float, t) -> np.ndarray:
+    from sim.effects.base import EFFECTS
+
+    eff = EFFECTS["sensor_delay"]({"type": "sensor_delay", "where": "channel:table_displacement", "delay_s": -delay_s})
+    return eff.transform(t, np.asarray(x, float))
+
+
 def acts_on(cand: Candidate):
-    """``keep(channel, column)``: the compared columns a sensor candidate acts on."""
+    """``keep(channel, column)``: the compared columns a sensor candidate acts on (every
+    one: the controller's channels, :data:`COMMAND`)."""
     from sim.effects.sensors import parse_channel
 
+    if cand.where == COMMAND:
+        return lambda c, j: True
     ch, col = parse_channel(cand.where)
     cols = col if isinstance(col, tuple) else (col,)
     return lambda c, j: c in (ch, *_derived(ch)) and (col is None or j in cols)
@@ -80,4 +119,13 @@ def _derived(sensor: str) -> tuple:
     return tuple(c for c, s in DERIVED_FROM.items() if s == sensor)
 
 
-__all__ = ["MAX_ADVANCE_SAMPLES", "MAX_DELAY_S", "SENSOR", "acts_on", "sensor_candidates", "sensor_model"]
+__all__ = [
+    "COMMAND",
+    "MAX_ADVANCE_SAMPLES",
+    "MAX_DELAY_S",
+    "SENSOR",
+    "acts_on",
+    "command_candidate",
+    "sensor_candidates",
+    "sensor_model",
+]

@@ -96,8 +96,10 @@ def test_clean_runs_add_no_delay(tmp_path):
 def test_delay_candidate_takes_either_sign():
     """The candidate's range on these paths: MAX_ADVANCE_SAMPLES samples early to MAX_DELAY_S late."""
     from sim.calibrate import sensitivity as SE
+    from sim.calibrate import sensorcands as SC
 
     pr = types.SimpleNamespace(
+        path="replay",
         dt=1.0 / FS,
         columns={"actuator_force": [0]},
         scale={"actuator_force": [1.0]},
@@ -108,8 +110,8 @@ def test_delay_candidate_takes_either_sign():
         for c in SE.candidates(_lab(), None, [pr], [], {}, effects=["sensor_delay"])
         if c.where == "channel:actuator_force"
     ]
-    assert c.lower[0] == pytest.approx(-SE.MAX_ADVANCE_SAMPLES / FS)
-    assert c.upper[0] == SE.MAX_DELAY_S
+    assert c.lower[0] == pytest.approx(-SC.MAX_ADVANCE_SAMPLES / FS)
+    assert c.upper[0] == SC.MAX_DELAY_S
     assert c.neutral[0] == 0.0
 
 
