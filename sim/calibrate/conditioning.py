@@ -292,10 +292,13 @@ def controller_lag(effects) -> float:
 
 def on_the_analog_clock(drive: np.ndarray, effects, dt: float) -> np.ndarray:
     """A recorded drive (valve commands or reference) as it was on the analog channels'
-    clock: read :func:`controller_lag` later. The model's own command channel is then
-    delayed back by that sensor effect (``sim.runs.build``), as the record's was."""
+    clock: read :func:`controller_lag` later, by the interpolation of the sensor effect
+    that delays it (:func:`sim.signals.sensing.fractional_delay`), which then delays the
+    model's own command channel back (``sim.runs.build``), as the record's was."""
+    from sim.signals.sensing import fractional_delay
+
     lag = controller_lag(effects)
-    return shift(drive, -lag, dt) if lag else drive
+    return fractional_delay(np.asarray(drive, float), -lag, dt) if lag else drive
 
 
 def declared_state(run, accel_lowpass_hz, table_order: int = TABLE_ORDER) -> dict:

@@ -60,8 +60,9 @@ def command_candidate(tb, prs) -> list[Candidate]:
     worked example's records) leave them on time among themselves and early against the
     command, which no other candidate takes (a valve delay only lags). Offered only early,
     up to :data:`MAX_ADVANCE_SAMPLES` (a recorder's skew; lagging is a valve delay's),
-    wherever a valve delay or a sensor's delay is looked for, and judged against the declared valve delay (``ref``: the least of it; within it a
-    valve delay that much shorter is the same records: :func:`sim.calibrate.pathjudge.judge_sensor`)."""
+    wherever a valve delay or a sensor's delay is looked for, and judged against the
+    declared valve delay (``ref``: the least of it; within it a valve delay that much
+    shorter is the same records: :func:`sim.calibrate.pathjudge._a_shorter_valve_delay`)."""
     if prs[0].path != "replay" or ("sensor_delay", COMMAND) in tb.have:
         return []
     if not (tb.offered("sensor_delay") or tb.offered("valve_delay")):  # the valve delay's other sign
@@ -94,10 +95,11 @@ def sensor_model(cand: Candidate, theta, pr, model: dict) -> dict:
 
 
 def _advanced(x, delay_s: float, t) -> np.ndarray:
-    from sim.effects.base import EFFECTS
+    """``x`` read ``delay_s`` later: a ``sensor_delay`` of ``-delay_s`` (the simulator's
+    interpolation, as the drive is read for the model: :func:`sim.calibrate.conditioning.on_the_analog_clock`)."""
+    from sim.signals.sensing import fractional_delay
 
-    eff = EFFECTS["sensor_delay"]({"type": "sensor_delay", "where": "channel:table_displacement", "delay_s": -delay_s})
-    return eff.transform(t, np.asarray(x, float))
+    return fractional_delay(np.asarray(x, float), -delay_s, float(t[1] - t[0]))
 
 
 def acts_on(cand: Candidate):
