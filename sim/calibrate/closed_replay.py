@@ -93,15 +93,22 @@ def closed_loop_replay(
     compiled callback route where the model allows it (:func:`sim.loop.callback.accepts`;
     the same result as the loop, bit for bit), ``"loop"`` on ``Simulation.run``."""
     from sim.calibrate.paths import _closed_loop_setup
-    from sim.calibrate.replay import comparison, model_run, read_record, record_channels, record_model
+    from sim.calibrate.replay import (
+        comparison,
+        drive_on_the_analog_clock,
+        model_run,
+        read_record,
+        record_channels,
+        record_model,
+    )
 
     name, src = read_record(source, "reference")
     rec = record_model(name, src, table, payload, check_actuators=False)
-    t = rec.t
-    sim, ref = _closed_loop_setup(rec.tm, t, _pose6(src.reference, src.dofs, len(t)))
+    t, notes = rec.t, []
+    reference = drive_on_the_analog_clock(np.asarray(src.reference, float), rec.desc, t, notes, "reference")
+    sim, ref = _closed_loop_setup(rec.tm, t, _pose6(reference, src.dofs, len(t)))
     res, engine = _run_closed(sim, ref, progress, engine)
     chans, extras, n = record_channels(res, rec.tm, t, src.dofs, sim.gains.rate_hz)
-    notes = []
     meta = {"closed_loop_of": name, "model_tick_hz": sim.gains.rate_hz}
     run = model_run(rec, res, chans, extras, n, f"closed-loop run of {Path(name).name}'s reference", meta, notes)
     rec_d = src.table_displacement[:n] if src.table_displacement is not None else None
@@ -113,7 +120,7 @@ def closed_loop_replay(
     ]
     resid, model = comparison(src, run, notes)
     tn = t[:n]
-    ref_n = src.reference[:n]
+    ref_n = reference[:n]  # on the analog clock, as the motion it is compared with
     return ClosedLoopOutcome(
         run=run,
         result=res,

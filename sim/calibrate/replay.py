@@ -389,7 +389,7 @@ def replay(
     if bias is None:
         bias = "estimate" if src.source == "measured" else "none"
     u, vn = _with_valve_null(src, desc, bias, drift, notes)
-    u = _on_the_analog_clock(u, desc, rec.t, notes)
+    u = drive_on_the_analog_clock(u, desc, rec.t, notes)
     rate = tick_rate(src.sample_rate_hz, hold, *model_rates(rec.tm))
     if rate != src.sample_rate_hz:
         notes.append(
@@ -424,8 +424,9 @@ def replay(
     )
 
 
-def _on_the_analog_clock(u: np.ndarray, desc, t, notes: list) -> np.ndarray:
-    """The commands read as late as the description says the controller's channels were
+def drive_on_the_analog_clock(u: np.ndarray, desc, t, notes: list, what: str = "command") -> np.ndarray:
+    """The recorded ``what`` (the commands, or ``shaketable replay --closed-loop``'s
+    reference) read as late as the description says the controller's channels were
     recorded (:func:`sim.calibrate.conditioning.on_the_analog_clock`), said in a note."""
     from sim.calibrate import conditioning
 
@@ -433,7 +434,7 @@ def _on_the_analog_clock(u: np.ndarray, desc, t, notes: list) -> np.ndarray:
     if lag:
         notes.append(
             f"the controller's channels recorded {1e3 * lag:.3g} ms late (the description's "
-            "sensor_delay at channel:valve_command): the command replayed that much earlier"
+            f"sensor_delay at channel:valve_command): the {what} replayed that much earlier"
         )
     return conditioning.on_the_analog_clock(u, desc.raw.get("effect", []), float(t[1] - t[0]))
 
@@ -558,6 +559,7 @@ __all__ = [
     "RecordModel",
     "ReplayOutcome",
     "comparison",
+    "drive_on_the_analog_clock",
     "model_rates",
     "model_run",
     "read_record",
