@@ -290,15 +290,15 @@ def controller_lag(effects) -> float:
     )
 
 
-def on_the_analog_clock(drive: np.ndarray, effects, dt: float) -> np.ndarray:
-    """A recorded drive (valve commands or reference) as it was on the analog channels'
-    clock: read :func:`controller_lag` later, by the interpolation of the sensor effect
-    that delays it (:func:`sim.signals.sensing.fractional_delay`), which then delays the
-    model's own command channel back (``sim.runs.build``), as the record's was."""
+def on_the_analog_clock(drive: np.ndarray, lag_s: float, dt: float) -> np.ndarray:
+    """A recorded drive (valve commands or reference), or a model channel made from it, as
+    on the analog channels' clock: read ``lag_s`` (:func:`controller_lag`) later, by the
+    interpolation of the sensor effect that delays it
+    (:func:`sim.signals.sensing.fractional_delay`), which then delays the model's own
+    command channel back (``sim.runs.build``), as the record's was."""
     from sim.signals.sensing import fractional_delay
 
-    lag = controller_lag(effects)
-    return fractional_delay(np.asarray(drive, float), -lag, dt) if lag else drive
+    return fractional_delay(np.asarray(drive, float), -lag_s, dt) if lag_s else drive
 
 
 def declared_state(run, accel_lowpass_hz, table_order: int = TABLE_ORDER) -> dict:

@@ -378,7 +378,7 @@ def _setup(job):
     if extra:
         raw["effect"] = build_order(list(raw.get("effect", [])) + [dict(e) for e in extra])
     cond = without_replaced(cond, raw.get("effect", []))
-    drive = conditioning.on_the_analog_clock(drive, raw.get("effect", []), float(t[1] - t[0]))
+    drive = conditioning.on_the_analog_clock(drive, conditioning.controller_lag(raw.get("effect")), float(t[1] - t[0]))
     try:  # a candidate's value the model refuses (a supply drop below the return): no model
         desc = parse_table(raw, src=src)
         tm = table_model(desc, payload)

@@ -436,7 +436,7 @@ def drive_on_the_analog_clock(u: np.ndarray, desc, t, notes: list, what: str = "
             f"the controller's channels recorded {1e3 * lag:.3g} ms late (the description's "
             f"sensor_delay at channel:valve_command): the {what} replayed that much earlier"
         )
-    return conditioning.on_the_analog_clock(u, desc.raw.get("effect", []), float(t[1] - t[0]))
+    return conditioning.on_the_analog_clock(u, lag, float(t[1] - t[0]))
 
 
 def _with_valve_null(src, desc, bias, drift: bool, notes: list) -> tuple[np.ndarray, dict | None]:

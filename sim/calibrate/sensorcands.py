@@ -76,30 +76,25 @@ def command_candidate(tb, prs) -> list[Candidate]:
 
 
 def sensor_model(cand: Candidate, theta, pr, model: dict) -> dict:
-    """The model's channels with sensor candidate ``cand`` at ``theta`` applied."""
+    """The model's channels with sensor candidate ``cand`` at ``theta`` applied (the
+    controller's lag as the drive is read for the model: :func:`on_the_analog_clock`)."""
+    from sim.calibrate.conditioning import on_the_analog_clock
     from sim.effects.base import EFFECTS
 
     if model is None:
         return None
     if cand.type == "sensor_lowpass" and not theta[0] > 0:
         return model
-    eff = EFFECTS[cand.type](cand.entry(theta))
     if cand.where == COMMAND:  # the drive read later: every channel of the model that much earlier
-        return {c: _advanced(x, eff.values["delay_s"], pr.t) for c, x in model.items()}
+        dt = float(pr.t[1] - pr.t[0])
+        return {c: on_the_analog_clock(x, float(theta[0]), dt) for c, x in model.items()}
+    eff = EFFECTS[cand.type](cand.entry(theta))
     ch = next((c for c in (eff.channel, *_derived(eff.channel)) if c in model), None)
     if ch is None:
         return model
     out = dict(model)  # a velocity derived from the displacement: its sensor's effect, linear, commutes with d/dt
     out[ch] = eff.measure(pr.t, {eff.channel: np.asarray(model[ch], float)}, None)[eff.channel]
     return out
-
-
-def _advanced(x, delay_s: float, t) -> np.ndarray:
-    """``x`` read ``delay_s`` later: a ``sensor_delay`` of ``-delay_s`` (the simulator's
-    interpolation, as the drive is read for the model: :func:`sim.calibrate.conditioning.on_the_analog_clock`)."""
-    from sim.signals.sensing import fractional_delay
-
-    return fractional_delay(np.asarray(x, float), -delay_s, float(t[1] - t[0]))
 
 
 def acts_on(cand: Candidate):

@@ -69,14 +69,14 @@ def test_a_description_with_the_controllers_lag_drives_on_the_analog_clock():
     assert conditioning.controller_lag([]) == 0.0
     t = np.arange(1024) / FS
     u = np.column_stack([np.sin(2 * np.pi * 2.0 * t), np.cos(2 * np.pi * 5.0 * t)])
-    v = conditioning.on_the_analog_clock(u, effects, 1.0 / FS)
+    v = conditioning.on_the_analog_clock(u, conditioning.controller_lag(effects), 1.0 / FS)
     # linear interpolation: off by p (1 - p) (2 pi f dt)^2 / 2, p the fraction of a sample: 2e-5 here
     assert np.allclose(
         v[:-10],
         np.column_stack([np.sin(2 * np.pi * 2.0 * (t + 0.002)), np.cos(2 * np.pi * 5.0 * (t + 0.002))])[:-10],
         atol=1e-4,
     )
-    assert conditioning.on_the_analog_clock(u, effects[1:], 1.0 / FS) is u
+    assert conditioning.on_the_analog_clock(u, conditioning.controller_lag(effects[1:]), 1.0 / FS) is u
 
 
 def test_shaketable_replay_drives_a_calibrated_description_on_the_analog_clock():
